@@ -1,0 +1,9 @@
+//! One module per `gonio` subcommand: its arguments and its `run`.
+
+pub mod extract;
+pub mod fit;
+pub mod hdr;
+pub mod serve;
+pub mod simulate;
+pub mod study;
+pub mod tradeoff;

@@ -1,0 +1,48 @@
+//! `gonio`: the measurement daemon (`serve`) and the offline processing commands.
+
+mod commands;
+
+use clap::{Parser, Subcommand};
+
+/// Image-based BRDF measurement: acquire, process, emulate.
+#[derive(Parser)]
+#[command(name = "gonio", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run the measurement daemon (HTTP API and web page).
+    Serve(commands::serve::Args),
+    /// Render the captures a scan of a scene would produce, plus truth and reference.
+    Simulate(commands::simulate::Args),
+    /// Merge a bracket of exposures into an HDR radiance map (OpenEXR).
+    Hdr(commands::hdr::Args),
+    /// Turn the captures of a scan into a samples CSV.
+    Extract(commands::extract::Args),
+    /// Fit a reflection model to a samples CSV.
+    Fit(commands::fit::Args),
+    /// Fit every combination of the θL present and compare against a reference.
+    Study(commands::study::Args),
+    /// Measure what accuracy costs in acquisition and processing time for a scene.
+    Tradeoff(commands::tradeoff::Args),
+}
+
+fn main() {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Serve(args) => commands::serve::run(args),
+        Command::Simulate(args) => commands::simulate::run(args),
+        Command::Hdr(args) => commands::hdr::run(args),
+        Command::Extract(args) => commands::extract::run(args),
+        Command::Fit(args) => commands::fit::run(args),
+        Command::Study(args) => commands::study::run(args),
+        Command::Tradeoff(args) => commands::tradeoff::run(args),
+    };
+    if let Err(err) = result {
+        eprintln!("error: {err:#}");
+        std::process::exit(1);
+    }
+}

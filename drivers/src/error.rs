@@ -1,0 +1,47 @@
+//! The one error type of both device traits.
+
+use thiserror::Error;
+
+/// A device fault. Hardware faults are expected events: callers retry the transient
+/// ones ([`DeviceError::is_transient`]) with bounded backoff.
+#[derive(Debug, Error)]
+pub enum DeviceError {
+    #[error("I/O error: {0}")]
+    Io(#[from] std::io::Error),
+    #[error("timed out after {seconds:.1} s waiting for {what}")]
+    Timeout { what: String, seconds: f64 },
+    #[error("rejected with error:{code} ({meaning})")]
+    Rejected { code: u32, meaning: String },
+    #[error("alarm {code} ({meaning})")]
+    Alarm { code: u32, meaning: String },
+    #[error("controller reset: position unknown, home before moving")]
+    Reset,
+    #[error("disconnected: {0}")]
+    Disconnected(String),
+    #[error("{what} {value} out of range [{min}, {max}]")]
+    OutOfRange {
+        what: String,
+        value: f64,
+        min: f64,
+        max: f64,
+    },
+    #[error("camera busy")]
+    Busy,
+    #[error("no device: {0}")]
+    NotFound(String),
+    #[error("protocol error: {0}")]
+    Protocol(String),
+}
+
+impl DeviceError {
+    /// Faults worth retrying after a backoff (the device may recover by itself).
+    pub fn is_transient(&self) -> bool {
+        matches!(
+            self,
+            DeviceError::Io(_)
+                | DeviceError::Timeout { .. }
+                | DeviceError::Busy
+                | DeviceError::Disconnected(_)
+        )
+    }
+}

@@ -1,0 +1,88 @@
+//! gonio-drivers: the two device traits the daemon depends on, and their real drivers.
+//!
+//! Both traits are synchronous and blocking: callers keep them off async worker
+//! threads (a dedicated thread or `spawn_blocking`). Angles are degrees, shutter times
+//! seconds.
+
+mod error;
+pub use error::DeviceError;
+
+use std::path::Path;
+use std::sync::Arc;
+
+use serde::{Deserialize, Serialize};
+
+/// State of the light arm as the controller reports it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ArmState {
+    Idle,
+    Moving,
+    Homing,
+    Hold,
+    Alarm,
+    /// Position unknown (after a reset or reconnect): home before the next move.
+    NeedsHoming,
+    Disconnected,
+}
+
+/// A snapshot of the arm: state and angle (degrees, machine position).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ArmStatus {
+    pub state: ArmState,
+    pub angle_deg: f64,
+}
+
+/// Stops the arm at once from any thread, even while another thread is inside
+/// [`Arm::move_to`] (feed hold, then soft reset).
+pub trait EmergencyStop: Send + Sync {
+    fn stop(&self) -> Result<(), DeviceError>;
+}
+
+/// The rotating light-source arm.
+pub trait Arm: Send {
+    /// Run the homing cycle; afterwards the position is known.
+    fn home(&mut self) -> Result<(), DeviceError>;
+    /// Move to `angle_deg` and return once the arm is idle there.
+    fn move_to(&mut self, angle_deg: f64) -> Result<(), DeviceError>;
+    /// Query state and position.
+    fn status(&mut self) -> Result<ArmStatus, DeviceError>;
+    /// Clear an alarm or reset condition; the caller re-homes afterwards.
+    fn clear_fault(&mut self) -> Result<(), DeviceError>;
+    /// A handle that stops this arm from another thread.
+    fn emergency_stop(&self) -> Arc<dyn EmergencyStop>;
+}
+
+/// What a camera says of itself.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CameraInfo {
+    pub model: String,
+    pub port: String,
+}
+
+/// Exposure settings; `iso` is `None` where the body has no ISO setting.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Exposure {
+    pub shutter_s: f64,
+    pub iso: Option<u32>,
+}
+
+/// A finished capture: the file written and the exposure actually used.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Capture {
+    pub path: std::path::PathBuf,
+    pub exposure: Exposure,
+}
+
+/// A still camera.
+pub trait Camera: Send {
+    fn identify(&mut self) -> Result<CameraInfo, DeviceError>;
+    /// Shutter times the body allows, in seconds, ascending.
+    fn shutter_speeds(&mut self) -> Result<Vec<f64>, DeviceError>;
+    /// Set the exposure (shutter snapped to the nearest allowed value) and return the
+    /// exposure read back from the body.
+    fn set_exposure(&mut self, exposure: Exposure) -> Result<Exposure, DeviceError>;
+    /// Capture one frame and store it atomically at `path` (the file's extension is the
+    /// camera's own: the returned [`Capture::path`] is where it landed).
+    fn capture_to(&mut self, path: &Path) -> Result<Capture, DeviceError>;
+}

@@ -1,0 +1,14 @@
+//! gonio-mock-hw: hardware emulators that behave like the real devices.
+//!
+//! - [`grbl`]: a GRBL 1.1 controller on a pseudo-terminal, opened by device path.
+//! - [`scene`], [`render`], [`camera`]: a camera that renders the cylinder scene with
+//!   its own vector-form reflection code, simulating only the effects a scene names.
+//! - [`world`]: the one emulated world both share: the light sits where the arm is.
+
+pub mod world;
+
+pub mod grbl;
+
+pub mod camera;
+pub mod render;
+pub mod scene;
