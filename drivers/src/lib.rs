@@ -4,7 +4,15 @@
 //! threads (a dedicated thread or `spawn_blocking`). Angles are degrees, shutter times
 //! seconds.
 
+pub mod atomic_file;
+pub mod bracket;
+pub mod camera_choice;
 mod error;
+#[cfg(feature = "gphoto2")]
+pub mod gphoto2_camera;
+pub mod grbl;
+pub mod supervised_camera;
+
 pub use error::DeviceError;
 
 use std::path::Path;

@@ -1,1 +1,312 @@
-//! (to be written)
+//! A camera emulator behind the drivers' [`Camera`] trait: renders the scene with the
+//! light where the shared world's arm is, takes as long as a real body (exposure plus
+//! download, scalable), and fails on demand the ways a tethered DSLR fails.
+
+use std::collections::VecDeque;
+use std::path::Path;
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::{Duration, Instant};
+
+use gonio_drivers::atomic_file::write_atomically;
+use gonio_drivers::{Camera, CameraInfo, Capture, DeviceError, Exposure};
+
+use crate::render::{self, Shot};
+use crate::scene::Scene;
+use crate::world::World;
+
+/// Nikon shutter speeds in ⅓-stop steps, 1/8000 s to 30 s, seconds, ascending.
+pub const SHUTTER_SPEEDS_S: [f64; 55] = [
+    1.0 / 8000.0,
+    1.0 / 6400.0,
+    1.0 / 5000.0,
+    1.0 / 4000.0,
+    1.0 / 3200.0,
+    1.0 / 2500.0,
+    1.0 / 2000.0,
+    1.0 / 1600.0,
+    1.0 / 1250.0,
+    1.0 / 1000.0,
+    1.0 / 800.0,
+    1.0 / 640.0,
+    1.0 / 500.0,
+    1.0 / 400.0,
+    1.0 / 320.0,
+    1.0 / 250.0,
+    1.0 / 200.0,
+    1.0 / 160.0,
+    1.0 / 125.0,
+    1.0 / 100.0,
+    1.0 / 80.0,
+    1.0 / 60.0,
+    1.0 / 50.0,
+    1.0 / 40.0,
+    1.0 / 30.0,
+    1.0 / 25.0,
+    1.0 / 20.0,
+    1.0 / 15.0,
+    1.0 / 13.0,
+    1.0 / 10.0,
+    1.0 / 8.0,
+    1.0 / 6.0,
+    1.0 / 5.0,
+    1.0 / 4.0,
+    1.0 / 3.0,
+    1.0 / 2.5,
+    1.0 / 2.0,
+    1.0 / 1.6,
+    1.0 / 1.3,
+    1.0,
+    1.3,
+    1.6,
+    2.0,
+    2.5,
+    3.0,
+    4.0,
+    5.0,
+    6.0,
+    8.0,
+    10.0,
+    13.0,
+    15.0,
+    20.0,
+    25.0,
+    30.0,
+];
+
+/// ISO settings of the emulated body.
+pub const ISO_VALUES: [u32; 5] = [100, 200, 400, 800, 1600];
+
+/// How long captures take. Durations are real-time seconds, multiplied by `time_scale`
+/// when the emulator waits (1.0 real time, 0.01 a hundred times faster).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CaptureTiming {
+    pub time_scale: f64,
+    /// Time from the shutter closing until the file is on the host.
+    pub download_latency_s: f64,
+    /// How long past the exposure the driver waits for a capture before giving up.
+    pub deadline_s: f64,
+}
+
+impl Default for CaptureTiming {
+    fn default() -> Self {
+        Self {
+            time_scale: 1.0,
+            download_latency_s: 1.5,
+            deadline_s: 20.0,
+        }
+    }
+}
+
+impl CaptureTiming {
+    /// Wall-clock seconds a successful capture at `shutter_s` takes.
+    pub fn capture_duration_s(&self, shutter_s: f64) -> f64 {
+        (shutter_s + self.download_latency_s) * self.time_scale
+    }
+
+    /// Wall-clock seconds before a capture that never completes is given up.
+    pub fn deadline_wall_s(&self, shutter_s: f64) -> f64 {
+        (shutter_s + self.deadline_s) * self.time_scale
+    }
+}
+
+/// A fault the next capture(s) meet, in injection order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CameraFault {
+    /// The next `captures` captures fail at once with [`DeviceError::Busy`].
+    Busy { captures: u32 },
+    /// The next capture fails with an I/O error (USB transfer); no file is written.
+    Io,
+    /// The next capture never completes: [`DeviceError::Timeout`] after the deadline.
+    Timeout,
+    /// The next capture exposes, but its file never reaches the host:
+    /// [`DeviceError::Timeout`] after the deadline, no file written.
+    FileNeverArrives,
+}
+
+/// Injects faults into a camera from any thread (cheap to clone).
+#[derive(Debug, Clone, Default)]
+pub struct FaultInjector {
+    queue: Arc<Mutex<VecDeque<CameraFault>>>,
+}
+
+impl FaultInjector {
+    pub fn inject(&self, fault: CameraFault) {
+        self.queue
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .push_back(fault);
+    }
+
+    /// Faults not yet consumed.
+    pub fn pending(&self) -> usize {
+        self.queue
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .len()
+    }
+
+    /// The fault the next capture meets, if any.
+    fn take(&self) -> Option<CameraFault> {
+        let mut queue = self.queue.lock().unwrap_or_else(PoisonError::into_inner);
+        match queue.front_mut() {
+            Some(CameraFault::Busy { captures }) if *captures > 1 => {
+                *captures -= 1;
+                Some(CameraFault::Busy { captures: 1 })
+            }
+            Some(CameraFault::Busy { captures: 0 }) => {
+                queue.pop_front();
+                drop(queue);
+                self.take()
+            }
+            _ => queue.pop_front(),
+        }
+    }
+}
+
+/// The emulated camera. Captures render `scene` with the light at the world's arm angle
+/// and are stored as 16-bit RGB TIFF (extension `tiff`).
+pub struct EmulatedCamera {
+    scene: Arc<Scene>,
+    world: World,
+    timing: CaptureTiming,
+    faults: FaultInjector,
+    exposure: Exposure,
+    frames: u64,
+}
+
+impl EmulatedCamera {
+    /// A camera at the scene's ISO and 1/60 s.
+    pub fn new(scene: Scene, world: World, timing: CaptureTiming) -> Self {
+        let iso = scene.camera().iso;
+        Self {
+            scene: Arc::new(scene),
+            world,
+            timing,
+            faults: FaultInjector::default(),
+            exposure: Exposure {
+                shutter_s: 1.0 / 60.0,
+                iso: Some(iso),
+            },
+            frames: 0,
+        }
+    }
+
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    pub fn timing(&self) -> CaptureTiming {
+        self.timing
+    }
+
+    /// Queues a fault for the coming captures.
+    pub fn inject(&self, fault: CameraFault) {
+        self.faults.inject(fault);
+    }
+
+    /// A handle that injects faults while the camera is owned elsewhere.
+    pub fn fault_injector(&self) -> FaultInjector {
+        self.faults.clone()
+    }
+
+    fn timeout(&self, what: &str, started: Instant) -> DeviceError {
+        let deadline =
+            Duration::from_secs_f64(self.timing.deadline_wall_s(self.exposure.shutter_s));
+        std::thread::sleep(deadline.saturating_sub(started.elapsed()));
+        DeviceError::Timeout {
+            what: what.to_string(),
+            seconds: started.elapsed().as_secs_f64(),
+        }
+    }
+}
+
+/// The allowed value nearest to `value` on a log scale.
+fn nearest_log(allowed: impl Iterator<Item = f64>, value: f64) -> f64 {
+    allowed
+        .min_by(|a, b| {
+            let da = (a.ln() - value.ln()).abs();
+            let db = (b.ln() - value.ln()).abs();
+            da.total_cmp(&db)
+        })
+        .unwrap_or(value)
+}
+
+impl Camera for EmulatedCamera {
+    fn identify(&mut self) -> Result<CameraInfo, DeviceError> {
+        Ok(CameraInfo {
+            model: self.scene.camera().model.clone(),
+            port: "emulated".to_string(),
+        })
+    }
+
+    fn shutter_speeds(&mut self) -> Result<Vec<f64>, DeviceError> {
+        Ok(SHUTTER_SPEEDS_S.to_vec())
+    }
+
+    fn set_exposure(&mut self, exposure: Exposure) -> Result<Exposure, DeviceError> {
+        let (lo, hi) = (
+            SHUTTER_SPEEDS_S[0],
+            SHUTTER_SPEEDS_S[SHUTTER_SPEEDS_S.len() - 1],
+        );
+        if !(exposure.shutter_s.is_finite() && exposure.shutter_s > 0.0) {
+            return Err(DeviceError::OutOfRange {
+                what: "shutter time (s)".into(),
+                value: exposure.shutter_s,
+                min: lo,
+                max: hi,
+            });
+        }
+        let shutter_s = nearest_log(SHUTTER_SPEEDS_S.iter().copied(), exposure.shutter_s);
+        let iso = match exposure.iso {
+            Some(0) => {
+                return Err(DeviceError::OutOfRange {
+                    what: "ISO".into(),
+                    value: 0.0,
+                    min: f64::from(ISO_VALUES[0]),
+                    max: f64::from(ISO_VALUES[ISO_VALUES.len() - 1]),
+                })
+            }
+            Some(iso) => {
+                let snapped = nearest_log(ISO_VALUES.iter().map(|&v| f64::from(v)), f64::from(iso));
+                Some(snapped as u32)
+            }
+            None => self.exposure.iso,
+        };
+        self.exposure = Exposure { shutter_s, iso };
+        Ok(self.exposure)
+    }
+
+    fn capture_to(&mut self, path: &Path) -> Result<Capture, DeviceError> {
+        let started = Instant::now();
+        match self.faults.take() {
+            Some(CameraFault::Busy { .. }) => return Err(DeviceError::Busy),
+            Some(CameraFault::Timeout) => return Err(self.timeout("capture to complete", started)),
+            Some(CameraFault::Io) => {
+                return Err(DeviceError::Io(std::io::Error::other(
+                    "USB transfer from the camera failed",
+                )))
+            }
+            Some(CameraFault::FileNeverArrives) => {
+                return Err(self.timeout("the image file from the camera", started))
+            }
+            None => {}
+        }
+        let shot = Shot {
+            theta_l_deg: self.world.arm_deg(),
+            shutter_s: self.exposure.shutter_s,
+            iso: self.exposure.iso.unwrap_or(self.scene.camera().iso),
+            frame_index: self.frames,
+        };
+        self.frames += 1;
+        let frame = render::render(&self.scene, &shot);
+        let path = path.with_extension("tiff");
+        let bytes = frame.encode_tiff()?;
+        let duration = Duration::from_secs_f64(self.timing.capture_duration_s(shot.shutter_s));
+        std::thread::sleep(duration.saturating_sub(started.elapsed()));
+        write_atomically(&path, &bytes)?;
+        Ok(Capture {
+            path,
+            exposure: self.exposure,
+        })
+    }
+}

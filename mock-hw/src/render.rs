@@ -1,1 +1,309 @@
-//! (to be written)
+//! Renders a capture of the cylinder scene: a pinhole camera ray per pixel meets the
+//! cylinder, a point light with inverse-square falloff lights it, and the sample's
+//! vector-form BRDF gives the reflected radiance.
+//!
+//! Raw count per channel c, above the black level:
+//! `S_c = t · (ISO/100) · intensity/100 · β_c · cosθi · (1000 mm / |L − P|)² · vignetting`,
+//! with β_c the radiance factor in the camera-RGB domain (eq. 4/5: the white reads
+//! ρw·W_c, W_G = 100), so the ratio of a sample pixel to the white pixel at the same
+//! geometry is β_c / (ρw W_c). Counts are rounded, offset by the black level and clipped
+//! at the white level. Rows outside the two strips and columns that miss the cylinder
+//! receive no light (the cylinder body and background are black).
+//!
+//! Separability: the ray–cylinder intersection, the surface normal and the in-plane
+//! light and view vectors depend only on the column; a pixel adds only its height z
+//! (exact, no approximation).
+
+pub mod brdf;
+pub mod effects;
+pub mod reference;
+
+use std::io::Cursor;
+use std::path::Path;
+
+use gonio_drivers::atomic_file::write_atomically;
+use rayon::prelude::*;
+
+use crate::scene::Scene;
+use brdf::Geom;
+use effects::NoiseModel;
+
+/// A 16-bit RGB image, rows top to bottom, channels interleaved.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Frame16 {
+    width: u32,
+    height: u32,
+    data: Vec<u16>,
+}
+
+impl Frame16 {
+    pub fn width(&self) -> u32 {
+        self.width
+    }
+
+    pub fn height(&self) -> u32 {
+        self.height
+    }
+
+    /// Interleaved R, G, B values, row-major.
+    pub fn data(&self) -> &[u16] {
+        &self.data
+    }
+
+    /// The pixel at column `x`, row `y` (panics outside the image).
+    pub fn pixel(&self, x: u32, y: u32) -> [u16; 3] {
+        let i = 3 * (y as usize * self.width as usize + x as usize);
+        [self.data[i], self.data[i + 1], self.data[i + 2]]
+    }
+
+    /// Encodes as an RGB 16-bit TIFF (LZW with horizontal differencing).
+    pub fn encode_tiff(&self) -> std::io::Result<Vec<u8>> {
+        use tiff::encoder::{colortype::RGB16, Compression, Predictor, TiffEncoder};
+        let mut out = Cursor::new(Vec::new());
+        TiffEncoder::new(&mut out)
+            .and_then(|e| {
+                e.with_compression(Compression::Lzw)
+                    .with_predictor(Predictor::Horizontal)
+                    .write_image::<RGB16>(self.width, self.height, &self.data)
+            })
+            .map_err(|e| std::io::Error::other(format!("TIFF encoding: {e}")))?;
+        Ok(out.into_inner())
+    }
+
+    /// Writes the TIFF atomically at `path`.
+    pub fn write_tiff(&self, path: &Path) -> std::io::Result<()> {
+        write_atomically(path, &self.encode_tiff()?)
+    }
+}
+
+/// One exposure: light angle (degrees), shutter (s), ISO, and an index that varies the
+/// noise between otherwise identical captures.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Shot {
+    pub theta_l_deg: f64,
+    pub shutter_s: f64,
+    pub iso: u32,
+    pub frame_index: u64,
+}
+
+/// How the stored values relate to light, as the capture sidecar states it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FileLevels {
+    pub black_level: u32,
+    pub white_level: u32,
+    /// `true`: the 8-bit non-linear response (sidecar `"response":"nonlinear"`).
+    pub nonlinear: bool,
+}
+
+/// The levels of the files `scene` renders.
+pub fn file_levels(scene: &Scene) -> FileLevels {
+    match scene.effects().response {
+        Some(_) => FileLevels {
+            black_level: 0,
+            white_level: 65_535,
+            nonlinear: true,
+        },
+        None => FileLevels {
+            black_level: scene.camera().black_level,
+            white_level: scene.camera().white_level,
+            nonlinear: false,
+        },
+    }
+}
+
+/// Renders at the scene's ISO with frame index 0.
+pub fn render_frame(scene: &Scene, theta_l_deg: f64, shutter_s: f64) -> Frame16 {
+    render(
+        scene,
+        &Shot {
+            theta_l_deg,
+            shutter_s,
+            iso: scene.camera().iso,
+            frame_index: 0,
+        },
+    )
+}
+
+/// What one column sees (in-plane parts of the vectors, mm).
+#[derive(Debug, Clone, Copy)]
+struct Column {
+    /// Ray parameter of the hit: the hit's height is z = −t·y for sensor offset y.
+    t: f64,
+    x_mm: f64,
+    n_l: f64,
+    n_v: f64,
+    l_v: f64,
+    l2: f64,
+    v2: f64,
+    theta_i_deg: f64,
+    theta_r_deg: f64,
+}
+
+fn columns(scene: &Scene, theta_l_deg: f64) -> Vec<Option<Column>> {
+    let s = scene.setup();
+    let (f, pitch, r, dc) = (
+        s.focal_length_mm,
+        s.pixel_pitch_um / 1000.0,
+        s.cylinder_radius_mm,
+        s.camera_distance_mm,
+    );
+    let (sin_l, cos_l) = theta_l_deg.to_radians().sin_cos();
+    let light = [s.light_distance_mm * cos_l, s.light_distance_mm * sin_l];
+    let cx = s.cx();
+    (0..s.image_width)
+        .map(|u| {
+            let x_mm = (f64::from(u) - cx) * pitch;
+            // Ray (dc, 0) + t·(−f, x) against x² + y² = r².
+            let a = f * f + x_mm * x_mm;
+            let half_b = -dc * f;
+            let disc = half_b * half_b - a * (dc * dc - r * r);
+            if disc < 0.0 {
+                return None;
+            }
+            let t = (-half_b - disc.sqrt()) / a;
+            let p = [dc - t * f, t * x_mm];
+            let n = [p[0] / r, p[1] / r];
+            let l = [light[0] - p[0], light[1] - p[1]];
+            let v = [t * f, -t * x_mm];
+            let dot = |a: [f64; 2], b: [f64; 2]| a[0] * b[0] + a[1] * b[1];
+            let tangent = [-n[1], n[0]];
+            let n_v = dot(n, v);
+            if n_v <= 0.0 {
+                return None;
+            }
+            Some(Column {
+                t,
+                x_mm,
+                n_l: dot(n, l),
+                n_v,
+                l_v: dot(l, v),
+                l2: dot(l, l),
+                v2: dot(v, v),
+                theta_i_deg: dot(tangent, l).atan2(dot(n, l)).to_degrees(),
+                theta_r_deg: -dot(tangent, v).atan2(n_v).to_degrees(),
+            })
+        })
+        .collect()
+}
+
+#[derive(Clone, Copy, PartialEq)]
+enum Strip {
+    Sample,
+    White,
+    Dark,
+}
+
+/// Renders one exposure.
+pub fn render(scene: &Scene, shot: &Shot) -> Frame16 {
+    let setup = scene.setup();
+    let (width, height) = (setup.image_width, setup.image_height);
+    let camera = scene.camera();
+    let effects = scene.effects();
+    let cols = columns(scene, shot.theta_l_deg);
+    let pitch = setup.pixel_pitch_um / 1000.0;
+    let f = setup.focal_length_mm;
+    let cy = setup.cy();
+    let scale = shot.shutter_s * f64::from(shot.iso) / 100.0 * scene.light_intensity() / 100.0;
+    let white_beta = scene
+        .camera_domain()
+        .white_rgb()
+        .map(|w| w * scene.white_reflectance());
+    let material = scene.material();
+    let retro = effects
+        .retro_reflection
+        .as_ref()
+        .map(|r| (r.kr, r.width_deg.to_radians().tan().powi(2)));
+    let noise = effects.noise.as_ref().map(|n| NoiseModel::new(n, shot.iso));
+    let frame_seed = effects::mix(
+        effects.seed
+            ^ effects::mix(shot.theta_l_deg.to_bits())
+            ^ effects::mix(shot.shutter_s.to_bits()).rotate_left(17)
+            ^ effects::mix(u64::from(shot.iso) ^ (shot.frame_index << 20)).rotate_left(31),
+    );
+    let vignetting = effects.vignetting.as_ref().map(|v| v.strength);
+    let black = f64::from(camera.black_level);
+    let white_level = f64::from(camera.white_level);
+    let response = effects
+        .response
+        .as_ref()
+        .map(|r| effects::response_table(r, camera.black_level, camera.white_level));
+
+    let row_len = 3 * width as usize;
+    let mut data = vec![0u16; row_len * height as usize];
+    data.par_chunks_mut(row_len)
+        .enumerate()
+        .for_each(|(row, out)| {
+            let row = row as u32;
+            let strip = if (setup.sample_rows[0]..=setup.sample_rows[1]).contains(&row) {
+                Strip::Sample
+            } else if (setup.white_rows[0]..=setup.white_rows[1]).contains(&row) {
+                Strip::White
+            } else {
+                Strip::Dark
+            };
+            let y_mm = (f64::from(row) - cy) * pitch;
+            let mut rng = noise.as_ref().map(|_| NoiseModel::row_rng(frame_seed, row));
+            for (u, px) in out.chunks_exact_mut(3).enumerate() {
+                let mut signal = [0.0; 3];
+                if let (Some(col), false) = (&cols[u], strip == Strip::Dark) {
+                    let z = -col.t * y_mm;
+                    let z2 = z * z;
+                    let l2 = col.l2 + z2;
+                    let (l_len, v_len) = (l2.sqrt(), (col.v2 + z2).sqrt());
+                    let cos_i = col.n_l / l_len;
+                    if cos_i > 0.0 {
+                        let beta = if strip == Strip::White {
+                            white_beta
+                        } else {
+                            let l_v = (col.l_v + z2) / (l_len * v_len);
+                            let g = Geom::new(
+                                cos_i,
+                                col.n_v / v_len,
+                                l_v,
+                                col.theta_i_deg,
+                                col.theta_r_deg,
+                            );
+                            let mut beta = material.beta(&g);
+                            if let Some((kr, w2)) = retro {
+                                let lobe = brdf::retro_lobe(l_v, w2);
+                                for (b, k) in beta.iter_mut().zip(kr) {
+                                    *b += k * lobe;
+                                }
+                            }
+                            beta
+                        };
+                        let mut gain = scale * cos_i * 1e6 / l2;
+                        if let Some(strength) = vignetting {
+                            gain *= effects::vignetting_gain(strength, f, col.x_mm, y_mm);
+                        }
+                        signal = beta.map(|b| b * gain);
+                    }
+                }
+                for (out, s) in px.iter_mut().zip(signal) {
+                    let s = match (&noise, rng.as_mut()) {
+                        (Some(model), Some(rng)) => model.apply(s, rng),
+                        _ => s,
+                    };
+                    let v = (black + s).round().clamp(0.0, white_level) as u16;
+                    *out = match &response {
+                        Some(table) => table[usize::from(v)],
+                        None => v,
+                    };
+                }
+            }
+        });
+    if let Some(hot) = &effects.hot_pixels {
+        let stuck = match &response {
+            Some(table) => table[camera.white_level as usize],
+            None => camera.white_level as u16,
+        };
+        for p in effects::hot_pixel_positions(hot.count, width, height, effects.seed) {
+            data[3 * p..3 * p + 3].fill(stuck);
+        }
+    }
+    Frame16 {
+        width,
+        height,
+        data,
+    }
+}

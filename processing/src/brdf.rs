@@ -1,1 +1,225 @@
-//! (to be written)
+//! Cook–Torrance and isotropic Ward reflection models in the paper's form (eq. 6–9, F = 1),
+//! as radiance factor β per camera channel at in-plane angles (θi, θr) in degrees.
+//!
+//! Both models are linear in their coefficients: β_c = Kd_c·a + Ks_c·s(m_c), with a
+//! diffuse basis `a` (1 for Cook–Torrance, 1/π for Ward) and a specular lobe
+//! s(m) = g · exp(−tan²α/m²) / m², where g depends on the angles only:
+//! - Cook–Torrance: g = G / (π cos⁴α cos θi cos θr), G = min(1, 2(n·h)(n·v)/(v·h), 2(n·h)(n·l)/(v·h));
+//! - Ward: g = 1 / (4π sqrt(cos θi cos θr)).
+//!
+//! Numerics: tan²α = (1 − c²)/c² with c = cos α clamped to [1e−12, 1]; the lobe is exactly 0
+//! where tan²α/m² exceeds the exponent at which exp(−x) leaves the normal f64 range;
+//! a direction at or past grazing (cos θ < 1e−9, or a non-finite angle) makes β exactly 0
+//! (no light arrives, or the point is not seen); m is clamped to [1e−6, 1e6].
+
+use std::f64::consts::PI;
+use std::fmt;
+use std::str::FromStr;
+
+use serde::{Deserialize, Serialize};
+
+/// Cosines below this count as at or past grazing.
+const COS_GRAZING: f64 = 1e-9;
+/// Smallest cos α used in tan²α.
+const COS_ALPHA_MIN: f64 = 1e-12;
+/// exp(−x) is below the smallest normal f64 for x above this: the lobe is 0 there.
+const EXP_UNDERFLOW: f64 = 708.0;
+/// Range to which the roughness m is clamped.
+pub const M_MIN: f64 = 1e-6;
+/// Upper end of the roughness clamp, see [`M_MIN`].
+pub const M_MAX: f64 = 1e6;
+
+/// A reflection model.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Model {
+    /// Cook–Torrance with Beckmann distribution, F = 1 (paper eq. 6, 8).
+    CookTorrance,
+    /// Isotropic Ward (paper eq. 7, 9).
+    Ward,
+}
+
+/// Whether the three channels share one roughness m or have one each.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Roughness {
+    /// One m for R, G and B (paper eq. 6, 7).
+    #[default]
+    Shared,
+    /// One m per channel (paper eq. 8, 9).
+    PerChannel,
+}
+
+/// Model coefficients in the camera-RGB β domain; `m` per channel (all equal when shared).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Params {
+    pub kd: [f64; 3],
+    pub ks: [f64; 3],
+    pub m: [f64; 3],
+}
+
+impl Params {
+    /// Parameters with one roughness for all channels.
+    pub fn shared(kd: [f64; 3], ks: [f64; 3], m: f64) -> Self {
+        Params { kd, ks, m: [m; 3] }
+    }
+}
+
+/// The model at one (θi, θr), as the basis of its linear form β_c = Kd_c·diffuse + Ks_c·specular(m_c).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Basis {
+    /// Diffuse basis a: 1 (Cook–Torrance) or 1/π (Ward); 0 at or past grazing.
+    pub diffuse: f64,
+    /// tan²α of the half vector.
+    tan2_alpha: f64,
+    /// Angular factor g of the lobe; 0 at or past grazing.
+    gain: f64,
+}
+
+impl Basis {
+    /// Specular basis s(m) = g·exp(−tan²α/m²)/m², finite and ≥ 0.
+    #[inline]
+    pub fn specular(&self, m: f64) -> f64 {
+        let m = if m.is_nan() {
+            M_MAX
+        } else {
+            m.clamp(M_MIN, M_MAX)
+        };
+        let inv_m2 = 1.0 / (m * m);
+        let x = self.tan2_alpha * inv_m2;
+        if self.gain == 0.0 || x > EXP_UNDERFLOW {
+            0.0
+        } else {
+            self.gain * (-x).exp() * inv_m2
+        }
+    }
+
+    /// β per channel for the given parameters.
+    pub fn evaluate(&self, params: &Params) -> [f64; 3] {
+        std::array::from_fn(|c| {
+            params.kd[c] * self.diffuse + params.ks[c] * self.specular(params.m[c])
+        })
+    }
+}
+
+impl Model {
+    /// Name used in files and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Model::CookTorrance => "cook-torrance",
+            Model::Ward => "ward",
+        }
+    }
+
+    /// The linear basis of the model at (θi, θr) in degrees.
+    pub fn basis(self, theta_i_deg: f64, theta_r_deg: f64) -> Basis {
+        let theta_i = theta_i_deg.to_radians();
+        let theta_r = theta_r_deg.to_radians();
+        let cos_i = theta_i.cos();
+        let cos_r = theta_r.cos();
+        // `!(x >= y)` also masks NaN.
+        if !(cos_i >= COS_GRAZING && cos_r >= COS_GRAZING) {
+            return Basis {
+                diffuse: 0.0,
+                tan2_alpha: 0.0,
+                gain: 0.0,
+            };
+        }
+        let cos_alpha = ((theta_i - theta_r) / 2.0).cos().clamp(COS_ALPHA_MIN, 1.0);
+        let cos_alpha2 = cos_alpha * cos_alpha;
+        let tan2_alpha = ((1.0 - cos_alpha2) / cos_alpha2).max(0.0);
+        match self {
+            Model::CookTorrance => {
+                // v·h = cos((θi + θr)/2) > 0 for directions before grazing.
+                let v_dot_h = ((theta_i + theta_r) / 2.0).cos().max(COS_GRAZING);
+                let masking = 2.0 * cos_alpha * cos_r / v_dot_h;
+                let shadowing = 2.0 * cos_alpha * cos_i / v_dot_h;
+                let g = 1f64.min(masking).min(shadowing);
+                Basis {
+                    diffuse: 1.0,
+                    tan2_alpha,
+                    gain: g / (PI * cos_alpha2 * cos_alpha2 * cos_i * cos_r),
+                }
+            }
+            Model::Ward => Basis {
+                diffuse: 1.0 / PI,
+                tan2_alpha,
+                gain: 1.0 / (4.0 * PI * (cos_i * cos_r).sqrt()),
+            },
+        }
+    }
+
+    /// β per channel (R, G, B) at (θi, θr) in degrees.
+    pub fn evaluate(&self, params: &Params, theta_i_deg: f64, theta_r_deg: f64) -> [f64; 3] {
+        self.basis(theta_i_deg, theta_r_deg).evaluate(params)
+    }
+}
+
+impl Roughness {
+    /// Name used in files and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Roughness::Shared => "shared",
+            Roughness::PerChannel => "per-channel",
+        }
+    }
+
+    /// How many roughness values the model has: 1 or 3.
+    pub fn count(self) -> usize {
+        match self {
+            Roughness::Shared => 1,
+            Roughness::PerChannel => 3,
+        }
+    }
+}
+
+/// An unknown model or roughness name.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown {what} `{name}` (expected {expected})")]
+pub struct UnknownName {
+    pub what: &'static str,
+    pub name: String,
+    pub expected: &'static str,
+}
+
+impl FromStr for Model {
+    type Err = UnknownName;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "cook-torrance" => Ok(Model::CookTorrance),
+            "ward" => Ok(Model::Ward),
+            _ => Err(UnknownName {
+                what: "model",
+                name: s.to_owned(),
+                expected: "cook-torrance or ward",
+            }),
+        }
+    }
+}
+
+impl FromStr for Roughness {
+    type Err = UnknownName;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "shared" => Ok(Roughness::Shared),
+            "per-channel" => Ok(Roughness::PerChannel),
+            _ => Err(UnknownName {
+                what: "roughness",
+                name: s.to_owned(),
+                expected: "shared or per-channel",
+            }),
+        }
+    }
+}
+
+impl fmt::Display for Model {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl fmt::Display for Roughness {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}

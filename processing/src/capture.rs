@@ -1,1 +1,520 @@
-//! (to be written)
+//! Reading captures: a 16-bit (or 8-bit) RGB TIFF or a camera raw file, plus its JSON
+//! sidecar of the same stem (`x.tiff` → `x.json`).
+//!
+//! Pixel values are kept as the file's integer counts (RGB interleaved, row-major)
+//! together with the black and white levels that apply to them; [`Frame::signal`]
+//! gives the normalised signal (count − black)/(white − black). Raw Bayer data are
+//! turned into RGB by 2×2 superpixels (half resolution): R and B as recorded, G the
+//! mean of the two greens.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+/// How pixel counts relate to exposure.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Response {
+    /// Counts proportional to exposure (raw data, linear TIFF).
+    #[default]
+    Linear,
+    /// An unknown monotonic camera response (developed images): needs response recovery.
+    Nonlinear,
+}
+
+/// The JSON sidecar of a capture (DESIGN.md). Unknown keys are ignored.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Sidecar {
+    /// Exposure time in seconds.
+    pub shutter_s: f64,
+    /// ISO speed; `null` where the body has no ISO setting (taken as 100).
+    pub iso: Option<f64>,
+    /// Light-arm angle θL in degrees.
+    pub theta_l: f64,
+    pub camera: String,
+    /// Capture time, RFC 3339.
+    pub time: String,
+    /// Black level in file counts, overriding the file's own.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub black_level: Option<f64>,
+    /// White (clipping) level in file counts, overriding the file's own.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub white_level: Option<f64>,
+    #[serde(default)]
+    pub response: Response,
+    /// Image width in pixels as stored in the file, checked when present.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub width: Option<u32>,
+    /// Image height in pixels as stored in the file, checked when present.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub height: Option<u32>,
+}
+
+impl Sidecar {
+    /// Relative exposure H = shutter_s · ISO/100 (seconds at ISO 100).
+    pub fn exposure(&self) -> f64 {
+        self.shutter_s * self.iso.unwrap_or(100.0) / 100.0
+    }
+
+    fn validate(&self, path: &Path) -> Result<(), CaptureError> {
+        let bad = |field: &'static str, reason: String| CaptureError::InvalidSidecar {
+            path: path.to_path_buf(),
+            field,
+            reason,
+        };
+        if !(self.shutter_s.is_finite() && self.shutter_s > 0.0 && self.shutter_s <= 3600.0) {
+            return Err(bad(
+                "shutter_s",
+                format!("{} is not a time in (0, 3600] s", self.shutter_s),
+            ));
+        }
+        if let Some(iso) = self.iso {
+            if !(iso.is_finite() && iso > 0.0) {
+                return Err(bad("iso", format!("{iso} is not a positive number")));
+            }
+        }
+        if !(self.theta_l.is_finite() && self.theta_l.abs() <= 180.0) {
+            return Err(bad(
+                "theta_l",
+                format!("{} is not an angle in [-180, 180] degrees", self.theta_l),
+            ));
+        }
+        for (field, level) in [("black_level", self.black_level), ("white_level", self.white_level)] {
+            if let Some(v) = level {
+                if !(v.is_finite() && v >= 0.0) {
+                    return Err(bad(field, format!("{v} is not a non-negative count")));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Errors reading a capture.
+#[derive(Debug, Error)]
+pub enum CaptureError {
+    #[error("{image}: sidecar {sidecar} is missing")]
+    MissingSidecar { image: PathBuf, sidecar: PathBuf },
+    #[error("{path}: cannot read sidecar: {source}")]
+    SidecarIo {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{path}: invalid sidecar JSON: {source}")]
+    SidecarJson {
+        path: PathBuf,
+        source: serde_json::Error,
+    },
+    #[error("{path}: sidecar field '{field}': {reason}")]
+    InvalidSidecar {
+        path: PathBuf,
+        field: &'static str,
+        reason: String,
+    },
+    #[error("{path}: cannot decode image: {reason}")]
+    Image { path: PathBuf, reason: String },
+    #[error("{path}: unsupported image layout: {reason}")]
+    Layout { path: PathBuf, reason: String },
+    #[error("{path}: unsupported file type (expected .tif, .tiff{raw})", raw = if cfg!(feature = "raw") { " or a camera raw file" } else { "; camera raw support is not built in" })]
+    UnsupportedFormat { path: PathBuf },
+}
+
+/// One capture: integer counts, their black and white levels, and the sidecar.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Frame {
+    pub path: PathBuf,
+    pub sidecar: Sidecar,
+    pub width: usize,
+    pub height: usize,
+    /// Counts, RGB interleaved, row-major: `data[3 * (y * width + x) + c]`.
+    pub data: Vec<u16>,
+    /// Black level in counts.
+    pub black_level: f64,
+    /// White (clipping) level in counts, above `black_level`.
+    pub white_level: f64,
+}
+
+/// Extensions read as TIFF; every other extension is tried as camera raw.
+const TIFF_EXTENSIONS: [&str; 2] = ["tif", "tiff"];
+/// Camera raw extensions recognised when scanning directories.
+pub const RAW_EXTENSIONS: [&str; 10] = [
+    "nef", "nrw", "cr2", "cr3", "arw", "dng", "orf", "rw2", "raf", "pef",
+];
+
+/// Whether `path` has a capture extension (TIFF or camera raw, case-insensitive).
+pub fn is_capture_path(path: &Path) -> bool {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .map(|e| e.to_ascii_lowercase())
+        .is_some_and(|e| TIFF_EXTENSIONS.contains(&e.as_str()) || RAW_EXTENSIONS.contains(&e.as_str()))
+}
+
+/// The sidecar path of an image: same stem, `.json`.
+pub fn sidecar_path(image: &Path) -> PathBuf {
+    image.with_extension("json")
+}
+
+/// Reads and validates the sidecar of `image`.
+pub fn read_sidecar(image: &Path) -> Result<Sidecar, CaptureError> {
+    let path = sidecar_path(image);
+    let text = match fs::read_to_string(&path) {
+        Ok(text) => text,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            return Err(CaptureError::MissingSidecar {
+                image: image.to_path_buf(),
+                sidecar: path,
+            })
+        }
+        Err(source) => return Err(CaptureError::SidecarIo { path, source }),
+    };
+    let sidecar: Sidecar = serde_json::from_str(&text).map_err(|source| CaptureError::SidecarJson {
+        path: path.clone(),
+        source,
+    })?;
+    sidecar.validate(&path)?;
+    Ok(sidecar)
+}
+
+/// Writes a 16-bit RGB TIFF of `counts` (RGB interleaved, row-major) and its sidecar.
+pub fn write_tiff_capture(
+    path: &Path,
+    width: u32,
+    height: u32,
+    counts: &[u16],
+    sidecar: &Sidecar,
+) -> Result<(), CaptureError> {
+    let image = image::ImageBuffer::<image::Rgb<u16>, &[u16]>::from_raw(width, height, counts).ok_or_else(|| {
+        CaptureError::Layout {
+            path: path.to_path_buf(),
+            reason: format!("{} values for {width}×{height} RGB", counts.len()),
+        }
+    })?;
+    let image_error = |reason: String| CaptureError::Image {
+        path: path.to_path_buf(),
+        reason,
+    };
+    image
+        .save_with_format(path, image::ImageFormat::Tiff)
+        .map_err(|e| image_error(e.to_string()))?;
+    let json = serde_json::to_string_pretty(sidecar).map_err(|e| image_error(e.to_string()))?;
+    let side = sidecar_path(path);
+    fs::write(&side, json).map_err(|source| CaptureError::SidecarIo { path: side, source })
+}
+
+/// Decoded file contents before the sidecar is applied.
+struct Decoded {
+    width: usize,
+    height: usize,
+    /// Width and height as stored in the file (sensor size for raw).
+    stored: (usize, usize),
+    data: Vec<u16>,
+    black_level: f64,
+    white_level: f64,
+    /// Largest count the file's bit depth can hold.
+    max_count: f64,
+}
+
+impl Frame {
+    /// Reads an image and its sidecar; sidecar levels override the file's own.
+    pub fn read(path: &Path) -> Result<Frame, CaptureError> {
+        let sidecar = read_sidecar(path)?;
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(|e| e.to_ascii_lowercase())
+            .unwrap_or_default();
+        let decoded = if TIFF_EXTENSIONS.contains(&ext.as_str()) {
+            decode_tiff(path)?
+        } else {
+            decode_raw(path)?
+        };
+        Self::assemble(path, sidecar, decoded)
+    }
+
+    /// Builds a frame from counts already in memory (RGB interleaved), checking sizes
+    /// and levels. `max_count` is the largest count the source bit depth can hold.
+    pub fn from_counts(
+        path: PathBuf,
+        sidecar: Sidecar,
+        width: usize,
+        height: usize,
+        data: Vec<u16>,
+        max_count: f64,
+    ) -> Result<Frame, CaptureError> {
+        if data.len() != width * height * 3 {
+            return Err(CaptureError::Layout {
+                path,
+                reason: format!("{} values for {width}×{height} RGB", data.len()),
+            });
+        }
+        let decoded = Decoded {
+            width,
+            height,
+            stored: (width, height),
+            data,
+            black_level: 0.0,
+            white_level: max_count,
+            max_count,
+        };
+        Self::assemble(&path, sidecar, decoded)
+    }
+
+    fn assemble(path: &Path, sidecar: Sidecar, decoded: Decoded) -> Result<Frame, CaptureError> {
+        let sidecar_file = sidecar_path(path);
+        let bad = |field: &'static str, reason: String| CaptureError::InvalidSidecar {
+            path: sidecar_file.clone(),
+            field,
+            reason,
+        };
+        let (stored_w, stored_h) = decoded.stored;
+        if let Some(w) = sidecar.width {
+            if w as usize != stored_w {
+                return Err(bad("width", format!("{w} but the image is {stored_w} wide")));
+            }
+        }
+        if let Some(h) = sidecar.height {
+            if h as usize != stored_h {
+                return Err(bad("height", format!("{h} but the image is {stored_h} high")));
+            }
+        }
+        let black_level = sidecar.black_level.unwrap_or(decoded.black_level);
+        let white_level = sidecar.white_level.unwrap_or(decoded.white_level);
+        if white_level > decoded.max_count {
+            return Err(bad(
+                "white_level",
+                format!(
+                    "{white_level} exceeds the file's largest count {}",
+                    decoded.max_count
+                ),
+            ));
+        }
+        if black_level >= white_level {
+            return Err(bad(
+                "black_level",
+                format!("{black_level} is not below the white level {white_level}"),
+            ));
+        }
+        if decoded.width == 0 || decoded.height == 0 {
+            return Err(CaptureError::Layout {
+                path: path.to_path_buf(),
+                reason: "empty image".into(),
+            });
+        }
+        Ok(Frame {
+            path: path.to_path_buf(),
+            sidecar,
+            width: decoded.width,
+            height: decoded.height,
+            data: decoded.data,
+            black_level,
+            white_level,
+        })
+    }
+
+    /// Normalised signal (count − black)/(white − black) of pixel (x, y), channel c.
+    /// 0 is black, 1 is clipping; noise can make it slightly negative.
+    pub fn signal(&self, x: usize, y: usize, c: usize) -> f64 {
+        let count = f64::from(self.data[3 * (y * self.width + x) + c]);
+        (count - self.black_level) / (self.white_level - self.black_level)
+    }
+}
+
+fn decode_tiff(path: &Path) -> Result<Decoded, CaptureError> {
+    use image::DynamicImage;
+    let image_error = |reason: String| CaptureError::Image {
+        path: path.to_path_buf(),
+        reason,
+    };
+    let reader = image::ImageReader::open(path)
+        .map_err(|e| image_error(e.to_string()))?
+        .with_guessed_format()
+        .map_err(|e| image_error(e.to_string()))?;
+    let image = reader.decode().map_err(|e| image_error(e.to_string()))?;
+    let (width, height) = (image.width() as usize, image.height() as usize);
+    let (data, max_count) = match image {
+        DynamicImage::ImageRgb16(img) => (img.into_raw(), f64::from(u16::MAX)),
+        DynamicImage::ImageRgba16(img) => (drop_alpha(&img.into_raw()), f64::from(u16::MAX)),
+        DynamicImage::ImageRgb8(img) => (widen(&img.into_raw()), f64::from(u8::MAX)),
+        DynamicImage::ImageRgba8(img) => (widen(&drop_alpha(&img.into_raw())), f64::from(u8::MAX)),
+        other => {
+            return Err(CaptureError::Layout {
+                path: path.to_path_buf(),
+                reason: format!("{:?} pixels; expected 8- or 16-bit RGB", other.color()),
+            })
+        }
+    };
+    Ok(Decoded {
+        width,
+        height,
+        stored: (width, height),
+        data,
+        black_level: 0.0,
+        white_level: max_count,
+        max_count,
+    })
+}
+
+fn drop_alpha<T: Copy>(rgba: &[T]) -> Vec<T> {
+    rgba.chunks_exact(4).flat_map(|p| [p[0], p[1], p[2]]).collect()
+}
+
+fn widen(values: &[u8]) -> Vec<u16> {
+    values.iter().map(|&v| u16::from(v)).collect()
+}
+
+#[cfg(not(feature = "raw"))]
+fn decode_raw(path: &Path) -> Result<Decoded, CaptureError> {
+    Err(CaptureError::UnsupportedFormat {
+        path: path.to_path_buf(),
+    })
+}
+
+#[cfg(feature = "raw")]
+fn decode_raw(path: &Path) -> Result<Decoded, CaptureError> {
+    use rawler::rawimage::{RawImageData, RawPhotometricInterpretation};
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(|e| e.to_ascii_lowercase())
+        .unwrap_or_default();
+    if !RAW_EXTENSIONS.contains(&ext.as_str()) {
+        return Err(CaptureError::UnsupportedFormat {
+            path: path.to_path_buf(),
+        });
+    }
+    let layout = |reason: String| CaptureError::Layout {
+        path: path.to_path_buf(),
+        reason,
+    };
+    let raw = rawler::decode_file(path).map_err(|e| CaptureError::Image {
+        path: path.to_path_buf(),
+        reason: e.to_string(),
+    })?;
+    let RawImageData::Integer(counts) = &raw.data else {
+        return Err(layout("floating-point raw data".into()));
+    };
+    let black = raw.blacklevel.as_bayer_array();
+    let black_level = f64::from(black.iter().sum::<f32>() / 4.0);
+    let white_level = raw
+        .whitelevel
+        .0
+        .iter()
+        .copied()
+        .min()
+        .map_or(f64::from(u16::MAX), f64::from);
+    let stored = (raw.width, raw.height);
+    let area = raw
+        .crop_area
+        .or(raw.active_area)
+        .map_or((0, 0, raw.width, raw.height), |r| (r.p.x, r.p.y, r.d.w, r.d.h));
+    let (data, width, height) = match (&raw.photometric, raw.cpp) {
+        (RawPhotometricInterpretation::Cfa(config), 1) => {
+            superpixels(counts, raw.width, area, |row, col| config.cfa.color_at(row, col))
+                .map_err(layout)?
+        }
+        (_, 3) => {
+            let (x0, y0, w, h) = area;
+            let mut data = Vec::with_capacity(w * h * 3);
+            for y in y0..y0 + h {
+                let start = 3 * (y * raw.width + x0);
+                data.extend_from_slice(&counts[start..start + 3 * w]);
+            }
+            (data, w, h)
+        }
+        (_, cpp) => return Err(layout(format!("{cpp} components per pixel"))),
+    };
+    Ok(Decoded {
+        width,
+        height,
+        stored,
+        data,
+        black_level,
+        white_level,
+        max_count: f64::from(u16::MAX),
+    })
+}
+
+/// 2×2 superpixels of a Bayer mosaic inside `area` = (x0, y0, w, h): one RGB pixel per
+/// block, R and B as recorded, G the mean of the two greens (rounded half up on even
+/// blocks and half down on odd ones, so rounding adds no bias). `color_at(row, col)` is
+/// the CFA colour (0 R, 1 G, 2 B) at absolute sensor coordinates.
+#[cfg_attr(not(feature = "raw"), allow(dead_code))]
+fn superpixels(
+    counts: &[u16],
+    stride: usize,
+    area: (usize, usize, usize, usize),
+    color_at: impl Fn(usize, usize) -> usize,
+) -> Result<(Vec<u16>, usize, usize), String> {
+    let (x0, y0, w, h) = area;
+    let (out_w, out_h) = (w / 2, h / 2);
+    if out_w == 0 || out_h == 0 || counts.len() < stride * (y0 + h) {
+        return Err(format!("raw area {w}×{h} is too small or outside the data"));
+    }
+    // The colours of the four positions of a block and where each one goes.
+    let mut offsets = [[usize::MAX; 2]; 3];
+    for (dy, dx) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
+        let color = color_at(y0 + dy, x0 + dx);
+        let slot = offsets
+            .get_mut(color)
+            .ok_or_else(|| format!("CFA colour {color} is not R, G or B"))?;
+        let position = dy * stride + dx;
+        if slot[0] == usize::MAX {
+            slot[0] = position;
+        } else if slot[1] == usize::MAX {
+            slot[1] = position;
+        } else {
+            return Err("CFA is not a 2×2 Bayer pattern".into());
+        }
+    }
+    let [r, g, b] = offsets;
+    if r[0] == usize::MAX || b[0] == usize::MAX || g[1] == usize::MAX {
+        return Err("CFA is not a 2×2 Bayer pattern".into());
+    }
+    let mut data = Vec::with_capacity(out_w * out_h * 3);
+    for by in 0..out_h {
+        for bx in 0..out_w {
+            let base = (y0 + 2 * by) * stride + x0 + 2 * bx;
+            let greens = u32::from(counts[base + g[0]]) + u32::from(counts[base + g[1]]);
+            let round = ((bx + by) & 1) as u32;
+            data.extend_from_slice(&[
+                counts[base + r[0]],
+                ((greens + round) / 2) as u16,
+                counts[base + b[0]],
+            ]);
+        }
+    }
+    Ok((data, out_w, out_h))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn superpixels_follow_the_cfa_pattern() {
+        // RGGB mosaic 4×2: R=10, G=21/22, B=30 in the first block; second block +100.
+        let counts = [10, 21, 110, 121, 22, 30, 122, 130];
+        let rggb = |row: usize, col: usize| match (row % 2, col % 2) {
+            (0, 0) => 0,
+            (1, 1) => 2,
+            _ => 1,
+        };
+        let (data, w, h) = superpixels(&counts, 4, (0, 0, 4, 2), rggb).unwrap();
+        assert_eq!((w, h), (2, 1));
+        // (21 + 22)/2 = 21.5: rounded down on block 0, up on block 1.
+        assert_eq!(data, vec![10, 21, 30, 110, 122, 130]);
+        // An offset area starting on a green pixel sees a GRBG block.
+        let counts = [0, 20, 10, 0, 0, 30, 22, 0];
+        let (data, _, _) = superpixels(&counts, 4, (1, 0, 2, 2), rggb).unwrap();
+        assert_eq!(data, vec![10, 21, 30]);
+    }
+
+    #[test]
+    fn superpixels_reject_non_bayer_patterns() {
+        let counts = [0u16; 16];
+        let all_green = |_: usize, _: usize| 1;
+        assert!(superpixels(&counts, 4, (0, 0, 4, 4), all_green).is_err());
+    }
+}

@@ -1,1 +1,504 @@
-//! (to be written)
+//! HDR radiance maps from a bracket of exposures.
+//!
+//! Two methods:
+//! - **linear** (raw counts): a noise-aware weighted mean of count/exposure over the
+//!   frames where the sample is neither near black nor near clipping. The weight of a
+//!   frame is its inverse variance, H²/(σ²_shot + σ²_read) with H the frame's exposure
+//!   and the shot variance predicted from the best single-frame estimate (the longest
+//!   valid exposure), so noisy samples do not bias their own weights.
+//! - **Debevec–Malik (1997)** for non-linear frames: counts quantised to 256 levels,
+//!   the log response g(z) recovered per channel by least squares from sampled pixels
+//!   with hat weights and a second-difference smoothness term λ, fixed by g(128) = 0;
+//!   then ln E = Σ w(z)(g(z) − ln H) / Σ w(z).
+//!
+//! Radiance is relative: for the linear method, normalised signal (0 black, 1 clipping)
+//! per second of exposure at ISO 100; for Debevec–Malik the scale fixed by g(128) = 0.
+//! Ratios of radiances (which is what extraction uses) are independent of that scale.
+//!
+//! A channel with no usable frame is flagged in [`HdrImage::mask`] and given a finite
+//! value: if any frame clipped, the lower bound from the shortest clipped exposure
+//! ([`SATURATED`]); otherwise (black in every frame) 0 ([`UNDEREXPOSED`]).
+
+use std::path::{Path, PathBuf};
+
+use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
+use thiserror::Error;
+
+use crate::capture::{Frame, Response};
+
+/// Mask bit: some channel of the pixel was clipped in every frame that saw it.
+pub const SATURATED: u8 = 1;
+/// Mask bit: some channel of the pixel was near black in every frame.
+pub const UNDEREXPOSED: u8 = 2;
+
+/// Levels of the Debevec–Malik response table.
+const LEVELS: usize = 256;
+
+/// Which merge to run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum MergeMethod {
+    /// Linear for linear frames, Debevec–Malik for non-linear ones.
+    #[default]
+    Auto,
+    Linear,
+    DebevecMalik,
+}
+
+/// Sensor noise model for the linear merge, in units of the normalised signal.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NoiseModel {
+    /// Electrons at clipping at ISO 100 (shot variance of signal s is s / full_well,
+    /// scaled by ISO/100).
+    pub full_well_electrons: f64,
+    /// Read noise standard deviation as a fraction of the range black..white.
+    pub read_noise: f64,
+}
+
+impl Default for NoiseModel {
+    /// Typical of an APS-C DSLR at base ISO: 30 000 e⁻ full well, read noise 1/5000.
+    fn default() -> Self {
+        Self {
+            full_well_electrons: 30_000.0,
+            read_noise: 2e-4,
+        }
+    }
+}
+
+/// Options of [`merge`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MergeOptions {
+    pub method: MergeMethod,
+    pub noise: NoiseModel,
+    /// Normalised signals below this are treated as black (linear method).
+    pub min_signal: f64,
+    /// Normalised signals above this are treated as clipped (linear method).
+    pub max_signal: f64,
+    /// Debevec–Malik smoothness weight λ.
+    pub smoothness: f64,
+    /// Debevec–Malik pixel locations sampled per channel (at least enough that
+    /// samples × (distinct exposures − 1) covers the 256 levels).
+    pub response_samples: usize,
+}
+
+impl Default for MergeOptions {
+    fn default() -> Self {
+        Self {
+            method: MergeMethod::Auto,
+            noise: NoiseModel::default(),
+            min_signal: 0.002,
+            max_signal: 0.98,
+            smoothness: 50.0,
+            response_samples: 100,
+        }
+    }
+}
+
+/// Errors of [`merge`] and [`HdrImage::write_exr`].
+#[derive(Debug, Error)]
+pub enum HdrError {
+    #[error("no frames to merge")]
+    NoFrames,
+    #[error("{path}: {found_w}×{found_h} pixels, but the bracket is {width}×{height}")]
+    SizeMismatch {
+        path: PathBuf,
+        width: usize,
+        height: usize,
+        found_w: usize,
+        found_h: usize,
+    },
+    #[error("{path}: θL {found}° differs from the bracket's {expected}°")]
+    ThetaMismatch {
+        path: PathBuf,
+        expected: f64,
+        found: f64,
+    },
+    #[error("{path}: response '{found:?}' differs from the bracket's '{expected:?}'")]
+    MixedResponse {
+        path: PathBuf,
+        expected: Response,
+        found: Response,
+    },
+    #[error("Debevec–Malik response recovery needs at least two different exposures")]
+    SingleExposure,
+    #[error("response recovery failed: {0}")]
+    Response(String),
+    #[error("invalid merge option: {0}")]
+    Options(String),
+    #[error("{path}: cannot write OpenEXR: {reason}")]
+    Exr { path: PathBuf, reason: String },
+}
+
+/// What the merge was made from; written to the EXR attributes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HdrInfo {
+    /// "linear" or "debevec-malik".
+    pub method: &'static str,
+    pub shutter_s: Vec<f64>,
+    /// ISO of each frame (100 where the sidecar has none).
+    pub iso: Vec<f64>,
+    pub theta_l: f64,
+    pub camera: String,
+    pub time: String,
+}
+
+/// A merged radiance map: f32 RGB interleaved, row-major, plus a per-pixel mask.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HdrImage {
+    pub width: usize,
+    pub height: usize,
+    /// `rgb[3 * (y * width + x) + c]`, relative radiance, finite and ≥ 0.
+    pub rgb: Vec<f32>,
+    /// [`SATURATED`] / [`UNDEREXPOSED`] bits per pixel; 0 for a good pixel.
+    pub mask: Vec<u8>,
+    pub info: HdrInfo,
+}
+
+impl HdrImage {
+    pub fn pixel(&self, x: usize, y: usize) -> [f32; 3] {
+        let i = 3 * (y * self.width + x);
+        [self.rgb[i], self.rgb[i + 1], self.rgb[i + 2]]
+    }
+
+    pub fn flags(&self, x: usize, y: usize) -> u8 {
+        self.mask[y * self.width + x]
+    }
+
+    /// Number of pixels with the given mask bit set.
+    pub fn count_flagged(&self, bit: u8) -> usize {
+        self.mask.iter().filter(|&&m| m & bit != 0).count()
+    }
+
+    /// Writes float32 RGB OpenEXR. Attributes: `exposure` 1 s and `isoSpeed` 100 (the
+    /// units of the values), `capDate`, and `gonio.*` custom attributes with the merge
+    /// method, θL, the frames' shutter times and ISOs, and the flagged pixel counts.
+    pub fn write_exr(&self, path: &Path) -> Result<(), HdrError> {
+        use exr::meta::attribute::{AttributeValue, Text};
+        use exr::prelude::*;
+        let text = |s: &str| Text::new_or_none(s).unwrap_or_else(|| Text::from("?"));
+        let list = |v: &[f64]| v.iter().map(|x| format!("{x}")).collect::<Vec<_>>().join(",");
+        let mut attributes = LayerAttributes::named("radiance");
+        attributes.exposure = Some(1.0);
+        attributes.iso_speed = Some(100.0);
+        attributes.capture_date = Text::new_or_none(&self.info.time);
+        attributes.owner = Text::new_or_none(&self.info.camera);
+        attributes.software_name = Some(text("gonio"));
+        let custom = [
+            ("gonio.method", AttributeValue::Text(text(self.info.method))),
+            ("gonio.thetaL", AttributeValue::F64(self.info.theta_l)),
+            ("gonio.shutterS", AttributeValue::Text(text(&list(&self.info.shutter_s)))),
+            ("gonio.iso", AttributeValue::Text(text(&list(&self.info.iso)))),
+            (
+                "gonio.units",
+                AttributeValue::Text(text(match self.info.method {
+                    "linear" => "normalised signal per second at ISO 100",
+                    _ => "relative radiance, g(128) = 0",
+                })),
+            ),
+            (
+                "gonio.saturatedPixels",
+                AttributeValue::I32(saturating_i32(self.count_flagged(SATURATED))),
+            ),
+            (
+                "gonio.underexposedPixels",
+                AttributeValue::I32(saturating_i32(self.count_flagged(UNDEREXPOSED))),
+            ),
+        ];
+        for (name, value) in custom {
+            attributes.other.insert(text(name), value);
+        }
+        let width = self.width;
+        let rgb = &self.rgb;
+        let layer = Layer::new(
+            (self.width, self.height),
+            attributes,
+            Encoding::FAST_LOSSLESS,
+            SpecificChannels::rgb(|position: Vec2<usize>| {
+                let i = 3 * (position.y() * width + position.x());
+                (rgb[i], rgb[i + 1], rgb[i + 2])
+            }),
+        );
+        Image::from_layer(layer)
+            .write()
+            .to_file(path)
+            .map_err(|e| HdrError::Exr {
+                path: path.to_path_buf(),
+                reason: e.to_string(),
+            })
+    }
+}
+
+fn saturating_i32(n: usize) -> i32 {
+    i32::try_from(n).unwrap_or(i32::MAX)
+}
+
+/// Merges a bracket of frames of one θL (any order; repeated exposures are fine).
+pub fn merge(frames: &[Frame], options: &MergeOptions) -> Result<HdrImage, HdrError> {
+    let first = frames.first().ok_or(HdrError::NoFrames)?;
+    check_options(options)?;
+    for frame in frames {
+        if (frame.width, frame.height) != (first.width, first.height) {
+            return Err(HdrError::SizeMismatch {
+                path: frame.path.clone(),
+                width: first.width,
+                height: first.height,
+                found_w: frame.width,
+                found_h: frame.height,
+            });
+        }
+        if (frame.sidecar.theta_l - first.sidecar.theta_l).abs() > 1e-6 {
+            return Err(HdrError::ThetaMismatch {
+                path: frame.path.clone(),
+                expected: first.sidecar.theta_l,
+                found: frame.sidecar.theta_l,
+            });
+        }
+        if frame.sidecar.response != first.sidecar.response {
+            return Err(HdrError::MixedResponse {
+                path: frame.path.clone(),
+                expected: first.sidecar.response,
+                found: frame.sidecar.response,
+            });
+        }
+    }
+    let method = match (options.method, first.sidecar.response) {
+        (MergeMethod::Auto, Response::Linear) | (MergeMethod::Linear, _) => MergeMethod::Linear,
+        _ => MergeMethod::DebevecMalik,
+    };
+    let (rgb, mask, name) = match method {
+        MergeMethod::DebevecMalik => {
+            let (rgb, mask) = merge_debevec_malik(frames, options)?;
+            (rgb, mask, "debevec-malik")
+        }
+        _ => {
+            let (rgb, mask) = merge_linear(frames, options);
+            (rgb, mask, "linear")
+        }
+    };
+    Ok(HdrImage {
+        width: first.width,
+        height: first.height,
+        rgb,
+        mask,
+        info: HdrInfo {
+            method: name,
+            shutter_s: frames.iter().map(|f| f.sidecar.shutter_s).collect(),
+            iso: frames.iter().map(|f| f.sidecar.iso.unwrap_or(100.0)).collect(),
+            theta_l: first.sidecar.theta_l,
+            camera: first.sidecar.camera.clone(),
+            time: first.sidecar.time.clone(),
+        },
+    })
+}
+
+fn check_options(o: &MergeOptions) -> Result<(), HdrError> {
+    let bad = |m: &str| Err(HdrError::Options(m.to_string()));
+    if !(0.0..1.0).contains(&o.min_signal) || !(o.max_signal > o.min_signal && o.max_signal <= 1.0) {
+        return bad("need 0 ≤ min_signal < max_signal ≤ 1");
+    }
+    if !(o.noise.full_well_electrons.is_finite() && o.noise.full_well_electrons > 0.0) {
+        return bad("full_well_electrons must be positive");
+    }
+    if !(o.noise.read_noise.is_finite() && o.noise.read_noise > 0.0) {
+        return bad("read_noise must be positive");
+    }
+    if !(o.smoothness.is_finite() && o.smoothness >= 0.0) || o.response_samples < 2 {
+        return bad("smoothness must be ≥ 0 and response_samples ≥ 2");
+    }
+    Ok(())
+}
+
+/// Per-frame constants of the linear merge.
+struct LinearFrame<'a> {
+    data: &'a [u16],
+    black: f64,
+    inv_range: f64,
+    exposure: f64,
+    /// Shot variance per unit signal: (ISO/100) / full well.
+    shot: f64,
+}
+
+fn merge_linear(frames: &[Frame], options: &MergeOptions) -> (Vec<f32>, Vec<u8>) {
+    let mut sorted: Vec<LinearFrame> = frames
+        .iter()
+        .map(|f| LinearFrame {
+            data: &f.data,
+            black: f.black_level,
+            inv_range: 1.0 / (f.white_level - f.black_level),
+            exposure: f.sidecar.exposure(),
+            shot: f.sidecar.iso.unwrap_or(100.0) / 100.0 / options.noise.full_well_electrons,
+        })
+        .collect();
+    // Longest exposure first: the first valid sample is the best single estimate.
+    sorted.sort_by(|a, b| b.exposure.total_cmp(&a.exposure));
+    let read_var = options.noise.read_noise * options.noise.read_noise;
+    let (lo, hi) = (options.min_signal, options.max_signal);
+    let width = frames[0].width;
+    let mut rgb = vec![0f32; frames[0].data.len()];
+    let mut mask = vec![0u8; frames[0].width * frames[0].height];
+    rgb.par_chunks_mut(3 * width)
+        .zip(mask.par_chunks_mut(width))
+        .enumerate()
+        .for_each(|(y, (row_rgb, row_mask))| {
+            let offset = 3 * width * y;
+            for (i, value) in row_rgb.iter_mut().enumerate() {
+                let index = offset + i;
+                let signal = |f: &LinearFrame| (f64::from(f.data[index]) - f.black) * f.inv_range;
+                let reference = sorted.iter().find_map(|f| {
+                    let s = signal(f);
+                    (s >= lo && s <= hi).then(|| s / f.exposure)
+                });
+                let (radiance, flag) = match reference {
+                    Some(l0) => {
+                        let (mut sum, mut weights) = (0.0, 0.0);
+                        for f in &sorted {
+                            let s = signal(f);
+                            if s >= lo && s <= hi {
+                                let w = f.exposure * f.exposure / (f.shot * l0 * f.exposure + read_var);
+                                sum += w * s / f.exposure;
+                                weights += w;
+                            }
+                        }
+                        ((sum / weights).max(0.0), 0)
+                    }
+                    // Sorted longest first, so the last clipped frame is the shortest.
+                    None => match sorted.iter().rev().find(|f| signal(f) > hi) {
+                        Some(f) => (hi / f.exposure, SATURATED),
+                        None => (0.0, UNDEREXPOSED),
+                    },
+                };
+                *value = radiance as f32;
+                row_mask[i / 3] |= flag;
+            }
+        });
+    (rgb, mask)
+}
+
+/// Debevec–Malik hat weight of level z ∈ 0..=255.
+fn hat(z: usize) -> f64 {
+    let (min, max) = (0.0, (LEVELS - 1) as f64);
+    let z = z as f64;
+    if z <= 0.5 * (min + max) {
+        z - min
+    } else {
+        max - z
+    }
+}
+
+/// Quantised level 0..=255 of a normalised signal.
+fn level(frame: &Frame, index: usize) -> usize {
+    let s = (f64::from(frame.data[index]) - frame.black_level) / (frame.white_level - frame.black_level);
+    (s.clamp(0.0, 1.0) * (LEVELS - 1) as f64).round() as usize
+}
+
+fn merge_debevec_malik(frames: &[Frame], options: &MergeOptions) -> Result<(Vec<f32>, Vec<u8>), HdrError> {
+    let ln_h: Vec<f64> = frames.iter().map(|f| f.sidecar.exposure().ln()).collect();
+    let mut distinct = ln_h.clone();
+    distinct.sort_by(f64::total_cmp);
+    distinct.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+    if distinct.len() < 2 {
+        return Err(HdrError::SingleExposure);
+    }
+    let curves: Vec<Vec<f64>> = (0..3)
+        .map(|c| recover_response(frames, &ln_h, c, distinct.len(), options))
+        .collect::<Result<_, _>>()?;
+    // Shortest exposure first, for the clipped-everywhere bound.
+    let mut order: Vec<usize> = (0..frames.len()).collect();
+    order.sort_by(|&a, &b| ln_h[a].total_cmp(&ln_h[b]));
+    let width = frames[0].width;
+    let mut rgb = vec![0f32; frames[0].data.len()];
+    let mut mask = vec![0u8; frames[0].width * frames[0].height];
+    rgb.par_chunks_mut(3 * width)
+        .zip(mask.par_chunks_mut(width))
+        .enumerate()
+        .for_each(|(y, (row_rgb, row_mask))| {
+            for (i, value) in row_rgb.iter_mut().enumerate() {
+                let index = 3 * width * y + i;
+                let g = &curves[i % 3];
+                let (mut sum, mut weights) = (0.0, 0.0);
+                for (frame, &ln) in frames.iter().zip(&ln_h) {
+                    let z = level(frame, index);
+                    sum += hat(z) * (g[z] - ln);
+                    weights += hat(z);
+                }
+                let (radiance, flag) = if weights > 0.0 {
+                    ((sum / weights).exp(), 0)
+                } else {
+                    match order.iter().find(|&&j| level(&frames[j], index) == LEVELS - 1) {
+                        Some(&j) => ((g[LEVELS - 1] - ln_h[j]).exp(), SATURATED),
+                        None => (0.0, UNDEREXPOSED),
+                    }
+                };
+                *value = radiance as f32;
+                row_mask[i / 3] |= flag;
+            }
+        });
+    Ok((rgb, mask))
+}
+
+/// Recovers g(z) = ln(exposure value at level z) for channel `c` (Debevec & Malik
+/// 1997, §2.1): pixel locations chosen to span the levels of a mid exposure, rows
+/// w(z)(g(z) − ln E_i) = w(z) ln H_j, λ w(z) g″(z) = 0, and g(128) = 0.
+fn recover_response(
+    frames: &[Frame],
+    ln_h: &[f64],
+    c: usize,
+    distinct_exposures: usize,
+    options: &MergeOptions,
+) -> Result<Vec<f64>, HdrError> {
+    let pixels = frames[0].width * frames[0].height;
+    let wanted = options
+        .response_samples
+        .max(2 * LEVELS / (distinct_exposures - 1) + 1)
+        .min(pixels);
+    // Candidates on a regular grid of about 16 × wanted pixels, sorted by level in
+    // the middle exposure, then taken at even steps through that order.
+    let stride = (pixels / (16 * wanted)).max(1);
+    let mid = {
+        let mut order: Vec<usize> = (0..frames.len()).collect();
+        order.sort_by(|&a, &b| ln_h[a].total_cmp(&ln_h[b]));
+        order[order.len() / 2]
+    };
+    let mut candidates: Vec<(usize, usize)> = (0..pixels)
+        .step_by(stride)
+        .map(|p| (level(&frames[mid], 3 * p + c), p))
+        .collect();
+    candidates.sort_unstable();
+    let n = wanted.min(candidates.len());
+    let chosen: Vec<usize> = (0..n).map(|k| candidates[k * candidates.len() / n].1).collect();
+
+    let rows = n * frames.len() + (LEVELS - 2) + 1;
+    let cols = LEVELS + n;
+    let mut a = DMatrix::<f64>::zeros(rows, cols);
+    let mut b = DVector::<f64>::zeros(rows);
+    let mut row = 0;
+    for (i, &p) in chosen.iter().enumerate() {
+        for (frame, &ln) in frames.iter().zip(ln_h) {
+            let z = level(frame, 3 * p + c);
+            let w = hat(z);
+            a[(row, z)] = w;
+            a[(row, LEVELS + i)] = -w;
+            b[row] = w * ln;
+            row += 1;
+        }
+    }
+    a[(row, LEVELS / 2)] = 1.0;
+    row += 1;
+    for z in 1..LEVELS - 1 {
+        let w = options.smoothness * hat(z);
+        a[(row, z - 1)] = w;
+        a[(row, z)] = -2.0 * w;
+        a[(row, z + 1)] = w;
+        row += 1;
+    }
+    let x = a
+        .svd(true, true)
+        .solve(&b, 1e-10)
+        .map_err(|e| HdrError::Response(e.to_string()))?;
+    let g: Vec<f64> = x.iter().take(LEVELS).copied().collect();
+    if g.iter().all(|v| v.is_finite()) {
+        Ok(g)
+    } else {
+        Err(HdrError::Response(format!("channel {c}: non-finite response")))
+    }
+}

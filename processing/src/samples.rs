@@ -1,4 +1,10 @@
-//! Samples CSV: one row per surface point, header `theta_l,theta_i,theta_r,r,g,b`.
+//! Samples CSV: one row per surface point, header `theta_l,theta_i,theta_r,r,g,b`
+//! (angles in degrees, β in the camera-RGB domain). Extra columns may follow the six
+//! named ones; they are ignored on reading.
+
+use std::fs::File;
+use std::io::{BufWriter, Read, Write};
+use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
@@ -9,4 +15,140 @@ pub struct Sample {
     pub theta_i: f64,
     pub theta_r: f64,
     pub rgb: [f64; 3],
+}
+
+/// The six leading columns of a samples CSV, in order.
+pub const HEADER: [&str; 6] = ["theta_l", "theta_i", "theta_r", "r", "g", "b"];
+
+/// Why a samples CSV could not be read or written. Lines are 1-based and count the header.
+#[derive(Debug, thiserror::Error)]
+pub enum SamplesError {
+    #[error("{path}: {source}")]
+    Io {
+        path: String,
+        source: std::io::Error,
+    },
+    #[error("samples CSV: header must start with `{expected}`, found `{found}`")]
+    Header { expected: String, found: String },
+    #[error("samples CSV line {line}: {message}")]
+    Row { line: u64, message: String },
+    #[error("samples CSV line {line}, column `{column}`: {message}")]
+    Field {
+        line: u64,
+        column: &'static str,
+        message: String,
+    },
+    #[error("samples CSV: {0}")]
+    Csv(#[from] csv::Error),
+    #[error("{path}: {source}")]
+    InFile {
+        path: String,
+        source: Box<SamplesError>,
+    },
+}
+
+impl SamplesError {
+    /// Names the file a reader or writer error came from.
+    fn in_file(self, path: &Path) -> Self {
+        match self {
+            SamplesError::Io { source, .. } => SamplesError::Io {
+                path: path.display().to_string(),
+                source,
+            },
+            other => SamplesError::InFile {
+                path: path.display().to_string(),
+                source: Box::new(other),
+            },
+        }
+    }
+}
+
+/// Reads a samples CSV file.
+pub fn read_csv(path: &Path) -> Result<Vec<Sample>, SamplesError> {
+    let file = File::open(path).map_err(|source| SamplesError::Io {
+        path: path.display().to_string(),
+        source,
+    })?;
+    read_csv_from(file).map_err(|e| e.in_file(path))
+}
+
+/// Reads samples CSV text from any reader. Every value must be a finite number.
+pub fn read_csv_from<R: Read>(reader: R) -> Result<Vec<Sample>, SamplesError> {
+    let mut csv = csv::ReaderBuilder::new()
+        .has_headers(true)
+        .flexible(false)
+        .trim(csv::Trim::All)
+        .from_reader(reader);
+    let header = csv.headers()?.clone();
+    let leading: Vec<&str> = header.iter().take(HEADER.len()).collect();
+    if leading != HEADER {
+        return Err(SamplesError::Header {
+            expected: HEADER.join(","),
+            found: header.iter().collect::<Vec<_>>().join(","),
+        });
+    }
+    let mut samples = Vec::new();
+    for record in csv.records() {
+        let record = record.map_err(|e| match e.position() {
+            Some(pos) => SamplesError::Row {
+                line: pos.line(),
+                message: e.to_string(),
+            },
+            None => SamplesError::Csv(e),
+        })?;
+        let line = record.position().map_or(0, csv::Position::line);
+        let mut values = [0.0; 6];
+        for ((value, column), text) in values.iter_mut().zip(HEADER).zip(record.iter()) {
+            let parsed: f64 = text.parse().map_err(|_| SamplesError::Field {
+                line,
+                column,
+                message: format!("`{text}` is not a number"),
+            })?;
+            if !parsed.is_finite() {
+                return Err(SamplesError::Field {
+                    line,
+                    column,
+                    message: format!("`{text}` is not finite"),
+                });
+            }
+            *value = parsed;
+        }
+        samples.push(Sample {
+            theta_l: values[0],
+            theta_i: values[1],
+            theta_r: values[2],
+            rgb: [values[3], values[4], values[5]],
+        });
+    }
+    Ok(samples)
+}
+
+/// Writes samples as CSV to a file (created or truncated).
+pub fn write_csv(path: &Path, samples: &[Sample]) -> Result<(), SamplesError> {
+    let file = File::create(path).map_err(|source| SamplesError::Io {
+        path: path.display().to_string(),
+        source,
+    })?;
+    let mut out = BufWriter::new(file);
+    write_csv_to(&mut out, samples).map_err(|e| e.in_file(path))?;
+    out.flush().map_err(|source| SamplesError::Io {
+        path: path.display().to_string(),
+        source,
+    })
+}
+
+/// Writes samples as CSV text to any writer; numbers use Rust's shortest round-trip form.
+pub fn write_csv_to<W: Write>(writer: W, samples: &[Sample]) -> Result<(), SamplesError> {
+    let mut csv = csv::Writer::from_writer(writer);
+    csv.write_record(HEADER)?;
+    for s in samples {
+        let row = [
+            s.theta_l, s.theta_i, s.theta_r, s.rgb[0], s.rgb[1], s.rgb[2],
+        ];
+        csv.write_record(row.iter().map(f64::to_string))?;
+    }
+    csv.flush().map_err(|source| SamplesError::Io {
+        path: String::from("samples CSV output"),
+        source,
+    })
 }

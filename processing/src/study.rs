@@ -1,1 +1,396 @@
-//! (to be written)
+//! The θL-combination study (paper §2.3 and §3): fit every non-empty subset of the
+//! illumination directions θL present in a samples set, evaluate each fit against a
+//! reference interpolated at the setup angles, and summarise the errors as box plots
+//! per number of θL used.
+//!
+//! Evaluation points are the (θi, θr) of every sample (all θL, whatever subset was
+//! fitted), where the reference covers them; so every fit is scored on the same points.
+//! Per fit: ΔErr_p per channel (eq. 11, reference as "measured") and the mean ΔE_u′v′
+//! (eq. 13) through the camera's RGB → XYZ matrix. Each combination is also fitted by
+//! Nelder–Mead from its default start, to count how often the paper's method ends at a
+//! higher loss than the robust fitter (a local minimum).
+
+pub mod boxplot;
+pub mod combinations;
+pub mod figures;
+pub mod pareto;
+mod plots;
+mod tables;
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use rayon::prelude::*;
+
+use crate::brdf::{Model, Roughness};
+use crate::color::CameraModel;
+use crate::fit::{self, FitMethod, FitOptions, FitResult};
+use crate::metrics::{self, MetricsError};
+use crate::reference::Reference;
+use crate::samples::Sample;
+use boxplot::BoxStats;
+use figures::FigureError;
+
+pub use plots::write_figures;
+pub use tables::write_tables;
+
+/// θL values closer than this (degrees) are the same direction.
+const THETA_L_TOLERANCE: f64 = 1e-6;
+
+/// Why a study could not be run or written.
+#[derive(Debug, thiserror::Error)]
+pub enum StudyError {
+    #[error("the samples are empty")]
+    NoSamples,
+    #[error("sample {index}: {field} is not finite")]
+    NonFinite { index: usize, field: &'static str },
+    #[error("{count} distinct θL in the samples; a study enumerates at most {max}")]
+    TooManyThetaL { count: usize, max: usize },
+    #[error("the reference covers none of the {samples} sample angles (θi, θr)")]
+    NoOverlap { samples: usize },
+    #[error("no model variant to fit")]
+    NoVariants,
+    #[error("reference at the sample angles: {0}")]
+    Reference(#[from] MetricsError),
+    #[error("cannot write {path}: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error(transparent)]
+    Figure(#[from] FigureError),
+}
+
+/// A model with its roughness form: one fitted variant of a study.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Variant {
+    pub model: Model,
+    pub roughness: Roughness,
+}
+
+impl Variant {
+    /// `cook-torrance` for shared roughness, `cook-torrance/per-channel` otherwise.
+    pub fn label(&self) -> String {
+        match self.roughness {
+            Roughness::Shared => self.model.name().to_string(),
+            Roughness::PerChannel => format!("{}/{}", self.model, self.roughness),
+        }
+    }
+}
+
+/// What a study fits.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StudyOptions {
+    pub variants: Vec<Variant>,
+    /// Also fit each combination with Nelder–Mead and compare its loss.
+    pub compare_nelder_mead: bool,
+    /// A Nelder–Mead fit counts as stuck in a local minimum when its loss exceeds the
+    /// robust loss by more than this fraction.
+    pub local_minimum_margin: f64,
+}
+
+impl Default for StudyOptions {
+    /// Cook–Torrance and Ward with shared roughness, Nelder–Mead compared at 0.1 %.
+    fn default() -> Self {
+        StudyOptions {
+            variants: [Model::CookTorrance, Model::Ward]
+                .into_iter()
+                .map(|model| Variant {
+                    model,
+                    roughness: Roughness::Shared,
+                })
+                .collect(),
+            compare_nelder_mead: true,
+            local_minimum_margin: 1e-3,
+        }
+    }
+}
+
+/// A setup angle pair where fits are scored, with the reference there.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EvalPoint {
+    pub theta_l: f64,
+    pub theta_i: f64,
+    pub theta_r: f64,
+    /// Reference β (camera RGB) interpolated at (θi, θr).
+    pub reference: [f64; 3],
+    /// CIE XYZ of `reference`.
+    pub reference_xyz: [f64; 3],
+}
+
+/// The scores of one successful fit.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scores {
+    /// The robust fit on the combination's samples.
+    pub fit: FitResult,
+    /// ΔErr_p (eq. 11) per channel against the reference at the evaluation points.
+    pub err_p: [f64; 3],
+    /// Mean ΔE_u′v′ (eq. 13) over the points with a defined chromaticity; `None` if none.
+    pub delta_e_uv: Option<f64>,
+    /// Loss of the Nelder–Mead fit on the same samples (when compared and it succeeded).
+    pub nelder_mead_loss: Option<f64>,
+}
+
+/// One (θL combination, variant) of a study.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CombinationResult {
+    pub theta_l: Vec<f64>,
+    pub variant: Variant,
+    /// The scores, or why the fit failed.
+    pub outcome: Result<Scores, String>,
+}
+
+/// Box-plot statistics of one (variant, number of θL) group.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GroupSummary {
+    pub variant: Variant,
+    pub size: usize,
+    /// Combinations fitted and failed.
+    pub fitted: usize,
+    pub failed: usize,
+    pub err_p: [Option<BoxStats>; 3],
+    pub delta_e_uv: Option<BoxStats>,
+    /// Nelder–Mead fits compared, and those ending above the robust loss.
+    pub nelder_mead_compared: usize,
+    pub nelder_mead_above: usize,
+}
+
+/// Everything a study computed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StudyReport {
+    /// Distinct θL of the samples, in order of first appearance.
+    pub theta_l: Vec<f64>,
+    pub points: Vec<EvalPoint>,
+    pub options: StudyOptions,
+    /// The camera model whose RGB → XYZ matrix scores chromaticity.
+    pub camera: CameraModel,
+    /// Per combination (size, then lexicographic) and variant, in that order.
+    pub results: Vec<CombinationResult>,
+    /// Wall time of the fits and scoring, seconds.
+    pub seconds: f64,
+}
+
+/// Distinct θL of `samples` in order of first appearance.
+pub fn distinct_theta_l(samples: &[Sample]) -> Vec<f64> {
+    let mut out: Vec<f64> = Vec::new();
+    for s in samples {
+        if !out
+            .iter()
+            .any(|t| (t - s.theta_l).abs() <= THETA_L_TOLERANCE)
+        {
+            out.push(s.theta_l);
+        }
+    }
+    out
+}
+
+/// The evaluation points: every sample's (θi, θr) the reference covers.
+pub fn evaluation_points(
+    samples: &[Sample],
+    reference: &Reference,
+    camera: &CameraModel,
+) -> Vec<EvalPoint> {
+    samples
+        .iter()
+        .filter_map(|s| {
+            let rgb = reference.interpolate(s.theta_i, s.theta_r)?;
+            Some(EvalPoint {
+                theta_l: s.theta_l,
+                theta_i: s.theta_i,
+                theta_r: s.theta_r,
+                reference: rgb,
+                reference_xyz: camera.xyz(rgb),
+            })
+        })
+        .collect()
+}
+
+fn check_samples(samples: &[Sample]) -> Result<(), StudyError> {
+    if samples.is_empty() {
+        return Err(StudyError::NoSamples);
+    }
+    for (index, s) in samples.iter().enumerate() {
+        let fields = [
+            ("theta_l", s.theta_l),
+            ("theta_i", s.theta_i),
+            ("theta_r", s.theta_r),
+            ("r", s.rgb[0]),
+            ("g", s.rgb[1]),
+            ("b", s.rgb[2]),
+        ];
+        if let Some((field, _)) = fields.iter().find(|(_, v)| !v.is_finite()) {
+            return Err(StudyError::NonFinite { index, field });
+        }
+    }
+    Ok(())
+}
+
+/// Runs the study: every non-empty θL combination × every variant, in parallel.
+pub fn run_study(
+    samples: &[Sample],
+    reference: &Reference,
+    camera: &CameraModel,
+    options: &StudyOptions,
+) -> Result<StudyReport, StudyError> {
+    let start = Instant::now();
+    check_samples(samples)?;
+    if options.variants.is_empty() {
+        return Err(StudyError::NoVariants);
+    }
+    let theta_l = distinct_theta_l(samples);
+    let combos =
+        combinations::combinations(&theta_l).ok_or_else(|| StudyError::TooManyThetaL {
+            count: theta_l.len(),
+            max: combinations::MAX_THETA_L,
+        })?;
+    let points = evaluation_points(samples, reference, camera);
+    if points.is_empty() {
+        return Err(StudyError::NoOverlap {
+            samples: samples.len(),
+        });
+    }
+    let measured: Vec<[f64; 3]> = points.iter().map(|p| p.reference).collect();
+    // ΔErr_p needs signal in every reference channel: check once, not per fit.
+    metrics::err_p(&measured, &measured)?;
+
+    let jobs: Vec<(&Vec<f64>, Variant)> = combos
+        .iter()
+        .flat_map(|c| options.variants.iter().map(move |v| (c, *v)))
+        .collect();
+    let results = jobs
+        .par_iter()
+        .map(|&(combo, variant)| CombinationResult {
+            theta_l: combo.clone(),
+            variant,
+            outcome: score_combination(samples, combo, variant, &points, &measured, camera, options),
+        })
+        .collect();
+    Ok(StudyReport {
+        theta_l,
+        points,
+        options: options.clone(),
+        camera: camera.clone(),
+        results,
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// The samples taken at any of the θL in `combo`.
+pub fn samples_at(samples: &[Sample], combo: &[f64]) -> Vec<Sample> {
+    samples
+        .iter()
+        .filter(|s| {
+            combo
+                .iter()
+                .any(|t| (t - s.theta_l).abs() <= THETA_L_TOLERANCE)
+        })
+        .copied()
+        .collect()
+}
+
+fn score_combination(
+    samples: &[Sample],
+    combo: &[f64],
+    variant: Variant,
+    points: &[EvalPoint],
+    measured: &[[f64; 3]],
+    camera: &CameraModel,
+    options: &StudyOptions,
+) -> Result<Scores, String> {
+    let subset = samples_at(samples, combo);
+    let mut fit_options = FitOptions::new(variant.model);
+    fit_options.roughness = variant.roughness;
+    let robust = fit::fit(&subset, &fit_options).map_err(|e| e.to_string())?;
+    let nelder_mead_loss = options
+        .compare_nelder_mead
+        .then(|| {
+            fit_options.method = FitMethod::NelderMead;
+            fit::fit(&subset, &fit_options).ok().map(|f| f.loss)
+        })
+        .flatten();
+    let estimated: Vec<[f64; 3]> = points
+        .iter()
+        .map(|p| robust.predict(p.theta_i, p.theta_r))
+        .collect();
+    let err_p = metrics::err_p(measured, &estimated).map_err(|e| e.to_string())?;
+    let reference_xyz: Vec<[f64; 3]> = points.iter().map(|p| p.reference_xyz).collect();
+    let estimated_xyz: Vec<[f64; 3]> = estimated.iter().map(|&rgb| camera.xyz(rgb)).collect();
+    let delta_e_uv = metrics::delta_e_uv(&reference_xyz, &estimated_xyz).ok();
+    Ok(Scores {
+        fit: robust,
+        err_p,
+        delta_e_uv,
+        nelder_mead_loss,
+    })
+}
+
+impl Scores {
+    /// Whether the Nelder–Mead loss exceeds the robust loss by more than `margin`
+    /// (relative); `None` when Nelder–Mead was not compared or failed.
+    pub fn nelder_mead_above(&self, margin: f64) -> Option<bool> {
+        self.nelder_mead_loss
+            .map(|nm| nm > self.fit.loss * (1.0 + margin))
+    }
+}
+
+impl StudyReport {
+    /// Box-plot statistics per variant and number of θL, variants in option order.
+    pub fn summary(&self) -> Vec<GroupSummary> {
+        let mut out = Vec::new();
+        for &variant in &self.options.variants {
+            for size in 1..=self.theta_l.len() {
+                let group: Vec<&CombinationResult> = self
+                    .results
+                    .iter()
+                    .filter(|r| r.variant == variant && r.theta_l.len() == size)
+                    .collect();
+                let scores: Vec<&Scores> =
+                    group.iter().filter_map(|r| r.outcome.as_ref().ok()).collect();
+                let above: Vec<bool> = scores
+                    .iter()
+                    .filter_map(|s| s.nelder_mead_above(self.options.local_minimum_margin))
+                    .collect();
+                let channel = |c: usize| {
+                    BoxStats::from_values(&scores.iter().map(|s| s.err_p[c]).collect::<Vec<_>>())
+                };
+                out.push(GroupSummary {
+                    variant,
+                    size,
+                    fitted: scores.len(),
+                    failed: group.len() - scores.len(),
+                    err_p: [channel(0), channel(1), channel(2)],
+                    delta_e_uv: BoxStats::from_values(
+                        &scores.iter().filter_map(|s| s.delta_e_uv).collect::<Vec<_>>(),
+                    ),
+                    nelder_mead_compared: above.len(),
+                    nelder_mead_above: above.iter().filter(|&&a| a).count(),
+                });
+            }
+        }
+        out
+    }
+
+    /// The result of `variant` fitted on the single θL closest to `theta_l`.
+    pub fn single(&self, variant: Variant, theta_l: f64) -> Option<&CombinationResult> {
+        self.results
+            .iter()
+            .filter(|r| r.variant == variant && r.theta_l.len() == 1)
+            .min_by(|a, b| {
+                (a.theta_l[0] - theta_l)
+                    .abs()
+                    .total_cmp(&(b.theta_l[0] - theta_l).abs())
+            })
+    }
+}
+
+/// Writes the tables and the figures of `report` into `dir` (created if missing);
+/// returns the files written.
+pub fn write_outputs(report: &StudyReport, dir: &Path) -> Result<Vec<PathBuf>, StudyError> {
+    std::fs::create_dir_all(dir).map_err(|source| StudyError::Io {
+        path: dir.to_path_buf(),
+        source,
+    })?;
+    let mut written = write_tables(report, dir)?;
+    written.extend(write_figures(report, dir)?);
+    Ok(written)
+}

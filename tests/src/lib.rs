@@ -1,2 +1,328 @@
 //! End-to-end tests across gonio's crates live in `tests/tests/`; this library holds
-//! their shared helpers.
+//! their shared helpers: locating the `gonio` binary, running the daemon as a real
+//! process, and a small HTTP client for its API.
+
+use std::io::{BufRead, BufReader, Read};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::OnceLock;
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+
+/// The `gonio` binary of the profile the tests were built with, built on first use
+/// (`cargo build -p gonio-daemon`), so `cargo test --workspace` works on a clean
+/// checkout.
+pub fn gonio_bin() -> &'static Path {
+    static BIN: OnceLock<PathBuf> = OnceLock::new();
+    BIN.get_or_init(|| {
+        // The test executable lives in <target>/<profile-dir>/deps/.
+        let exe = std::env::current_exe().expect("test executable path");
+        let profile_dir = exe
+            .parent()
+            .and_then(Path::parent)
+            .expect("test executable inside <target>/<profile>/deps")
+            .to_path_buf();
+        let target_dir = profile_dir.parent().expect("target directory");
+        let profile = match profile_dir.file_name().and_then(|n| n.to_str()) {
+            Some("debug") => "dev".to_owned(),
+            Some(other) => other.to_owned(),
+            None => "dev".to_owned(),
+        };
+        let status = Command::new(env!("CARGO"))
+            .args(["build", "--quiet", "-p", "gonio-daemon", "--bin", "gonio"])
+            .arg("--profile")
+            .arg(&profile)
+            .arg("--target-dir")
+            .arg(target_dir)
+            .status()
+            .expect("running cargo build for the gonio binary");
+        assert!(status.success(), "building the gonio binary failed");
+        let bin = profile_dir.join(format!("gonio{}", std::env::consts::EXE_SUFFIX));
+        assert!(bin.is_file(), "{} missing after the build", bin.display());
+        bin
+    })
+}
+
+/// A fresh, empty directory under the system temp dir, unique to this process and name.
+pub fn temp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("gonio-test-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("creating a temp dir");
+    dir
+}
+
+/// A small, fast variant of the builtin `gold` scene (480×320 pixels, same field of
+/// view and material), for tests that run whole scans.
+pub const SMALL_GOLD_SCENE: &str = r#"
+name = "small-gold"
+
+[setup]
+cylinder_radius_mm = 40.0
+camera_distance_mm = 700.0
+light_distance_mm = 1000.0
+focal_length_mm = 85.0
+pixel_pitch_um = 49.2
+image_width = 480
+image_height = 320
+sample_rows = [124, 148]
+white_rows = [171, 195]
+
+[scan]
+theta_l_deg = [-20.0, -25.0, -30.0, -35.0, -40.0, -45.0]
+bracket_s = [0.5, 0.125, 0.033333333333333333, 0.01]
+
+[sample]
+model = "cook-torrance"
+kd = [9.0, 6.5, 2.0]
+ks = [25.0, 20.0, 7.0]
+m = [0.07]
+
+[white]
+reflectance = 0.99
+
+[light]
+spectrum = "illuminant-a"
+intensity = 6000.0
+
+[camera]
+model = "Nikon D200 (emulated)"
+sensitivities = "nikon-d5100"
+bit_depth = 12
+black_level = 0
+white_level = 4095
+iso = 100
+
+[effects]
+seed = 1
+"#;
+
+/// The token every test daemon uses.
+pub const TOKEN: &str = "test-token-0123456789";
+
+/// A `gonio serve` process on emulated hardware, listening on a free port.
+pub struct Daemon {
+    child: Child,
+    /// Base URL, e.g. `http://127.0.0.1:40123`.
+    pub url: String,
+    pub data: PathBuf,
+    stdout_lines: Vec<String>,
+}
+
+/// An HTTP answer: status and JSON body (`Value::Null` if the body is not JSON).
+#[derive(Debug)]
+pub struct Answer {
+    pub status: u16,
+    pub json: Value,
+    pub bytes: Vec<u8>,
+    pub content_type: String,
+}
+
+impl Daemon {
+    /// Writes the scene and `config` (TOML; `SCENE` in it is replaced by the scene
+    /// file's path) into `dir`, and starts the daemon with data in `dir/data`.
+    pub fn start(dir: &Path, config: &str) -> Daemon {
+        let scene = dir.join("scene.toml");
+        std::fs::write(&scene, SMALL_GOLD_SCENE).expect("writing the scene");
+        let config_path = dir.join("gonio.toml");
+        let config = config.replace("SCENE", &scene.display().to_string());
+        std::fs::write(&config_path, config).expect("writing the config");
+        Self::spawn(dir, &config_path)
+    }
+
+    /// Starts the daemon again on the same directory and configuration.
+    pub fn restart(dir: &Path) -> Daemon {
+        Self::spawn(dir, &dir.join("gonio.toml"))
+    }
+
+    fn spawn(dir: &Path, config: &Path) -> Daemon {
+        let data = dir.join("data");
+        let log = std::fs::File::create(dir.join(format!(
+            "daemon-{}.log",
+            std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map(|d| d.as_millis())
+                .unwrap_or(0)
+        )))
+        .expect("creating the daemon log");
+        let mut child = Command::new(gonio_bin())
+            .arg("serve")
+            .arg("--config")
+            .arg(config)
+            .arg("--data")
+            .arg(&data)
+            .args(["--bind", "127.0.0.1:0"])
+            .env("GONIO_TOKEN", TOKEN)
+            .env("RUST_LOG", "info")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::from(log))
+            .spawn()
+            .expect("starting gonio serve");
+        let stdout = child.stdout.take().expect("daemon stdout");
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+                if tx.send(line).is_err() {
+                    break;
+                }
+            }
+        });
+        let mut stdout_lines = Vec::new();
+        let deadline = Instant::now() + Duration::from_secs(60);
+        let url = loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            match rx.recv_timeout(left) {
+                Ok(line) => {
+                    if let Some(url) = line.strip_prefix("gonio: listening on ") {
+                        break url.trim().to_owned();
+                    }
+                    stdout_lines.push(line);
+                }
+                Err(_) => {
+                    let _ = child.kill();
+                    panic!(
+                        "daemon did not start; stdout {stdout_lines:?}; see logs in {}",
+                        dir.display()
+                    );
+                }
+            }
+        };
+        Daemon {
+            child,
+            url,
+            data,
+            stdout_lines,
+        }
+    }
+
+    /// Lines the daemon printed before it listened.
+    pub fn startup_output(&self) -> &[String] {
+        &self.stdout_lines
+    }
+
+    /// Kills the process with SIGKILL (no chance to clean up) and waits for it.
+    pub fn kill9(mut self) {
+        self.child.kill().expect("killing the daemon");
+        self.child.wait().expect("reaping the daemon");
+    }
+
+    fn request(&self, method: &str, path: &str, token: Option<&str>, body: Option<&str>) -> Answer {
+        let mut request = ureq::request(method, &format!("{}{path}", self.url))
+            .timeout(Duration::from_secs(30));
+        if let Some(token) = token {
+            request = request.set("Authorization", &format!("Bearer {token}"));
+        }
+        let result = match body {
+            Some(body) => request
+                .set("Content-Type", "application/json")
+                .send_string(body),
+            None => request.call(),
+        };
+        let response = match result {
+            Ok(response) | Err(ureq::Error::Status(_, response)) => response,
+            Err(err) => panic!("{method} {path}: {err}"),
+        };
+        let status = response.status();
+        let content_type = response.content_type().to_owned();
+        let mut bytes = Vec::new();
+        response
+            .into_reader()
+            .take(100 << 20)
+            .read_to_end(&mut bytes)
+            .expect("reading the body");
+        let json = serde_json::from_slice(&bytes).unwrap_or(Value::Null);
+        Answer {
+            status,
+            json,
+            bytes,
+            content_type,
+        }
+    }
+
+    pub fn get(&self, path: &str) -> Answer {
+        self.request("GET", path, None, None)
+    }
+
+    /// POST with the daemon's token.
+    pub fn post(&self, path: &str, body: &Value) -> Answer {
+        self.request("POST", path, Some(TOKEN), Some(&body.to_string()))
+    }
+
+    /// POST with an explicit token (or none) and raw body.
+    pub fn post_raw(&self, path: &str, token: Option<&str>, body: &str) -> Answer {
+        self.request("POST", path, token, Some(body))
+    }
+
+    /// Polls `GET path` until `done` holds for its JSON, or panics after `timeout`.
+    pub fn wait_for(&self, path: &str, timeout: Duration, done: impl Fn(&Value) -> bool) -> Value {
+        let deadline = Instant::now() + timeout;
+        loop {
+            let answer = self.get(path);
+            if answer.status == 200 && done(&answer.json) {
+                return answer.json;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "timed out waiting on {path}; last: {}",
+                answer.json
+            );
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+
+    /// Waits until scan `id` reaches a state in `states`.
+    pub fn wait_state(&self, id: i64, states: &[&str], timeout: Duration) -> Value {
+        self.wait_for(&format!("/api/scans/{id}"), timeout, |scan| {
+            states.contains(&scan["state"].as_str().unwrap_or(""))
+        })
+    }
+}
+
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// A daemon configuration on emulators with the small scene, `time_scale` for both
+/// devices, fast retries and fault injection on.
+pub fn emulator_config(time_scale: f64) -> String {
+    format!(
+        r#"
+[arm]
+kind = "emulator"
+time_scale = {time_scale}
+
+[camera]
+kind = "emulator"
+scene = "SCENE"
+time_scale = {time_scale}
+
+[retry]
+attempts = 3
+backoff_ms = 50
+
+[emulator]
+fault_injection = true
+"#
+    )
+}
+
+/// Every file under `dir`, relative, sorted.
+pub fn files_under(dir: &Path) -> Vec<String> {
+    fn walk(base: &Path, dir: &Path, out: &mut Vec<String>) {
+        for entry in std::fs::read_dir(dir).into_iter().flatten().flatten() {
+            let path = entry.path();
+            if path.is_dir() {
+                walk(base, &path, out);
+            } else if let Ok(rel) = path.strip_prefix(base) {
+                out.push(rel.to_string_lossy().into_owned());
+            }
+        }
+    }
+    let mut out = Vec::new();
+    walk(dir, dir, &mut out);
+    out.sort();
+    out
+}

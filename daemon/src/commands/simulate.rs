@@ -1,9 +1,110 @@
-//! `gonio simulate` (to be written).
+//! `gonio simulate`: render every capture a scan of a scene would produce (all θL, all
+//! bracket exposures, 16-bit TIFF + JSON sidecar), plus `setup.json`, `truth.json` and a
+//! goniospectrophotometer-style `reference.csv`, in the scan directory layout.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use gonio_drivers::atomic_file::write_atomically;
+use gonio_mock_hw::render::{self, reference};
+use gonio_mock_hw::scene::Scene;
+use gonio_processing::geometry::Setup;
 
 /// Arguments of `gonio simulate`.
 #[derive(clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// Scene file (TOML), or a built-in scene: gold, red, blue-green.
+    #[arg(long)]
+    pub scene: String,
+    /// Output scan directory (created if missing).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Light angles θL in degrees, comma-separated, instead of the scene's.
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+    pub theta_l: Option<Vec<f64>>,
+    /// Seed of the noise and hot-pixel positions, instead of the scene's.
+    #[arg(long)]
+    pub seed: Option<u64>,
+}
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("gonio simulate is not available in this build yet")
+/// A built-in scene by name, otherwise a scene file.
+fn load_scene(spec: &str) -> anyhow::Result<Scene> {
+    match Scene::builtin(spec) {
+        Some(scene) => Ok(scene),
+        None => Scene::load(Path::new(spec)).with_context(|| {
+            format!(
+                "loading scene `{spec}` (built-in scenes: {})",
+                Scene::BUILTIN.join(", ")
+            )
+        }),
+    }
+}
+
+fn write_json(path: &Path, value: &serde_json::Value) -> anyhow::Result<()> {
+    let mut text = serde_json::to_string_pretty(value)?;
+    text.push('\n');
+    write_atomically(path, text.as_bytes()).with_context(|| format!("writing {}", path.display()))
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let mut scene = load_scene(&args.scene)?;
+    if let Some(theta_l) = args.theta_l {
+        scene.set_theta_l_deg(theta_l).context("--theta-l")?;
+    }
+    if let Some(seed) = args.seed {
+        scene.set_seed(seed);
+    }
+    let out = &args.out;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+
+    let setup: Setup = serde_json::from_value(scene.setup().setup_json())
+        .context("scene setup does not convert to the processing setup")?;
+    write_json(&out.join("setup.json"), &serde_json::to_value(&setup)?)?;
+    write_json(&out.join("truth.json"), &scene.truth_json())?;
+    let reference_path = out.join("reference.csv");
+    write_atomically(&reference_path, reference::reference_csv(&scene).as_bytes())
+        .with_context(|| format!("writing {}", reference_path.display()))?;
+
+    let levels = render::file_levels(&scene);
+    let total = scene.theta_l_deg().len() * scene.bracket_s().len();
+    let progress = indicatif::ProgressBar::new(total as u64).with_style(
+        indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} captures {msg} [{elapsed}]")
+            .context("progress template")?,
+    );
+    for &theta_l in scene.theta_l_deg() {
+        let dir = out.join(format!("theta_l_{theta_l:.1}"));
+        std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+        for (index, &shutter_s) in scene.bracket_s().iter().enumerate() {
+            progress.set_message(format!("θL {theta_l:.1}°, {shutter_s} s"));
+            let frame = render::render_frame(&scene, theta_l, shutter_s);
+            let image = dir.join(format!("exp_{index:02}.tiff"));
+            frame
+                .write_tiff(&image)
+                .with_context(|| format!("writing {}", image.display()))?;
+            let time = time::OffsetDateTime::now_utc()
+                .format(&time::format_description::well_known::Rfc3339)?;
+            let mut sidecar = serde_json::json!({
+                "shutter_s": shutter_s,
+                "iso": scene.camera().iso,
+                "theta_l": theta_l,
+                "camera": scene.camera().model,
+                "time": time,
+                "black_level": levels.black_level,
+                "white_level": levels.white_level,
+                "scene": scene.name(),
+            });
+            if levels.nonlinear {
+                sidecar["response"] = "nonlinear".into();
+            }
+            write_json(&image.with_extension("json"), &sidecar)?;
+            progress.inc(1);
+        }
+    }
+    progress.finish_and_clear();
+    println!(
+        "{total} captures of scene `{}` written to {}",
+        scene.name(),
+        out.display()
+    );
+    Ok(())
 }

@@ -1,0 +1,602 @@
+//! The HTTP API (DESIGN.md "HTTP API"): JSON under `/api`, the web page at `/`.
+//! Mutating routes need the bearer token; reads are open.
+
+use std::convert::Infallible;
+use std::path::Path as FsPath;
+use std::sync::Arc;
+
+use axum::body::Bytes;
+use axum::extract::{DefaultBodyLimit, Path, Query, Request, State};
+use axum::http::{header, HeaderValue, StatusCode};
+use axum::middleware::{self, Next};
+use axum::response::sse::{Event, KeepAlive, Sse};
+use axum::response::{IntoResponse, Response};
+use axum::routing::{get, post};
+use axum::{Json, Router};
+use futures_util::{Stream, StreamExt};
+use serde::Deserialize;
+use serde_json::{json, Value};
+use tokio_stream::wrappers::BroadcastStream;
+
+use super::files::{is_partial, safe_join};
+use super::hardware::InjectedFault;
+use super::plan::{theta_dir_name, Step, FIT_MODELS};
+use super::preview;
+use super::shared::{lock, Shared};
+use super::store::{NewScan, ScanRecord, ScanState, StepState, Store, StoreError};
+use super::validate::{self, Bounds, FieldError};
+
+/// An error answer: status and `{"error": "...", "field": ...}`.
+pub struct ApiError {
+    status: StatusCode,
+    message: String,
+    field: Option<String>,
+}
+
+impl ApiError {
+    fn new(status: StatusCode, message: impl Into<String>) -> Self {
+        Self {
+            status,
+            message: message.into(),
+            field: None,
+        }
+    }
+
+    fn not_found(what: impl std::fmt::Display) -> Self {
+        Self::new(StatusCode::NOT_FOUND, format!("{what} not found"))
+    }
+}
+
+impl IntoResponse for ApiError {
+    fn into_response(self) -> Response {
+        let body = match self.field {
+            Some(field) => json!({ "error": self.message, "field": field }),
+            None => json!({ "error": self.message }),
+        };
+        (self.status, Json(body)).into_response()
+    }
+}
+
+impl From<StoreError> for ApiError {
+    fn from(err: StoreError) -> Self {
+        tracing::error!("store: {err}");
+        Self::new(StatusCode::INTERNAL_SERVER_ERROR, err.to_string())
+    }
+}
+
+impl From<FieldError> for ApiError {
+    fn from(err: FieldError) -> Self {
+        Self {
+            status: StatusCode::UNPROCESSABLE_ENTITY,
+            message: err.to_string(),
+            field: Some(err.field),
+        }
+    }
+}
+
+fn internal(err: impl std::fmt::Display) -> ApiError {
+    ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, err.to_string())
+}
+
+type ApiResult<T> = Result<T, ApiError>;
+type AppState = State<Arc<Shared>>;
+
+/// Runs `f` with the handlers' database connection off the async workers.
+async fn db<T: Send + 'static>(
+    shared: &Arc<Shared>,
+    f: impl FnOnce(&Shared, &mut Store) -> Result<T, StoreError> + Send + 'static,
+) -> ApiResult<T> {
+    let shared = shared.clone();
+    tokio::task::spawn_blocking(move || {
+        let mut store = lock(&shared.store);
+        f(&shared, &mut store)
+    })
+    .await
+    .map_err(internal)?
+    .map_err(ApiError::from)
+}
+
+/// The routes of the daemon.
+pub fn router(shared: Arc<Shared>) -> Router {
+    let mutating = Router::new()
+        .route("/api/scans", post(create_scan))
+        .route("/api/scans/{id}/pause", post(pause_scan))
+        .route("/api/scans/{id}/resume", post(resume_scan))
+        .route("/api/scans/{id}/cancel", post(cancel_scan))
+        .route("/api/sweeps", post(create_sweep))
+        .route("/api/arm/stop", post(stop_arm))
+        .route("/api/emulator/fault", post(inject_fault))
+        .route_layer(middleware::from_fn_with_state(
+            shared.clone(),
+            require_token,
+        ));
+    Router::new()
+        .route("/", get(super::web::index))
+        .route("/api/openapi.json", get(super::web::openapi))
+        .route("/api/health", get(|| async { Json(json!({ "status": "ok" })) }))
+        .route("/api/hardware", get(hardware))
+        .route("/api/hardware/log", get(hardware_log))
+        .route("/api/scans", get(list_scans))
+        .route("/api/scans/{id}", get(get_scan))
+        .route("/api/scans/{id}/steps", get(scan_steps))
+        .route("/api/scans/{id}/events", get(scan_events))
+        .route("/api/scans/{id}/thumbnail.png", get(thumbnail))
+        .route("/api/scans/{id}/plot", get(plot))
+        .route("/api/scans/{id}/files", get(list_files))
+        .route("/api/scans/{id}/files/{*path}", get(get_file))
+        .route("/api/sweeps", get(list_sweeps))
+        .route("/api/sweeps/{id}", get(get_sweep))
+        .merge(mutating)
+        .layer(DefaultBodyLimit::max(shared.config.max_body_bytes))
+        .with_state(shared)
+}
+
+/// Rejects a request without the right `Authorization: Bearer` token before its body
+/// is read, so nothing changes.
+async fn require_token(State(shared): AppState, request: Request, next: Next) -> Response {
+    let given = request
+        .headers()
+        .get(header::AUTHORIZATION)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.strip_prefix("Bearer "))
+        .map(str::trim);
+    if given.is_some_and(|t| constant_time_eq(t.as_bytes(), shared.token.as_bytes())) {
+        return next.run(request).await;
+    }
+    let mut response = ApiError::new(
+        StatusCode::UNAUTHORIZED,
+        "missing or wrong bearer token (Authorization: Bearer <token>)",
+    )
+    .into_response();
+    response
+        .headers_mut()
+        .insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
+    response
+}
+
+/// Compares two byte strings in time independent of where they differ.
+fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
+}
+
+fn parse_json(body: &Bytes) -> ApiResult<Value> {
+    serde_json::from_slice(body).map_err(|e| {
+        ApiError::new(
+            StatusCode::BAD_REQUEST,
+            format!("body is not valid JSON: {e}"),
+        )
+    })
+}
+
+fn bounds(shared: &Shared) -> Bounds {
+    let camera = lock(&shared.hardware).camera.clone();
+    Bounds {
+        limits: shared.config.limits,
+        shutter_min_s: camera.shutter_min_s,
+        shutter_max_s: camera.shutter_max_s,
+        auto_bracket: shared.default_bracket.clone(),
+    }
+}
+
+fn rfc3339(unix: i64) -> Option<String> {
+    time::OffsetDateTime::from_unix_timestamp(unix)
+        .ok()?
+        .format(&time::format_description::well_known::Rfc3339)
+        .ok()
+}
+
+/// The JSON of a scan: record, progress and links to its results that exist.
+pub fn scan_view(shared: &Shared, scan: &ScanRecord) -> Value {
+    let base = format!("/api/scans/{}", scan.id);
+    let dir = shared.scan_dir(scan.id);
+    let file = |rel: &str| dir.join(rel).is_file().then(|| format!("{base}/files/{rel}"));
+    let fits: serde_json::Map<String, Value> = FIT_MODELS
+        .iter()
+        .filter_map(|(model, name)| file(name).map(|url| ((*model).to_owned(), json!(url))))
+        .collect();
+    let hdr: Vec<String> = scan
+        .plan
+        .theta_l
+        .iter()
+        .filter_map(|t| file(&format!("hdr/{}.exr", theta_dir_name(*t))))
+        .collect();
+    json!({
+        "id": scan.id,
+        "sample": scan.plan.sample,
+        "state": scan.state,
+        "error": scan.error,
+        "sweep_id": scan.sweep_id,
+        "theta_l": scan.plan.theta_l,
+        "bracket": { "shutter_s": scan.plan.shutter_s, "auto": scan.plan.auto_bracket },
+        "progress": { "done": scan.done, "total": scan.total },
+        "current_step": scan.current_step,
+        "created": scan.created,
+        "started": scan.started,
+        "finished": scan.finished,
+        "not_before": scan.not_before.and_then(rfc3339),
+        "links": {
+            "self": base,
+            "events": format!("{base}/events"),
+            "steps": format!("{base}/steps"),
+            "files": format!("{base}/files"),
+            "thumbnail": format!("{base}/thumbnail.png"),
+            "plot": format!("{base}/plot"),
+        },
+        "results": {
+            "samples": file("samples.csv"),
+            "fits": fits,
+            "hdr": hdr,
+        },
+    })
+}
+
+async fn create_scan(State(shared): AppState, body: Bytes) -> ApiResult<impl IntoResponse> {
+    let value = parse_json(&body)?;
+    let plan = validate::scan_request(&value, &bounds(&shared))?;
+    let id = db(&shared, move |shared, store| {
+        let id = store.insert_scans(&[NewScan {
+            plan,
+            sweep_id: None,
+            not_before: None,
+        }])?[0];
+        shared.publish(store, id)?;
+        Ok(id)
+    })
+    .await?;
+    shared.wake();
+    tracing::info!("scan {id} queued");
+    Ok((
+        StatusCode::CREATED,
+        Json(json!({ "id": id, "url": format!("/api/scans/{id}") })),
+    ))
+}
+
+async fn list_scans(State(shared): AppState) -> ApiResult<Json<Value>> {
+    let scans = db(&shared, |_, store| store.scans()).await?;
+    Ok(Json(Value::Array(
+        scans.iter().map(|s| scan_view(&shared, s)).collect(),
+    )))
+}
+
+async fn load_scan(shared: &Arc<Shared>, id: i64) -> ApiResult<ScanRecord> {
+    db(shared, move |_, store| store.scan(id))
+        .await?
+        .ok_or_else(|| ApiError::not_found(format!("scan {id}")))
+}
+
+async fn get_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
+    let scan = load_scan(&shared, id).await?;
+    Ok(Json(scan_view(&shared, &scan)))
+}
+
+async fn scan_steps(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
+    load_scan(&shared, id).await?;
+    let steps = db(&shared, move |_, store| store.steps(id)).await?;
+    Ok(Json(json!(steps)))
+}
+
+/// Applies an operator transition to a scan: 409 if its state does not allow it.
+async fn control(
+    shared: Arc<Shared>,
+    id: i64,
+    from: &'static [ScanState],
+    to: ScanState,
+    verb: &'static str,
+) -> ApiResult<Json<Value>> {
+    let scan = load_scan(&shared, id).await?;
+    let changed = db(&shared, move |shared, store| {
+        let changed = store.transition(id, from, to, None)?;
+        shared.publish(store, id)?;
+        Ok(changed)
+    })
+    .await?;
+    if !changed {
+        return Err(ApiError::new(
+            StatusCode::CONFLICT,
+            format!(
+                "scan {id} is {}: cannot {verb} it",
+                scan.state.as_str()
+            ),
+        ));
+    }
+    shared.wake();
+    tracing::info!("scan {id}: {verb}");
+    let scan = load_scan(&shared, id).await?;
+    Ok(Json(scan_view(&shared, &scan)))
+}
+
+async fn pause_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
+    const FROM: &[ScanState] = &[ScanState::Queued, ScanState::Running, ScanState::Interrupted];
+    control(shared, id, FROM, ScanState::Paused, "pause").await
+}
+
+async fn resume_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
+    control(shared, id, &[ScanState::Paused], ScanState::Queued, "resume").await
+}
+
+async fn cancel_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
+    const FROM: &[ScanState] = &[
+        ScanState::Queued,
+        ScanState::Running,
+        ScanState::Paused,
+        ScanState::Interrupted,
+    ];
+    control(shared, id, FROM, ScanState::Cancelled, "cancel").await
+}
+
+/// Stops the arm at once (feed hold, then reset) and pauses the running scan.
+async fn stop_arm(State(shared): AppState) -> ApiResult<Json<Value>> {
+    let estop = lock(&shared.estop).clone();
+    let stopped = match estop {
+        Some(estop) => tokio::task::spawn_blocking(move || estop.stop())
+            .await
+            .map_err(internal)?
+            .map_err(|e| {
+                ApiError::new(StatusCode::SERVICE_UNAVAILABLE, format!("arm stop: {e}"))
+            }),
+        None => Err(ApiError::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "arm stop: the arm is not connected",
+        )),
+    };
+    let paused = db(&shared, |shared, store| {
+        let ids = store.transition_all(
+            ScanState::Running,
+            ScanState::Paused,
+            Some("emergency stop by the operator"),
+        )?;
+        store.log(shared.boot, None, "stop", "emergency stop")?;
+        for id in &ids {
+            shared.publish(store, *id)?;
+        }
+        Ok(ids)
+    })
+    .await?;
+    stopped?;
+    tracing::warn!("emergency stop; paused scans {paused:?}");
+    Ok(Json(json!({ "stopped": true, "paused": paused })))
+}
+
+async fn create_sweep(State(shared): AppState, body: Bytes) -> ApiResult<impl IntoResponse> {
+    let value = parse_json(&body)?;
+    let sweep = validate::sweep_request(&value, &bounds(&shared))?;
+    let (id, scans) = db(&shared, move |_, store| {
+        store.insert_sweep(&value, sweep.start_at, sweep.scans)
+    })
+    .await?;
+    shared.wake();
+    tracing::info!("sweep {id} queued: {} scans", scans.len());
+    Ok((
+        StatusCode::CREATED,
+        Json(json!({ "id": id, "scans": scans, "url": format!("/api/sweeps/{id}") })),
+    ))
+}
+
+/// One view of a sweep: its scans and their summed progress.
+fn sweep_view(shared: &Shared, store: &Store, id: i64) -> Result<Option<Value>, StoreError> {
+    let Some(sweep) = store.sweep(id)? else {
+        return Ok(None);
+    };
+    let scans = store.scans_of_sweep(id)?;
+    let done: u32 = scans.iter().map(|s| s.done).sum();
+    let total: u32 = scans.iter().map(|s| s.total).sum();
+    let count = |state: ScanState| scans.iter().filter(|s| s.state == state).count();
+    let state = if scans.iter().all(|s| s.state.is_final()) {
+        if count(ScanState::Done) == scans.len() {
+            "done"
+        } else {
+            "finished"
+        }
+    } else if scans.iter().any(|s| s.state == ScanState::Running) {
+        "running"
+    } else {
+        "waiting"
+    };
+    let states: serde_json::Map<String, Value> = [
+        ScanState::Queued,
+        ScanState::Running,
+        ScanState::Paused,
+        ScanState::Done,
+        ScanState::Failed,
+        ScanState::Cancelled,
+        ScanState::Interrupted,
+    ]
+    .into_iter()
+    .map(|s| (s.as_str().to_owned(), json!(count(s))))
+    .collect();
+    Ok(Some(json!({
+        "id": sweep.id,
+        "created": sweep.created,
+        "start_at": sweep.start_at.and_then(rfc3339),
+        "request": sweep.request,
+        "state": state,
+        "progress": { "done": done, "total": total },
+        "scans_by_state": states,
+        "scans": scans.iter().map(|s| scan_view(shared, s)).collect::<Vec<_>>(),
+    })))
+}
+
+async fn get_sweep(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
+    db(&shared, move |shared, store| sweep_view(shared, store, id))
+        .await?
+        .map(Json)
+        .ok_or_else(|| ApiError::not_found(format!("sweep {id}")))
+}
+
+async fn list_sweeps(State(shared): AppState) -> ApiResult<Json<Value>> {
+    let sweeps = db(&shared, |shared, store| {
+        store
+            .sweep_ids()?
+            .into_iter()
+            .filter_map(|id| sweep_view(shared, store, id).transpose())
+            .collect::<Result<Vec<_>, _>>()
+    })
+    .await?;
+    Ok(Json(Value::Array(sweeps)))
+}
+
+async fn hardware(State(shared): AppState) -> Json<Value> {
+    let mut status = lock(&shared.hardware).clone();
+    if let Some(emulators) = &shared.emulators {
+        // The emulated arm's live angle, also while a move is under way.
+        status.arm.angle_deg = Some(emulators.world.arm_deg());
+    }
+    Json(json!({
+        "arm": status.arm,
+        "camera": status.camera,
+        "emulated": shared.emulators.is_some(),
+        "boot": shared.boot,
+    }))
+}
+
+#[derive(Deserialize)]
+struct LogQuery {
+    #[serde(default)]
+    after: i64,
+}
+
+async fn hardware_log(
+    State(shared): AppState,
+    Query(query): Query<LogQuery>,
+) -> ApiResult<Json<Value>> {
+    let entries = db(&shared, move |_, store| store.hardware_log(query.after)).await?;
+    Ok(Json(json!(entries)))
+}
+
+/// Server-sent events of one scan: its view now, then at every change; the stream
+/// ends after a final state (done, failed, cancelled).
+async fn scan_events(
+    State(shared): AppState,
+    Path(id): Path<i64>,
+) -> ApiResult<Sse<impl Stream<Item = Result<Event, Infallible>>>> {
+    let updates = BroadcastStream::new(shared.events.subscribe());
+    let first = load_scan(&shared, id).await?;
+    let view_shared = shared.clone();
+    let stream = futures_util::stream::once(async move { first })
+        .chain(updates.filter_map(move |msg| async move {
+            // A lagging subscriber skips snapshots; the next one is complete anyway.
+            msg.ok().filter(|scan| scan.id == id)
+        }))
+        .scan(false, move |ended, scan| {
+            let item = (!*ended).then(|| {
+                *ended = scan.state.is_final();
+                let view = scan_view(&view_shared, &scan);
+                Ok(Event::default().event("progress").data(view.to_string()))
+            });
+            async move { item }
+        });
+    Ok(Sse::new(stream).keep_alive(KeepAlive::default()))
+}
+
+async fn list_files(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
+    load_scan(&shared, id).await?;
+    let dir = shared.scan_dir(id);
+    let files = tokio::task::spawn_blocking(move || {
+        let mut files = Vec::new();
+        collect_files(&dir, &dir, &mut files);
+        files.sort();
+        files
+    })
+    .await
+    .map_err(internal)?;
+    Ok(Json(json!(files)))
+}
+
+fn collect_files(base: &FsPath, dir: &FsPath, out: &mut Vec<String>) {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let path = entry.path();
+        if path.is_dir() {
+            collect_files(base, &path, out);
+        } else if !is_partial(&entry.file_name().to_string_lossy()) {
+            if let Ok(rel) = path.strip_prefix(base) {
+                out.push(rel.to_string_lossy().into_owned());
+            }
+        }
+    }
+}
+
+fn content_type(path: &FsPath) -> &'static str {
+    match path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+        .as_deref()
+    {
+        Some("json") => "application/json",
+        Some("csv") => "text/csv; charset=utf-8",
+        Some("tif" | "tiff") => "image/tiff",
+        Some("exr") => "image/x-exr",
+        Some("png") => "image/png",
+        Some("svg") => "image/svg+xml",
+        _ => "application/octet-stream",
+    }
+}
+
+async fn get_file(
+    State(shared): AppState,
+    Path((id, rel)): Path<(i64, String)>,
+) -> ApiResult<Response> {
+    let path = safe_join(&shared.scan_dir(id), &rel)
+        .ok_or_else(|| ApiError::not_found(format!("file {rel:?}")))?;
+    let bytes = tokio::fs::read(&path)
+        .await
+        .map_err(|_| ApiError::not_found(format!("file {rel:?} of scan {id}")))?;
+    Ok(([(header::CONTENT_TYPE, content_type(&path))], bytes).into_response())
+}
+
+/// The latest captured frame of a scan as a small PNG.
+async fn thumbnail(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Response> {
+    let steps = db(&shared, move |_, store| store.steps(id)).await?;
+    let latest = steps
+        .iter()
+        .rev()
+        .filter(|s| s.state == StepState::Done && matches!(s.step, Step::Capture { .. }))
+        .find_map(|s| s.result.as_ref()?.get("path")?.as_str().map(str::to_owned))
+        .ok_or_else(|| ApiError::not_found(format!("a frame of scan {id}")))?;
+    let path = shared.scan_dir(id).join(latest);
+    let png = tokio::task::spawn_blocking(move || preview::thumbnail_png(&path))
+        .await
+        .map_err(internal)?
+        .map_err(internal)?;
+    Ok((
+        [
+            (header::CONTENT_TYPE, "image/png"),
+            (header::CACHE_CONTROL, "no-store"),
+        ],
+        png,
+    )
+        .into_response())
+}
+
+/// Measured samples and the fitted models' predictions, for the page's plots.
+async fn plot(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
+    load_scan(&shared, id).await?;
+    let dir = shared.scan_dir(id);
+    let plot = tokio::task::spawn_blocking(move || preview::plot_data(&dir))
+        .await
+        .map_err(internal)?
+        .map_err(|e| ApiError::not_found(format!("plot data: {e}")))?;
+    Ok(Json(plot))
+}
+
+/// Test hook (only with `emulator.fault_injection = true`): injects a fault into the
+/// emulated devices.
+async fn inject_fault(State(shared): AppState, body: Bytes) -> ApiResult<Json<Value>> {
+    let emulators = match (&shared.emulators, shared.config.emulator.fault_injection) {
+        (Some(emulators), true) => emulators.clone(),
+        _ => return Err(ApiError::not_found("fault injection (emulator.fault_injection is off)")),
+    };
+    let fault: InjectedFault = serde_json::from_slice(&body).map_err(|e| ApiError {
+        status: StatusCode::UNPROCESSABLE_ENTITY,
+        message: format!("fault: {e}"),
+        field: Some("fault".into()),
+    })?;
+    tokio::task::spawn_blocking(move || emulators.inject(&fault))
+        .await
+        .map_err(internal)?
+        .map_err(internal)?;
+    Ok(Json(json!({ "injected": true })))
+}

@@ -1,0 +1,229 @@
+//! Opening the devices the configuration names: the real GRBL arm and gphoto2 camera,
+//! or the emulators (a GRBL emulator on a pseudo-terminal, driven through the real
+//! GRBL driver, and a camera rendering a scene).
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use anyhow::Context;
+use gonio_drivers::grbl::{GrblArm, GrblArmConfig};
+use gonio_drivers::{Arm, Camera, DeviceError};
+use gonio_mock_hw::camera::{CameraFault, CaptureTiming, EmulatedCamera, FaultInjector};
+use gonio_mock_hw::grbl::{Fault, GrblConfig, GrblEmulator};
+use gonio_mock_hw::scene::Scene;
+use gonio_mock_hw::world::World;
+use gonio_processing::geometry::Setup;
+use gonio_processing::capture::Response;
+use serde_json::Value;
+
+use super::config::{ArmConfig, CameraConfig, Config, Limits};
+
+/// What every capture sidecar says besides the exposure (`None`: the camera's own).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct SidecarDefaults {
+    pub black_level: Option<f64>,
+    pub white_level: Option<f64>,
+    pub response: Response,
+}
+
+/// Opens (and reopens, after a disconnect) the arm.
+pub struct ArmOpener {
+    path: PathBuf,
+    config: GrblArmConfig,
+}
+
+impl ArmOpener {
+    pub fn open(&self) -> Result<Box<dyn Arm>, DeviceError> {
+        Ok(Box::new(GrblArm::open(&self.path, self.config.clone())?))
+    }
+
+    /// The serial device the arm is opened on.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+}
+
+/// The running emulators, kept alive for the daemon's life and reachable for fault
+/// injection.
+pub struct Emulators {
+    pub grbl: std::sync::Mutex<GrblEmulator>,
+    pub camera_faults: FaultInjector,
+    pub world: World,
+}
+
+/// What the daemon knows of its devices besides the devices themselves.
+pub struct Devices {
+    pub arm: ArmOpener,
+    pub camera: Box<dyn Camera>,
+    /// Geometry written to each scan's setup.json, if known.
+    pub setup: Option<Setup>,
+    /// Scene truth written to each emulated scan's truth.json.
+    pub truth: Option<Value>,
+    /// Levels and response written to every capture sidecar.
+    pub sidecar: SidecarDefaults,
+    /// ISO set for every exposure, where the body has one.
+    pub iso: Option<u32>,
+    /// Shutter times (s) of the "auto" bracket.
+    pub default_bracket: Vec<f64>,
+    pub emulators: Option<Arc<Emulators>>,
+}
+
+fn grbl_arm_config(limits: Limits) -> GrblArmConfig {
+    GrblArmConfig {
+        min_deg: limits.min_deg,
+        max_deg: limits.max_deg,
+        ..GrblArmConfig::default()
+    }
+}
+
+/// The driver settings that match the emulator's firmware settings.
+fn emulated_arm_config(limits: Limits, emulator: &GrblConfig) -> GrblArmConfig {
+    GrblArmConfig {
+        steps_per_deg: emulator.steps_per_deg,
+        max_travel_deg: emulator.max_travel_deg,
+        homing_enabled: emulator.homing_enabled,
+        ..grbl_arm_config(limits)
+    }
+}
+
+/// Loads a scene by builtin name or file path.
+fn load_scene(name_or_path: &str) -> anyhow::Result<Scene> {
+    if let Some(scene) = Scene::builtin(name_or_path) {
+        return Ok(scene);
+    }
+    Scene::load(Path::new(name_or_path))
+        .with_context(|| format!("camera.scene {name_or_path:?}: not a builtin scene, and"))
+}
+
+/// Opens the devices of `config`.
+pub fn open(config: &Config) -> anyhow::Result<Devices> {
+    let world = World::new(0.0);
+    let (grbl, arm) = match &config.arm {
+        ArmConfig::Emulator { time_scale } => {
+            let grbl_config = GrblConfig {
+                time_scale: *time_scale,
+                ..GrblConfig::default()
+            };
+            let emulator = GrblEmulator::start(grbl_config.clone(), world.clone())
+                .context("starting the GRBL emulator")?;
+            let arm = ArmOpener {
+                path: emulator.device_path().to_path_buf(),
+                config: emulated_arm_config(config.limits, &grbl_config),
+            };
+            (Some(emulator), arm)
+        }
+        ArmConfig::Grbl { path } => (
+            None,
+            ArmOpener {
+                path: path.clone(),
+                config: grbl_arm_config(config.limits),
+            },
+        ),
+    };
+    match &config.camera {
+        CameraConfig::Emulator { scene, time_scale } => {
+            let scene = load_scene(scene)?;
+            let timing = CaptureTiming {
+                time_scale: *time_scale,
+                ..CaptureTiming::default()
+            };
+            let camera = EmulatedCamera::new(scene.clone(), world.clone(), timing);
+            let setup: Setup = serde_json::from_value(scene.setup().setup_json())
+                .context("converting the scene setup")?;
+            let body = scene.camera();
+            let sidecar = if scene.effects().response.is_some() {
+                // The emulated developed images span the full 16-bit range.
+                SidecarDefaults {
+                    black_level: Some(0.0),
+                    white_level: Some(65535.0),
+                    response: Response::Nonlinear,
+                }
+            } else {
+                SidecarDefaults {
+                    black_level: Some(f64::from(body.black_level)),
+                    white_level: Some(f64::from(body.white_level)),
+                    response: Response::Linear,
+                }
+            };
+            let emulators = grbl.map(|grbl| {
+                Arc::new(Emulators {
+                    grbl: std::sync::Mutex::new(grbl),
+                    camera_faults: camera.fault_injector(),
+                    world,
+                })
+            });
+            Ok(Devices {
+                arm,
+                camera: Box::new(camera),
+                setup: Some(setup),
+                truth: Some(scene.truth_json()),
+                sidecar,
+                iso: Some(body.iso),
+                default_bracket: scene.bracket_s().to_vec(),
+                emulators,
+            })
+        }
+        CameraConfig::Gphoto2 { iso, bracket_s } => Ok(Devices {
+            arm,
+            camera: open_gphoto2()?,
+            setup: config.setup.clone(),
+            truth: None,
+            sidecar: SidecarDefaults::default(),
+            iso: Some(*iso),
+            default_bracket: bracket_s.clone(),
+            emulators: None,
+        }),
+    }
+}
+
+#[cfg(feature = "gphoto2")]
+fn open_gphoto2() -> anyhow::Result<Box<dyn Camera>> {
+    let camera = gonio_drivers::gphoto2_camera::GphotoCamera::open()
+        .context("opening the gphoto2 camera")?;
+    Ok(Box::new(camera))
+}
+
+#[cfg(not(feature = "gphoto2"))]
+fn open_gphoto2() -> anyhow::Result<Box<dyn Camera>> {
+    anyhow::bail!("camera.kind = \"gphoto2\" needs gonio built with the `gphoto2` feature")
+}
+
+/// A fault the test hook injects into an emulator.
+#[derive(Debug, Clone, serde::Deserialize)]
+#[serde(rename_all = "snake_case", tag = "fault")]
+pub enum InjectedFault {
+    /// Pull the emulated serial cable.
+    Unplug,
+    /// Plug it back in.
+    Reconnect,
+    /// The camera reports busy for the next `count` captures.
+    CameraBusy { count: u32 },
+    /// The next `count` captures never complete (time out).
+    CameraTimeout { count: u32 },
+}
+
+impl Emulators {
+    /// Applies a fault to the emulated devices.
+    pub fn inject(&self, fault: &InjectedFault) -> anyhow::Result<()> {
+        match fault {
+            InjectedFault::Unplug => lock(&self.grbl).inject(Fault::Unplug),
+            InjectedFault::Reconnect => lock(&self.grbl)
+                .reconnect()
+                .context("reconnecting the GRBL emulator")?,
+            InjectedFault::CameraBusy { count } => {
+                self.camera_faults
+                    .inject(CameraFault::Busy { captures: *count });
+            }
+            InjectedFault::CameraTimeout { count } => {
+                for _ in 0..*count {
+                    self.camera_faults.inject(CameraFault::Timeout);
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+fn lock<T>(mutex: &std::sync::Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    mutex.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+}

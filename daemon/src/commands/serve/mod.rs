@@ -1,0 +1,179 @@
+//! `gonio serve`: the measurement daemon. HTTP handlers (tokio + axum) queue scans in
+//! a durable SQLite store; one hardware owner thread runs them step by step.
+
+mod api;
+mod config;
+mod files;
+mod hardware;
+mod plan;
+mod preview;
+mod process;
+mod runner;
+mod shared;
+mod store;
+mod validate;
+mod web;
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::{mpsc, Arc, Mutex};
+
+use anyhow::Context;
+use gonio_drivers::ArmState;
+use tokio::sync::broadcast;
+
+use config::Config;
+use shared::{ArmView, CameraView, HardwareStatus, Shared};
+use store::Store;
+
+/// Arguments of `gonio serve`.
+#[derive(clap::Args)]
+pub struct Args {
+    /// Configuration file (TOML, every key optional); without one the daemon runs on
+    /// emulated hardware with the builtin `gold` scene.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Listen address (default 127.0.0.1:8080; port 0 picks a free port).
+    #[arg(long)]
+    bind: Option<std::net::SocketAddr>,
+    /// Data directory: database, token, scans (default ./gonio-data).
+    #[arg(long)]
+    data: Option<PathBuf>,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| "info".into()),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let mut config = match &args.config {
+        Some(path) => Config::load(path)?,
+        None => Config::default(),
+    };
+    if let Some(bind) = args.bind {
+        config.bind = bind;
+    }
+    if let Some(data) = args.data {
+        config.data_dir = data;
+    }
+    std::fs::create_dir_all(&config.data_dir)
+        .with_context(|| format!("creating data directory {}", config.data_dir.display()))?;
+    let token = token(&config)?;
+
+    let db_path = config.data_dir.join("gonio.sqlite");
+    let mut runner_store =
+        Store::open(&db_path).with_context(|| format!("opening {}", db_path.display()))?;
+    let boot = runner_store.begin_boot()?;
+    let api_store = Store::open(&db_path)?;
+    let devices = hardware::open(&config)?;
+
+    let (wake_tx, wake_rx) = mpsc::channel();
+    let (events, _) = broadcast::channel(256);
+    let shared = Arc::new(Shared {
+        token,
+        boot,
+        store: Mutex::new(api_store),
+        events,
+        wake: Mutex::new(wake_tx),
+        hardware: Mutex::new(HardwareStatus {
+            arm: ArmView {
+                state: ArmState::Disconnected,
+                angle_deg: None,
+                homed: false,
+                device: devices.arm.path().display().to_string(),
+                error: None,
+            },
+            camera: CameraView {
+                model: None,
+                port: None,
+                state: "idle",
+                shutter_min_s: devices.default_bracket.iter().copied().fold(f64::INFINITY, f64::min),
+                shutter_max_s: devices.default_bracket.iter().copied().fold(0.0, f64::max),
+                error: None,
+            },
+        }),
+        estop: Mutex::new(None),
+        default_bracket: devices.default_bracket.clone(),
+        emulators: devices.emulators.clone(),
+        config,
+    });
+    let runner = runner::Runner::new(shared.clone(), runner_store, wake_rx, devices);
+    std::thread::Builder::new()
+        .name("hardware".into())
+        .spawn(move || runner.run())
+        .context("starting the hardware thread")?;
+
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
+    runtime.block_on(serve(shared))
+}
+
+async fn serve(shared: Arc<Shared>) -> anyhow::Result<()> {
+    let listener = tokio::net::TcpListener::bind(shared.config.bind)
+        .await
+        .with_context(|| format!("binding {}", shared.config.bind))?;
+    let addr = listener.local_addr()?;
+    println!("gonio: listening on http://{addr}");
+    std::io::stdout().flush()?;
+    tracing::info!(
+        "data in {}, boot {}, {} hardware",
+        shared.config.data_dir.display(),
+        shared.boot,
+        if shared.emulators.is_some() { "emulated" } else { "real" }
+    );
+    axum::serve(listener, api::router(shared))
+        .with_graceful_shutdown(async {
+            // Without a signal handler the process would just end: same outcome.
+            let _ = tokio::signal::ctrl_c().await;
+        })
+        .await
+        .context("HTTP server")
+}
+
+/// The bearer token: from the config, else `GONIO_TOKEN`, else the one in DATA/token,
+/// else a new random one written there (mode 600) and printed.
+fn token(config: &Config) -> anyhow::Result<String> {
+    if let Some(token) = config.token.clone().filter(|t| !t.is_empty()) {
+        return Ok(token);
+    }
+    if let Some(token) = std::env::var("GONIO_TOKEN").ok().filter(|t| !t.is_empty()) {
+        return Ok(token);
+    }
+    let path = config.data_dir.join("token");
+    if let Ok(existing) = std::fs::read_to_string(&path) {
+        let existing = existing.trim().to_owned();
+        if !existing.is_empty() {
+            println!("gonio: token in {}", path.display());
+            return Ok(existing);
+        }
+    }
+    let mut bytes = [0u8; 24];
+    getrandom::fill(&mut bytes).map_err(|e| anyhow::anyhow!("random token: {e}"))?;
+    let token: String = bytes.iter().map(|b| format!("{b:02x}")).collect();
+    write_private(&path, &token)?;
+    println!("gonio: token {token} (saved in {})", path.display());
+    Ok(token)
+}
+
+/// Writes a file readable by its owner only.
+fn write_private(path: &Path, text: &str) -> anyhow::Result<()> {
+    let mut options = std::fs::OpenOptions::new();
+    options.write(true).create(true).truncate(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        options.mode(0o600);
+    }
+    let mut file = options
+        .open(path)
+        .with_context(|| format!("writing {}", path.display()))?;
+    file.write_all(text.as_bytes())?;
+    file.sync_all()?;
+    Ok(())
+}

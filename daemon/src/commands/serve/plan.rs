@@ -1,0 +1,137 @@
+//! Scans as data: a validated request expands into the ordered steps the hardware
+//! owner executes, stored before anything moves.
+
+use serde::{Deserialize, Serialize};
+
+/// What a scan measures, after validation ("auto" bracket already resolved).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ScanPlan {
+    /// Sample name, safe as a path component.
+    pub sample: String,
+    /// Light angles θL, degrees, in acquisition order.
+    pub theta_l: Vec<f64>,
+    /// Shutter times of the bracket, seconds.
+    pub shutter_s: Vec<f64>,
+    /// Whether the bracket was chosen automatically.
+    pub auto_bracket: bool,
+}
+
+/// The reflection models fitted at the end of every scan, with their result file names.
+pub const FIT_MODELS: [(&str, &str); 2] = [
+    ("cook-torrance", "fit-cook-torrance.json"),
+    ("ward", "fit-ward.json"),
+];
+
+/// One unit of work of a scan. Hardware steps are idempotent on resume: a capture whose
+/// frame already exists is not taken again.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum Step {
+    /// Run the homing cycle.
+    Home,
+    /// Move the arm to θL (degrees).
+    Move { theta_l: f64 },
+    /// Capture exposure `index` of the bracket at θL.
+    Capture {
+        theta_l: f64,
+        index: usize,
+        shutter_s: f64,
+    },
+    /// Merge the bracket of θL into `hdr/theta_l_<θL>.exr`.
+    Hdr { theta_l: f64 },
+    /// Extract the samples of all captures into `samples.csv`.
+    Extract,
+    /// Fit one model to `samples.csv`.
+    Fit { model: String },
+}
+
+impl Step {
+    /// One line for logs and progress views.
+    pub fn describe(&self) -> String {
+        match self {
+            Step::Home => "home the arm".to_owned(),
+            Step::Move { theta_l } => format!("move to θL {theta_l:.1}°"),
+            Step::Capture {
+                theta_l,
+                index,
+                shutter_s,
+            } => format!("capture θL {theta_l:.1}° exposure {index} ({shutter_s} s)"),
+            Step::Hdr { theta_l } => format!("HDR merge θL {theta_l:.1}°"),
+            Step::Extract => "extract samples".to_owned(),
+            Step::Fit { model } => format!("fit {model}"),
+        }
+    }
+}
+
+/// Directory of the captures of one θL inside a scan directory.
+pub fn theta_dir_name(theta_l: f64) -> String {
+    format!("theta_l_{theta_l:.1}")
+}
+
+/// File stem of bracket exposure `index`.
+pub fn exposure_stem(index: usize) -> String {
+    format!("exp_{index:02}")
+}
+
+impl ScanPlan {
+    /// The steps of the plan, in execution order.
+    pub fn steps(&self) -> Vec<Step> {
+        let mut steps = vec![Step::Home];
+        for &theta_l in &self.theta_l {
+            steps.push(Step::Move { theta_l });
+            steps.extend(
+                self.shutter_s
+                    .iter()
+                    .enumerate()
+                    .map(|(index, &shutter_s)| Step::Capture {
+                        theta_l,
+                        index,
+                        shutter_s,
+                    }),
+            );
+            steps.push(Step::Hdr { theta_l });
+        }
+        steps.push(Step::Extract);
+        steps.extend(FIT_MODELS.iter().map(|(model, _)| Step::Fit {
+            model: (*model).to_owned(),
+        }));
+        steps
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn plan_expands_home_moves_brackets_hdr_and_processing() {
+        let plan = ScanPlan {
+            sample: "gold".into(),
+            theta_l: vec![-20.0, -25.0],
+            shutter_s: vec![0.1, 0.01, 0.001],
+            auto_bracket: false,
+        };
+        let steps = plan.steps();
+        assert_eq!(steps.len(), 1 + 2 * (1 + 3 + 1) + 1 + 2);
+        assert_eq!(steps[0], Step::Home);
+        assert_eq!(steps[1], Step::Move { theta_l: -20.0 });
+        assert_eq!(
+            steps[4],
+            Step::Capture {
+                theta_l: -20.0,
+                index: 2,
+                shutter_s: 0.001
+            }
+        );
+        assert_eq!(steps[5], Step::Hdr { theta_l: -20.0 });
+        assert_eq!(steps[11], Step::Extract);
+        assert!(matches!(&steps[13], Step::Fit { model } if model == "ward"));
+    }
+
+    #[test]
+    fn layout_names_follow_the_scan_directory_contract() {
+        assert_eq!(theta_dir_name(-20.0), "theta_l_-20.0");
+        assert_eq!(theta_dir_name(-32.5), "theta_l_-32.5");
+        assert_eq!(exposure_stem(3), "exp_03");
+    }
+}

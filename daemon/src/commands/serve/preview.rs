@@ -1,0 +1,92 @@
+//! What the web page shows of a scan: a small PNG of a frame, and the measured samples
+//! with the fitted models' predictions.
+
+use std::io::Cursor;
+use std::path::Path;
+
+use image::{ImageBuffer, Rgb};
+use serde_json::{json, Value};
+
+use super::plan::FIT_MODELS;
+
+/// Longest side of a thumbnail, pixels.
+const THUMBNAIL_SIZE: u32 = 360;
+
+/// Errors of the previews.
+#[derive(Debug, thiserror::Error)]
+pub enum PreviewError {
+    #[error("{path}: {source}")]
+    Image {
+        path: String,
+        source: image::ImageError,
+    },
+    #[error("{0}")]
+    Processing(String),
+}
+
+/// A PNG thumbnail of a (16-bit, linear) frame: downscaled, normalised to its 99.5th
+/// percentile and gamma-encoded so dark frames stay visible.
+pub fn thumbnail_png(path: &Path) -> Result<Vec<u8>, PreviewError> {
+    let image_err = |source| PreviewError::Image {
+        path: path.display().to_string(),
+        source,
+    };
+    let frame = image::open(path).map_err(image_err)?.into_rgb16();
+    let small = image::imageops::thumbnail(
+        &frame,
+        THUMBNAIL_SIZE.min(frame.width()),
+        ((u64::from(THUMBNAIL_SIZE.min(frame.width())) * u64::from(frame.height()))
+            / u64::from(frame.width().max(1)))
+        .max(1) as u32,
+    );
+    let mut values: Vec<u16> = small.as_raw().clone();
+    let top = if values.is_empty() {
+        1.0
+    } else {
+        let k = (values.len() - 1) * 995 / 1000;
+        f64::from(*values.select_nth_unstable(k).1).max(1.0)
+    };
+    let out: ImageBuffer<Rgb<u8>, Vec<u8>> = ImageBuffer::from_fn(small.width(), small.height(), |x, y| {
+        let p = small.get_pixel(x, y);
+        Rgb(p.0.map(|v| {
+            let linear = (f64::from(v) / top).clamp(0.0, 1.0);
+            (255.0 * linear.powf(1.0 / 2.2)).round() as u8
+        }))
+    });
+    let mut png = Vec::new();
+    out.write_to(&mut Cursor::new(&mut png), image::ImageFormat::Png)
+        .map_err(image_err)?;
+    Ok(png)
+}
+
+/// The samples of a scan (`samples.csv`) and, per fitted model, its parameters and the
+/// β it predicts at each sample's angles.
+pub fn plot_data(dir: &Path) -> Result<Value, PreviewError> {
+    let samples = gonio_processing::samples::read_csv(&dir.join("samples.csv"))
+        .map_err(|e| PreviewError::Processing(e.to_string()))?;
+    let mut fits = serde_json::Map::new();
+    for (model, name) in FIT_MODELS {
+        let path = dir.join(name);
+        let Ok(text) = std::fs::read_to_string(&path) else {
+            continue;
+        };
+        let fit = super::process::read_fit(&text)
+            .map_err(|e| PreviewError::Processing(format!("{name}: {e}")))?;
+        let predicted: Vec<[f64; 3]> = samples
+            .iter()
+            .map(|s| super::process::predict(&fit, s.theta_i, s.theta_r))
+            .collect();
+        let params: Value =
+            serde_json::from_str(&text).map_err(|e| PreviewError::Processing(e.to_string()))?;
+        fits.insert(
+            model.to_owned(),
+            json!({ "params": params, "predicted": predicted }),
+        );
+    }
+    Ok(json!({
+        "samples": samples.iter().map(|s| json!({
+            "theta_l": s.theta_l, "theta_i": s.theta_i, "theta_r": s.theta_r, "rgb": s.rgb,
+        })).collect::<Vec<_>>(),
+        "fits": fits,
+    }))
+}

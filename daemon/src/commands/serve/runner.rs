@@ -1,0 +1,561 @@
+//! The hardware owner: one thread that owns the arm and the camera and works through
+//! the queue, one step at a time. A step is recorded as started before the hardware is
+//! touched and as done, with its result, in one transaction afterwards, so a restart
+//! resumes at the first step not done (after re-homing: the position is unknown then).
+
+use std::path::{Path, PathBuf};
+use std::sync::{mpsc, Arc};
+use std::time::Duration;
+
+use gonio_drivers::{Arm, ArmState, Camera, DeviceError, Exposure};
+use gonio_processing::capture::Sidecar;
+use gonio_processing::geometry::Setup;
+use serde_json::{json, Value};
+
+use super::files::{remove_partials, write_atomic};
+use super::hardware::{ArmOpener, Devices, SidecarDefaults};
+use super::plan::{exposure_stem, theta_dir_name, Step};
+use super::process;
+use super::shared::{lock, scan_dir, Shared};
+use super::store::{now_rfc3339, now_unix, ScanRecord, ScanState, StepState, Store, StoreError};
+
+/// Why a step did not complete.
+enum StepError {
+    /// The operator paused, cancelled or stopped the scan: leave it as they set it.
+    Halted,
+    /// The arm went away: the scan waits until it is back.
+    Interrupted(String),
+    /// The scan cannot complete.
+    Failed(String),
+    Store(StoreError),
+}
+
+impl From<StoreError> for StepError {
+    fn from(err: StoreError) -> Self {
+        StepError::Store(err)
+    }
+}
+
+/// How often the owner looks at the queue and the devices when nothing wakes it.
+const IDLE_POLL: Duration = Duration::from_millis(500);
+
+/// The hardware owner thread's state.
+pub struct Runner {
+    shared: Arc<Shared>,
+    store: Store,
+    wake: mpsc::Receiver<()>,
+    opener: ArmOpener,
+    arm: Option<Box<dyn Arm>>,
+    camera: Box<dyn Camera>,
+    camera_model: String,
+    homed: bool,
+    /// Where the arm was last sent (degrees), if it got there.
+    at_deg: Option<f64>,
+    setup: Option<Setup>,
+    truth: Option<Value>,
+    sidecar: SidecarDefaults,
+    iso: Option<u32>,
+}
+
+impl Runner {
+    pub fn new(
+        shared: Arc<Shared>,
+        store: Store,
+        wake: mpsc::Receiver<()>,
+        devices: Devices,
+    ) -> Self {
+        Self {
+            shared,
+            store,
+            wake,
+            opener: devices.arm,
+            arm: None,
+            camera: devices.camera,
+            camera_model: String::new(),
+            homed: false,
+            at_deg: None,
+            setup: devices.setup,
+            truth: devices.truth,
+            sidecar: devices.sidecar,
+            iso: devices.iso,
+        }
+    }
+
+    /// Runs forever on the calling thread.
+    pub fn run(mut self) {
+        self.identify_camera();
+        loop {
+            if let Err(err) = self.tick() {
+                tracing::error!("queue: {err}");
+                std::thread::sleep(Duration::from_secs(1));
+            }
+        }
+    }
+
+    fn identify_camera(&mut self) {
+        let info = self.camera.identify();
+        let speeds = self.camera.shutter_speeds();
+        let mut status = lock(&self.shared.hardware);
+        match (info, speeds) {
+            (Ok(info), Ok(speeds)) => {
+                self.camera_model = info.model.clone();
+                status.camera.model = Some(info.model);
+                status.camera.port = Some(info.port);
+                if let (Some(min), Some(max)) = (speeds.first(), speeds.last()) {
+                    status.camera.shutter_min_s = *min;
+                    status.camera.shutter_max_s = *max;
+                }
+                status.camera.state = "idle";
+            }
+            (Err(err), _) | (_, Err(err)) => {
+                tracing::warn!("camera: {err}");
+                status.camera.state = "error";
+                status.camera.error = Some(err.to_string());
+            }
+        }
+    }
+
+    /// One pass: (re)connect the arm if needed, then run the next scan or wait.
+    fn tick(&mut self) -> Result<(), StoreError> {
+        if self.arm.is_none() && !self.connect_arm()? {
+            self.idle();
+            return Ok(());
+        }
+        match self.store.next_runnable(now_unix())? {
+            Some(scan) => self.run_scan(scan),
+            None => {
+                self.refresh_arm_status();
+                self.idle();
+                Ok(())
+            }
+        }
+    }
+
+    fn idle(&self) {
+        // A timeout and a wake-up both mean: look again.
+        let _ = self.wake.recv_timeout(IDLE_POLL);
+    }
+
+    /// Opens the arm; on success, interrupted scans go back to running. Returns whether
+    /// the arm is connected.
+    fn connect_arm(&mut self) -> Result<bool, StoreError> {
+        match self.opener.open() {
+            Ok(arm) => {
+                *lock(&self.shared.estop) = Some(arm.emergency_stop());
+                self.arm = Some(arm);
+                self.homed = false;
+                self.at_deg = None;
+                self.log(None, "connect", &self.opener.path().display().to_string())?;
+                {
+                    let mut status = lock(&self.shared.hardware);
+                    status.arm.state = ArmState::NeedsHoming;
+                    status.arm.homed = false;
+                    status.arm.error = None;
+                }
+                for id in self
+                    .store
+                    .transition_all(ScanState::Interrupted, ScanState::Running, None)?
+                {
+                    tracing::info!("scan {id}: arm back, resuming");
+                    self.shared.publish(&self.store, id)?;
+                }
+                Ok(true)
+            }
+            Err(err) => {
+                let mut status = lock(&self.shared.hardware);
+                if status.arm.error.is_none() {
+                    tracing::warn!("arm {}: {err}", self.opener.path().display());
+                }
+                status.arm.state = ArmState::Disconnected;
+                status.arm.error = Some(err.to_string());
+                Ok(false)
+            }
+        }
+    }
+
+    fn refresh_arm_status(&mut self) {
+        let Some(arm) = self.arm.as_mut() else {
+            return;
+        };
+        match arm.status() {
+            Ok(s) => {
+                let mut status = lock(&self.shared.hardware);
+                status.arm.state = if self.homed || s.state != ArmState::Idle {
+                    s.state
+                } else {
+                    ArmState::NeedsHoming
+                };
+                status.arm.angle_deg = Some(s.angle_deg);
+                status.arm.homed = self.homed;
+            }
+            Err(err) if matches!(err, DeviceError::Reset | DeviceError::Alarm { .. }) => {
+                self.homed = false;
+            }
+            Err(err) => {
+                tracing::warn!("arm status: {err}; reconnecting");
+                self.disconnect_arm(&err.to_string());
+            }
+        }
+    }
+
+    fn disconnect_arm(&mut self, reason: &str) {
+        self.arm = None;
+        self.homed = false;
+        self.at_deg = None;
+        *lock(&self.shared.estop) = None;
+        let mut status = lock(&self.shared.hardware);
+        status.arm.state = ArmState::Disconnected;
+        status.arm.homed = false;
+        status.arm.error = Some(reason.to_owned());
+    }
+
+    fn log(&mut self, scan: Option<i64>, action: &str, detail: &str) -> Result<(), StoreError> {
+        self.store.log(self.shared.boot, scan, action, detail)
+    }
+
+    fn still_running(&self, id: i64) -> Result<bool, StoreError> {
+        Ok(self
+            .store
+            .scan(id)?
+            .is_some_and(|s| s.state == ScanState::Running))
+    }
+
+    fn run_scan(&mut self, scan: ScanRecord) -> Result<(), StoreError> {
+        let id = scan.id;
+        if scan.state == ScanState::Queued
+            && !self
+                .store
+                .transition(id, &[ScanState::Queued], ScanState::Running, None)?
+        {
+            return Ok(());
+        }
+        tracing::info!("scan {id} ({}): running", scan.plan.sample);
+        self.shared.publish(&self.store, id)?;
+        let dir = scan_dir(&self.shared.config.data_dir, id);
+        if let Err(err) = self.prepare_dir(&dir) {
+            let reason = format!("preparing {}: {err}", dir.display());
+            return self.finish_with(id, ScanState::Failed, &reason);
+        }
+        for step in self.store.steps(id)? {
+            if step.state == StepState::Done {
+                continue;
+            }
+            if !self.still_running(id)? {
+                break;
+            }
+            self.store.step_started(id, step.index)?;
+            self.shared.publish(&self.store, id)?;
+            match self.execute(id, &dir, &step.step) {
+                Ok(result) => {
+                    self.store.step_done(id, step.index, &result)?;
+                }
+                Err(StepError::Halted) => break,
+                Err(StepError::Interrupted(reason)) => {
+                    tracing::warn!("scan {id} interrupted: {reason}");
+                    self.disconnect_arm(&reason);
+                    return self.finish_with(id, ScanState::Interrupted, &reason);
+                }
+                Err(StepError::Failed(reason)) => {
+                    tracing::error!("scan {id} failed: {reason}");
+                    return self.finish_with(id, ScanState::Failed, &reason);
+                }
+                Err(StepError::Store(err)) => return Err(err),
+            }
+            self.shared.publish(&self.store, id)?;
+        }
+        self.shared.publish(&self.store, id)?;
+        if let Some(scan) = self.store.scan(id)? {
+            tracing::info!("scan {id}: {}", scan.state.as_str());
+        }
+        Ok(())
+    }
+
+    /// Moves a running scan to `state` with `reason` (a no-op if the operator changed
+    /// it meanwhile).
+    fn finish_with(&mut self, id: i64, state: ScanState, reason: &str) -> Result<(), StoreError> {
+        self.store
+            .transition(id, &[ScanState::Running], state, Some(reason))?;
+        self.shared.publish(&self.store, id)
+    }
+
+    /// Creates the scan directory with setup.json (and truth.json for emulated scans),
+    /// and removes temporary files a crash left behind.
+    fn prepare_dir(&self, dir: &Path) -> std::io::Result<()> {
+        std::fs::create_dir_all(dir)?;
+        let removed = remove_partials(dir)?;
+        if removed > 0 {
+            tracing::info!("{}: removed {removed} partial file(s)", dir.display());
+        }
+        let files = [("setup.json", self.setup.as_ref().map(|s| json!(s))), ("truth.json", self.truth.clone())];
+        for (name, value) in files {
+            let path = dir.join(name);
+            if let (Some(value), false) = (value, path.exists()) {
+                let text = serde_json::to_vec_pretty(&value).map_err(std::io::Error::other)?;
+                write_atomic(&path, &text)?;
+            }
+        }
+        Ok(())
+    }
+
+    fn execute(&mut self, id: i64, dir: &Path, step: &Step) -> Result<Value, StepError> {
+        match step {
+            Step::Home => {
+                self.home(id)?;
+                Ok(json!({ "homed": true }))
+            }
+            Step::Move { theta_l } => {
+                self.move_to(id, *theta_l)?;
+                Ok(json!({ "angle_deg": theta_l }))
+            }
+            Step::Capture {
+                theta_l,
+                index,
+                shutter_s,
+            } => self.capture(id, dir, *theta_l, *index, *shutter_s),
+            Step::Hdr { .. } | Step::Extract | Step::Fit { .. } => {
+                process::run(step, dir).map_err(|err| StepError::Failed(format!("{}: {err}", step.describe())))
+            }
+        }
+    }
+
+    /// Runs `op` on the arm with bounded retries. Transient faults back off and retry;
+    /// a reset or alarm is cleared and the arm re-homed before the next try; a stop
+    /// by the operator halts at once. A dead connection after the last try interrupts
+    /// the scan, anything else fails it.
+    fn arm_op(
+        &mut self,
+        id: i64,
+        what: &str,
+        mut op: impl FnMut(&mut dyn Arm) -> Result<(), DeviceError>,
+    ) -> Result<(), StepError> {
+        let retry = self.shared.config.retry;
+        let mut last = None;
+        for attempt in 0..retry.attempts {
+            if attempt > 0 {
+                std::thread::sleep(backoff(retry.backoff_ms, attempt));
+            }
+            if !self.still_running(id)? {
+                return Err(StepError::Halted);
+            }
+            let Some(arm) = self.arm.as_mut() else {
+                return Err(StepError::Interrupted("arm disconnected".into()));
+            };
+            let mut rehomed = false;
+            let result = if self.homed || what == "home" {
+                op(arm.as_mut())
+            } else {
+                rehomed = true;
+                arm.home().and_then(|()| op(arm.as_mut()))
+            };
+            match result {
+                Ok(()) => {
+                    if rehomed {
+                        self.homed = true;
+                        self.log(Some(id), "home", "before the next move")?;
+                    }
+                    return Ok(());
+                }
+                Err(err) => {
+                    tracing::warn!("scan {id}: {what} (try {}): {err}", attempt + 1);
+                    let recoverable = matches!(err, DeviceError::Reset | DeviceError::Alarm { .. });
+                    if recoverable {
+                        self.homed = false;
+                        self.at_deg = None;
+                        if let Err(clear) = arm.clear_fault() {
+                            tracing::warn!("clearing the arm fault: {clear}");
+                        }
+                    } else if !err.is_transient() {
+                        return Err(StepError::Failed(format!("{what}: {err}")));
+                    }
+                    last = Some(err);
+                }
+            }
+        }
+        let attempts = retry.attempts;
+        if !self.still_running(id)? {
+            return Err(StepError::Halted);
+        }
+        let connection_lost = last.as_ref().is_some_and(is_connection_loss);
+        let err = last.map(|e| e.to_string()).unwrap_or_default();
+        if connection_lost {
+            Err(StepError::Interrupted(format!(
+                "{what}: {err} (after {attempts} attempts); waiting for the arm to come back"
+            )))
+        } else {
+            Err(StepError::Failed(format!(
+                "{what} failed after {attempts} attempts: {err}"
+            )))
+        }
+    }
+
+    fn home(&mut self, id: i64) -> Result<(), StepError> {
+        self.arm_op(id, "home", |arm| arm.home())?;
+        self.homed = true;
+        self.at_deg = None;
+        self.log(Some(id), "home", "")?;
+        self.note_arm(None);
+        Ok(())
+    }
+
+    fn move_to(&mut self, id: i64, theta_l: f64) -> Result<(), StepError> {
+        self.at_deg = None;
+        self.arm_op(id, &format!("move to θL {theta_l:.1}°"), |arm| {
+            arm.move_to(theta_l)
+        })?;
+        self.at_deg = Some(theta_l);
+        self.log(Some(id), "move", &format!("{theta_l:.1}"))?;
+        self.note_arm(Some(theta_l));
+        Ok(())
+    }
+
+    fn note_arm(&self, angle: Option<f64>) {
+        let mut status = lock(&self.shared.hardware);
+        status.arm.state = ArmState::Idle;
+        status.arm.homed = self.homed;
+        status.arm.error = None;
+        status.arm.angle_deg = angle.or(Some(0.0));
+    }
+
+    /// Runs `op` on the camera with bounded retries of transient faults (busy, timeout).
+    fn camera_op<T>(
+        &mut self,
+        id: i64,
+        what: &str,
+        mut op: impl FnMut(&mut dyn Camera) -> Result<T, DeviceError>,
+    ) -> Result<T, StepError> {
+        let retry = self.shared.config.retry;
+        let mut last = String::new();
+        for attempt in 0..retry.attempts {
+            if attempt > 0 {
+                std::thread::sleep(backoff(retry.backoff_ms, attempt));
+            }
+            if !self.still_running(id)? {
+                return Err(StepError::Halted);
+            }
+            lock(&self.shared.hardware).camera.state = "capturing";
+            let result = op(self.camera.as_mut());
+            let mut status = lock(&self.shared.hardware);
+            match result {
+                Ok(value) => {
+                    status.camera.state = "idle";
+                    status.camera.error = None;
+                    return Ok(value);
+                }
+                Err(err) => {
+                    tracing::warn!("scan {id}: camera {what} (try {}): {err}", attempt + 1);
+                    status.camera.state = "error";
+                    status.camera.error = Some(err.to_string());
+                    if !err.is_transient() {
+                        return Err(StepError::Failed(format!("camera {what}: {err}")));
+                    }
+                    last = err.to_string();
+                }
+            }
+        }
+        Err(StepError::Failed(format!(
+            "camera {what} failed after {} attempts: {last}",
+            retry.attempts
+        )))
+    }
+
+    fn capture(
+        &mut self,
+        id: i64,
+        dir: &Path,
+        theta_l: f64,
+        index: usize,
+        shutter_s: f64,
+    ) -> Result<Value, StepError> {
+        let frame_dir = dir.join(theta_dir_name(theta_l));
+        let stem = exposure_stem(index);
+        let sidecar_path = frame_dir.join(format!("{stem}.json"));
+        let existing = find_frame(&frame_dir, &stem);
+        if let (Some(image), true) = (&existing, sidecar_path.exists()) {
+            return Ok(frame_result(dir, image, true));
+        }
+        let requested = Exposure {
+            shutter_s,
+            iso: self.iso,
+        };
+        let what = format!("θL {theta_l:.1}° {stem}");
+        let image = match existing {
+            // The image landed but the crash came before its sidecar: only the
+            // exposure actually set is missing.
+            Some(image) => {
+                let exposure =
+                    self.camera_op(id, &format!("exposure for {what}"), |c| c.set_exposure(requested))?;
+                (image, exposure)
+            }
+            None => {
+                if !self.homed || self.at_deg != Some(theta_l) {
+                    self.move_to(id, theta_l)?;
+                }
+                self.camera_op(id, &format!("exposure for {what}"), |c| {
+                    c.set_exposure(requested)
+                })?;
+                std::fs::create_dir_all(&frame_dir)
+                    .map_err(|e| StepError::Failed(format!("{}: {e}", frame_dir.display())))?;
+                let target = frame_dir.join(format!("{stem}.tiff"));
+                let capture =
+                    self.camera_op(id, &format!("capture {what}"), |c| c.capture_to(&target))?;
+                self.log(Some(id), "capture", &what)?;
+                (capture.path, capture.exposure)
+            }
+        };
+        let (image, exposure) = image;
+        let sidecar = Sidecar {
+            shutter_s: exposure.shutter_s,
+            iso: exposure.iso.map(f64::from),
+            theta_l,
+            camera: self.camera_model.clone(),
+            time: now_rfc3339(),
+            black_level: self.sidecar.black_level,
+            white_level: self.sidecar.white_level,
+            response: self.sidecar.response,
+            width: None,
+            height: None,
+        };
+        let text = serde_json::to_vec_pretty(&sidecar)
+            .map_err(|e| StepError::Failed(format!("sidecar of {what}: {e}")))?;
+        write_atomic(&sidecar_path, &text)
+            .map_err(|e| StepError::Failed(format!("{}: {e}", sidecar_path.display())))?;
+        Ok(frame_result(dir, &image, false))
+    }
+}
+
+/// Backoff before try `attempt` (1-based after the first): base · 2^(attempt−1).
+fn backoff(base_ms: u64, attempt: u32) -> Duration {
+    Duration::from_millis(base_ms.saturating_mul(1 << (attempt - 1).min(10)))
+}
+
+/// Whether an arm error means the connection is gone (rather than a refusal).
+fn is_connection_loss(err: &DeviceError) -> bool {
+    matches!(
+        err,
+        DeviceError::Io(_)
+            | DeviceError::Disconnected(_)
+            | DeviceError::Timeout { .. }
+            | DeviceError::NotFound(_)
+    )
+}
+
+/// The captured image of `stem` in `dir`, whatever its extension (sidecars excluded).
+fn find_frame(dir: &Path, stem: &str) -> Option<PathBuf> {
+    let entries = std::fs::read_dir(dir).ok()?;
+    entries
+        .filter_map(Result::ok)
+        .map(|e| e.path())
+        .find(|p| {
+            p.file_stem().is_some_and(|s| s == stem)
+                && p.extension().is_some_and(|e| e != "json")
+        })
+}
+
+fn frame_result(scan_dir: &Path, image: &Path, reused: bool) -> Value {
+    let rel = image
+        .strip_prefix(scan_dir)
+        .unwrap_or(image)
+        .to_string_lossy()
+        .into_owned();
+    json!({ "path": rel, "reused": reused })
+}

@@ -1,0 +1,324 @@
+//! Validation of scan and sweep requests. Every invalid field is reported by name
+//! (`theta_l[2]`, `bracket.shutter_s`, ...) and nothing is queued.
+
+use serde_json::{Map, Value};
+
+use super::config::Limits;
+use super::files::is_safe_name;
+use super::plan::ScanPlan;
+
+/// The first invalid field of a request.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{field}: {message}")]
+pub struct FieldError {
+    pub field: String,
+    pub message: String,
+}
+
+fn invalid(field: impl Into<String>, message: impl Into<String>) -> FieldError {
+    FieldError {
+        field: field.into(),
+        message: message.into(),
+    }
+}
+
+/// What a request is checked against.
+#[derive(Debug, Clone)]
+pub struct Bounds {
+    /// Soft limits of θL, degrees.
+    pub limits: Limits,
+    /// Shutter range of the camera, seconds.
+    pub shutter_min_s: f64,
+    pub shutter_max_s: f64,
+    /// The "auto" bracket, seconds.
+    pub auto_bracket: Vec<f64>,
+}
+
+/// Most θL of one scan.
+const MAX_THETA_L: usize = 181;
+/// Most exposures of one bracket.
+const MAX_BRACKET: usize = 32;
+/// Most scans one sweep may queue.
+pub const MAX_SWEEP_SCANS: usize = 1000;
+
+fn object<'a>(value: &'a Value, allowed: &[&str]) -> Result<&'a Map<String, Value>, FieldError> {
+    let map = value
+        .as_object()
+        .ok_or_else(|| invalid("body", "must be a JSON object"))?;
+    if let Some(unknown) = map.keys().find(|k| !allowed.contains(&k.as_str())) {
+        return Err(invalid(unknown.as_str(), "unknown field"));
+    }
+    Ok(map)
+}
+
+fn sample_name(field: &str, value: Option<&Value>) -> Result<String, FieldError> {
+    let name = value
+        .ok_or_else(|| invalid(field, "required"))?
+        .as_str()
+        .ok_or_else(|| invalid(field, "must be a string"))?;
+    if !is_safe_name(name) {
+        return Err(invalid(
+            field,
+            "must be 1-64 letters, digits, '-', '_' or '.', not starting with '.'",
+        ));
+    }
+    Ok(name.to_owned())
+}
+
+fn theta_list(field: &str, value: Option<&Value>, limits: Limits) -> Result<Vec<f64>, FieldError> {
+    let items = value
+        .ok_or_else(|| invalid(field, "required"))?
+        .as_array()
+        .ok_or_else(|| invalid(field, "must be an array of angles in degrees"))?;
+    if items.is_empty() || items.len() > MAX_THETA_L {
+        return Err(invalid(field, format!("must hold 1 to {MAX_THETA_L} angles")));
+    }
+    let mut out: Vec<f64> = Vec::with_capacity(items.len());
+    for (i, item) in items.iter().enumerate() {
+        let f = format!("{field}[{i}]");
+        let theta = item
+            .as_f64()
+            .filter(|t| t.is_finite())
+            .ok_or_else(|| invalid(&f, "must be a number (degrees)"))?;
+        if !(limits.min_deg..=limits.max_deg).contains(&theta) {
+            return Err(invalid(
+                &f,
+                format!(
+                    "{theta} is outside the soft limits [{}, {}]",
+                    limits.min_deg, limits.max_deg
+                ),
+            ));
+        }
+        // Directories are named with one decimal: angles must differ there too.
+        if out.iter().any(|t| format!("{t:.1}") == format!("{theta:.1}")) {
+            return Err(invalid(&f, format!("{theta} is listed twice")));
+        }
+        out.push(theta);
+    }
+    Ok(out)
+}
+
+/// The bracket: absent or `"auto"`, or `{"shutter_s": [...]}`; returns the shutter
+/// times and whether they were chosen automatically.
+fn bracket(value: Option<&Value>, bounds: &Bounds) -> Result<(Vec<f64>, bool), FieldError> {
+    match value {
+        None | Some(Value::Null) => Ok((bounds.auto_bracket.clone(), true)),
+        Some(Value::String(s)) if s == "auto" => Ok((bounds.auto_bracket.clone(), true)),
+        Some(v @ Value::Object(_)) => {
+            let map = object(v, &["shutter_s"])
+                .map_err(|e| invalid(format!("bracket.{}", e.field), e.message))?;
+            let items = map
+                .get("shutter_s")
+                .ok_or_else(|| invalid("bracket.shutter_s", "required"))?
+                .as_array()
+                .ok_or_else(|| invalid("bracket.shutter_s", "must be an array of seconds"))?;
+            if items.is_empty() || items.len() > MAX_BRACKET {
+                return Err(invalid(
+                    "bracket.shutter_s",
+                    format!("must hold 1 to {MAX_BRACKET} shutter times"),
+                ));
+            }
+            let (min, max) = (bounds.shutter_min_s, bounds.shutter_max_s);
+            let mut out: Vec<f64> = Vec::with_capacity(items.len());
+            for (i, item) in items.iter().enumerate() {
+                let f = format!("bracket.shutter_s[{i}]");
+                let s = item
+                    .as_f64()
+                    .filter(|s| s.is_finite() && *s > 0.0)
+                    .ok_or_else(|| invalid(&f, "must be a positive number (seconds)"))?;
+                if s < min * (1.0 - 1e-9) || s > max * (1.0 + 1e-9) {
+                    return Err(invalid(
+                        &f,
+                        format!("{s} s is outside the camera's range [{min}, {max}] s"),
+                    ));
+                }
+                if out.contains(&s) {
+                    return Err(invalid(&f, format!("{s} s is listed twice")));
+                }
+                out.push(s);
+            }
+            Ok((out, false))
+        }
+        Some(_) => Err(invalid(
+            "bracket",
+            "must be \"auto\" or {\"shutter_s\": [seconds, ...]}",
+        )),
+    }
+}
+
+/// Checks a `POST /api/scans` body.
+pub fn scan_request(body: &Value, bounds: &Bounds) -> Result<ScanPlan, FieldError> {
+    let map = object(body, &["sample", "theta_l", "bracket"])?;
+    let sample = sample_name("sample", map.get("sample"))?;
+    let theta_l = theta_list("theta_l", map.get("theta_l"), bounds.limits)?;
+    let (shutter_s, auto_bracket) = bracket(map.get("bracket"), bounds)?;
+    Ok(ScanPlan {
+        sample,
+        theta_l,
+        shutter_s,
+        auto_bracket,
+    })
+}
+
+/// A checked sweep: its scans in queue order and its start time (Unix seconds).
+#[derive(Debug)]
+pub struct SweepPlan {
+    pub scans: Vec<ScanPlan>,
+    pub start_at: Option<i64>,
+}
+
+/// Checks a `POST /api/sweeps` body: `samples` × `theta_l_sets` × `repeats` scans,
+/// repeat-major (each round completes before the next begins).
+pub fn sweep_request(body: &Value, bounds: &Bounds) -> Result<SweepPlan, FieldError> {
+    let map = object(body, &["samples", "theta_l_sets", "repeats", "bracket", "start_at"])?;
+    let samples_value = map
+        .get("samples")
+        .ok_or_else(|| invalid("samples", "required"))?
+        .as_array()
+        .filter(|a| !a.is_empty())
+        .ok_or_else(|| invalid("samples", "must be a non-empty array of sample names"))?;
+    let samples = samples_value
+        .iter()
+        .enumerate()
+        .map(|(i, v)| sample_name(&format!("samples[{i}]"), Some(v)))
+        .collect::<Result<Vec<_>, _>>()?;
+    let sets_value = map
+        .get("theta_l_sets")
+        .ok_or_else(|| invalid("theta_l_sets", "required"))?
+        .as_array()
+        .filter(|a| !a.is_empty())
+        .ok_or_else(|| invalid("theta_l_sets", "must be a non-empty array of θL arrays"))?;
+    let sets = sets_value
+        .iter()
+        .enumerate()
+        .map(|(i, v)| theta_list(&format!("theta_l_sets[{i}]"), Some(v), bounds.limits))
+        .collect::<Result<Vec<_>, _>>()?;
+    let repeats = match map.get("repeats") {
+        None => 1,
+        Some(v) => v
+            .as_u64()
+            .filter(|r| (1..=MAX_SWEEP_SCANS as u64).contains(r))
+            .ok_or_else(|| invalid("repeats", "must be a whole number from 1"))?
+            as usize,
+    };
+    let total = samples.len() * sets.len() * repeats;
+    if total > MAX_SWEEP_SCANS {
+        return Err(invalid(
+            "repeats",
+            format!("the sweep would queue {total} scans, more than {MAX_SWEEP_SCANS}"),
+        ));
+    }
+    let (shutter_s, auto_bracket) = bracket(map.get("bracket"), bounds)?;
+    let start_at = match map.get("start_at") {
+        None | Some(Value::Null) => None,
+        Some(v) => {
+            let text = v
+                .as_str()
+                .ok_or_else(|| invalid("start_at", "must be an RFC 3339 time string"))?;
+            let time = time::OffsetDateTime::parse(
+                text,
+                &time::format_description::well_known::Rfc3339,
+            )
+            .map_err(|e| invalid("start_at", format!("not an RFC 3339 time: {e}")))?;
+            Some(time.unix_timestamp())
+        }
+    };
+    let mut scans = Vec::with_capacity(total);
+    for _ in 0..repeats {
+        for sample in &samples {
+            for theta_l in &sets {
+                scans.push(ScanPlan {
+                    sample: sample.clone(),
+                    theta_l: theta_l.clone(),
+                    shutter_s: shutter_s.clone(),
+                    auto_bracket,
+                });
+            }
+        }
+    }
+    Ok(SweepPlan { scans, start_at })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    fn bounds() -> Bounds {
+        Bounds {
+            limits: Limits {
+                min_deg: -90.0,
+                max_deg: 0.0,
+            },
+            shutter_min_s: 1.0 / 4000.0,
+            shutter_max_s: 30.0,
+            auto_bracket: vec![0.1, 0.01],
+        }
+    }
+
+    fn field_of(body: Value) -> String {
+        scan_request(&body, &bounds()).unwrap_err().field
+    }
+
+    #[test]
+    fn valid_scan_defaults_to_the_auto_bracket() {
+        let plan = scan_request(&json!({"sample": "gold", "theta_l": [-20, -25.5]}), &bounds())
+            .unwrap();
+        assert_eq!(plan.theta_l, vec![-20.0, -25.5]);
+        assert_eq!(plan.shutter_s, vec![0.1, 0.01]);
+        assert!(plan.auto_bracket);
+        let plan = scan_request(
+            &json!({"sample": "g", "theta_l": [-20], "bracket": {"shutter_s": [0.5]}}),
+            &bounds(),
+        )
+        .unwrap();
+        assert_eq!((plan.shutter_s, plan.auto_bracket), (vec![0.5], false));
+    }
+
+    #[test]
+    fn each_invalid_field_is_named() {
+        assert_eq!(field_of(json!({"theta_l": [-20]})), "sample");
+        assert_eq!(field_of(json!({"sample": "../x", "theta_l": [-20]})), "sample");
+        assert_eq!(field_of(json!({"sample": "g"})), "theta_l");
+        assert_eq!(field_of(json!({"sample": "g", "theta_l": []})), "theta_l");
+        assert_eq!(field_of(json!({"sample": "g", "theta_l": [-20, 10]})), "theta_l[1]");
+        assert_eq!(field_of(json!({"sample": "g", "theta_l": [-20, "x"]})), "theta_l[1]");
+        assert_eq!(field_of(json!({"sample": "g", "theta_l": [-20, -20]})), "theta_l[1]");
+        let bracket = |b: Value| field_of(json!({"sample": "g", "theta_l": [-20], "bracket": b}));
+        assert_eq!(bracket(json!({"shutter_s": []})), "bracket.shutter_s");
+        assert_eq!(bracket(json!({"shutter_s": [0.1, 60]})), "bracket.shutter_s[1]");
+        assert_eq!(bracket(json!({"shutter_s": [-1]})), "bracket.shutter_s[0]");
+        assert_eq!(bracket(json!({"shots": [1]})), "bracket.shots");
+        assert_eq!(bracket(json!("manual")), "bracket");
+        assert_eq!(field_of(json!({"sample": "g", "theta_l": [-20], "x": 1})), "x");
+        assert_eq!(field_of(json!([1])), "body");
+    }
+
+    #[test]
+    fn sweep_expands_repeat_major_with_start_time() {
+        let sweep = sweep_request(
+            &json!({"samples": ["a", "b"], "theta_l_sets": [[-20], [-30, -40]],
+                    "repeats": 2, "start_at": "2030-01-01T22:00:00Z"}),
+            &bounds(),
+        )
+        .unwrap();
+        assert_eq!(sweep.scans.len(), 8);
+        assert_eq!(sweep.scans[0].sample, "a");
+        assert_eq!(sweep.scans[1].theta_l, vec![-30.0, -40.0]);
+        assert_eq!(sweep.scans[2].sample, "b");
+        assert_eq!(sweep.scans[4].sample, "a");
+        assert_eq!(sweep.start_at, Some(1_893_535_200));
+        let err = sweep_request(
+            &json!({"samples": ["a"], "theta_l_sets": [[-20, 5]]}),
+            &bounds(),
+        )
+        .unwrap_err();
+        assert_eq!(err.field, "theta_l_sets[0][1]");
+        let err = sweep_request(
+            &json!({"samples": ["a"], "theta_l_sets": [[-20]], "start_at": "tonight"}),
+            &bounds(),
+        )
+        .unwrap_err();
+        assert_eq!(err.field, "start_at");
+    }
+}

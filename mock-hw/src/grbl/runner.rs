@@ -1,0 +1,147 @@
+//! The emulator thread: serves the pty with blocking I/O, drives the controller in
+//! machine time and applies injected faults.
+
+use std::io;
+use std::path::PathBuf;
+use std::sync::mpsc::{Receiver, SyncSender, TryRecvError};
+use std::time::{Duration, Instant};
+
+use super::faults::{Fault, LineFaults};
+use super::protocol::Controller;
+use super::pty::{self, Pty};
+
+/// Poll interval while something changes with time (motion, dwell, queued output).
+const BUSY_POLL: Duration = Duration::from_millis(1);
+/// Poll interval while idle; bounds the latency of injected faults.
+const IDLE_POLL: Duration = Duration::from_millis(10);
+
+/// Requests from the [`super::GrblEmulator`] handle, each acknowledged.
+pub(crate) enum Command {
+    Inject(Fault, SyncSender<()>),
+    Reconnect(SyncSender<io::Result<()>>),
+    Stop,
+}
+
+/// Machine time: real time since start divided by the time scale.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Clock {
+    origin: Instant,
+    time_scale: f64,
+}
+
+impl Clock {
+    pub fn new(time_scale: f64) -> Self {
+        Clock {
+            origin: Instant::now(),
+            time_scale,
+        }
+    }
+
+    /// Machine seconds since start.
+    pub fn now(&self) -> f64 {
+        self.origin.elapsed().as_secs_f64() / self.time_scale
+    }
+}
+
+pub(crate) struct Runner {
+    pub controller: Controller,
+    pub pty: Option<Pty>,
+    pub link: PathBuf,
+    pub clock: Clock,
+    pub faults: LineFaults,
+    pub commands: Receiver<Command>,
+}
+
+impl Runner {
+    pub fn run(mut self) {
+        let mut buf = [0u8; 512];
+        loop {
+            loop {
+                match self.commands.try_recv() {
+                    Ok(Command::Stop) | Err(TryRecvError::Disconnected) => return,
+                    Ok(command) => self.handle(command),
+                    Err(TryRecvError::Empty) => break,
+                }
+            }
+            let wait = if self.controller.busy() {
+                BUSY_POLL
+            } else {
+                IDLE_POLL
+            };
+            let received = match &mut self.pty {
+                Some(pty) => match pty.read(&mut buf, wait) {
+                    Ok(n) => n,
+                    Err(_) => {
+                        // The line is in a bad state; keep the loop from spinning.
+                        std::thread::sleep(wait);
+                        0
+                    }
+                },
+                None => {
+                    std::thread::sleep(wait);
+                    0
+                }
+            };
+            let now = self.clock.now();
+            if !self.faults.silent {
+                // Each byte is a checkpoint, so a real-time command after a line acts
+                // after that line, as on the serial line.
+                for &byte in &buf[..received] {
+                    self.controller.receive(byte);
+                    self.controller.tick(now);
+                }
+            }
+            self.controller.tick(now);
+            self.send_output(now);
+        }
+    }
+
+    fn send_output(&mut self, now: f64) {
+        for line in self.controller.take_output(now) {
+            if let (Some(bytes), Some(pty)) = (self.faults.apply(line), &mut self.pty) {
+                pty.write(&bytes);
+            }
+        }
+    }
+
+    fn handle(&mut self, command: Command) {
+        let now = self.clock.now();
+        match command {
+            Command::Inject(fault, ack) => {
+                self.inject(fault, now);
+                let _ = ack.send(());
+            }
+            Command::Reconnect(ack) => {
+                let _ = ack.send(self.reconnect(now));
+            }
+            Command::Stop => {}
+        }
+    }
+
+    fn inject(&mut self, fault: Fault, now: f64) {
+        match fault {
+            Fault::Unplug => self.unplug(now),
+            Fault::Silent => self.faults.silent = true,
+            Fault::Responsive => self.faults.silent = false,
+            Fault::Garble => self.faults.garble_next = true,
+            Fault::Truncate => self.faults.truncate_next = true,
+            Fault::AlarmDuringMotion(code) => self.controller.arm_alarm(code),
+            Fault::ResetBanner => self.controller.hard_reset(now),
+        }
+    }
+
+    fn unplug(&mut self, now: f64) {
+        self.pty = None;
+        pty::remove_link(&self.link);
+        self.controller.power_off(now);
+    }
+
+    fn reconnect(&mut self, now: f64) -> io::Result<()> {
+        if self.pty.is_some() {
+            self.unplug(now);
+        }
+        self.pty = Some(Pty::open(&self.link)?);
+        self.controller.power_on(now);
+        Ok(())
+    }
+}

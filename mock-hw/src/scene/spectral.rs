@@ -1,0 +1,202 @@
+//! Spectral tables on the goniospectrophotometer grid (390–730 nm, 10 nm steps) and the
+//! camera-RGB domain of paper eq. 4/5.
+//!
+//! The emulated camera integrates over 400–700 nm, the range of eq. 4, so the ratio a
+//! capture gives, times the white's camera-RGB value, is exactly the eq. 5 value of the
+//! sample's spectral radiance factor.
+
+use std::path::Path;
+
+use super::SceneError;
+
+/// Number of bands: 390, 400, …, 730 nm.
+pub const BANDS: usize = 35;
+/// First wavelength of the grid, nm.
+pub const FIRST_NM: f64 = 390.0;
+/// Wavelength step, nm.
+pub const STEP_NM: f64 = 10.0;
+
+/// Wavelength of band `i` in nm.
+pub fn wavelength_nm(i: usize) -> f64 {
+    FIRST_NM + STEP_NM * i as f64
+}
+
+/// One value per band.
+pub type Spectrum = [f64; BANDS];
+
+const ILLUMINANT_A_CSV: &str =
+    include_str!("../../../processing/data/cie_illuminant_a_390_730_10nm.csv");
+const NIKON_D5100_CSV: &str =
+    include_str!("../../../processing/data/nikon_d5100_npl_sensitivities_390_730_10nm.csv");
+
+/// CIE standard illuminant A, relative power (100 at 560 nm).
+pub fn illuminant_a() -> Spectrum {
+    parse_table::<1>(ILLUMINANT_A_CSV, "built-in illuminant A")
+        .map(|t| t[0])
+        .expect("embedded illuminant A table is valid")
+}
+
+/// Nikon D5100 spectral sensitivities (NPL measurement), relative, R G B.
+pub fn nikon_d5100() -> [Spectrum; 3] {
+    parse_table::<3>(NIKON_D5100_CSV, "built-in Nikon D5100 sensitivities")
+        .expect("embedded Nikon D5100 table is valid")
+}
+
+/// Reads a table with a header line and rows `wavelength_nm,v1,..,vN` covering exactly
+/// 390–730 nm in 10 nm steps.
+pub fn read_table<const N: usize>(path: &Path) -> Result<[Spectrum; N], SceneError> {
+    let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    parse_table::<N>(&text, &path.display().to_string())
+}
+
+fn parse_table<const N: usize>(text: &str, what: &str) -> Result<[Spectrum; N], SceneError> {
+    let bad = |line: usize, reason: String| SceneError::Table {
+        what: what.to_string(),
+        line,
+        reason,
+    };
+    let mut out = [[0.0; BANDS]; N];
+    let mut rows = 0;
+    for (index, line) in text.lines().enumerate().skip(1) {
+        let line_no = index + 1;
+        let line = line.trim();
+        if line.is_empty() {
+            continue;
+        }
+        if rows == BANDS {
+            return Err(bad(line_no, format!("more than {BANDS} wavelength rows")));
+        }
+        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+        if fields.len() != N + 1 {
+            return Err(bad(
+                line_no,
+                format!("expected {} columns, found {}", N + 1, fields.len()),
+            ));
+        }
+        let parse = |s: &str| {
+            s.parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| bad(line_no, format!("`{s}` is not a finite number")))
+        };
+        let wl = parse(fields[0])?;
+        if (wl - wavelength_nm(rows)).abs() > 1e-6 {
+            return Err(bad(
+                line_no,
+                format!("wavelength {wl} nm, expected {} nm", wavelength_nm(rows)),
+            ));
+        }
+        for (c, field) in fields[1..].iter().enumerate() {
+            out[c][rows] = parse(field)?;
+        }
+        rows += 1;
+    }
+    if rows != BANDS {
+        return Err(bad(
+            text.lines().count(),
+            format!("{rows} wavelength rows, expected {BANDS} (390–730 nm)"),
+        ));
+    }
+    Ok(out)
+}
+
+/// The camera-RGB domain of eq. 4/5 for one camera and light: per-channel weights
+/// k·c̄(λ)·I(λ) on 400–700 nm (zero outside), k = 100 / Σ ḡ I.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CameraDomain {
+    weights: [Spectrum; 3],
+}
+
+/// Centres (nm) and width (nm, standard deviation) of the three smooth basis spectra
+/// used to turn camera-RGB values back into spectra.
+const BASIS_CENTRES_NM: [f64; 3] = [610.0, 535.0, 460.0];
+const BASIS_SIGMA_NM: f64 = 40.0;
+
+impl CameraDomain {
+    /// Builds the domain; fails when the light gives no green signal at all.
+    pub fn new(sensitivities: &[Spectrum; 3], light: &Spectrum) -> Result<Self, SceneError> {
+        let in_range = |i: usize| (400.0..=700.0).contains(&wavelength_nm(i));
+        let green: f64 = (0..BANDS)
+            .filter(|&i| in_range(i))
+            .map(|i| sensitivities[1][i] * light[i])
+            .sum();
+        if !(green > 0.0 && green.is_finite()) {
+            return Err(SceneError::Invalid {
+                key: "light.spectrum".into(),
+                reason: "the light gives no green camera signal on 400–700 nm".into(),
+            });
+        }
+        let k = 100.0 / green;
+        let mut weights = [[0.0; BANDS]; 3];
+        for (c, w) in weights.iter_mut().enumerate() {
+            for (i, wi) in w.iter_mut().enumerate() {
+                if in_range(i) {
+                    *wi = k * sensitivities[c][i] * light[i];
+                }
+            }
+        }
+        Ok(Self { weights })
+    }
+
+    /// Camera-RGB value (eq. 5) of a spectral radiance factor.
+    pub fn rgb(&self, beta: &Spectrum) -> [f64; 3] {
+        self.weights
+            .map(|w| w.iter().zip(beta).map(|(w, b)| w * b).sum())
+    }
+
+    /// Camera-RGB value of a perfect reflecting diffuser (G = 100).
+    pub fn white_rgb(&self) -> [f64; 3] {
+        self.weights.map(|w| w.iter().sum())
+    }
+
+    /// The basis spectra, Gaussians at 610, 535 and 460 nm (σ 40 nm).
+    fn basis() -> [Spectrum; 3] {
+        BASIS_CENTRES_NM.map(|centre| {
+            std::array::from_fn(|i| {
+                let x = (wavelength_nm(i) - centre) / BASIS_SIGMA_NM;
+                (-0.5 * x * x).exp()
+            })
+        })
+    }
+
+    /// A smooth spectrum whose camera-RGB value is `rgb`: a combination of three
+    /// Gaussian basis spectra solved from the 3×3 system. Linear in `rgb`, so a model
+    /// written in camera RGB has a spectral counterpart with the same eq. 5 value at
+    /// every geometry. Out-of-gamut RGB gives a spectrum with negative lobes.
+    pub fn spectrum_from_rgb(&self, rgb: [f64; 3]) -> Spectrum {
+        let basis = Self::basis();
+        let mut matrix = [[0.0; 3]; 3];
+        for (c, row) in matrix.iter_mut().enumerate() {
+            for (j, entry) in row.iter_mut().enumerate() {
+                *entry = self.weights[c]
+                    .iter()
+                    .zip(&basis[j])
+                    .map(|(w, b)| w * b)
+                    .sum();
+            }
+        }
+        let a = solve3(matrix, rgb);
+        std::array::from_fn(|i| (0..3).map(|j| a[j] * basis[j][i]).sum())
+    }
+}
+
+/// Solves a 3×3 system by Cramer's rule (the basis matrix is well conditioned: each
+/// Gaussian sits on one channel's peak).
+fn solve3(m: [[f64; 3]; 3], b: [f64; 3]) -> [f64; 3] {
+    let det = |m: &[[f64; 3]; 3]| {
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+    };
+    let d = det(&m);
+    std::array::from_fn(|j| {
+        let mut mj = m;
+        for (row, bi) in mj.iter_mut().zip(b) {
+            row[j] = bi;
+        }
+        det(&mj) / d
+    })
+}

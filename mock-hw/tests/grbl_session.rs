@@ -1,0 +1,159 @@
+//! A scripted session against the emulated GRBL controller over its pseudo-terminal,
+//! replies checked byte for byte.
+
+mod grbl_support;
+
+use std::time::{Duration, Instant};
+
+use gonio_mock_hw::grbl::{move_duration_s, GrblConfig};
+use grbl_support::{fast_config, mpos_x, start, Client, LOCKED_BANNER};
+
+const SETTINGS: &str = "$0=10\r\n$1=25\r\n$2=0\r\n$3=0\r\n$4=0\r\n$5=0\r\n$6=0\r\n$10=1\r\n\
+$11=0.010\r\n$12=0.002\r\n$13=0\r\n$20=1\r\n$21=0\r\n$22=1\r\n$23=0\r\n$24=100.000\r\n\
+$25=600.000\r\n$26=250\r\n$27=0.000\r\n$30=1000\r\n$31=0\r\n$32=0\r\n\
+$100=80.000\r\n$101=250.000\r\n$102=250.000\r\n$110=1200.000\r\n$111=500.000\r\n\
+$112=500.000\r\n$120=40.000\r\n$121=10.000\r\n$122=10.000\r\n$130=180.000\r\n\
+$131=200.000\r\n$132=200.000\r\nok\r\n";
+
+#[test]
+fn scripted_session_byte_for_byte() {
+    let (emulator, world) = start(fast_config(), -30.0);
+    let mut grbl = Client::open(emulator.device_path());
+    grbl.expect(LOCKED_BANNER);
+
+    // Homing is enabled: motion is locked until $H or $X.
+    grbl.exchange("G0X-10\n", "error:9\r\n");
+    grbl.exchange("$$\n", SETTINGS);
+    grbl.exchange("$I\n", "[VER:1.1h.20190830:]\r\n[OPT:V,15,128]\r\nok\r\n");
+    grbl.exchange(
+        "$G\n",
+        "[GC:G0 G54 G17 G21 G90 G94 M5 M9 T0 F0 S0]\r\nok\r\n",
+    );
+    grbl.exchange("?", "<Alarm|MPos:0.000,0.000,0.000|FS:0,0>\r\n");
+
+    // Homing runs to the switch at the positive end; the arm is physically at −30°.
+    grbl.send(b"$H\n");
+    let homing = grbl.wait_for_state("Home");
+    assert!((0.0..=30.0).contains(&mpos_x(&homing)), "{homing}");
+    grbl.expect("ok\r\n");
+    grbl.exchange("?", "<Idle|MPos:0.000,0.000,0.000|FS:0,0>\r\n");
+    assert_eq!(world.arm_deg(), 0.0);
+
+    // Settings: format and range errors as the firmware reports them.
+    grbl.exchange("$110=abc\n", "error:2\r\n");
+    grbl.exchange("$110\n", "error:3\r\n");
+    grbl.exchange("$0=2\n", "error:6\r\n");
+    grbl.exchange("$120=-5\n", "error:4\r\n");
+    grbl.exchange("$130=180\n", "ok\r\n");
+    grbl.exchange("G1X-10\n", "error:22\r\n");
+    grbl.exchange("G5X1\n", "error:20\r\n");
+
+    // An absolute move, answered at once; MPos follows the profile.
+    grbl.exchange("G90G0X-45\n", "ok\r\n");
+    let moving = grbl.wait_for_state("Run");
+    let x = mpos_x(&moving);
+    assert!((-45.0..=0.0).contains(&x), "{moving}");
+    grbl.wait_for_state("Idle");
+    grbl.exchange("?", "<Idle|MPos:-45.000,0.000,0.000|FS:0,0>\r\n");
+    assert_eq!(world.arm_deg(), -45.0);
+    grbl.exchange("G91G0X5\nG90\n", "ok\r\nok\r\n");
+    grbl.exchange("G4P0\n", "ok\r\n");
+    grbl.exchange("?", "<Idle|MPos:-40.000,0.000,0.000|FS:0,0>\r\n");
+
+    // A target past the soft limit: ALARM:2, locked until a soft reset.
+    grbl.exchange("G0X-181\n", "ALARM:2\r\n[MSG:Reset to continue]\r\n");
+    grbl.send(b"$X\n");
+    grbl.exchange("?", "<Alarm|MPos:-40.000,0.000,0.000|FS:0,0>\r\n");
+    // The soft reset answers the line that raised the alarm, then reboots the protocol
+    // (input received meanwhile is flushed).
+    grbl.send(b"\x18");
+    grbl.expect("ok\r\n");
+    grbl.expect(LOCKED_BANNER);
+    grbl.exchange("$X\n", "[MSG:Caution: Unlocked]\r\nok\r\n");
+    grbl.exchange("?", "<Idle|MPos:-40.000,0.000,0.000|FS:0,0>\r\n");
+    assert_eq!(world.arm_deg(), -40.0);
+}
+
+#[test]
+fn feed_hold_resume_and_soft_reset_mid_motion() {
+    let (emulator, world) = start(fast_config(), 0.0);
+    let mut grbl = Client::open(emulator.device_path());
+    grbl.expect(LOCKED_BANNER);
+    grbl.exchange("$H\n", "ok\r\n");
+
+    // 135° at 20°/s: about 70 ms of real time.
+    grbl.exchange("G1X-135F1200\n", "ok\r\n");
+    grbl.wait_for_state("Run");
+    std::thread::sleep(Duration::from_millis(15));
+    grbl.send(b"!");
+    grbl.wait_for_state("Hold");
+    let held = grbl.wait_for_state("Hold:0");
+    let x_held = mpos_x(&held);
+    assert!(x_held < 0.0 && x_held > -135.0, "{held}");
+    std::thread::sleep(Duration::from_millis(20));
+    grbl.exchange("?", &format!("{held}\r\n"));
+    assert!((world.arm_deg() - x_held).abs() < 0.0125 + 1e-9);
+    // Settings are refused while holding.
+    grbl.exchange("$$\n", "error:8\r\n");
+    grbl.send(b"~");
+    grbl.wait_for_state("Idle");
+    grbl.exchange("?", "<Idle|MPos:-135.000,0.000,0.000|FS:0,0>\r\n");
+
+    // A soft reset while moving: ALARM:3, banner, position no longer trusted.
+    grbl.exchange("G0X-10\n", "ok\r\n");
+    let running = grbl.wait_for_state("Run");
+    grbl.send(b"\x18");
+    grbl.expect("ALARM:3\r\n");
+    grbl.expect(LOCKED_BANNER);
+    let alarm = grbl.wait_for_state("Alarm");
+    let stopped = mpos_x(&alarm);
+    assert!(
+        stopped < -10.0 && stopped >= mpos_x(&running),
+        "{running} then {alarm}"
+    );
+    grbl.exchange("G0X-20\n", "error:9\r\n");
+
+    // A soft reset after a completed feed hold keeps the position and raises no alarm.
+    grbl.exchange("$X\n", "[MSG:Caution: Unlocked]\r\nok\r\n");
+    grbl.exchange("!", "");
+    grbl.wait_for_state("Hold:0");
+    grbl.send(b"\x18");
+    grbl.expect(grbl_support::BANNER);
+    grbl.wait_for_state("Idle");
+}
+
+#[test]
+fn dwell_answers_after_the_motion_and_profile_timing() {
+    // 90° at 20°/s with 40°/s²: 0.5 s ramps and 4 s cruise.
+    assert!((move_duration_s(90.0, 1200.0, 40.0) - 5.0).abs() < 1e-12);
+    // 5° never reaches 20°/s: a triangle of 2·√(5/40) s.
+    assert!((move_duration_s(-5.0, 1200.0, 40.0) - 2.0 * (5.0f64 / 40.0).sqrt()).abs() < 1e-12);
+    assert_eq!(move_duration_s(0.0, 1200.0, 40.0), 0.0);
+
+    let config = GrblConfig {
+        time_scale: 0.02,
+        homing_enabled: false,
+        soft_limits: false,
+        ..GrblConfig::default()
+    };
+    let expected = move_duration_s(90.0, 1200.0, 40.0) * config.time_scale;
+    let (emulator, world) = start(config, 0.0);
+    let mut grbl = Client::open(emulator.device_path());
+    grbl.expect(grbl_support::BANNER);
+    let sent = Instant::now();
+    grbl.exchange("G0X-90\nG4P0\n", "ok\r\n");
+    let mut last = 1.0;
+    // World follows the arm continuously and monotonically while the dwell waits.
+    while sent.elapsed().as_secs_f64() < expected * 0.8 {
+        let arm = world.arm_deg();
+        assert!(arm <= last && arm >= -90.0);
+        last = arm;
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    assert!(last < 0.0 && last > -90.0, "{last}");
+    grbl.expect("ok\r\n");
+    let elapsed = sent.elapsed().as_secs_f64();
+    assert!(elapsed >= expected * 0.98, "{elapsed} s < {expected} s");
+    assert_eq!(world.arm_deg(), -90.0);
+    grbl.exchange("?", "<Idle|MPos:-90.000,0.000,0.000|FS:0,0>\r\n");
+}

@@ -1,0 +1,226 @@
+//! Scene files: built-ins, validation errors that name the key, truth and setup JSON,
+//! and the camera-RGB domain.
+
+use gonio_mock_hw::scene::{Sample, Scene, SceneError};
+
+const SMALL: &str = include_str!("scene_small.toml");
+const CT: &str =
+    "[sample]\nmodel = \"cook-torrance\"\nkd = [10.0, 8.0, 3.0]\nks = [2.0, 1.5, 0.5]\nm = [0.1]\n";
+
+fn small(extra: &str) -> Result<Scene, SceneError> {
+    Scene::from_toml_str(&format!("{SMALL}\n{extra}"))
+}
+
+fn error_text(toml: &str) -> String {
+    match Scene::from_toml_str(toml) {
+        Ok(_) => panic!("scene was accepted"),
+        Err(e) => e.to_string(),
+    }
+}
+
+#[test]
+fn builtin_scenes_are_realistic() {
+    for name in Scene::BUILTIN {
+        let scene = Scene::builtin(name).expect(name);
+        assert_eq!(scene.name(), name);
+        assert_eq!(
+            scene.theta_l_deg(),
+            &[-20.0, -25.0, -30.0, -35.0, -40.0, -45.0]
+        );
+        let s = scene.setup();
+        assert_eq!((s.image_width, s.image_height), (3872, 2592));
+        assert_eq!(s.pixel_pitch_um, 6.1);
+        assert!(scene.bracket_s().iter().all(|t| (0.01..=0.5).contains(t)));
+    }
+    assert!(Scene::builtin("silver").is_none());
+    let gold = Scene::builtin("gold").unwrap();
+    assert_eq!(gold.bracket_s().len(), 4);
+    match gold.sample() {
+        Sample::CookTorrance { kd, ks, m } => {
+            assert!(m[0] >= 0.05 && m[0] <= 0.1);
+            assert!(ks[0] > kd[0] && ks[0] > ks[2], "strong yellowish specular");
+        }
+        other => panic!("gold is {other:?}"),
+    }
+    assert!(matches!(
+        Scene::builtin("red").unwrap().sample(),
+        Sample::CookTorrance { m, .. } if (m[0] - 0.4).abs() < 0.1
+    ));
+    assert!(Scene::builtin("blue-green").unwrap().sample().is_spectral());
+}
+
+#[test]
+fn white_is_100_in_green_and_spectra_round_trip() {
+    let scene = small(CT).unwrap();
+    let domain = scene.camera_domain();
+    let white = domain.white_rgb();
+    assert!((white[1] - 100.0).abs() < 1e-9);
+    // Tungsten light through the D5100: red above blue.
+    assert!(white[0] > white[2]);
+    for rgb in [[10.0, 20.0, 30.0], [80.0, 5.0, 1.0], white] {
+        let back = domain.rgb(&domain.spectrum_from_rgb(rgb));
+        for c in 0..3 {
+            assert!((back[c] - rgb[c]).abs() < 1e-9, "{back:?} vs {rgb:?}");
+        }
+    }
+}
+
+#[test]
+fn unknown_keys_are_named() {
+    let text = format!("{SMALL}\n{CT}").replace("cylinder_radius_mm", "cylinder_radus_mm");
+    let err = error_text(&text);
+    assert!(err.contains("cylinder_radus_mm"), "{err}");
+    let err = error_text(&format!("{SMALL}\n{CT}shininess = 3\n"));
+    assert!(err.contains("shininess"), "{err}");
+    let err = error_text(&format!("{SMALL}\n{CT}\n[effects.blur]\nradius = 2\n"));
+    assert!(err.contains("blur"), "{err}");
+    let err = error_text(&format!(
+        "{SMALL}\n[sample]\nmodel = \"phong\"\nkd = [1.0, 1.0, 1.0]\n"
+    ));
+    assert!(err.contains("phong"), "{err}");
+}
+
+#[test]
+fn bad_values_are_named() {
+    let cases = [
+        (
+            "cylinder_radius_mm = 40.0",
+            "cylinder_radius_mm = -1.0",
+            "setup.cylinder_radius_mm",
+        ),
+        (
+            "white_rows = [79, 99]",
+            "white_rows = [30, 50]",
+            "setup.white_rows",
+        ),
+        (
+            "sample_rows = [20, 40]",
+            "sample_rows = [20, 400]",
+            "setup.sample_rows",
+        ),
+        ("bracket_s = [0.01]", "bracket_s = []", "scan.bracket_s"),
+        (
+            "theta_l_deg = [-30.0]",
+            "theta_l_deg = [-130.0]",
+            "scan.theta_l_deg",
+        ),
+        (
+            "reflectance = 0.9",
+            "reflectance = 0.0",
+            "white.reflectance",
+        ),
+        (
+            "white_level = 65535",
+            "white_level = 70000",
+            "camera.white_level",
+        ),
+        ("bit_depth = 16", "bit_depth = 4", "camera.bit_depth"),
+        (
+            "intensity = 2000000.0",
+            "intensity = nan",
+            "light.intensity",
+        ),
+    ];
+    for (from, to, key) in cases {
+        let text = format!("{SMALL}\n{CT}").replace(from, to);
+        let err = error_text(&text);
+        assert!(err.contains(key), "{to}: {err}");
+    }
+    let err = error_text(&format!("{SMALL}\n{}", CT.replace("[0.1]", "[0.1, 0.2]")));
+    assert!(err.contains("sample.m"), "{err}");
+    let err = error_text(&format!(
+        "{SMALL}\n{}",
+        CT.replace("ks = [2.0", "ks = [-2.0")
+    ));
+    assert!(err.contains("sample.ks"), "{err}");
+    let err = error_text(&format!(
+        "{SMALL}\n{CT}\n[effects.noise]\nelectrons_per_dn = 0.0\nread_noise_dn = 1.0\n"
+    ));
+    assert!(err.contains("effects.noise.electrons_per_dn"), "{err}");
+    let err = error_text(
+        &format!("{SMALL}\n{CT}").replace("\"nikon-d5100\"", "\"/nonexistent/sens.csv\""),
+    );
+    assert!(err.contains("/nonexistent/sens.csv"), "{err}");
+    let err = error_text(&format!("{SMALL}\n{CT}").replace("name = \"small\"\n", ""));
+    assert!(err.contains("name"), "{err}");
+}
+
+#[test]
+fn bad_tables_name_file_and_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let sens = dir.path().join("sens.csv");
+    std::fs::write(&sens, "wavelength_nm,r,g,b\n390,0,0,0\n400,0,x,0\n").unwrap();
+    let text = format!("{SMALL}\n{CT}").replace("\"nikon-d5100\"", &format!("{:?}", sens));
+    let err = error_text(&text);
+    assert!(err.contains("sens.csv") && err.contains("line 3"), "{err}");
+
+    let table = dir.path().join("measured.csv");
+    std::fs::write(&table, "theta_i,theta_r,390\n0,0,1\n").unwrap();
+    let scene = dir.path().join("scene.toml");
+    std::fs::write(
+        &scene,
+        format!("{SMALL}\n[sample]\nmodel = \"measured\"\npath = \"measured.csv\"\n"),
+    )
+    .unwrap();
+    let err = Scene::load(&scene).unwrap_err().to_string();
+    assert!(
+        err.contains("measured.csv") && err.contains("line 2"),
+        "{err}"
+    );
+}
+
+#[test]
+fn truth_and_setup_json() {
+    let scene = small(CT).unwrap();
+    let truth = scene.truth_json();
+    assert_eq!(truth["scene"], "small");
+    assert_eq!(truth["model"], "cook-torrance");
+    assert_eq!(truth["roughness"], "shared");
+    assert_eq!(truth["kd"], serde_json::json!([10.0, 8.0, 3.0]));
+    assert_eq!(truth["ks"], serde_json::json!([2.0, 1.5, 0.5]));
+    assert_eq!(truth["m"], serde_json::json!([0.1]));
+    assert_eq!(truth["white_reflectance"], 0.9);
+    let per_channel = small(&CT.replace("[0.1]", "[0.1, 0.2, 0.3]")).unwrap();
+    assert_eq!(per_channel.truth_json()["roughness"], "per-channel");
+
+    let setup = scene.setup().setup_json();
+    let keys: Vec<&str> = setup
+        .as_object()
+        .unwrap()
+        .keys()
+        .map(String::as_str)
+        .collect();
+    assert_eq!(
+        keys,
+        [
+            "camera_distance_mm",
+            "cylinder_radius_mm",
+            "focal_length_mm",
+            "image_height",
+            "image_width",
+            "light_distance_mm",
+            "pixel_pitch_um",
+            "principal_point_x",
+            "sample_row",
+            "white_row"
+        ]
+    );
+    assert_eq!(setup["sample_row"], 30);
+    assert_eq!(setup["white_row"], 89);
+}
+
+#[test]
+fn binning_keeps_the_geometry() {
+    let gold = Scene::builtin("gold").unwrap();
+    let small = gold.binned(8).unwrap();
+    let (a, b) = (gold.setup(), small.setup());
+    assert_eq!((b.image_width, b.image_height), (484, 324));
+    assert_eq!(b.pixel_pitch_um, 8.0 * a.pixel_pitch_um);
+    assert_eq!(b.sample_rows, [125, 150]);
+    // The sensor spans the same angle of view.
+    let span = |s: &gonio_mock_hw::scene::SceneSetup| f64::from(s.image_width) * s.pixel_pitch_um;
+    assert!((span(a) - span(b)).abs() <= 8.0 * a.pixel_pitch_um);
+    assert_eq!(small.truth_json(), gold.truth_json());
+    assert!(gold.binned(0).is_err());
+    assert!(gold.binned(5000).is_err());
+}

@@ -1,0 +1,245 @@
+//! The robust method: exact Kd, Ks at each m (see `linear`) and a global search over log m.
+
+use std::cell::RefCell;
+
+use argmin::core::{CostFunction, Error as ArgminError, Executor};
+use argmin::solver::brent::BrentOpt;
+
+use super::{linear, nelder_mead, Data, FitError, FitOptions, Found};
+use crate::brdf::{Params, Roughness};
+
+/// Grid local minima within this fraction of the best grid value are refined too.
+const REFINE_WITHIN: f64 = 0.05;
+/// At most this many grid local minima are refined.
+const MAX_REFINED: usize = 3;
+/// Per-channel roughness: rounds of channel-by-channel search at most.
+const MAX_ROUNDS: usize = 6;
+/// Per-channel roughness: stop once a round lowers the loss by less than this fraction.
+const ROUND_TOLERANCE: f64 = 1e-9;
+/// Brent tolerance on ln m: relative and absolute parts.
+const BRENT_EPS: f64 = 1.5e-8;
+const BRENT_ABS: f64 = 1e-7;
+
+/// Which roughness a one-dimensional search moves.
+#[derive(Clone, Copy)]
+enum Target {
+    Shared,
+    Channel(usize),
+}
+
+impl Target {
+    fn apply(self, mut m: [f64; 3], value: f64) -> [f64; 3] {
+        match self {
+            Target::Shared => m = [value; 3],
+            Target::Channel(c) => m[c] = value,
+        }
+        m
+    }
+}
+
+/// The loss profile: eq. 10 minimised over Kd, Ks at a given m, with caches.
+struct Profile<'a> {
+    data: &'a Data,
+    spec: [Vec<f64>; 3],
+    /// The m each `spec` vector holds; NaN when not computed yet.
+    spec_m: [f64; 3],
+    weights: Vec<f64>,
+    residuals: Vec<f64>,
+    evaluations: u64,
+    best: Option<(Params, f64)>,
+}
+
+impl<'a> Profile<'a> {
+    fn new(data: &'a Data) -> Self {
+        let n = data.y.len();
+        Profile {
+            data,
+            spec: [vec![0.0; n], vec![0.0; n], vec![0.0; n]],
+            spec_m: [f64::NAN; 3],
+            weights: Vec::new(),
+            residuals: Vec::new(),
+            evaluations: 0,
+            best: None,
+        }
+    }
+
+    fn update_spec(&mut self, c: usize, m: f64) {
+        if self.spec_m[c] != m {
+            for (s, b) in self.spec[c].iter_mut().zip(&self.data.bases) {
+                *s = b.specular(m);
+            }
+            self.spec_m[c] = m;
+        }
+    }
+
+    /// Profile loss at roughness `m`; all channels use `m[0]` when `shared`.
+    fn eval(&mut self, m: [f64; 3], shared: bool) -> f64 {
+        let fit = if shared {
+            self.update_spec(0, m[0]);
+            let s = self.spec[0].as_slice();
+            linear::solve(self.data, [s, s, s], &mut self.weights, &mut self.residuals)
+        } else {
+            for (c, &mc) in m.iter().enumerate() {
+                self.update_spec(c, mc);
+            }
+            let [r, g, b] = &self.spec;
+            linear::solve(self.data, [r, g, b], &mut self.weights, &mut self.residuals)
+        };
+        self.evaluations += 1;
+        if self.best.as_ref().map_or(true, |(_, loss)| fit.loss < *loss) {
+            self.best = Some((
+                Params {
+                    kd: fit.kd,
+                    ks: fit.ks,
+                    m,
+                },
+                fit.loss,
+            ));
+        }
+        fit.loss
+    }
+
+    fn best_m(&self) -> [f64; 3] {
+        self.best.as_ref().map_or([f64::NAN; 3], |(p, _)| p.m)
+    }
+
+    fn best_loss(&self) -> f64 {
+        self.best.as_ref().map_or(f64::INFINITY, |(_, loss)| *loss)
+    }
+}
+
+/// The profile along one roughness as a function of ln m, for Brent's method.
+struct LineProfile<'p, 'a> {
+    profile: &'p RefCell<Profile<'a>>,
+    base: [f64; 3],
+    target: Target,
+}
+
+impl CostFunction for LineProfile<'_, '_> {
+    type Param = f64;
+    type Output = f64;
+    fn cost(&self, ln_m: &f64) -> Result<f64, ArgminError> {
+        let m = self.target.apply(self.base, ln_m.exp());
+        let shared = matches!(self.target, Target::Shared);
+        Ok(self.profile.borrow_mut().eval(m, shared))
+    }
+}
+
+/// Minimises the profile along `target` on [lo, hi] in ln m with Brent's method.
+fn brent(
+    profile: &RefCell<Profile<'_>>,
+    base: [f64; 3],
+    target: Target,
+    lo: f64,
+    hi: f64,
+) -> Result<(), FitError> {
+    let line = LineProfile {
+        profile,
+        base,
+        target,
+    };
+    let solver = BrentOpt::new(lo, hi).set_tolerance(BRENT_EPS, BRENT_ABS);
+    Executor::new(line, solver)
+        .configure(|state| state.max_iters(200))
+        .run()
+        .map_err(|e| FitError::Optimizer(e.to_string()))?;
+    Ok(())
+}
+
+/// Grid over the whole ln m range along `target`, then Brent around the best grid minima.
+fn global_search(
+    profile: &RefCell<Profile<'_>>,
+    base: [f64; 3],
+    target: Target,
+    ln_range: (f64, f64),
+    grid_points: usize,
+) -> Result<(), FitError> {
+    let (lo, hi) = ln_range;
+    let step = (hi - lo) / (grid_points - 1) as f64;
+    let grid: Vec<f64> = (0..grid_points).map(|k| lo + step * k as f64).collect();
+    let shared = matches!(target, Target::Shared);
+    let values: Vec<f64> = grid
+        .iter()
+        .map(|x| profile.borrow_mut().eval(target.apply(base, x.exp()), shared))
+        .collect();
+    let mut minima: Vec<usize> = (0..grid_points)
+        .filter(|&k| {
+            (k == 0 || values[k] <= values[k - 1])
+                && (k + 1 == grid_points || values[k] <= values[k + 1])
+        })
+        .collect();
+    minima.sort_by(|&a, &b| values[a].total_cmp(&values[b]));
+    let best = values[minima[0]];
+    for &k in minima
+        .iter()
+        .take(MAX_REFINED)
+        .filter(|&&k| values[k] <= best + REFINE_WITHIN * best.abs())
+    {
+        let a = grid[k.saturating_sub(1)];
+        let b = grid[(k + 1).min(grid_points - 1)];
+        brent(profile, base, target, a, b)?;
+    }
+    Ok(())
+}
+
+fn validate(options: &FitOptions) -> Result<(f64, f64), FitError> {
+    let o = &options.robust;
+    if !(o.m_min > 0.0 && o.m_max > o.m_min && o.m_max.is_finite()) {
+        return Err(FitError::InvalidOptions(format!(
+            "roughness range [{}, {}] must satisfy 0 < m_min < m_max < ∞",
+            o.m_min, o.m_max
+        )));
+    }
+    if o.grid_points < 3 {
+        return Err(FitError::InvalidOptions(format!(
+            "grid_points = {} (at least 3 needed)",
+            o.grid_points
+        )));
+    }
+    Ok((o.m_min.ln(), o.m_max.ln()))
+}
+
+pub(crate) fn fit(data: &Data, options: &FitOptions) -> Result<Found, FitError> {
+    let ln_range = validate(options)?;
+    let grid_points = options.robust.grid_points;
+    let profile = RefCell::new(Profile::new(data));
+    global_search(&profile, [1.0; 3], Target::Shared, ln_range, grid_points)?;
+    if options.roughness == Roughness::PerChannel {
+        let step = (ln_range.1 - ln_range.0) / (grid_points - 1) as f64;
+        for round in 0..MAX_ROUNDS {
+            let before = profile.borrow().best_loss();
+            for c in 0..3 {
+                let base = profile.borrow().best_m();
+                let target = Target::Channel(c);
+                if round == 0 {
+                    global_search(&profile, base, target, ln_range, grid_points)?;
+                } else {
+                    let x = base[c].ln();
+                    let lo = (x - 2.0 * step).max(ln_range.0);
+                    let hi = (x + 2.0 * step).min(ln_range.1);
+                    brent(&profile, base, target, lo, hi)?;
+                }
+            }
+            let after = profile.borrow().best_loss();
+            if before - after <= ROUND_TOLERANCE * before {
+                break;
+            }
+        }
+    }
+    let profile = profile.into_inner();
+    let (params, loss) = profile
+        .best
+        .ok_or_else(|| FitError::Optimizer("no roughness was evaluated".into()))?;
+    let mut found = Found {
+        params,
+        evaluations: profile.evaluations,
+    };
+    if options.robust.polish {
+        let polished = nelder_mead::polish(data, options, &params)?;
+        found.evaluations += polished.evaluations;
+        if data.loss(&polished.params) < loss {
+            found.params = polished.params;
+        }
+    }
+    Ok(found)
+}

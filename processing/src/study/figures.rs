@@ -1,0 +1,264 @@
+//! SVG figures of a study: box plots (paper Fig. 7, 9) and x–y charts (Fig. 6, the u′v′
+//! chart of Fig. 8, Pareto plots). Drawn with plotters' SVG backend; text is left to the
+//! SVG viewer's fonts.
+
+use std::path::{Path, PathBuf};
+
+use plotters::prelude::*;
+
+use super::boxplot::BoxStats;
+
+/// Figure size in SVG user units (pixels).
+const SIZE: (u32, u32) = (900, 600);
+
+/// Series colours: black first (measured/reference data), then a colour-blind-safe set.
+const PALETTE: [RGBColor; 7] = [
+    RGBColor(0, 0, 0),
+    RGBColor(0, 114, 178),
+    RGBColor(213, 94, 0),
+    RGBColor(0, 158, 115),
+    RGBColor(204, 121, 167),
+    RGBColor(230, 159, 0),
+    RGBColor(86, 180, 233),
+];
+
+/// A figure could not be written.
+#[derive(Debug, thiserror::Error)]
+#[error("cannot draw figure {path}: {message}")]
+pub struct FigureError {
+    pub path: PathBuf,
+    pub message: String,
+}
+
+/// One model's boxes: `(number of θL, statistics)` per group.
+#[derive(Debug, Clone)]
+pub struct BoxSeries {
+    pub name: String,
+    pub groups: Vec<(usize, BoxStats)>,
+}
+
+/// How an x–y series is drawn.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Mark {
+    /// Filled dots at the points.
+    Points,
+    /// Polylines through each segment's points, in order.
+    Lines,
+}
+
+/// One named x–y series; each segment is drawn separately (e.g. one line per θL).
+#[derive(Debug, Clone)]
+pub struct XySeries {
+    pub name: String,
+    pub mark: Mark,
+    pub segments: Vec<Vec<(f64, f64)>>,
+}
+
+/// An x–y chart. With `log_x`, x values are plotted on a log₁₀ axis (they must be > 0;
+/// others are skipped).
+#[derive(Debug, Clone)]
+pub struct XyPlot {
+    pub title: String,
+    pub x_label: String,
+    pub y_label: String,
+    pub log_x: bool,
+    pub series: Vec<XySeries>,
+}
+
+fn draw_error(path: &Path, err: impl std::fmt::Display) -> FigureError {
+    FigureError {
+        path: path.to_path_buf(),
+        message: err.to_string(),
+    }
+}
+
+/// Padded `(lo, hi)` range of the values; a unit range around a single value.
+fn padded_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
+    let (lo, hi) = values
+        .filter(|v| v.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+            (lo.min(v), hi.max(v))
+        });
+    if !lo.is_finite() {
+        return (0.0, 1.0);
+    }
+    let span = hi - lo;
+    if span <= 1e-12 * lo.abs().max(1.0) {
+        let half = 0.5 * lo.abs().max(1e-3);
+        return (lo - half, hi + half);
+    }
+    (lo - 0.05 * span, hi + 0.05 * span)
+}
+
+/// Box-and-whisker plot, groups along x by the number of θL, one coloured box per series
+/// within each group; outliers as hollow circles.
+pub fn box_plot_svg(
+    path: &Path,
+    title: &str,
+    y_label: &str,
+    series: &[BoxSeries],
+) -> Result<(), FigureError> {
+    let err = |e: &dyn std::fmt::Display| draw_error(path, e);
+    let k_max = series
+        .iter()
+        .flat_map(|s| s.groups.iter().map(|(k, _)| *k))
+        .max()
+        .unwrap_or(1);
+    let (y_lo, y_hi) = padded_range(series.iter().flat_map(|s| {
+        s.groups.iter().flat_map(|(_, b)| {
+            [b.whisker_low, b.whisker_high]
+                .into_iter()
+                .chain(b.outliers.iter().copied())
+        })
+    }));
+    let root = SVGBackend::new(path, SIZE).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| err(&e))?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 22))
+        .margin(12)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d(0.5..k_max as f64 + 0.5, y_lo..y_hi)
+        .map_err(|e| err(&e))?;
+    chart
+        .configure_mesh()
+        .disable_x_mesh()
+        .x_labels(k_max + 1)
+        .x_label_formatter(&|x| {
+            if (x - x.round()).abs() < 1e-9 {
+                format!("{}", x.round())
+            } else {
+                String::new()
+            }
+        })
+        .x_desc("number of illumination directions θL")
+        .y_desc(y_label)
+        .draw()
+        .map_err(|e| err(&e))?;
+
+    let width = 0.8 / series.len().max(1) as f64;
+    for (j, s) in series.iter().enumerate() {
+        let color = PALETTE[1 + j % (PALETTE.len() - 1)];
+        let offset = (j as f64 - (series.len() as f64 - 1.0) / 2.0) * width;
+        let half = 0.4 * width;
+        let boxes = s.groups.iter().map(|(k, b)| {
+            let c = *k as f64 + offset;
+            Rectangle::new([(c - half, b.q1), (c + half, b.q3)], color.stroke_width(2))
+        });
+        chart
+            .draw_series(boxes)
+            .map_err(|e| err(&e))?
+            .label(s.name.clone())
+            .legend(move |(x, y)| Rectangle::new([(x, y - 6), (x + 16, y + 6)], color.filled()));
+        let lines = s.groups.iter().flat_map(|(k, b)| {
+            let c = *k as f64 + offset;
+            [
+                vec![(c - half, b.median), (c + half, b.median)],
+                vec![(c, b.q3), (c, b.whisker_high)],
+                vec![(c, b.q1), (c, b.whisker_low)],
+                vec![(c - half / 2.0, b.whisker_high), (c + half / 2.0, b.whisker_high)],
+                vec![(c - half / 2.0, b.whisker_low), (c + half / 2.0, b.whisker_low)],
+            ]
+        });
+        chart
+            .draw_series(lines.map(|l| PathElement::new(l, color.stroke_width(2))))
+            .map_err(|e| err(&e))?;
+        let outliers = s.groups.iter().flat_map(|(k, b)| {
+            let c = *k as f64 + offset;
+            b.outliers.iter().map(move |&o| (c, o))
+        });
+        chart
+            .draw_series(outliers.map(|p| Circle::new(p, 4, color.stroke_width(1))))
+            .map_err(|e| err(&e))?;
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(|e| err(&e))?;
+    root.present().map_err(|e| err(&e))
+}
+
+/// An x–y chart of points and polylines with a legend.
+pub fn xy_svg(path: &Path, plot: &XyPlot) -> Result<(), FigureError> {
+    let err = |e: &dyn std::fmt::Display| draw_error(path, e);
+    let to_x = |x: f64| {
+        if plot.log_x {
+            (x > 0.0).then(|| x.log10())
+        } else {
+            Some(x)
+        }
+    };
+    let transformed: Vec<Vec<Vec<(f64, f64)>>> = plot
+        .series
+        .iter()
+        .map(|s| {
+            s.segments
+                .iter()
+                .map(|seg| {
+                    seg.iter()
+                        .filter_map(|&(x, y)| to_x(x).map(|x| (x, y)))
+                        .filter(|(x, y)| x.is_finite() && y.is_finite())
+                        .collect()
+                })
+                .collect()
+        })
+        .collect();
+    let all = || transformed.iter().flatten().flatten();
+    let (x_lo, x_hi) = padded_range(all().map(|p| p.0));
+    let (y_lo, y_hi) = padded_range(all().map(|p| p.1));
+
+    let root = SVGBackend::new(path, SIZE).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| err(&e))?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(&plot.title, ("sans-serif", 22))
+        .margin(12)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d(x_lo..x_hi, y_lo..y_hi)
+        .map_err(|e| err(&e))?;
+    let log_x = plot.log_x;
+    chart
+        .configure_mesh()
+        .x_label_formatter(&|x| {
+            let v = if log_x { 10f64.powf(*x) } else { *x };
+            format!("{v:.3}")
+        })
+        .y_label_formatter(&|y| format!("{y:.3}"))
+        .x_desc(plot.x_label.as_str())
+        .y_desc(plot.y_label.as_str())
+        .draw()
+        .map_err(|e| err(&e))?;
+
+    for (i, (s, segments)) in plot.series.iter().zip(&transformed).enumerate() {
+        let color = PALETTE[i % PALETTE.len()];
+        let annotation = match s.mark {
+            Mark::Points => chart
+                .draw_series(
+                    segments
+                        .iter()
+                        .flatten()
+                        .map(|&p| Circle::new(p, 2, color.filled())),
+                )
+                .map_err(|e| err(&e))?,
+            Mark::Lines => chart
+                .draw_series(
+                    segments
+                        .iter()
+                        .map(|seg| PathElement::new(seg.clone(), color.stroke_width(2))),
+                )
+                .map_err(|e| err(&e))?,
+        };
+        annotation.label(s.name.clone()).legend(move |(x, y)| {
+            PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(3))
+        });
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(|e| err(&e))?;
+    root.present().map_err(|e| err(&e))
+}

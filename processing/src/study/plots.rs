@@ -1,0 +1,163 @@
+//! The paper's figures from a study report:
+//! - `fig6_g_channel.svg`: reference G and both models along θr, each model fitted on the
+//!   single θL nearest −25° (the paper's choice), one curve per θL line;
+//! - `fig7_err_p_g.svg`: box plots of ΔErr_p (G) per number of θL and variant;
+//! - `fig8_uv_chart.svg`: u′v′ of the reference and of each variant fitted on the single
+//!   θL nearest −45° (the paper's choice);
+//! - `fig9_delta_e_uv.svg`: box plots of ΔE_u′v′ per number of θL and variant.
+
+use std::path::{Path, PathBuf};
+
+use super::figures::{box_plot_svg, xy_svg, BoxSeries, Mark, XyPlot, XySeries};
+use super::{EvalPoint, GroupSummary, StudyError, StudyReport};
+use crate::metrics;
+
+/// θL of the single-direction fit shown in Fig. 6 (paper: −25°).
+const FIG6_THETA_L: f64 = -25.0;
+/// θL of the single-direction fit shown in Fig. 8 (paper: −45°).
+const FIG8_THETA_L: f64 = -45.0;
+
+/// Writes the four figures into `dir`; returns their paths.
+pub fn write_figures(report: &StudyReport, dir: &Path) -> Result<Vec<PathBuf>, StudyError> {
+    let summary = report.summary();
+    let fig6 = dir.join("fig6_g_channel.svg");
+    xy_svg(&fig6, &g_channel_plot(report))?;
+    let fig7 = dir.join("fig7_err_p_g.svg");
+    box_plot_svg(
+        &fig7,
+        "ΔErr_p of the G channel against the reference",
+        "ΔErr_p (G)",
+        &box_series(report, &summary, |g| g.err_p[1].clone()),
+    )?;
+    let fig8 = dir.join("fig8_uv_chart.svg");
+    xy_svg(&fig8, &uv_plot(report))?;
+    let fig9 = dir.join("fig9_delta_e_uv.svg");
+    box_plot_svg(
+        &fig9,
+        "ΔE_u′v′ against the reference",
+        "mean ΔE_u′v′",
+        &box_series(report, &summary, |g| g.delta_e_uv.clone()),
+    )?;
+    Ok(vec![fig6, fig7, fig8, fig9])
+}
+
+fn box_series(
+    report: &StudyReport,
+    summary: &[GroupSummary],
+    stats: impl Fn(&GroupSummary) -> Option<super::BoxStats>,
+) -> Vec<BoxSeries> {
+    report
+        .options
+        .variants
+        .iter()
+        .map(|v| BoxSeries {
+            name: v.label(),
+            groups: summary
+                .iter()
+                .filter(|g| g.variant == *v)
+                .filter_map(|g| stats(g).map(|b| (g.size, b)))
+                .collect(),
+        })
+        .collect()
+}
+
+/// Evaluation points of each θL line, sorted by θr.
+fn lines(report: &StudyReport) -> Vec<Vec<EvalPoint>> {
+    report
+        .theta_l
+        .iter()
+        .map(|&t| {
+            let mut line: Vec<EvalPoint> = report
+                .points
+                .iter()
+                .filter(|p| p.theta_l == t)
+                .copied()
+                .collect();
+            line.sort_by(|a, b| a.theta_r.total_cmp(&b.theta_r));
+            line
+        })
+        .collect()
+}
+
+fn g_channel_plot(report: &StudyReport) -> XyPlot {
+    let lines = lines(report);
+    let mut series = vec![XySeries {
+        name: "reference".into(),
+        mark: Mark::Points,
+        segments: vec![report
+            .points
+            .iter()
+            .map(|p| (p.theta_r, p.reference[1]))
+            .collect()],
+    }];
+    let mut fitted_on = None;
+    for &v in &report.options.variants {
+        let Some(result) = report.single(v, FIG6_THETA_L) else {
+            continue;
+        };
+        let Ok(scores) = &result.outcome else { continue };
+        fitted_on = Some(result.theta_l[0]);
+        series.push(XySeries {
+            name: v.label(),
+            mark: Mark::Lines,
+            segments: lines
+                .iter()
+                .map(|line| {
+                    line.iter()
+                        .map(|p| (p.theta_r, scores.fit.predict(p.theta_i, p.theta_r)[1]))
+                        .collect()
+                })
+                .collect(),
+        });
+    }
+    XyPlot {
+        title: match fitted_on {
+            Some(t) => format!("G channel: reference and models fitted on θL = {t}°"),
+            None => "G channel: reference (no single-θL fit succeeded)".into(),
+        },
+        x_label: "θr (degrees)".into(),
+        y_label: "β_G".into(),
+        log_x: false,
+        series,
+    }
+}
+
+fn uv_plot(report: &StudyReport) -> XyPlot {
+    let uv = |xyz: [f64; 3]| metrics::uv_prime(xyz).map(|[u, v]| (u, v));
+    let mut series = vec![XySeries {
+        name: "reference".into(),
+        mark: Mark::Points,
+        segments: vec![report
+            .points
+            .iter()
+            .filter_map(|p| uv(p.reference_xyz))
+            .collect()],
+    }];
+    let mut fitted_on = None;
+    for &v in &report.options.variants {
+        let Some(result) = report.single(v, FIG8_THETA_L) else {
+            continue;
+        };
+        let Ok(scores) = &result.outcome else { continue };
+        fitted_on = Some(result.theta_l[0]);
+        series.push(XySeries {
+            name: v.label(),
+            mark: Mark::Points,
+            segments: vec![report
+                .points
+                .iter()
+                .filter_map(|p| uv(report.camera.xyz(scores.fit.predict(p.theta_i, p.theta_r))))
+                .collect()],
+        });
+    }
+    XyPlot {
+        title: match fitted_on {
+            Some(t) => format!("CIE 1976 u′v′: reference and models fitted on θL = {t}°"),
+            None => "CIE 1976 u′v′: reference (no single-θL fit succeeded)".into(),
+        },
+        x_label: "u′".into(),
+        y_label: "v′".into(),
+        log_x: false,
+        series,
+    }
+}

@@ -1,0 +1,265 @@
+//! Extraction of synthetic scans with a known Lambertian β.
+
+use std::fs;
+use std::path::Path;
+
+use gonio_processing::capture::{self, CaptureError, Response, Sidecar};
+use gonio_processing::color::CameraModel;
+use gonio_processing::extract::{self, ExtractError, ExtractOptions};
+use gonio_processing::geometry::Setup;
+
+const W: u32 = 64;
+const H: u32 = 48;
+const BRACKET: [f64; 3] = [0.01, 0.04, 0.16];
+/// Camera-RGB β of the Lambertian sample.
+const KD: [f64; 3] = [30.0, 50.0, 20.0];
+
+fn setup() -> Setup {
+    Setup {
+        cylinder_radius_mm: 50.0,
+        camera_distance_mm: 1000.0,
+        light_distance_mm: 800.0,
+        focal_length_mm: 50.0,
+        pixel_pitch_um: 90.0,
+        image_width: W,
+        image_height: H,
+        principal_point_x: None,
+        sample_row: 14,
+        white_row: 34,
+    }
+}
+
+/// How one scan is made: the white's reflectance and radiance scale, per-θL brackets.
+struct Scene {
+    white_reflectance: f64,
+    /// Radiance (normalised signal per second) of the white strip at θi = 0, per channel.
+    white_level: [f64; 3],
+    sample_scale: f64,
+}
+
+impl Default for Scene {
+    fn default() -> Self {
+        Self {
+            white_reflectance: 1.0,
+            white_level: [10.0, 12.0, 6.0],
+            sample_scale: 1.0,
+        }
+    }
+}
+
+/// Writes setup.json and the TIFF captures of a Lambertian sample above a diffuse white.
+fn write_scan(dir: &Path, theta_ls: &[f64], scene: &Scene) {
+    let setup = setup();
+    fs::write(dir.join("setup.json"), serde_json::to_string(&setup).unwrap()).unwrap();
+    let white_rgb = CameraModel::builtin().white_rgb();
+    let (black, white) = (512.0, 64_000.0);
+    for &theta_l in theta_ls {
+        let sub = dir.join(format!("theta_l_{theta_l:.1}"));
+        fs::create_dir_all(&sub).unwrap();
+        for (n, &t) in BRACKET.iter().enumerate() {
+            let mut counts = Vec::with_capacity((W * H * 3) as usize);
+            for y in 0..H {
+                for x in 0..W {
+                    let cos_i = setup
+                        .angles_at_column(f64::from(x), theta_l)
+                        .map_or(0.0, |a| a.theta_i.to_radians().cos().max(0.0));
+                    for c in 0..3 {
+                        // The white's radiance is ρ·PRD; the sample's is β/W_c times the PRD.
+                        let prd = scene.white_level[c] * cos_i;
+                        let radiance = if (24..44).contains(&y) {
+                            prd * scene.white_reflectance
+                        } else {
+                            prd * KD[c] / white_rgb[c] * scene.sample_scale
+                        };
+                        let signal = (radiance * t).min(1.0);
+                        counts.push((black + signal * (white - black)).round() as u16);
+                    }
+                }
+            }
+            let sidecar = Sidecar {
+                shutter_s: t,
+                iso: Some(100.0),
+                theta_l,
+                camera: "synthetic".into(),
+                time: "2026-11-23T15:00:00Z".into(),
+                black_level: Some(black),
+                white_level: Some(white),
+                response: Response::Linear,
+                width: Some(W),
+                height: Some(H),
+            };
+            capture::write_tiff_capture(&sub.join(format!("exp_{n:02}.tiff")), W, H, &counts, &sidecar).unwrap();
+        }
+    }
+}
+
+#[test]
+fn synthetic_lambertian_scan_gives_the_known_beta() {
+    let dir = tempfile::tempdir().unwrap();
+    let theta_ls = [-45.0, -20.0];
+    write_scan(dir.path(), &theta_ls, &Scene::default());
+    let hdr_dir = dir.path().join("hdr");
+    let options = ExtractOptions {
+        hdr_dir: Some(hdr_dir.clone()),
+        ..ExtractOptions::default()
+    };
+    let progress = std::cell::RefCell::new(Vec::new());
+    let extraction = extract::extract_scan_with_progress(dir.path(), &options, |done, total| progress.borrow_mut().push((done, total))).unwrap();
+    assert_eq!(*progress.borrow(), vec![(1, 2), (2, 2)]);
+    assert_eq!(extraction.per_theta.len(), 2);
+    assert_eq!(extraction.per_theta[0].theta_l, -45.0);
+    assert!(hdr_dir.join("theta_l_-45.0.exr").is_file() && hdr_dir.join("theta_l_-20.0.exr").is_file());
+    let setup = setup();
+    for summary in &extraction.per_theta {
+        assert_eq!(summary.frames, 3);
+        assert_eq!(summary.samples + summary.dropped.total(), W as usize);
+        assert!(summary.samples > 25, "{summary:?}");
+        // Every column past the limit or off the cylinder is dropped as such.
+        let (mut off, mut grazing) = (0, 0);
+        for x in 0..W {
+            match setup.angles_at_column(f64::from(x), summary.theta_l) {
+                Some(a) if a.theta_i.abs() < 90.0 => grazing += usize::from(a.theta_i.abs() > 80.0 || a.theta_r.abs() > 80.0),
+                _ => off += 1,
+            }
+        }
+        assert_eq!((summary.dropped.off_cylinder, summary.dropped.grazing), (off, grazing), "{summary:?}");
+        assert_eq!(summary.dropped.saturated + summary.dropped.dark_white, 0, "{summary:?}");
+    }
+    for s in &extraction.samples {
+        assert!(s.theta_i.abs() <= 80.0 && s.theta_r.abs() <= 80.0);
+        // Lit points of one θL lie near θi + θr = θL (finite distances bend it a little).
+        assert!((s.theta_i + s.theta_r - s.theta_l).abs() < 6.0, "{s:?}");
+        for c in 0..3 {
+            assert!((s.rgb[c] - KD[c]).abs() < 0.01 * KD[c], "{s:?}");
+        }
+    }
+}
+
+#[test]
+fn white_reflectance_scales_beta_and_is_validated() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = Scene {
+        white_reflectance: 0.8,
+        ..Scene::default()
+    };
+    write_scan(dir.path(), &[-30.0], &scene);
+    let options = ExtractOptions {
+        white_reflectance: 0.8,
+        ..ExtractOptions::default()
+    };
+    let extraction = extract::extract_scan(dir.path(), &options).unwrap();
+    assert!(!extraction.samples.is_empty());
+    for s in &extraction.samples {
+        for c in 0..3 {
+            assert!((s.rgb[c] - KD[c]).abs() < 0.01 * KD[c], "{s:?}");
+        }
+    }
+    for bad in [0.0, -1.0, f64::NAN] {
+        let options = ExtractOptions {
+            white_reflectance: bad,
+            ..ExtractOptions::default()
+        };
+        assert!(matches!(extract::extract_scan(dir.path(), &options), Err(ExtractError::Options(_))));
+    }
+}
+
+#[test]
+fn dark_white_reference_drops_columns_instead_of_dividing_by_zero() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = Scene {
+        white_level: [0.0; 3],
+        ..Scene::default()
+    };
+    write_scan(dir.path(), &[-30.0], &scene);
+    let extraction = extract::extract_scan(dir.path(), &ExtractOptions::default()).unwrap();
+    assert!(extraction.samples.is_empty());
+    let d = extraction.dropped;
+    assert!(d.dark_white > 25, "{d:?}");
+    assert_eq!(d.total(), W as usize);
+}
+
+#[test]
+fn saturated_strips_are_dropped_and_counted() {
+    let dir = tempfile::tempdir().unwrap();
+    // Sample 400× brighter than its β: clipped even in the shortest exposure where lit.
+    let scene = Scene {
+        sample_scale: 400.0,
+        ..Scene::default()
+    };
+    write_scan(dir.path(), &[-30.0], &scene);
+    let extraction = extract::extract_scan(dir.path(), &ExtractOptions::default()).unwrap();
+    assert!(extraction.dropped.saturated > 20, "{:?}", extraction.dropped);
+    for s in &extraction.samples {
+        assert!(s.rgb.iter().all(|v| v.is_finite()));
+    }
+}
+
+#[test]
+fn grazing_limit_is_configurable() {
+    let dir = tempfile::tempdir().unwrap();
+    write_scan(dir.path(), &[-30.0], &Scene::default());
+    let options = ExtractOptions {
+        grazing_limit_deg: 40.0,
+        ..ExtractOptions::default()
+    };
+    let extraction = extract::extract_scan(dir.path(), &options).unwrap();
+    let all = extract::extract_scan(dir.path(), &ExtractOptions::default()).unwrap();
+    assert!(extraction.samples.len() < all.samples.len());
+    assert!(extraction.samples.iter().all(|s| s.theta_i.abs() <= 40.0 && s.theta_r.abs() <= 40.0));
+}
+
+#[test]
+fn scan_directory_problems_give_clear_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let err = extract::extract_scan(dir.path(), &ExtractOptions::default()).unwrap_err();
+    assert!(matches!(err, ExtractError::Setup { .. }) && err.to_string().contains("setup.json"), "{err}");
+
+    fs::write(dir.path().join("setup.json"), r#"{"cylinder_radius_mm": 50}"#).unwrap();
+    let err = extract::extract_scan(dir.path(), &ExtractOptions::default()).unwrap_err();
+    assert!(err.to_string().contains("camera_distance_mm"), "{err}");
+
+    let mut bad = setup();
+    bad.camera_distance_mm = 10.0;
+    fs::write(dir.path().join("setup.json"), serde_json::to_string(&bad).unwrap()).unwrap();
+    assert!(matches!(extract::extract_scan(dir.path(), &ExtractOptions::default()), Err(ExtractError::Geometry { .. })));
+
+    fs::write(dir.path().join("setup.json"), serde_json::to_string(&setup()).unwrap()).unwrap();
+    // An image without a sidecar is skipped, and then there is nothing to extract.
+    fs::write(dir.path().join("stray.tiff"), b"x").unwrap();
+    assert!(matches!(extract::extract_scan(dir.path(), &ExtractOptions::default()), Err(ExtractError::NoCaptures { .. })));
+
+    write_scan(dir.path(), &[-30.0], &Scene::default());
+    let extraction = extract::extract_scan(dir.path(), &ExtractOptions::default()).unwrap();
+    assert_eq!(extraction.skipped_without_sidecar, vec![dir.path().join("stray.tiff")]);
+
+    // A sidecar that contradicts its image stops the extraction and names the file.
+    let side = dir.path().join("theta_l_-30.0/exp_01.json");
+    let text = fs::read_to_string(&side).unwrap().replace("\"width\": 64", "\"width\": 640");
+    fs::write(&side, text).unwrap();
+    match extract::extract_scan(dir.path(), &ExtractOptions::default()) {
+        Err(ExtractError::Capture(CaptureError::InvalidSidecar { path, field, .. })) => {
+            assert_eq!((path, field), (side, "width"));
+        }
+        other => panic!("expected InvalidSidecar, got {other:?}"),
+    }
+}
+
+#[test]
+fn captures_of_another_size_than_the_setup_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    write_scan(dir.path(), &[-30.0], &Scene::default());
+    let mut other = setup();
+    other.image_width = 100;
+    fs::write(dir.path().join("setup.json"), serde_json::to_string(&other).unwrap()).unwrap();
+    assert!(matches!(
+        extract::extract_scan(dir.path(), &ExtractOptions::default()),
+        Err(ExtractError::SizeMismatch { .. })
+    ));
+    let mut rows = setup();
+    rows.white_row = 47;
+    fs::write(dir.path().join("setup.json"), serde_json::to_string(&rows).unwrap()).unwrap();
+    assert!(matches!(
+        extract::extract_scan(dir.path(), &ExtractOptions::default()),
+        Err(ExtractError::RowOutside { which: "white", .. })
+    ));
+}

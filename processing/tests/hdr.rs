@@ -1,0 +1,249 @@
+//! HDR merge: brackets of known radiance, hard cases, OpenEXR output.
+
+use std::path::PathBuf;
+
+use gonio_processing::capture::{Frame, Response, Sidecar};
+use gonio_processing::hdr::{self, HdrError, MergeMethod, MergeOptions, NoiseModel, SATURATED, UNDEREXPOSED};
+
+const W: usize = 64;
+const H: usize = 48;
+const BLACK: f64 = 600.0;
+const WHITE: f64 = 60_000.0;
+const BRACKET: [f64; 7] = [1.0 / 100.0, 1.0 / 50.0, 1.0 / 25.0, 1.0 / 13.0, 1.0 / 8.0, 1.0 / 4.0, 1.0 / 2.0];
+
+/// Deterministic standard normal deviates (xorshift64* + Box–Muller).
+struct Noise(u64);
+
+impl Noise {
+    fn uniform(&mut self) -> f64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        ((self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+    }
+    fn normal(&mut self) -> f64 {
+        (-2.0 * self.uniform().ln()).sqrt() * (std::f64::consts::TAU * self.uniform()).cos()
+    }
+}
+
+/// Known radiance (normalised signal per second at ISO 100) spanning 3.5 decades.
+fn radiance(x: usize, y: usize, c: usize) -> f64 {
+    let t = (x + W * y) as f64 / (W * H - 1) as f64;
+    0.02 * 10f64.powf(3.5 * t) * [1.0, 0.8, 0.6][c]
+}
+
+/// Standard deviation of a single-frame radiance estimate under the default noise.
+fn single_frame_sigma(radiance: f64, shutter_s: f64) -> f64 {
+    let noise = NoiseModel::default();
+    let s = radiance * shutter_s;
+    (s / noise.full_well_electrons + noise.read_noise.powi(2)).sqrt() / shutter_s
+}
+
+fn sidecar(shutter_s: f64, response: Response) -> Sidecar {
+    Sidecar {
+        shutter_s,
+        iso: Some(100.0),
+        theta_l: -30.0,
+        camera: "test".into(),
+        time: "2026-11-23T14:00:00Z".into(),
+        black_level: Some(BLACK),
+        white_level: Some(WHITE),
+        response,
+        width: None,
+        height: None,
+    }
+}
+
+/// A linear raw frame of `radiance` with shot and read noise from `noise`.
+fn linear_frame(shutter_s: f64, noise: &NoiseModel, rng: &mut Noise, scene: impl Fn(usize, usize, usize) -> f64) -> Frame {
+    let mut data = Vec::with_capacity(W * H * 3);
+    for y in 0..H {
+        for x in 0..W {
+            for c in 0..3 {
+                let s = scene(x, y, c) * shutter_s;
+                let sigma = (s / noise.full_well_electrons + noise.read_noise * noise.read_noise).sqrt();
+                let signal = s + sigma * rng.normal();
+                let count = BLACK + signal * (WHITE - BLACK);
+                data.push(count.round().clamp(0.0, 65_535.0) as u16);
+            }
+        }
+    }
+    Frame::from_counts(PathBuf::from(format!("t{shutter_s}.tiff")), sidecar(shutter_s, Response::Linear), W, H, data, 65_535.0).unwrap()
+}
+
+fn bracket(shutters: &[f64], scene: impl Fn(usize, usize, usize) -> f64 + Copy) -> Vec<Frame> {
+    let mut rng = Noise(0x9e37_79b9_7f4a_7c15);
+    let noise = NoiseModel::default();
+    shutters.iter().map(|&t| linear_frame(t, &noise, &mut rng, scene)).collect()
+}
+
+#[test]
+fn linear_bracket_merges_back_to_the_known_radiance_within_the_noise() {
+    let frames = bracket(&BRACKET, radiance);
+    let merged = hdr::merge(&frames, &MergeOptions::default()).unwrap();
+    assert_eq!(merged.info.method, "linear");
+    assert_eq!(merged.count_flagged(SATURATED | UNDEREXPOSED), 0);
+    let mut worst_z: f64 = 0.0;
+    for y in 0..H {
+        for x in 0..W {
+            let got = merged.pixel(x, y);
+            for c in 0..3 {
+                let truth = radiance(x, y, c);
+                // Noise of the best single frame bounds the merged noise from above.
+                let t = BRACKET.iter().copied().filter(|&t| truth * t <= 0.98).fold(0.0, f64::max);
+                let sigma = single_frame_sigma(truth, t);
+                worst_z = worst_z.max((f64::from(got[c]) - truth).abs() / sigma);
+            }
+        }
+    }
+    // 9216 values: a correct merge stays within 4.5 σ of the best single frame.
+    assert!(worst_z < 4.5, "worst deviation {worst_z} σ");
+}
+
+#[test]
+fn frame_order_and_duplicated_exposures_do_not_matter() {
+    let frames = bracket(&BRACKET, radiance);
+    let forward = hdr::merge(&frames, &MergeOptions::default()).unwrap();
+    let mut shuffled = frames.clone();
+    shuffled.reverse();
+    shuffled.swap(1, 4);
+    let backward = hdr::merge(&shuffled, &MergeOptions::default()).unwrap();
+    for (a, b) in forward.rgb.iter().zip(&backward.rgb) {
+        assert!((a - b).abs() <= 1e-5 * a.abs().max(1e-3), "{a} vs {b}");
+    }
+    // The same exposure three times (three noisy frames) merges to the truth with
+    // the noise of one frame divided by √3.
+    let thrice = bracket(&[0.1, 0.1, 0.1], |_, _, c| 2.0 + c as f64);
+    let merged = hdr::merge(&thrice, &MergeOptions::default()).unwrap();
+    let mut sum_sq = 0.0;
+    for (i, v) in merged.rgb.iter().enumerate() {
+        let truth = 2.0 + (i % 3) as f64;
+        let z = (f64::from(*v) - truth) / (single_frame_sigma(truth, 0.1) / 3f64.sqrt());
+        assert!(z.abs() < 5.0, "{v} vs {truth}");
+        sum_sq += z * z;
+    }
+    let rms_z = (sum_sq / merged.rgb.len() as f64).sqrt();
+    assert!((0.8..1.2).contains(&rms_z), "rms deviation {rms_z} σ");
+}
+
+#[test]
+fn single_exposure_merges_linearly_and_is_refused_by_debevec_malik() {
+    let frames = bracket(&[0.05], |_, _, _| 4.0);
+    let merged = hdr::merge(&frames, &MergeOptions::default()).unwrap();
+    let sigma = single_frame_sigma(4.0, 0.05);
+    for v in &merged.rgb {
+        assert!((f64::from(*v) - 4.0).abs() < 5.0 * sigma, "{v}");
+    }
+    let dm = MergeOptions {
+        method: MergeMethod::DebevecMalik,
+        ..MergeOptions::default()
+    };
+    assert!(matches!(hdr::merge(&frames, &dm), Err(HdrError::SingleExposure)));
+    // Two frames of the same exposure are still a single exposure.
+    let same = bracket(&[0.05, 0.05], |_, _, _| 4.0);
+    assert!(matches!(hdr::merge(&same, &dm), Err(HdrError::SingleExposure)));
+}
+
+#[test]
+fn all_saturated_is_flagged_with_a_finite_lower_bound() {
+    let frames = bracket(&[0.1, 0.5, 1.0], |_, _, _| 1.0e4);
+    let merged = hdr::merge(&frames, &MergeOptions::default()).unwrap();
+    assert_eq!(merged.count_flagged(SATURATED), W * H);
+    for v in &merged.rgb {
+        assert!(v.is_finite());
+        // Lower bound from the shortest exposure: 0.98 / 0.1.
+        assert!((f64::from(*v) - 9.8).abs() < 1e-4, "{v}");
+    }
+}
+
+#[test]
+fn all_black_is_flagged_as_zero() {
+    let frames = bracket(&[0.01, 0.02], |_, _, _| 0.0);
+    for method in [MergeMethod::Linear, MergeMethod::DebevecMalik] {
+        let options = MergeOptions {
+            method,
+            ..MergeOptions::default()
+        };
+        let merged = hdr::merge(&frames, &options).unwrap();
+        assert_eq!(merged.count_flagged(UNDEREXPOSED), W * H, "{method:?}");
+        assert!(merged.rgb.iter().all(|&v| v == 0.0), "{method:?}");
+    }
+}
+
+#[test]
+fn brackets_that_do_not_belong_together_are_refused() {
+    let mut frames = bracket(&[0.01, 0.02], radiance);
+    frames[1].sidecar.theta_l = -35.0;
+    assert!(matches!(hdr::merge(&frames, &MergeOptions::default()), Err(HdrError::ThetaMismatch { .. })));
+    let mut frames = bracket(&[0.01, 0.02], radiance);
+    frames[1].sidecar.response = Response::Nonlinear;
+    assert!(matches!(hdr::merge(&frames, &MergeOptions::default()), Err(HdrError::MixedResponse { .. })));
+    let mut frames = bracket(&[0.01, 0.02], radiance);
+    frames[1].width = W / 2;
+    assert!(matches!(hdr::merge(&frames, &MergeOptions::default()), Err(HdrError::SizeMismatch { .. })));
+    assert!(matches!(hdr::merge(&[], &MergeOptions::default()), Err(HdrError::NoFrames)));
+}
+
+/// 8-bit frames through a gamma-like response: the recovered radiance must be
+/// proportional to the truth (Debevec–Malik fixes only the scale).
+#[test]
+fn debevec_malik_recovers_radiance_up_to_scale() {
+    let shutters = [1.0 / 64.0, 1.0 / 16.0, 1.0 / 4.0, 1.0];
+    let scene = |x: usize, y: usize, c: usize| 0.01 * 10f64.powf(2.5 * (x + W * y) as f64 / (W * H - 1) as f64) * [1.0, 0.7, 0.5][c];
+    let frames: Vec<Frame> = shutters
+        .iter()
+        .map(|&t| {
+            let data = (0..H)
+                .flat_map(|y| (0..W).flat_map(move |x| (0..3).map(move |c| (x, y, c))))
+                .map(|(x, y, c)| {
+                    let exposure = (scene(x, y, c) * t * 20.0).min(1.0);
+                    (255.0 * exposure.powf(1.0 / 2.2)).round() as u16
+                })
+                .collect();
+            let mut side = sidecar(t, Response::Nonlinear);
+            side.black_level = None;
+            side.white_level = None;
+            Frame::from_counts(PathBuf::from("nl.tiff"), side, W, H, data, 255.0).unwrap()
+        })
+        .collect();
+    let merged = hdr::merge(&frames, &MergeOptions::default()).unwrap();
+    assert_eq!(merged.info.method, "debevec-malik");
+    for c in 0..3 {
+        let logs: Vec<f64> = (0..W * H)
+            .map(|p| (f64::from(merged.rgb[3 * p + c]) / scene(p % W, p / W, c)).ln())
+            .collect();
+        let mean = logs.iter().sum::<f64>() / logs.len() as f64;
+        let spread = logs.iter().map(|l| (l - mean).abs()).fold(0.0, f64::max);
+        assert!(spread < 0.12, "channel {c}: ln ratio varies by {spread}");
+    }
+}
+
+#[test]
+fn exr_holds_the_radiance_and_exposure_metadata() {
+    use exr::meta::attribute::{AttributeValue, Text};
+    let frames = bracket(&[0.02, 0.08], radiance);
+    let merged = hdr::merge(&frames, &MergeOptions::default()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("map.exr");
+    merged.write_exr(&path).unwrap();
+    let image = exr::prelude::read_first_rgba_layer_from_file(
+        &path,
+        |size, _| vec![[0f32; 3]; size.width() * size.height()],
+        |pixels, position, (r, g, b, _): (f32, f32, f32, f32)| pixels[position.y() * W + position.x()] = [r, g, b],
+    )
+    .unwrap();
+    let pixels = &image.layer_data.channel_data.pixels;
+    assert_eq!(pixels.len(), W * H);
+    for (p, rgb) in pixels.iter().enumerate() {
+        assert_eq!(*rgb, merged.pixel(p % W, p / W));
+    }
+    let attributes = &image.layer_data.attributes;
+    assert_eq!(attributes.exposure, Some(1.0));
+    assert_eq!(attributes.other.get(&Text::from("gonio.thetaL")), Some(&AttributeValue::F64(-30.0)));
+    assert_eq!(
+        attributes.other.get(&Text::from("gonio.shutterS")),
+        Some(&AttributeValue::Text(Text::from("0.02,0.08")))
+    );
+    let missing_dir = dir.path().join("no/such/dir/map.exr");
+    assert!(matches!(merged.write_exr(&missing_dir), Err(HdrError::Exr { .. })));
+}

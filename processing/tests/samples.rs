@@ -1,0 +1,74 @@
+use gonio_processing::samples::{read_csv, read_csv_from, write_csv, Sample, SamplesError};
+
+fn samples() -> Vec<Sample> {
+    vec![
+        Sample {
+            theta_l: -20.0,
+            theta_i: -30.125,
+            theta_r: 10.1,
+            rgb: [1.0 / 3.0, 50.0, 1e-7],
+        },
+        Sample {
+            theta_l: -45.0,
+            theta_i: 0.0,
+            theta_r: -44.9,
+            rgb: [0.0, 99.5, 12.25],
+        },
+    ]
+}
+
+#[test]
+fn write_then_read_round_trips_exactly() {
+    let dir = std::env::temp_dir().join(format!("gonio-samples-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("samples.csv");
+    write_csv(&path, &samples()).unwrap();
+    let text = std::fs::read_to_string(&path).unwrap();
+    assert!(text.starts_with("theta_l,theta_i,theta_r,r,g,b\n"));
+    assert_eq!(read_csv(&path).unwrap(), samples());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn extra_columns_are_ignored() {
+    let text = "theta_l,theta_i,theta_r,r,g,b,weight,valid\n-20,-25,5,1,2,3,0.5,true\n";
+    let read = read_csv_from(text.as_bytes()).unwrap();
+    assert_eq!(read.len(), 1);
+    assert_eq!(read[0].rgb, [1.0, 2.0, 3.0]);
+    assert_eq!(read[0].theta_i, -25.0);
+}
+
+#[test]
+fn wrong_header_is_rejected() {
+    let err = read_csv_from("theta_i,theta_l,theta_r,r,g,b\n".as_bytes()).unwrap_err();
+    assert!(matches!(err, SamplesError::Header { .. }), "{err}");
+}
+
+#[test]
+fn malformed_rows_name_their_line() {
+    let text = "theta_l,theta_i,theta_r,r,g,b\n-20,-25,5,1,2,3\n-20,-26,x,1,2,3\n";
+    let err = read_csv_from(text.as_bytes()).unwrap_err();
+    let message = err.to_string();
+    assert!(message.contains("line 3") && message.contains("theta_r"), "{message}");
+
+    let short = "theta_l,theta_i,theta_r,r,g,b\n-20,-25,5,1,2,3\n-20,-25,5,1,2,3\n-20,1\n";
+    let message = read_csv_from(short.as_bytes()).unwrap_err().to_string();
+    assert!(message.contains("line 4"), "{message}");
+}
+
+#[test]
+fn non_finite_values_are_rejected() {
+    let text = "theta_l,theta_i,theta_r,r,g,b\n-20,-25,5,NaN,2,3\n";
+    let message = read_csv_from(text.as_bytes()).unwrap_err().to_string();
+    assert!(message.contains("line 2") && message.contains("`r`"), "{message}");
+    let text = "theta_l,theta_i,theta_r,r,g,b\n-20,-25,5,1,inf,3\n";
+    assert!(read_csv_from(text.as_bytes()).is_err());
+}
+
+#[test]
+fn missing_file_names_the_path() {
+    let message = read_csv(std::path::Path::new("/nonexistent/gonio.csv"))
+        .unwrap_err()
+        .to_string();
+    assert!(message.contains("/nonexistent/gonio.csv"), "{message}");
+}

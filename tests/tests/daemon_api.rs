@@ -1,0 +1,195 @@
+//! The daemon's HTTP contract on emulated hardware: authentication, validation of every
+//! field, the queue (two concurrent POSTs run one after the other), operator controls,
+//! and the page and API description.
+
+use std::time::Duration;
+
+use gonio_tests::{emulator_config, temp_dir, Daemon, TOKEN};
+use serde_json::{json, Value};
+
+fn scan_count(daemon: &Daemon) -> usize {
+    daemon.get("/api/scans").json.as_array().map_or(0, Vec::len)
+}
+
+#[test]
+fn mutating_routes_need_the_token_and_change_nothing_without_it() {
+    let dir = temp_dir("api-auth");
+    let daemon = Daemon::start(&dir, &emulator_config(0.01));
+    assert_eq!(daemon.get("/api/health").json, json!({"status": "ok"}));
+    let body = json!({"sample": "gold", "theta_l": [-20]}).to_string();
+    for token in [None, Some("wrong-token"), Some("")] {
+        let answer = daemon.post_raw("/api/scans", token, &body);
+        assert_eq!(answer.status, 401, "token {token:?}: {:?}", answer.json);
+        assert!(answer.json["error"].as_str().unwrap().contains("token"));
+    }
+    for path in [
+        "/api/sweeps",
+        "/api/arm/stop",
+        "/api/scans/1/cancel",
+        "/api/emulator/fault",
+    ] {
+        assert_eq!(daemon.post_raw(path, None, "{}").status, 401, "{path}");
+    }
+    assert_eq!(scan_count(&daemon), 0, "nothing may be queued without the token");
+    assert_eq!(
+        daemon.get("/api/sweeps").json,
+        json!([]),
+        "nothing may be queued without the token"
+    );
+    // Reads are open.
+    assert_eq!(daemon.get("/api/hardware").status, 200);
+    std::fs::remove_dir_all(dir).ok();
+}
+
+#[test]
+fn every_invalid_field_gets_422_naming_it_and_nothing_is_queued() {
+    let dir = temp_dir("api-422");
+    let daemon = Daemon::start(&dir, &emulator_config(0.01));
+    let cases: Vec<(Value, &str)> = vec![
+        (json!({"theta_l": [-20]}), "sample"),
+        (json!({"sample": "../etc", "theta_l": [-20]}), "sample"),
+        (json!({"sample": "a/b", "theta_l": [-20]}), "sample"),
+        (json!({"sample": "", "theta_l": [-20]}), "sample"),
+        (json!({"sample": "gold"}), "theta_l"),
+        (json!({"sample": "gold", "theta_l": []}), "theta_l"),
+        (json!({"sample": "gold", "theta_l": [-20, 15]}), "theta_l[1]"),
+        (json!({"sample": "gold", "theta_l": [-95]}), "theta_l[0]"),
+        (json!({"sample": "gold", "theta_l": ["x"]}), "theta_l[0]"),
+        (
+            json!({"sample": "gold", "theta_l": [-20], "bracket": {"shutter_s": []}}),
+            "bracket.shutter_s",
+        ),
+        (
+            json!({"sample": "gold", "theta_l": [-20], "bracket": {"shutter_s": [0.01, 3600]}}),
+            "bracket.shutter_s[1]",
+        ),
+        (
+            json!({"sample": "gold", "theta_l": [-20], "bracket": {"shutter_s": [0]}}),
+            "bracket.shutter_s[0]",
+        ),
+        (
+            json!({"sample": "gold", "theta_l": [-20], "bracket": "sometimes"}),
+            "bracket",
+        ),
+        (json!({"sample": "gold", "theta_l": [-20], "extra": 1}), "extra"),
+    ];
+    for (body, field) in cases {
+        let answer = daemon.post("/api/scans", &body);
+        assert_eq!(answer.status, 422, "{body}: {:?}", answer.json);
+        assert_eq!(answer.json["field"], json!(field), "{body}");
+        assert!(
+            answer.json["error"].as_str().unwrap().starts_with(field),
+            "{body}: {}",
+            answer.json["error"]
+        );
+    }
+    let sweep = json!({"samples": ["a"], "theta_l_sets": [[-20, 30]]});
+    let answer = daemon.post("/api/sweeps", &sweep);
+    assert_eq!(answer.status, 422);
+    assert_eq!(answer.json["field"], json!("theta_l_sets[0][1]"));
+    // Not JSON at all, and a body over the size limit.
+    assert_eq!(daemon.post_raw("/api/scans", Some(TOKEN), "{").status, 400);
+    let huge = format!(
+        "{{\"sample\":\"gold\",\"theta_l\":[-20],\"pad\":\"{}\"}}",
+        "x".repeat(200_000)
+    );
+    assert_eq!(daemon.post_raw("/api/scans", Some(TOKEN), &huge).status, 413);
+    assert_eq!(scan_count(&daemon), 0, "an invalid request must queue nothing");
+    std::fs::remove_dir_all(dir).ok();
+}
+
+#[test]
+fn concurrent_scans_run_one_after_the_other_and_controls_work() {
+    let dir = temp_dir("api-queue");
+    let daemon = Daemon::start(&dir, &emulator_config(0.01));
+    let body = json!({"sample": "gold", "theta_l": [-20, -30], "bracket": {"shutter_s": [0.5, 0.05]}});
+    let ids: Vec<i64> = std::thread::scope(|s| {
+        let posts: Vec<_> = (0..2)
+            .map(|_| s.spawn(|| daemon.post("/api/scans", &body)))
+            .collect();
+        posts
+            .into_iter()
+            .map(|p| {
+                let answer = p.join().unwrap();
+                assert_eq!(answer.status, 201, "{:?}", answer.json);
+                answer.json["id"].as_i64().unwrap()
+            })
+            .collect()
+    });
+    // A third scan, paused while queued, then cancelled: it never runs.
+    let third = daemon.post("/api/scans", &body).json["id"].as_i64().unwrap();
+    let paused = daemon.post(&format!("/api/scans/{third}/pause"), &json!({}));
+    assert_eq!(paused.status, 200, "{:?}", paused.json);
+    assert_eq!(paused.json["state"], "paused");
+
+    let timeout = Duration::from_secs(90);
+    let first = daemon.wait_state(ids[0].min(ids[1]), &["done", "failed"], timeout);
+    let second = daemon.wait_state(ids[0].max(ids[1]), &["done", "failed"], timeout);
+    for scan in [&first, &second] {
+        assert_eq!(scan["state"], "done", "{scan}");
+        assert_eq!(scan["progress"]["done"], scan["progress"]["total"]);
+    }
+    // One hardware owner: every hardware action of the first scan precedes the second's.
+    let log = daemon.get("/api/hardware/log").json;
+    let scan_of: Vec<i64> = log
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|e| e["scan_id"].as_i64())
+        .collect();
+    let last_first = scan_of.iter().rposition(|s| *s == first["id"].as_i64().unwrap());
+    let first_second = scan_of.iter().position(|s| *s == second["id"].as_i64().unwrap());
+    assert!(
+        last_first.unwrap() < first_second.unwrap(),
+        "scans interleaved: {scan_of:?}"
+    );
+    let captures = log
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|e| e["action"] == "capture")
+        .count();
+    assert_eq!(captures, 2 * 2 * 2);
+
+    let third_view = daemon.get(&format!("/api/scans/{third}")).json;
+    assert_eq!(third_view["state"], "paused");
+    assert_eq!(third_view["progress"]["done"], 0);
+    assert_eq!(
+        daemon
+            .post(&format!("/api/scans/{third}/cancel"), &json!({}))
+            .json["state"],
+        "cancelled"
+    );
+    // A cancelled scan cannot be resumed.
+    assert_eq!(
+        daemon
+            .post(&format!("/api/scans/{third}/resume"), &json!({}))
+            .status,
+        409
+    );
+    assert_eq!(daemon.get("/api/scans/999").status, 404);
+    std::fs::remove_dir_all(dir).ok();
+}
+
+#[test]
+fn page_and_openapi_are_served() {
+    let dir = temp_dir("api-page");
+    let daemon = Daemon::start(&dir, &emulator_config(0.01));
+    let page = daemon.get("/");
+    assert_eq!(page.status, 200);
+    assert!(page.content_type.starts_with("text/html"));
+    let html = String::from_utf8(page.bytes).unwrap();
+    assert!(html.contains("/api/scans"), "the page drives the API");
+    let spec = daemon.get("/api/openapi.json").json;
+    assert!(spec["openapi"].as_str().unwrap().starts_with("3."));
+    for path in [
+        "/api/scans",
+        "/api/scans/{id}",
+        "/api/scans/{id}/events",
+        "/api/sweeps",
+        "/api/arm/stop",
+    ] {
+        assert!(spec["paths"][path].is_object(), "{path} missing from OpenAPI");
+    }
+    std::fs::remove_dir_all(dir).ok();
+}
