@@ -4,3 +4,41 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 cargo test --workspace --locked
+
+# ---- gonio-drivers with the `gphoto2` feature, against libgphoto2's virtual camera ----
+# Building the feature needs libgphoto2-dev, libclang-dev (bindgen) and pkg-config.
+missing=()
+for pkg in libgphoto2-dev libclang-dev pkg-config; do
+    dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")
+done
+if ((${#missing[@]})); then
+    echo "installing ${missing[*]}"
+    export DEBIAN_FRONTEND=noninteractive
+    apt-get update -q </dev/null
+    apt-get install -y -q --no-install-recommends "${missing[@]}" </dev/null
+fi
+cargo test -p gonio-drivers --features gphoto2 --locked --no-run
+
+# Debian's libgphoto2 (2.5.30) has no virtual camera. The PyPI wheel gphoto2==2.6.4
+# bundles libgphoto2 2.5.34 with the `vusb` port driver (a virtual Nikon DSC D750).
+# Its gphoto2/libgphoto2/libgphoto2.so.6 and libgphoto2_port.so.12 carry the same
+# sonames the crate links against, so LD_LIBRARY_PATH swaps them in at run time (their
+# own dependencies resolve through their RPATH into the wheel's gphoto2.libs/).
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+python3 -m pip download --quiet --disable-pip-version-check --no-deps --only-binary=:all: \
+    gphoto2==2.6.4 -d "$work/wheel" </dev/null
+python3 -m zipfile -e "$work"/wheel/gphoto2-2.6.4-*.whl "$work/wheel/unzipped"
+lib="$work/wheel/unzipped/gphoto2/libgphoto2"
+test -f "$lib/vusb/vusb.so" -a -f "$lib/libgphoto2.so.6" || {
+    echo "gphoto2 wheel layout changed: no $lib/vusb/vusb.so" >&2
+    exit 1
+}
+mkdir "$work/vcamera" "$work/home"
+cp drivers/tests/fixtures/vcamera.jpg "$work/vcamera/"
+# HOME is a scratch directory (libgphoto2 reads ~/.gphoto); keep cargo's and rustup's own.
+RUSTUP_HOME="${RUSTUP_HOME:-$HOME/.rustup}" CARGO_HOME="${CARGO_HOME:-$HOME/.cargo}" \
+    HOME="$work/home" \
+    LD_LIBRARY_PATH="$lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}" \
+    CAMLIBS="$lib/camlibs" IOLIBS="$lib/vusb" VCAMERADIR="$work/vcamera" \
+    cargo test -p gonio-drivers --features gphoto2 --locked

@@ -200,3 +200,37 @@ fn bad_scenes_fail_with_a_clear_message() {
         "{stderr}"
     );
 }
+
+#[test]
+fn builtin_scene_with_binning() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("red");
+    let result = gonio(&[
+        "--scene",
+        "red",
+        "--out",
+        out.to_str().unwrap(),
+        "--binning",
+        "8",
+        "--theta-l",
+        "-20",
+    ]);
+    assert!(
+        result.status.success(),
+        "{}",
+        String::from_utf8_lossy(&result.stderr)
+    );
+    assert_eq!(json(&out.join("truth.json"))["scene"], "red");
+    let setup = json(&out.join("setup.json"));
+    assert_eq!(
+        (
+            setup["image_width"].as_u64(),
+            setup["image_height"].as_u64()
+        ),
+        (Some(484), Some(324))
+    );
+    let image = image::open(out.join("theta_l_-20.0/exp_00.tiff")).unwrap();
+    assert_eq!((image.width(), image.height()), (484, 324));
+    let sidecar = json(&out.join("theta_l_-20.0/exp_00.json"));
+    assert!((sidecar["shutter_s"].as_f64().unwrap() - 1.0 / 15.0).abs() < 1e-12);
+}

@@ -99,8 +99,8 @@ impl GphotoCamera {
             config
                 .model
                 .as_deref()
-                .map_or(true, |m| m.eq_ignore_ascii_case(model))
-                && config.port.as_deref().map_or(true, |p| p == port)
+                .is_none_or(|m| m.eq_ignore_ascii_case(model))
+                && config.port.as_deref().is_none_or(|p| p == port)
         };
         let descriptor = detected
             .iter()

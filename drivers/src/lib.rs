@@ -3,6 +3,14 @@
 //! Both traits are synchronous and blocking: callers keep them off async worker
 //! threads (a dedicated thread or `spawn_blocking`). Angles are degrees, shutter times
 //! seconds.
+//!
+//! - [`grbl`]: the light arm on a GRBL 1.1 controller over a serial port.
+//! - [`supervised_camera`]: a [`Camera`] run in a child process under a watchdog;
+//!   `gphoto2_camera` (cargo feature `gphoto2`) is the libgphoto2 camera it runs, in the
+//!   `gonio-camera-worker` binary.
+//! - [`bracket`]: choosing a bracket of shutter speeds from a metering capture.
+//! - [`camera_choice`]: reading a camera's shutter and ISO choice strings.
+//! - [`atomic_file`]: writing captures so readers never see half a file.
 
 pub mod atomic_file;
 pub mod bracket;

@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 use gonio_drivers::atomic_file::write_atomically;
 use gonio_drivers::{Camera, CameraInfo, Capture, DeviceError, Exposure};
 
-use crate::render::{self, Shot};
+use crate::render::{self, FileLevels, Shot};
 use crate::scene::Scene;
 use crate::world::World;
 
@@ -197,6 +197,12 @@ impl EmulatedCamera {
 
     pub fn timing(&self) -> CaptureTiming {
         self.timing
+    }
+
+    /// Black and white level and response of the files this camera writes (for the
+    /// capture sidecar).
+    pub fn file_levels(&self) -> FileLevels {
+        render::file_levels(&self.scene)
     }
 
     /// Queues a fault for the coming captures.

@@ -10,11 +10,14 @@
 //! board powered up, so it differs from the physical angle, which is what the shared
 //! [`World`] holds. Motion follows trapezoidal velocity profiles (blocks run stop to
 //! stop) in machine time, which runs `1 / time_scale` times faster than real time.
+//! When the steppers stop dead (soft reset while moving, a limit alarm, power loss) the
+//! arm coasts on and slips steps, so MPos is off until the next `$H`.
 //!
 //! What the firmware does and this emulator does not: arcs and other G-codes outside
-//! G0 G1 G4 G17 G20 G21 G54 G90 G91 G94 M3 M4 M5 M8 M9 (`error:20`), jogging (`$J=`),
-//! check mode (`$C`), sleep (`$SLP`), startup blocks (`$Nx=`), overrides, and junction
-//! blending between consecutive blocks.
+//! G0 G1 G4 G17 G20 G21 G53 G54 G90 G91 G94 M3 M4 M5 M8 M9 (`error:20`), check mode
+//! (`$C`), sleep (`$SLP`), startup blocks (`$Nx=`), overrides and the safety door, and
+//! junction blending between consecutive blocks. Jogging (`$J=`, jog cancel 0x85) is
+//! emulated.
 
 mod faults;
 mod gcode;

@@ -10,6 +10,11 @@
 //! at the white level. Rows outside the two strips and columns that miss the cylinder
 //! receive no light (the cylinder body and background are black).
 //!
+//! Vertical convention: the camera centre and the point light lie in the horizontal
+//! plane z = 0 through the cylinder axis; a pixel row at sensor offset y sees the surface
+//! at height z = −t·y, so strips above and below the optical axis are lit slightly out of
+//! plane (by their real 3D geometry), identically when placed symmetrically.
+//!
 //! Separability: the ray–cylinder intersection, the surface normal and the in-plane
 //! light and view vectors depend only on the column; a pixel adds only its height z
 //! (exact, no approximation).
@@ -160,7 +165,8 @@ fn columns(scene: &Scene, theta_l_deg: f64) -> Vec<Option<Column>> {
             if disc < 0.0 {
                 return None;
             }
-            let t = (-half_b - disc.sqrt()) / a;
+            // Near root in the cancellation-free form c / (−b/2 + √disc).
+            let t = (dc * dc - r * r) / (-half_b + disc.sqrt());
             let p = [dc - t * f, t * x_mm];
             let n = [p[0] / r, p[1] / r];
             let l = [light[0] - p[0], light[1] - p[1]];
@@ -193,6 +199,62 @@ enum Strip {
     Dark,
 }
 
+/// Per-frame constants of the light reaching the sensor.
+struct Lighting<'a> {
+    scene: &'a Scene,
+    /// Counts per unit β·cosθi at 1000 mm: t · ISO/100 · intensity/100.
+    scale: f64,
+    white_beta: [f64; 3],
+    /// Retro-reflection kr and w².
+    retro: Option<([f64; 3], f64)>,
+    vignetting: Option<f64>,
+}
+
+impl Lighting<'_> {
+    /// Signal (counts above black) of the pixel at sensor height `y_mm` in column
+    /// `col` of a strip; `None` where no light arrives.
+    #[inline]
+    fn signal(&self, col: &Column, y_mm: f64, strip: Strip) -> Option<[f64; 3]> {
+        if strip == Strip::Dark {
+            return None;
+        }
+        let z = -col.t * y_mm;
+        let z2 = z * z;
+        let l2 = col.l2 + z2;
+        let (l_len, v_len) = (l2.sqrt(), (col.v2 + z2).sqrt());
+        let cos_i = col.n_l / l_len;
+        if cos_i <= 0.0 {
+            return None;
+        }
+        let beta = if strip == Strip::White {
+            self.white_beta
+        } else {
+            let l_v = (col.l_v + z2) / (l_len * v_len);
+            let g = Geom::new(
+                cos_i,
+                col.n_v / v_len,
+                l_v,
+                col.theta_i_deg,
+                col.theta_r_deg,
+            );
+            let mut beta = self.scene.material().beta(&g);
+            if let Some((kr, w2)) = self.retro {
+                let lobe = brdf::retro_lobe(l_v, w2);
+                for (b, k) in beta.iter_mut().zip(kr) {
+                    *b += k * lobe;
+                }
+            }
+            beta
+        };
+        let mut gain = self.scale * cos_i * 1e6 / l2;
+        if let Some(strength) = self.vignetting {
+            let f = self.scene.setup().focal_length_mm;
+            gain *= effects::vignetting_gain(strength, f, col.x_mm, y_mm);
+        }
+        Some(beta.map(|b| b * gain))
+    }
+}
+
 /// Renders one exposure.
 pub fn render(scene: &Scene, shot: &Shot) -> Frame16 {
     let setup = scene.setup();
@@ -201,18 +263,20 @@ pub fn render(scene: &Scene, shot: &Shot) -> Frame16 {
     let effects = scene.effects();
     let cols = columns(scene, shot.theta_l_deg);
     let pitch = setup.pixel_pitch_um / 1000.0;
-    let f = setup.focal_length_mm;
     let cy = setup.cy();
-    let scale = shot.shutter_s * f64::from(shot.iso) / 100.0 * scene.light_intensity() / 100.0;
-    let white_beta = scene
-        .camera_domain()
-        .white_rgb()
-        .map(|w| w * scene.white_reflectance());
-    let material = scene.material();
-    let retro = effects
-        .retro_reflection
-        .as_ref()
-        .map(|r| (r.kr, r.width_deg.to_radians().tan().powi(2)));
+    let lighting = Lighting {
+        scene,
+        scale: shot.shutter_s * f64::from(shot.iso) / 100.0 * scene.light_intensity() / 100.0,
+        white_beta: scene
+            .camera_domain()
+            .white_rgb()
+            .map(|w| w * scene.white_reflectance()),
+        retro: effects
+            .retro_reflection
+            .as_ref()
+            .map(|r| (r.kr, r.width_deg.to_radians().tan().powi(2))),
+        vignetting: effects.vignetting.as_ref().map(|v| v.strength),
+    };
     let noise = effects.noise.as_ref().map(|n| NoiseModel::new(n, shot.iso));
     let frame_seed = effects::mix(
         effects.seed
@@ -220,13 +284,21 @@ pub fn render(scene: &Scene, shot: &Shot) -> Frame16 {
             ^ effects::mix(shot.shutter_s.to_bits()).rotate_left(17)
             ^ effects::mix(u64::from(shot.iso) ^ (shot.frame_index << 20)).rotate_left(31),
     );
-    let vignetting = effects.vignetting.as_ref().map(|v| v.strength);
     let black = f64::from(camera.black_level);
     let white_level = f64::from(camera.white_level);
     let response = effects
         .response
         .as_ref()
         .map(|r| effects::response_table(r, camera.black_level, camera.white_level));
+    // Round half up by truncating a non-negative value (cheaper than `round`).
+    let quantise = |s: f64| {
+        let v = ((black + s).clamp(0.0, white_level) + 0.5) as u16;
+        match &response {
+            Some(table) => table[usize::from(v)],
+            None => v,
+        }
+    };
+    let dark = quantise(0.0);
 
     let row_len = 3 * width as usize;
     let mut data = vec![0u16; row_len * height as usize];
@@ -242,53 +314,29 @@ pub fn render(scene: &Scene, shot: &Shot) -> Frame16 {
                 Strip::Dark
             };
             let y_mm = (f64::from(row) - cy) * pitch;
-            let mut rng = noise.as_ref().map(|_| NoiseModel::row_rng(frame_seed, row));
-            for (u, px) in out.chunks_exact_mut(3).enumerate() {
-                let mut signal = [0.0; 3];
-                if let (Some(col), false) = (&cols[u], strip == Strip::Dark) {
-                    let z = -col.t * y_mm;
-                    let z2 = z * z;
-                    let l2 = col.l2 + z2;
-                    let (l_len, v_len) = (l2.sqrt(), (col.v2 + z2).sqrt());
-                    let cos_i = col.n_l / l_len;
-                    if cos_i > 0.0 {
-                        let beta = if strip == Strip::White {
-                            white_beta
-                        } else {
-                            let l_v = (col.l_v + z2) / (l_len * v_len);
-                            let g = Geom::new(
-                                cos_i,
-                                col.n_v / v_len,
-                                l_v,
-                                col.theta_i_deg,
-                                col.theta_r_deg,
-                            );
-                            let mut beta = material.beta(&g);
-                            if let Some((kr, w2)) = retro {
-                                let lobe = brdf::retro_lobe(l_v, w2);
-                                for (b, k) in beta.iter_mut().zip(kr) {
-                                    *b += k * lobe;
+            match &noise {
+                None => {
+                    for (col, px) in cols.iter().zip(out.chunks_exact_mut(3)) {
+                        match col.and_then(|col| lighting.signal(&col, y_mm, strip)) {
+                            Some(signal) => {
+                                for (v, s) in px.iter_mut().zip(signal) {
+                                    *v = quantise(s);
                                 }
                             }
-                            beta
-                        };
-                        let mut gain = scale * cos_i * 1e6 / l2;
-                        if let Some(strength) = vignetting {
-                            gain *= effects::vignetting_gain(strength, f, col.x_mm, y_mm);
+                            None => px.fill(dark),
                         }
-                        signal = beta.map(|b| b * gain);
                     }
                 }
-                for (out, s) in px.iter_mut().zip(signal) {
-                    let s = match (&noise, rng.as_mut()) {
-                        (Some(model), Some(rng)) => model.apply(s, rng),
-                        _ => s,
-                    };
-                    let v = (black + s).round().clamp(0.0, white_level) as u16;
-                    *out = match &response {
-                        Some(table) => table[usize::from(v)],
-                        None => v,
-                    };
+                Some(model) => {
+                    let mut rng = NoiseModel::row_rng(frame_seed, row);
+                    for (col, px) in cols.iter().zip(out.chunks_exact_mut(3)) {
+                        let signal = col
+                            .and_then(|col| lighting.signal(&col, y_mm, strip))
+                            .unwrap_or([0.0; 3]);
+                        for (v, s) in px.iter_mut().zip(signal) {
+                            *v = quantise(model.apply(s, &mut rng));
+                        }
+                    }
                 }
             }
         });

@@ -661,7 +661,10 @@ impl Scene {
     /// grid (rows to within one binned row). Fast tests and demos use it.
     pub fn binned(&self, factor: u32) -> Result<Scene, SceneError> {
         if factor == 0 || factor > self.setup.image_width.min(self.setup.image_height) {
-            return Err(invalid("binning factor", format!("{factor} does not fit the image")));
+            return Err(invalid(
+                "binning factor",
+                format!("{factor} does not fit the image"),
+            ));
         }
         let k = f64::from(factor);
         let s = &self.setup;

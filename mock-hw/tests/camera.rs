@@ -103,6 +103,11 @@ fn settings_snap_like_a_nikon() {
         Err(DeviceError::OutOfRange { .. })
     ));
     assert_eq!(SHUTTER_SPEEDS_S.len(), speeds.len());
+    let levels = cam.file_levels();
+    assert_eq!(
+        (levels.black_level, levels.white_level, levels.nonlinear),
+        (0, 65535, false)
+    );
 }
 
 #[test]

@@ -76,12 +76,17 @@ fn scripted_session_byte_for_byte() {
 
 #[test]
 fn feed_hold_resume_and_soft_reset_mid_motion() {
-    let (emulator, world) = start(fast_config(), 0.0);
+    // Slow enough that the moves outlast a busy test machine's scheduling delays.
+    let config = GrblConfig {
+        time_scale: 0.03,
+        ..fast_config()
+    };
+    let (emulator, world) = start(config, 0.0);
     let mut grbl = Client::open(emulator.device_path());
     grbl.expect(LOCKED_BANNER);
     grbl.exchange("$H\n", "ok\r\n");
 
-    // 135° at 20°/s: about 70 ms of real time.
+    // 135° at 20°/s: about 220 ms of real time.
     grbl.exchange("G1X-135F1200\n", "ok\r\n");
     grbl.wait_for_state("Run");
     std::thread::sleep(Duration::from_millis(15));
@@ -113,8 +118,18 @@ fn feed_hold_resume_and_soft_reset_mid_motion() {
     );
     grbl.exchange("G0X-20\n", "error:9\r\n");
 
-    // A soft reset after a completed feed hold keeps the position and raises no alarm.
+    // Jogging, and a jog cancel (0x85) that stops it short.
     grbl.exchange("$X\n", "[MSG:Caution: Unlocked]\r\nok\r\n");
+    grbl.exchange("$J=G91X-300F1200\n", "error:15\r\n");
+    grbl.exchange("$J=G53X-100F300\n", "ok\r\n");
+    grbl.wait_for_state("Jog");
+    grbl.exchange("G0X-20\n", "error:9\r\n");
+    grbl.send(&[0x85]);
+    let cancelled = grbl.wait_for_state("Idle");
+    let x = mpos_x(&cancelled);
+    assert!(x >= stopped && x < -100.0, "from {stopped}: {cancelled}");
+
+    // A soft reset after a completed feed hold keeps the position and raises no alarm.
     grbl.exchange("!", "");
     grbl.wait_for_state("Hold:0");
     grbl.send(b"\x18");

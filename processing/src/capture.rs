@@ -81,7 +81,10 @@ impl Sidecar {
                 format!("{} is not an angle in [-180, 180] degrees", self.theta_l),
             ));
         }
-        for (field, level) in [("black_level", self.black_level), ("white_level", self.white_level)] {
+        for (field, level) in [
+            ("black_level", self.black_level),
+            ("white_level", self.white_level),
+        ] {
             if let Some(v) = level {
                 if !(v.is_finite() && v >= 0.0) {
                     return Err(bad(field, format!("{v} is not a non-negative count")));
@@ -148,7 +151,9 @@ pub fn is_capture_path(path: &Path) -> bool {
     path.extension()
         .and_then(|e| e.to_str())
         .map(|e| e.to_ascii_lowercase())
-        .is_some_and(|e| TIFF_EXTENSIONS.contains(&e.as_str()) || RAW_EXTENSIONS.contains(&e.as_str()))
+        .is_some_and(|e| {
+            TIFF_EXTENSIONS.contains(&e.as_str()) || RAW_EXTENSIONS.contains(&e.as_str())
+        })
 }
 
 /// The sidecar path of an image: same stem, `.json`.
@@ -169,10 +174,11 @@ pub fn read_sidecar(image: &Path) -> Result<Sidecar, CaptureError> {
         }
         Err(source) => return Err(CaptureError::SidecarIo { path, source }),
     };
-    let sidecar: Sidecar = serde_json::from_str(&text).map_err(|source| CaptureError::SidecarJson {
-        path: path.clone(),
-        source,
-    })?;
+    let sidecar: Sidecar =
+        serde_json::from_str(&text).map_err(|source| CaptureError::SidecarJson {
+            path: path.clone(),
+            source,
+        })?;
     sidecar.validate(&path)?;
     Ok(sidecar)
 }
@@ -185,12 +191,11 @@ pub fn write_tiff_capture(
     counts: &[u16],
     sidecar: &Sidecar,
 ) -> Result<(), CaptureError> {
-    let image = image::ImageBuffer::<image::Rgb<u16>, &[u16]>::from_raw(width, height, counts).ok_or_else(|| {
-        CaptureError::Layout {
+    let image = image::ImageBuffer::<image::Rgb<u16>, &[u16]>::from_raw(width, height, counts)
+        .ok_or_else(|| CaptureError::Layout {
             path: path.to_path_buf(),
             reason: format!("{} values for {width}×{height} RGB", counts.len()),
-        }
-    })?;
+        })?;
     let image_error = |reason: String| CaptureError::Image {
         path: path.to_path_buf(),
         reason,
@@ -271,12 +276,18 @@ impl Frame {
         let (stored_w, stored_h) = decoded.stored;
         if let Some(w) = sidecar.width {
             if w as usize != stored_w {
-                return Err(bad("width", format!("{w} but the image is {stored_w} wide")));
+                return Err(bad(
+                    "width",
+                    format!("{w} but the image is {stored_w} wide"),
+                ));
             }
         }
         if let Some(h) = sidecar.height {
             if h as usize != stored_h {
-                return Err(bad("height", format!("{h} but the image is {stored_h} high")));
+                return Err(bad(
+                    "height",
+                    format!("{h} but the image is {stored_h} high"),
+                ));
             }
         }
         let black_level = sidecar.black_level.unwrap_or(decoded.black_level);
@@ -357,7 +368,9 @@ fn decode_tiff(path: &Path) -> Result<Decoded, CaptureError> {
 }
 
 fn drop_alpha<T: Copy>(rgba: &[T]) -> Vec<T> {
-    rgba.chunks_exact(4).flat_map(|p| [p[0], p[1], p[2]]).collect()
+    rgba.chunks_exact(4)
+        .flat_map(|p| [p[0], p[1], p[2]])
+        .collect()
 }
 
 fn widen(values: &[u8]) -> Vec<u16> {
@@ -408,11 +421,15 @@ fn decode_raw(path: &Path) -> Result<Decoded, CaptureError> {
     let area = raw
         .crop_area
         .or(raw.active_area)
-        .map_or((0, 0, raw.width, raw.height), |r| (r.p.x, r.p.y, r.d.w, r.d.h));
+        .map_or((0, 0, raw.width, raw.height), |r| {
+            (r.p.x, r.p.y, r.d.w, r.d.h)
+        });
     let (data, width, height) = match (&raw.photometric, raw.cpp) {
         (RawPhotometricInterpretation::Cfa(config), 1) => {
-            superpixels(counts, raw.width, area, |row, col| config.cfa.color_at(row, col))
-                .map_err(layout)?
+            superpixels(counts, raw.width, area, |row, col| {
+                config.cfa.color_at(row, col)
+            })
+            .map_err(layout)?
         }
         (_, 3) => {
             let (x0, y0, w, h) = area;

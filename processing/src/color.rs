@@ -14,7 +14,8 @@ use thiserror::Error;
 
 const CMF_CSV: &str = include_str!("../data/cie1931_2deg_cmf_390_730_10nm.csv");
 const ILLUMINANT_A_CSV: &str = include_str!("../data/cie_illuminant_a_390_730_10nm.csv");
-const NIKON_D5100_CSV: &str = include_str!("../data/nikon_d5100_npl_sensitivities_390_730_10nm.csv");
+const NIKON_D5100_CSV: &str =
+    include_str!("../data/nikon_d5100_npl_sensitivities_390_730_10nm.csv");
 
 /// First and last wavelength (nm) of the eq. 4/5 sums.
 pub const SUM_RANGE_NM: (f64, f64) = (400.0, 700.0);

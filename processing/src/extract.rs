@@ -153,7 +153,7 @@ pub fn extract_scan(dir: &Path, options: &ExtractOptions) -> Result<Extraction, 
     extract_scan_with_progress(dir, options, |_, _| {})
 }
 
-/// [`extract_scan`], calling `progress(done, total)` after each θL.
+/// [`extract_scan`], calling `progress(done, total)` before the first θL and after each.
 pub fn extract_scan_with_progress(
     dir: &Path,
     options: &ExtractOptions,
@@ -164,14 +164,19 @@ pub fn extract_scan_with_progress(
     let mut images = Vec::new();
     find_captures(dir, &mut images)?;
     images.sort();
-    let (with_sidecar, skipped_without_sidecar): (Vec<PathBuf>, Vec<PathBuf>) =
-        images.into_iter().partition(|p| capture::sidecar_path(p).is_file());
+    let (with_sidecar, skipped_without_sidecar): (Vec<PathBuf>, Vec<PathBuf>) = images
+        .into_iter()
+        .partition(|p| capture::sidecar_path(p).is_file());
     // Group by θL (sidecars only; images are decoded per group).
     let mut groups: BTreeMap<i64, (f64, Vec<PathBuf>)> = BTreeMap::new();
     for path in with_sidecar {
         let theta_l = capture::read_sidecar(&path)?.theta_l;
         let key = (theta_l * 1e6).round() as i64;
-        groups.entry(key).or_insert_with(|| (theta_l, Vec::new())).1.push(path);
+        groups
+            .entry(key)
+            .or_insert_with(|| (theta_l, Vec::new()))
+            .1
+            .push(path);
     }
     if groups.is_empty() {
         return Err(ExtractError::NoCaptures {
@@ -185,6 +190,7 @@ pub fn extract_scan_with_progress(
         })?;
     }
     let total = groups.len();
+    progress(0, total);
     let mut extraction = Extraction {
         samples: Vec::new(),
         dropped: DropCounts::default(),
@@ -196,7 +202,8 @@ pub fn extract_scan_with_progress(
             .par_iter()
             .map(|p| Frame::read(p))
             .collect::<Result<_, _>>()?;
-        let map = hdr::merge(&frames, &options.merge).map_err(|source| ExtractError::Hdr { theta_l, source })?;
+        let map = hdr::merge(&frames, &options.merge)
+            .map_err(|source| ExtractError::Hdr { theta_l, source })?;
         if let Some(hdr_dir) = &options.hdr_dir {
             map.write_exr(&hdr_dir.join(format!("theta_l_{theta_l:.1}.exr")))
                 .map_err(|source| ExtractError::Hdr { theta_l, source })?;
@@ -216,13 +223,17 @@ pub fn extract_scan_with_progress(
 }
 
 fn check_options(o: &ExtractOptions) -> Result<(), ExtractError> {
-    if !(o.white_reflectance.is_finite() && o.white_reflectance > 0.0 && o.white_reflectance <= 2.0) {
+    if !(o.white_reflectance.is_finite() && o.white_reflectance > 0.0 && o.white_reflectance <= 2.0)
+    {
         return Err(ExtractError::Options(format!(
             "white reflectance {} is not in (0, 2]",
             o.white_reflectance
         )));
     }
-    if !(o.grazing_limit_deg.is_finite() && o.grazing_limit_deg > 0.0 && o.grazing_limit_deg <= 90.0) {
+    if !(o.grazing_limit_deg.is_finite()
+        && o.grazing_limit_deg > 0.0
+        && o.grazing_limit_deg <= 90.0)
+    {
         return Err(ExtractError::Options(format!(
             "grazing limit {}° is not in (0, 90]",
             o.grazing_limit_deg
@@ -244,7 +255,8 @@ pub fn read_setup(path: &Path) -> Result<Setup, ExtractError> {
         reason,
     };
     let text = fs::read_to_string(path).map_err(|e| setup_error(format!("cannot read: {e}")))?;
-    let setup: Setup = serde_json::from_str(&text).map_err(|e| setup_error(format!("invalid setup JSON: {e}")))?;
+    let setup: Setup =
+        serde_json::from_str(&text).map_err(|e| setup_error(format!("invalid setup JSON: {e}")))?;
     setup.validate().map_err(|source| ExtractError::Geometry {
         path: path.to_path_buf(),
         source,
@@ -321,12 +333,18 @@ fn extract_theta(
             // Centre of the column in sensor pixels (a superpixel spans two columns).
             let u = (scale * x) as f64 + (scale as f64 - 1.0) / 2.0;
             let angles = setup.angles_at_column(u, theta_l);
-            (angles, strip_mean(map, x, sample_row), strip_mean(map, x, white_row))
+            (
+                angles,
+                strip_mean(map, x, sample_row),
+                strip_mean(map, x, white_row),
+            )
         })
         .collect();
     let brightest_white = columns
         .iter()
-        .filter(|(angles, _, (_, flags))| angles.is_some() && flags & (SATURATED | UNDEREXPOSED) == 0)
+        .filter(|(angles, _, (_, flags))| {
+            angles.is_some() && flags & (SATURATED | UNDEREXPOSED) == 0
+        })
         .map(|(_, _, (white, _))| white[0].min(white[1]).min(white[2]))
         .fold(0.0, f64::max);
     let threshold = options.min_white_fraction * brightest_white;
@@ -344,10 +362,13 @@ fn extract_theta(
             dropped.grazing += 1;
         } else if (sample_flags | white_flags) & SATURATED != 0 {
             dropped.saturated += 1;
-        } else if white_flags & UNDEREXPOSED != 0 || white.iter().any(|&w| !(w > threshold && w > 0.0)) {
+        } else if white_flags & UNDEREXPOSED != 0
+            || white.iter().any(|&w| !(w > threshold && w > 0.0))
+        {
             dropped.dark_white += 1;
         } else {
-            let rgb = [0, 1, 2].map(|c| sample[c] / white[c] * options.white_reflectance * white_rgb[c]);
+            let rgb =
+                [0, 1, 2].map(|c| sample[c] / white[c] * options.white_reflectance * white_rgb[c]);
             samples.push(Sample {
                 theta_l,
                 theta_i: a.theta_i,

@@ -235,7 +235,10 @@ impl Data {
                 return Err(FitError::NoSignal { channel });
             }
         }
-        let mean_norm = y.iter().map(|v| metrics::point_loss(v, &[0.0; 3])).sum::<f64>()
+        let mean_norm = y
+            .iter()
+            .map(|v| metrics::point_loss(v, &[0.0; 3]))
+            .sum::<f64>()
             / y.len() as f64;
         Ok(Data {
             diffuse: bases.iter().map(|b| b.diffuse).collect(),
@@ -309,6 +312,7 @@ pub fn solve_at_roughness(
     let fit = linear::solve(
         &data,
         [&spec[0], &spec[1], &spec[2]],
+        linear::FINE_TOLERANCE,
         &mut Vec::new(),
         &mut Vec::new(),
     );

@@ -176,7 +176,12 @@ impl HdrImage {
         use exr::meta::attribute::{AttributeValue, Text};
         use exr::prelude::*;
         let text = |s: &str| Text::new_or_none(s).unwrap_or_else(|| Text::from("?"));
-        let list = |v: &[f64]| v.iter().map(|x| format!("{x}")).collect::<Vec<_>>().join(",");
+        let list = |v: &[f64]| {
+            v.iter()
+                .map(|x| format!("{x}"))
+                .collect::<Vec<_>>()
+                .join(",")
+        };
         let mut attributes = LayerAttributes::named("radiance");
         attributes.exposure = Some(1.0);
         attributes.iso_speed = Some(100.0);
@@ -186,8 +191,14 @@ impl HdrImage {
         let custom = [
             ("gonio.method", AttributeValue::Text(text(self.info.method))),
             ("gonio.thetaL", AttributeValue::F64(self.info.theta_l)),
-            ("gonio.shutterS", AttributeValue::Text(text(&list(&self.info.shutter_s)))),
-            ("gonio.iso", AttributeValue::Text(text(&list(&self.info.iso)))),
+            (
+                "gonio.shutterS",
+                AttributeValue::Text(text(&list(&self.info.shutter_s))),
+            ),
+            (
+                "gonio.iso",
+                AttributeValue::Text(text(&list(&self.info.iso))),
+            ),
             (
                 "gonio.units",
                 AttributeValue::Text(text(match self.info.method {
@@ -283,7 +294,10 @@ pub fn merge(frames: &[Frame], options: &MergeOptions) -> Result<HdrImage, HdrEr
         info: HdrInfo {
             method: name,
             shutter_s: frames.iter().map(|f| f.sidecar.shutter_s).collect(),
-            iso: frames.iter().map(|f| f.sidecar.iso.unwrap_or(100.0)).collect(),
+            iso: frames
+                .iter()
+                .map(|f| f.sidecar.iso.unwrap_or(100.0))
+                .collect(),
             theta_l: first.sidecar.theta_l,
             camera: first.sidecar.camera.clone(),
             time: first.sidecar.time.clone(),
@@ -293,7 +307,9 @@ pub fn merge(frames: &[Frame], options: &MergeOptions) -> Result<HdrImage, HdrEr
 
 fn check_options(o: &MergeOptions) -> Result<(), HdrError> {
     let bad = |m: &str| Err(HdrError::Options(m.to_string()));
-    if !(0.0..1.0).contains(&o.min_signal) || !(o.max_signal > o.min_signal && o.max_signal <= 1.0) {
+    let ordered =
+        (0.0..1.0).contains(&o.min_signal) && o.max_signal > o.min_signal && o.max_signal <= 1.0;
+    if !ordered {
         return bad("need 0 ≤ min_signal < max_signal ≤ 1");
     }
     if !(o.noise.full_well_electrons.is_finite() && o.noise.full_well_electrons > 0.0) {
@@ -354,9 +370,10 @@ fn merge_linear(frames: &[Frame], options: &MergeOptions) -> (Vec<f32>, Vec<u8>)
                         for f in &sorted {
                             let s = signal(f);
                             if s >= lo && s <= hi {
-                                let w = f.exposure * f.exposure / (f.shot * l0 * f.exposure + read_var);
-                                sum += w * s / f.exposure;
-                                weights += w;
+                                // w = H²/σ², and w·(s/H) = H·s/σ².
+                                let inv_var = 1.0 / (f.shot * l0 * f.exposure + read_var);
+                                sum += f.exposure * s * inv_var;
+                                weights += f.exposure * f.exposure * inv_var;
                             }
                         }
                         ((sum / weights).max(0.0), 0)
@@ -387,11 +404,15 @@ fn hat(z: usize) -> f64 {
 
 /// Quantised level 0..=255 of a normalised signal.
 fn level(frame: &Frame, index: usize) -> usize {
-    let s = (f64::from(frame.data[index]) - frame.black_level) / (frame.white_level - frame.black_level);
+    let s = (f64::from(frame.data[index]) - frame.black_level)
+        / (frame.white_level - frame.black_level);
     (s.clamp(0.0, 1.0) * (LEVELS - 1) as f64).round() as usize
 }
 
-fn merge_debevec_malik(frames: &[Frame], options: &MergeOptions) -> Result<(Vec<f32>, Vec<u8>), HdrError> {
+fn merge_debevec_malik(
+    frames: &[Frame],
+    options: &MergeOptions,
+) -> Result<(Vec<f32>, Vec<u8>), HdrError> {
     let ln_h: Vec<f64> = frames.iter().map(|f| f.sidecar.exposure().ln()).collect();
     let mut distinct = ln_h.clone();
     distinct.sort_by(f64::total_cmp);
@@ -424,7 +445,10 @@ fn merge_debevec_malik(frames: &[Frame], options: &MergeOptions) -> Result<(Vec<
                 let (radiance, flag) = if weights > 0.0 {
                     ((sum / weights).exp(), 0)
                 } else {
-                    match order.iter().find(|&&j| level(&frames[j], index) == LEVELS - 1) {
+                    match order
+                        .iter()
+                        .find(|&&j| level(&frames[j], index) == LEVELS - 1)
+                    {
                         Some(&j) => ((g[LEVELS - 1] - ln_h[j]).exp(), SATURATED),
                         None => (0.0, UNDEREXPOSED),
                     }
@@ -465,7 +489,9 @@ fn recover_response(
         .collect();
     candidates.sort_unstable();
     let n = wanted.min(candidates.len());
-    let chosen: Vec<usize> = (0..n).map(|k| candidates[k * candidates.len() / n].1).collect();
+    let chosen: Vec<usize> = (0..n)
+        .map(|k| candidates[k * candidates.len() / n].1)
+        .collect();
 
     let rows = n * frames.len() + (LEVELS - 2) + 1;
     let cols = LEVELS + n;
@@ -499,6 +525,8 @@ fn recover_response(
     if g.iter().all(|v| v.is_finite()) {
         Ok(g)
     } else {
-        Err(HdrError::Response(format!("channel {c}: non-finite response")))
+        Err(HdrError::Response(format!(
+            "channel {c}: non-finite response"
+        )))
     }
 }

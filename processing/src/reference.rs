@@ -67,21 +67,20 @@ impl Spline {
                 let (h0, h1) = (x[i] - x[i - 1], x[i + 1] - x[i]);
                 diag[i] = 2.0 * (h0 + h1);
                 upper[i] = h1;
-                for c in 0..3 {
-                    rhs[i][c] = 6.0 * ((y[i + 1][c] - y[i][c]) / h1 - (y[i][c] - y[i - 1][c]) / h0);
-                }
+                rhs[i] = [0, 1, 2]
+                    .map(|c| 6.0 * ((y[i + 1][c] - y[i][c]) / h1 - (y[i][c] - y[i - 1][c]) / h0));
             }
             for i in 2..n - 1 {
                 let factor = (x[i] - x[i - 1]) / diag[i - 1];
                 diag[i] -= factor * upper[i - 1];
-                for c in 0..3 {
-                    rhs[i][c] -= factor * rhs[i - 1][c];
+                let previous = rhs[i - 1];
+                for (r, p) in rhs[i].iter_mut().zip(previous) {
+                    *r -= factor * p;
                 }
             }
             for i in (1..n - 1).rev() {
-                for c in 0..3 {
-                    m[i][c] = (rhs[i][c] - upper[i] * m[i + 1][c]) / diag[i];
-                }
+                let next = m[i + 1];
+                m[i] = [0, 1, 2].map(|c| (rhs[i][c] - upper[i] * next[c]) / diag[i]);
             }
         }
         Self { x, y, m }
@@ -102,7 +101,8 @@ impl Spline {
         for (c, value) in out.iter_mut().enumerate() {
             *value = a * self.y[k - 1][c]
                 + b * self.y[k][c]
-                + ((a * a * a - a) * self.m[k - 1][c] + (b * b * b - b) * self.m[k][c]) * h * h / 6.0;
+                + ((a * a * a - a) * self.m[k - 1][c] + (b * b * b - b) * self.m[k][c]) * h * h
+                    / 6.0;
         }
         out
     }
@@ -127,25 +127,40 @@ impl Reference {
     }
 
     /// Reads a reference CSV from `reader` (`name` appears in errors).
-    pub fn from_reader<R: Read>(reader: R, name: &str, camera: &CameraModel) -> Result<Self, ReferenceError> {
+    pub fn from_reader<R: Read>(
+        reader: R,
+        name: &str,
+        camera: &CameraModel,
+    ) -> Result<Self, ReferenceError> {
         let parse_err = |line: usize, reason: String| ReferenceError::Parse {
             name: name.to_string(),
             line,
             reason,
         };
-        let mut csv = csv::ReaderBuilder::new().has_headers(false).trim(csv::Trim::All).from_reader(reader);
+        let mut csv = csv::ReaderBuilder::new()
+            .has_headers(false)
+            .trim(csv::Trim::All)
+            .from_reader(reader);
         let mut records = csv.records();
         let header = records
             .next()
-            .ok_or_else(|| ReferenceError::Empty { name: name.to_string() })?
+            .ok_or_else(|| ReferenceError::Empty {
+                name: name.to_string(),
+            })?
             .map_err(|e| parse_err(1, e.to_string()))?;
         if header.get(0) != Some("theta_i") || header.get(1) != Some("theta_r") {
-            return Err(parse_err(1, "header must start with theta_i,theta_r".into()));
+            return Err(parse_err(
+                1,
+                "header must start with theta_i,theta_r".into(),
+            ));
         }
         let wavelengths: Vec<f64> = header
             .iter()
             .skip(2)
-            .map(|h| h.parse::<f64>().map_err(|_| parse_err(1, format!("column '{h}' is not a wavelength in nm"))))
+            .map(|h| {
+                h.parse::<f64>()
+                    .map_err(|_| parse_err(1, format!("column '{h}' is not a wavelength in nm")))
+            })
             .collect::<Result<_, _>>()?;
         let columns: Vec<usize> = camera
             .wavelengths_nm()
@@ -164,30 +179,52 @@ impl Reference {
             let line = index + 2;
             let record = record.map_err(|e| parse_err(line, e.to_string()))?;
             if record.len() != header.len() {
-                return Err(parse_err(line, format!("{} fields, header has {}", record.len(), header.len())));
+                return Err(parse_err(
+                    line,
+                    format!("{} fields, header has {}", record.len(), header.len()),
+                ));
             }
             let field = |i: usize| -> Result<f64, ReferenceError> {
                 let text = record.get(i).unwrap_or("");
                 text.parse::<f64>()
                     .ok()
                     .filter(|v| v.is_finite())
-                    .ok_or_else(|| parse_err(line, format!("{}: '{text}' is not a finite number", header.get(i).unwrap_or("?"))))
+                    .ok_or_else(|| {
+                        parse_err(
+                            line,
+                            format!(
+                                "{}: '{text}' is not a finite number",
+                                header.get(i).unwrap_or("?")
+                            ),
+                        )
+                    })
             };
             let (theta_i, theta_r) = (field(0)?, field(1)?);
             if theta_i.abs() > 90.0 || theta_r.abs() > 90.0 {
-                return Err(parse_err(line, "angles must lie in [-90, 90] degrees".into()));
+                return Err(parse_err(
+                    line,
+                    "angles must lie in [-90, 90] degrees".into(),
+                ));
             }
             for (slot, &col) in spectrum.iter_mut().zip(&columns) {
                 *slot = field(col)?;
             }
-            let rgb = camera.camera_rgb(&spectrum).map_err(|source| ReferenceError::Color {
-                name: name.to_string(),
-                source,
-            })?;
-            points.push(ReferencePoint { theta_i, theta_r, rgb });
+            let rgb = camera
+                .camera_rgb(&spectrum)
+                .map_err(|source| ReferenceError::Color {
+                    name: name.to_string(),
+                    source,
+                })?;
+            points.push(ReferencePoint {
+                theta_i,
+                theta_r,
+                rgb,
+            });
         }
         if points.is_empty() {
-            return Err(ReferenceError::Empty { name: name.to_string() });
+            return Err(ReferenceError::Empty {
+                name: name.to_string(),
+            });
         }
         Self::from_points(points).map_err(|(line, reason)| parse_err(line, reason))
     }
@@ -206,11 +243,21 @@ impl Reference {
         let mut start = 0;
         while start < order.len() {
             let theta_i = points[order[start]].theta_i;
-            let end = start + order[start..].iter().take_while(|&&k| points[k].theta_i == theta_i).count();
+            let end = start
+                + order[start..]
+                    .iter()
+                    .take_while(|&&k| points[k].theta_i == theta_i)
+                    .count();
             let nodes = &order[start..end];
             for pair in nodes.windows(2) {
                 if points[pair[0]].theta_r == points[pair[1]].theta_r {
-                    return Err((pair[1] + 2, format!("duplicate node θi {theta_i}, θr {}", points[pair[1]].theta_r)));
+                    return Err((
+                        pair[1] + 2,
+                        format!(
+                            "duplicate node θi {theta_i}, θr {}",
+                            points[pair[1]].theta_r
+                        ),
+                    ));
                 }
             }
             let x = nodes.iter().map(|&k| points[k].theta_r).collect();
@@ -259,6 +306,8 @@ mod tests {
             assert_eq!(s.eval(*xi), *yi);
         }
         let v = s.eval(2.2);
-        assert!((v[0] - 5.4).abs() < 1e-12 && (v[1] + 2.2).abs() < 1e-12 && (v[2] - 5.0).abs() < 1e-12);
+        assert!(
+            (v[0] - 5.4).abs() < 1e-12 && (v[1] + 2.2).abs() < 1e-12 && (v[2] - 5.0).abs() < 1e-12
+        );
     }
 }

@@ -50,6 +50,8 @@ pub enum StudyError {
     NoOverlap { samples: usize },
     #[error("no model variant to fit")]
     NoVariants,
+    #[error("the column stride must be at least 1")]
+    ZeroStride,
     #[error("reference at the sample angles: {0}")]
     Reference(#[from] MetricsError),
     #[error("cannot write {path}: {source}")]
@@ -87,10 +89,13 @@ pub struct StudyOptions {
     /// A Nelder–Mead fit counts as stuck in a local minimum when its loss exceeds the
     /// robust loss by more than this fraction.
     pub local_minimum_margin: f64,
+    /// Fit on every `stride`-th sample of each θL (1 = all); scoring uses all points.
+    pub stride: usize,
 }
 
 impl Default for StudyOptions {
-    /// Cook–Torrance and Ward with shared roughness, Nelder–Mead compared at 0.1 %.
+    /// Cook–Torrance and Ward with shared roughness, Nelder–Mead compared at 0.1 %,
+    /// every sample fitted.
     fn default() -> Self {
         StudyOptions {
             variants: [Model::CookTorrance, Model::Ward]
@@ -102,6 +107,7 @@ impl Default for StudyOptions {
                 .collect(),
             compare_nelder_mead: true,
             local_minimum_margin: 1e-3,
+            stride: 1,
         }
     }
 }
@@ -237,12 +243,15 @@ pub fn run_study(
     if options.variants.is_empty() {
         return Err(StudyError::NoVariants);
     }
+    if options.stride == 0 {
+        return Err(StudyError::ZeroStride);
+    }
+    let fitted = subsample(samples, options.stride);
     let theta_l = distinct_theta_l(samples);
-    let combos =
-        combinations::combinations(&theta_l).ok_or_else(|| StudyError::TooManyThetaL {
-            count: theta_l.len(),
-            max: combinations::MAX_THETA_L,
-        })?;
+    let combos = combinations::combinations(&theta_l).ok_or_else(|| StudyError::TooManyThetaL {
+        count: theta_l.len(),
+        max: combinations::MAX_THETA_L,
+    })?;
     let points = evaluation_points(samples, reference, camera);
     if points.is_empty() {
         return Err(StudyError::NoOverlap {
@@ -262,7 +271,9 @@ pub fn run_study(
         .map(|&(combo, variant)| CombinationResult {
             theta_l: combo.clone(),
             variant,
-            outcome: score_combination(samples, combo, variant, &points, &measured, camera, options),
+            outcome: score_combination(
+                &fitted, combo, variant, &points, &measured, camera, options,
+            ),
         })
         .collect();
     Ok(StudyReport {
@@ -273,6 +284,34 @@ pub fn run_study(
         results,
         seconds: start.elapsed().as_secs_f64(),
     })
+}
+
+/// Every `stride`-th sample of each θL, counted in file order from each θL's first
+/// sample (pixel-column subsampling when samples are in column order); `stride` 0 is
+/// taken as 1.
+pub fn subsample(samples: &[Sample], stride: usize) -> Vec<Sample> {
+    let stride = stride.max(1);
+    let mut seen: Vec<(f64, usize)> = Vec::new();
+    samples
+        .iter()
+        .filter(|s| {
+            let index = match seen
+                .iter_mut()
+                .find(|(t, _)| (t - s.theta_l).abs() <= THETA_L_TOLERANCE)
+            {
+                Some((_, count)) => {
+                    *count += 1;
+                    *count - 1
+                }
+                None => {
+                    seen.push((s.theta_l, 1));
+                    0
+                }
+            };
+            index % stride == 0
+        })
+        .copied()
+        .collect()
 }
 
 /// The samples taken at any of the θL in `combo`.
@@ -344,8 +383,10 @@ impl StudyReport {
                     .iter()
                     .filter(|r| r.variant == variant && r.theta_l.len() == size)
                     .collect();
-                let scores: Vec<&Scores> =
-                    group.iter().filter_map(|r| r.outcome.as_ref().ok()).collect();
+                let scores: Vec<&Scores> = group
+                    .iter()
+                    .filter_map(|r| r.outcome.as_ref().ok())
+                    .collect();
                 let above: Vec<bool> = scores
                     .iter()
                     .filter_map(|s| s.nelder_mead_above(self.options.local_minimum_margin))
@@ -360,7 +401,10 @@ impl StudyReport {
                     failed: group.len() - scores.len(),
                     err_p: [channel(0), channel(1), channel(2)],
                     delta_e_uv: BoxStats::from_values(
-                        &scores.iter().filter_map(|s| s.delta_e_uv).collect::<Vec<_>>(),
+                        &scores
+                            .iter()
+                            .filter_map(|s| s.delta_e_uv)
+                            .collect::<Vec<_>>(),
                     ),
                     nelder_mead_compared: above.len(),
                     nelder_mead_above: above.iter().filter(|&&a| a).count(),

@@ -47,7 +47,10 @@ fn matches_vector_form_on_a_grid() {
                 let got = model.evaluate(&params, ti, tr);
                 let want = vector_form(model, &params, ti, tr);
                 for c in 0..3 {
-                    assert!(close(got[c], want[c], 1e-9), "{model} {ti} {tr}: {got:?} vs {want:?}");
+                    assert!(
+                        close(got[c], want[c], 1e-9),
+                        "{model} {ti} {tr}: {got:?} vs {want:?}"
+                    );
                 }
             }
         }
@@ -66,8 +69,15 @@ fn specular_peak_hand_values() {
     assert!(close(ward, 1.0 / (4.0 * PI * 0.01 * c), 1e-12));
     // Diffuse only: CT gives Kd, Ward Kd/π.
     let d = Params::shared([7.0, 8.0, 9.0], [0.0; 3], 0.3);
-    assert_eq!(Model::CookTorrance.evaluate(&d, -10.0, 40.0), [7.0, 8.0, 9.0]);
-    assert!(close(Model::Ward.evaluate(&d, -10.0, 40.0)[2], 9.0 / PI, 1e-15));
+    assert_eq!(
+        Model::CookTorrance.evaluate(&d, -10.0, 40.0),
+        [7.0, 8.0, 9.0]
+    );
+    assert!(close(
+        Model::Ward.evaluate(&d, -10.0, 40.0)[2],
+        9.0 / PI,
+        1e-15
+    ));
 }
 
 #[test]
@@ -83,7 +93,13 @@ fn lobe_is_exactly_zero_where_exp_underflows() {
 fn grazing_and_beyond_is_masked_to_zero() {
     let p = Params::shared([5.0; 3], [10.0; 3], 0.3);
     for model in [Model::CookTorrance, Model::Ward] {
-        for (ti, tr) in [(90.0, 10.0), (10.0, -90.0), (95.0, 0.0), (f64::NAN, 0.0), (-120.0, 30.0)] {
+        for (ti, tr) in [
+            (90.0, 10.0),
+            (10.0, -90.0),
+            (95.0, 0.0),
+            (f64::NAN, 0.0),
+            (-120.0, 30.0),
+        ] {
             assert_eq!(model.evaluate(&p, ti, tr), [0.0; 3], "{model} {ti} {tr}");
         }
     }
@@ -93,7 +109,10 @@ fn grazing_and_beyond_is_masked_to_zero() {
 fn names_round_trip() {
     for model in [Model::CookTorrance, Model::Ward] {
         assert_eq!(model.name().parse::<Model>().unwrap(), model);
-        assert_eq!(serde_json::to_string(&model).unwrap(), format!("\"{model}\""));
+        assert_eq!(
+            serde_json::to_string(&model).unwrap(),
+            format!("\"{model}\"")
+        );
     }
     for r in [Roughness::Shared, Roughness::PerChannel] {
         assert_eq!(r.name().parse::<Roughness>().unwrap(), r);

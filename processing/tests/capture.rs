@@ -21,7 +21,9 @@ fn sidecar() -> Sidecar {
 }
 
 fn counts(width: u32, height: u32) -> Vec<u16> {
-    (0..width * height * 3).map(|i| (i * 997 % 65_536) as u16).collect()
+    (0..width * height * 3)
+        .map(|i| (i * 997 % 65_536) as u16)
+        .collect()
 }
 
 #[test]
@@ -60,7 +62,9 @@ fn missing_sidecar_is_named() {
     capture::write_tiff_capture(&path, 2, 2, &[0; 12], &sidecar()).unwrap();
     fs::remove_file(dir.path().join("a.json")).unwrap();
     match Frame::read(&path) {
-        Err(CaptureError::MissingSidecar { sidecar, .. }) => assert_eq!(sidecar, dir.path().join("a.json")),
+        Err(CaptureError::MissingSidecar { sidecar, .. }) => {
+            assert_eq!(sidecar, dir.path().join("a.json"))
+        }
         other => panic!("expected MissingSidecar, got {other:?}"),
     }
 }
@@ -75,7 +79,11 @@ fn read_with_sidecar_json(dir: &Path, json: &str) -> Result<Frame, CaptureError>
 #[test]
 fn malformed_sidecar_names_the_problem() {
     let dir = tempfile::tempdir().unwrap();
-    let err = read_with_sidecar_json(dir.path(), r#"{"iso":100,"theta_l":-20,"camera":"c","time":"t"}"#).unwrap_err();
+    let err = read_with_sidecar_json(
+        dir.path(),
+        r#"{"iso":100,"theta_l":-20,"camera":"c","time":"t"}"#,
+    )
+    .unwrap_err();
     assert!(matches!(err, CaptureError::SidecarJson { .. }));
     assert!(err.to_string().contains("shutter_s"), "{err}");
     let err = read_with_sidecar_json(dir.path(), "{not json").unwrap_err();
@@ -87,18 +95,44 @@ fn contradicting_or_nonsense_sidecar_values_are_rejected() {
     let dir = tempfile::tempdir().unwrap();
     let base = r#""camera":"c","time":"2026-11-23T14:00:00Z""#;
     let cases = [
-        (format!(r#"{{"shutter_s":-0.01,"iso":100,"theta_l":-20,{base}}}"#), "shutter_s"),
-        (format!(r#"{{"shutter_s":0,"iso":100,"theta_l":-20,{base}}}"#), "shutter_s"),
-        (format!(r#"{{"shutter_s":0.1,"iso":0,"theta_l":-20,{base}}}"#), "iso"),
-        (format!(r#"{{"shutter_s":0.1,"iso":100,"theta_l":400,{base}}}"#), "theta_l"),
-        (format!(r#"{{"shutter_s":0.1,"iso":100,"theta_l":-20,"width":5,{base}}}"#), "width"),
-        (format!(r#"{{"shutter_s":0.1,"iso":100,"theta_l":-20,"height":4,{base}}}"#), "height"),
-        (format!(r#"{{"shutter_s":0.1,"iso":100,"theta_l":-20,"white_level":70000,{base}}}"#), "white_level"),
         (
-            format!(r#"{{"shutter_s":0.1,"iso":100,"theta_l":-20,"black_level":5000,"white_level":4000,{base}}}"#),
+            format!(r#"{{"shutter_s":-0.01,"iso":100,"theta_l":-20,{base}}}"#),
+            "shutter_s",
+        ),
+        (
+            format!(r#"{{"shutter_s":0,"iso":100,"theta_l":-20,{base}}}"#),
+            "shutter_s",
+        ),
+        (
+            format!(r#"{{"shutter_s":0.1,"iso":0,"theta_l":-20,{base}}}"#),
+            "iso",
+        ),
+        (
+            format!(r#"{{"shutter_s":0.1,"iso":100,"theta_l":400,{base}}}"#),
+            "theta_l",
+        ),
+        (
+            format!(r#"{{"shutter_s":0.1,"iso":100,"theta_l":-20,"width":5,{base}}}"#),
+            "width",
+        ),
+        (
+            format!(r#"{{"shutter_s":0.1,"iso":100,"theta_l":-20,"height":4,{base}}}"#),
+            "height",
+        ),
+        (
+            format!(r#"{{"shutter_s":0.1,"iso":100,"theta_l":-20,"white_level":70000,{base}}}"#),
+            "white_level",
+        ),
+        (
+            format!(
+                r#"{{"shutter_s":0.1,"iso":100,"theta_l":-20,"black_level":5000,"white_level":4000,{base}}}"#
+            ),
             "black_level",
         ),
-        (format!(r#"{{"shutter_s":0.1,"iso":100,"theta_l":-20,"black_level":-3,{base}}}"#), "black_level"),
+        (
+            format!(r#"{{"shutter_s":0.1,"iso":100,"theta_l":-20,"black_level":-3,{base}}}"#),
+            "black_level",
+        ),
     ];
     for (json, field) in cases {
         match read_with_sidecar_json(dir.path(), &json) {
@@ -107,7 +141,9 @@ fn contradicting_or_nonsense_sidecar_values_are_rejected() {
         }
     }
     // Matching dimensions, a null ISO and a nonlinear response are accepted.
-    let ok = format!(r#"{{"shutter_s":0.1,"iso":null,"theta_l":-20,"width":4,"height":3,"response":"nonlinear",{base}}}"#);
+    let ok = format!(
+        r#"{{"shutter_s":0.1,"iso":null,"theta_l":-20,"width":4,"height":3,"response":"nonlinear",{base}}}"#
+    );
     let frame = read_with_sidecar_json(dir.path(), &ok).unwrap();
     assert_eq!(frame.sidecar.response, Response::Nonlinear);
     assert_eq!(frame.sidecar.exposure(), 0.1);
@@ -136,7 +172,10 @@ fn unreadable_or_unsupported_images_give_typed_errors() {
     let path = dir.path().join("picture.png");
     fs::write(&path, b"png").unwrap();
     fs::write(path.with_extension("json"), &side).unwrap();
-    assert!(matches!(Frame::read(&path), Err(CaptureError::UnsupportedFormat { .. })));
+    assert!(matches!(
+        Frame::read(&path),
+        Err(CaptureError::UnsupportedFormat { .. })
+    ));
 }
 
 #[test]
@@ -144,12 +183,21 @@ fn grey_tiff_is_a_layout_error_and_8_bit_rgb_is_read() {
     let dir = tempfile::tempdir().unwrap();
     let side = serde_json::to_string(&sidecar()).unwrap();
     let grey = dir.path().join("grey.tiff");
-    image::GrayImage::from_raw(2, 2, vec![1, 2, 3, 4]).unwrap().save(&grey).unwrap();
+    image::GrayImage::from_raw(2, 2, vec![1, 2, 3, 4])
+        .unwrap()
+        .save(&grey)
+        .unwrap();
     fs::write(grey.with_extension("json"), &side).unwrap();
-    assert!(matches!(Frame::read(&grey), Err(CaptureError::Layout { .. })));
+    assert!(matches!(
+        Frame::read(&grey),
+        Err(CaptureError::Layout { .. })
+    ));
 
     let rgb8 = dir.path().join("rgb8.tiff");
-    image::RgbImage::from_raw(2, 1, vec![0, 128, 255, 1, 2, 3]).unwrap().save(&rgb8).unwrap();
+    image::RgbImage::from_raw(2, 1, vec![0, 128, 255, 1, 2, 3])
+        .unwrap()
+        .save(&rgb8)
+        .unwrap();
     fs::write(rgb8.with_extension("json"), &side).unwrap();
     let frame = Frame::read(&rgb8).unwrap();
     assert_eq!(frame.white_level, 255.0);
@@ -162,5 +210,8 @@ fn capture_paths_are_recognised_case_insensitively() {
     assert!(capture::is_capture_path(Path::new("x/exp_00.TIFF")));
     assert!(capture::is_capture_path(Path::new("x/DSC_0001.NEF")));
     assert!(!capture::is_capture_path(Path::new("x/exp_00.json")));
-    assert_eq!(capture::sidecar_path(Path::new("x/a.nef")), Path::new("x/a.json"));
+    assert_eq!(
+        capture::sidecar_path(Path::new("x/a.nef")),
+        Path::new("x/a.json")
+    );
 }

@@ -18,16 +18,29 @@ fn perfect_white_has_g_100_and_spectra_scale_linearly() {
     for c in 0..3 {
         assert!((grey[c] - 0.3 * white[c]).abs() < 1e-9);
     }
-    assert!(matches!(camera.camera_rgb(&[1.0; 5]), Err(ColorError::SpectrumLength { expected: 31, found: 5 })));
+    assert!(matches!(
+        camera.camera_rgb(&[1.0; 5]),
+        Err(ColorError::SpectrumLength {
+            expected: 31,
+            found: 5
+        })
+    ));
 }
 
 #[test]
 fn a_red_spectrum_is_red_in_camera_rgb() {
     let camera = CameraModel::builtin();
-    let red: Vec<f64> = camera.wavelengths_nm().iter().map(|&w| if w >= 600.0 { 0.9 } else { 0.05 }).collect();
+    let red: Vec<f64> = camera
+        .wavelengths_nm()
+        .iter()
+        .map(|&w| if w >= 600.0 { 0.9 } else { 0.05 })
+        .collect();
     let rgb = camera.camera_rgb(&red).unwrap();
     let white = camera.white_rgb();
-    assert!(rgb[0] / white[0] > 0.6 && rgb[2] / white[2] < 0.2, "{rgb:?}");
+    assert!(
+        rgb[0] / white[0] > 0.6 && rgb[2] / white[2] < 0.2,
+        "{rgb:?}"
+    );
 }
 
 #[test]
@@ -35,12 +48,17 @@ fn fitted_matrix_reproduces_the_chromaticity_of_illuminant_a() {
     let camera = CameraModel::builtin();
     // Perfect white under illuminant A: CIE 1976 u'v' = (0.2560, 0.5243).
     let uv = camera.uv_prime(camera.white_rgb()).unwrap();
-    assert!((uv[0] - 0.2560).abs() < 0.005 && (uv[1] - 0.5243).abs() < 0.005, "{uv:?}");
+    assert!(
+        (uv[0] - 0.2560).abs() < 0.005 && (uv[1] - 0.5243).abs() < 0.005,
+        "{uv:?}"
+    );
     // And Y of the perfect white is close to G = 100 (both normalised to the illuminant).
     let xyz = camera.xyz(camera.white_rgb());
     assert!((xyz[1] - 100.0).abs() < 5.0, "{xyz:?}");
     let m = camera.rgb_to_xyz_matrix();
-    let direct: Vec<f64> = (0..3).map(|r| (0..3).map(|c| m[r][c] * camera.white_rgb()[c]).sum()).collect();
+    let direct: Vec<f64> = (0..3)
+        .map(|r| (0..3).map(|c| m[r][c] * camera.white_rgb()[c]).sum())
+        .collect();
     assert!(direct.iter().zip(xyz).all(|(a, b)| (a - b).abs() < 1e-9));
 }
 

@@ -92,7 +92,10 @@ fn hand_worked_oblique_column() {
     let (px, py) = (50.0 * phi.cos(), 50.0 * phi.sin());
     let expected = (-py).atan2(300.0 - px).to_degrees() - a.phi;
     assert!((a.theta_i - expected).abs() < 1e-9);
-    assert!(a.theta_i < -a.phi, "a nearer light sees the point more obliquely");
+    assert!(
+        a.theta_i < -a.phi,
+        "a nearer light sees the point more obliquely"
+    );
 }
 
 #[test]

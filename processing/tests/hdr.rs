@@ -3,13 +3,23 @@
 use std::path::PathBuf;
 
 use gonio_processing::capture::{Frame, Response, Sidecar};
-use gonio_processing::hdr::{self, HdrError, MergeMethod, MergeOptions, NoiseModel, SATURATED, UNDEREXPOSED};
+use gonio_processing::hdr::{
+    self, HdrError, MergeMethod, MergeOptions, NoiseModel, SATURATED, UNDEREXPOSED,
+};
 
 const W: usize = 64;
 const H: usize = 48;
 const BLACK: f64 = 600.0;
 const WHITE: f64 = 60_000.0;
-const BRACKET: [f64; 7] = [1.0 / 100.0, 1.0 / 50.0, 1.0 / 25.0, 1.0 / 13.0, 1.0 / 8.0, 1.0 / 4.0, 1.0 / 2.0];
+const BRACKET: [f64; 7] = [
+    1.0 / 100.0,
+    1.0 / 50.0,
+    1.0 / 25.0,
+    1.0 / 13.0,
+    1.0 / 8.0,
+    1.0 / 4.0,
+    1.0 / 2.0,
+];
 
 /// Deterministic standard normal deviates (xorshift64* + Box–Muller).
 struct Noise(u64);
@@ -55,26 +65,43 @@ fn sidecar(shutter_s: f64, response: Response) -> Sidecar {
 }
 
 /// A linear raw frame of `radiance` with shot and read noise from `noise`.
-fn linear_frame(shutter_s: f64, noise: &NoiseModel, rng: &mut Noise, scene: impl Fn(usize, usize, usize) -> f64) -> Frame {
+fn linear_frame(
+    shutter_s: f64,
+    noise: &NoiseModel,
+    rng: &mut Noise,
+    scene: impl Fn(usize, usize, usize) -> f64,
+) -> Frame {
     let mut data = Vec::with_capacity(W * H * 3);
     for y in 0..H {
         for x in 0..W {
             for c in 0..3 {
                 let s = scene(x, y, c) * shutter_s;
-                let sigma = (s / noise.full_well_electrons + noise.read_noise * noise.read_noise).sqrt();
+                let sigma =
+                    (s / noise.full_well_electrons + noise.read_noise * noise.read_noise).sqrt();
                 let signal = s + sigma * rng.normal();
                 let count = BLACK + signal * (WHITE - BLACK);
                 data.push(count.round().clamp(0.0, 65_535.0) as u16);
             }
         }
     }
-    Frame::from_counts(PathBuf::from(format!("t{shutter_s}.tiff")), sidecar(shutter_s, Response::Linear), W, H, data, 65_535.0).unwrap()
+    Frame::from_counts(
+        PathBuf::from(format!("t{shutter_s}.tiff")),
+        sidecar(shutter_s, Response::Linear),
+        W,
+        H,
+        data,
+        65_535.0,
+    )
+    .unwrap()
 }
 
 fn bracket(shutters: &[f64], scene: impl Fn(usize, usize, usize) -> f64 + Copy) -> Vec<Frame> {
     let mut rng = Noise(0x9e37_79b9_7f4a_7c15);
     let noise = NoiseModel::default();
-    shutters.iter().map(|&t| linear_frame(t, &noise, &mut rng, scene)).collect()
+    shutters
+        .iter()
+        .map(|&t| linear_frame(t, &noise, &mut rng, scene))
+        .collect()
 }
 
 #[test]
@@ -86,13 +113,16 @@ fn linear_bracket_merges_back_to_the_known_radiance_within_the_noise() {
     let mut worst_z: f64 = 0.0;
     for y in 0..H {
         for x in 0..W {
-            let got = merged.pixel(x, y);
-            for c in 0..3 {
+            for (c, got) in merged.pixel(x, y).into_iter().enumerate() {
                 let truth = radiance(x, y, c);
                 // Noise of the best single frame bounds the merged noise from above.
-                let t = BRACKET.iter().copied().filter(|&t| truth * t <= 0.98).fold(0.0, f64::max);
+                let t = BRACKET
+                    .iter()
+                    .copied()
+                    .filter(|&t| truth * t <= 0.98)
+                    .fold(0.0, f64::max);
                 let sigma = single_frame_sigma(truth, t);
-                worst_z = worst_z.max((f64::from(got[c]) - truth).abs() / sigma);
+                worst_z = worst_z.max((f64::from(got) - truth).abs() / sigma);
             }
         }
     }
@@ -138,10 +168,16 @@ fn single_exposure_merges_linearly_and_is_refused_by_debevec_malik() {
         method: MergeMethod::DebevecMalik,
         ..MergeOptions::default()
     };
-    assert!(matches!(hdr::merge(&frames, &dm), Err(HdrError::SingleExposure)));
+    assert!(matches!(
+        hdr::merge(&frames, &dm),
+        Err(HdrError::SingleExposure)
+    ));
     // Two frames of the same exposure are still a single exposure.
     let same = bracket(&[0.05, 0.05], |_, _, _| 4.0);
-    assert!(matches!(hdr::merge(&same, &dm), Err(HdrError::SingleExposure)));
+    assert!(matches!(
+        hdr::merge(&same, &dm),
+        Err(HdrError::SingleExposure)
+    ));
 }
 
 #[test]
@@ -174,14 +210,26 @@ fn all_black_is_flagged_as_zero() {
 fn brackets_that_do_not_belong_together_are_refused() {
     let mut frames = bracket(&[0.01, 0.02], radiance);
     frames[1].sidecar.theta_l = -35.0;
-    assert!(matches!(hdr::merge(&frames, &MergeOptions::default()), Err(HdrError::ThetaMismatch { .. })));
+    assert!(matches!(
+        hdr::merge(&frames, &MergeOptions::default()),
+        Err(HdrError::ThetaMismatch { .. })
+    ));
     let mut frames = bracket(&[0.01, 0.02], radiance);
     frames[1].sidecar.response = Response::Nonlinear;
-    assert!(matches!(hdr::merge(&frames, &MergeOptions::default()), Err(HdrError::MixedResponse { .. })));
+    assert!(matches!(
+        hdr::merge(&frames, &MergeOptions::default()),
+        Err(HdrError::MixedResponse { .. })
+    ));
     let mut frames = bracket(&[0.01, 0.02], radiance);
     frames[1].width = W / 2;
-    assert!(matches!(hdr::merge(&frames, &MergeOptions::default()), Err(HdrError::SizeMismatch { .. })));
-    assert!(matches!(hdr::merge(&[], &MergeOptions::default()), Err(HdrError::NoFrames)));
+    assert!(matches!(
+        hdr::merge(&frames, &MergeOptions::default()),
+        Err(HdrError::SizeMismatch { .. })
+    ));
+    assert!(matches!(
+        hdr::merge(&[], &MergeOptions::default()),
+        Err(HdrError::NoFrames)
+    ));
 }
 
 /// 8-bit frames through a gamma-like response: the recovered radiance must be
@@ -189,7 +237,9 @@ fn brackets_that_do_not_belong_together_are_refused() {
 #[test]
 fn debevec_malik_recovers_radiance_up_to_scale() {
     let shutters = [1.0 / 64.0, 1.0 / 16.0, 1.0 / 4.0, 1.0];
-    let scene = |x: usize, y: usize, c: usize| 0.01 * 10f64.powf(2.5 * (x + W * y) as f64 / (W * H - 1) as f64) * [1.0, 0.7, 0.5][c];
+    let scene = |x: usize, y: usize, c: usize| {
+        0.01 * 10f64.powf(2.5 * (x + W * y) as f64 / (W * H - 1) as f64) * [1.0, 0.7, 0.5][c]
+    };
     let frames: Vec<Frame> = shutters
         .iter()
         .map(|&t| {
@@ -229,7 +279,9 @@ fn exr_holds_the_radiance_and_exposure_metadata() {
     let image = exr::prelude::read_first_rgba_layer_from_file(
         &path,
         |size, _| vec![[0f32; 3]; size.width() * size.height()],
-        |pixels, position, (r, g, b, _): (f32, f32, f32, f32)| pixels[position.y() * W + position.x()] = [r, g, b],
+        |pixels, position, (r, g, b, _): (f32, f32, f32, f32)| {
+            pixels[position.y() * W + position.x()] = [r, g, b]
+        },
     )
     .unwrap();
     let pixels = &image.layer_data.channel_data.pixels;
@@ -239,11 +291,17 @@ fn exr_holds_the_radiance_and_exposure_metadata() {
     }
     let attributes = &image.layer_data.attributes;
     assert_eq!(attributes.exposure, Some(1.0));
-    assert_eq!(attributes.other.get(&Text::from("gonio.thetaL")), Some(&AttributeValue::F64(-30.0)));
+    assert_eq!(
+        attributes.other.get(&Text::from("gonio.thetaL")),
+        Some(&AttributeValue::F64(-30.0))
+    );
     assert_eq!(
         attributes.other.get(&Text::from("gonio.shutterS")),
         Some(&AttributeValue::Text(Text::from("0.02,0.08")))
     );
     let missing_dir = dir.path().join("no/such/dir/map.exr");
-    assert!(matches!(merged.write_exr(&missing_dir), Err(HdrError::Exr { .. })));
+    assert!(matches!(
+        merged.write_exr(&missing_dir),
+        Err(HdrError::Exr { .. })
+    ));
 }

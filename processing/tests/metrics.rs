@@ -10,7 +10,10 @@ fn loss_is_the_sum_of_euclidean_distances() {
     assert_eq!(loss(&measured, &estimated).unwrap(), 7.0);
     assert!(matches!(
         loss(&measured, &estimated[..1]),
-        Err(MetricsError::LengthMismatch { measured: 2, estimated: 1 })
+        Err(MetricsError::LengthMismatch {
+            measured: 2,
+            estimated: 1
+        })
     ));
 }
 
@@ -33,7 +36,10 @@ fn err_p_per_channel() {
 fn uv_prime_of_known_whites() {
     // D65 white XYZ (95.047, 100, 108.883): u′ = 0.1978, v′ = 0.4683.
     let [u, v] = uv_prime([95.047, 100.0, 108.883]).unwrap();
-    assert!((u - 0.19784).abs() < 1e-4 && (v - 0.46834).abs() < 1e-4, "{u} {v}");
+    assert!(
+        (u - 0.19784).abs() < 1e-4 && (v - 0.46834).abs() < 1e-4,
+        "{u} {v}"
+    );
     // Equal-energy white: u′ = 4/19, v′ = 9/19.
     let [u, v] = uv_prime([1.0, 1.0, 1.0]).unwrap();
     assert!((u - 4.0 / 19.0).abs() < 1e-15 && (v - 9.0 / 19.0).abs() < 1e-15);
@@ -46,10 +52,15 @@ fn delta_e_uv_is_the_mean_relative_chromaticity_difference() {
     assert_eq!(delta_e_uv_point(white, [2.0, 2.0, 2.0]), Some(0.0));
     // X doubled: denominator 20, u′ = 8/20, v′ = 9/20.
     let d = delta_e_uv_point(white, [2.0, 1.0, 1.0]).unwrap();
-    let expected = (8.0 / 20.0 - 4.0 / 19.0) / (4.0 / 19.0) + (9.0 / 19.0 - 9.0 / 20.0) / (9.0 / 19.0);
+    let expected =
+        (8.0 / 20.0 - 4.0 / 19.0) / (4.0 / 19.0) + (9.0 / 19.0 - 9.0 / 20.0) / (9.0 / 19.0);
     assert!((d - expected).abs() < 1e-12);
     // The black point is left out of the mean.
-    let mean = delta_e_uv(&[white, white, [0.0; 3]], &[white, [2.0, 1.0, 1.0], [0.0; 3]]).unwrap();
+    let mean = delta_e_uv(
+        &[white, white, [0.0; 3]],
+        &[white, [2.0, 1.0, 1.0], [0.0; 3]],
+    )
+    .unwrap();
     assert!((mean - expected / 2.0).abs() < 1e-12);
     assert_eq!(
         delta_e_uv(&[[0.0; 3]], &[[0.0; 3]]),

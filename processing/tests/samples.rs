@@ -49,7 +49,10 @@ fn malformed_rows_name_their_line() {
     let text = "theta_l,theta_i,theta_r,r,g,b\n-20,-25,5,1,2,3\n-20,-26,x,1,2,3\n";
     let err = read_csv_from(text.as_bytes()).unwrap_err();
     let message = err.to_string();
-    assert!(message.contains("line 3") && message.contains("theta_r"), "{message}");
+    assert!(
+        message.contains("line 3") && message.contains("theta_r"),
+        "{message}"
+    );
 
     let short = "theta_l,theta_i,theta_r,r,g,b\n-20,-25,5,1,2,3\n-20,-25,5,1,2,3\n-20,1\n";
     let message = read_csv_from(short.as_bytes()).unwrap_err().to_string();
@@ -60,7 +63,10 @@ fn malformed_rows_name_their_line() {
 fn non_finite_values_are_rejected() {
     let text = "theta_l,theta_i,theta_r,r,g,b\n-20,-25,5,NaN,2,3\n";
     let message = read_csv_from(text.as_bytes()).unwrap_err().to_string();
-    assert!(message.contains("line 2") && message.contains("`r`"), "{message}");
+    assert!(
+        message.contains("line 2") && message.contains("`r`"),
+        "{message}"
+    );
     let text = "theta_l,theta_i,theta_r,r,g,b\n-20,-25,5,1,inf,3\n";
     assert!(read_csv_from(text.as_bytes()).is_err());
 }

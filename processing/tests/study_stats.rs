@@ -12,13 +12,20 @@ fn six_directions_give_63_distinct_combinations_binomially_sized() {
     assert_eq!(all.len(), 63);
     for k in 1..=6 {
         let expected = [6, 15, 20, 15, 6, 1][k - 1];
-        assert_eq!(all.iter().filter(|c| c.len() == k).count(), expected, "size {k}");
+        assert_eq!(
+            all.iter().filter(|c| c.len() == k).count(),
+            expected,
+            "size {k}"
+        );
     }
     let mut keys: Vec<String> = all.iter().map(|c| format!("{c:?}")).collect();
     keys.sort();
     keys.dedup();
     assert_eq!(keys.len(), 63, "combinations are distinct");
-    assert!(all.iter().all(|c| c.windows(2).all(|w| w[0] > w[1])), "members keep input order");
+    assert!(
+        all.iter().all(|c| c.windows(2).all(|w| w[0] > w[1])),
+        "members keep input order"
+    );
 }
 
 #[test]
@@ -76,6 +83,7 @@ fn figures_are_written_as_svg_with_their_labels() {
         x_label: "time (s)".into(),
         y_label: "error".into(),
         log_x: true,
+        log_y: false,
         series: vec![
             XySeries {
                 name: "settings".into(),
@@ -104,6 +112,7 @@ fn figure_into_a_missing_directory_is_an_error_naming_the_file() {
         x_label: "x".into(),
         y_label: "y".into(),
         log_x: false,
+        log_y: false,
         series: vec![],
     };
     let err = xy_svg(&path, &plot).unwrap_err();

@@ -207,8 +207,8 @@ impl Daemon {
     }
 
     fn request(&self, method: &str, path: &str, token: Option<&str>, body: Option<&str>) -> Answer {
-        let mut request = ureq::request(method, &format!("{}{path}", self.url))
-            .timeout(Duration::from_secs(30));
+        let mut request =
+            ureq::request(method, &format!("{}{path}", self.url)).timeout(Duration::from_secs(30));
         if let Some(token) = token {
             request = request.set("Authorization", &format!("Bearer {token}"));
         }

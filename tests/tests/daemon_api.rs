@@ -30,7 +30,11 @@ fn mutating_routes_need_the_token_and_change_nothing_without_it() {
     ] {
         assert_eq!(daemon.post_raw(path, None, "{}").status, 401, "{path}");
     }
-    assert_eq!(scan_count(&daemon), 0, "nothing may be queued without the token");
+    assert_eq!(
+        scan_count(&daemon),
+        0,
+        "nothing may be queued without the token"
+    );
     assert_eq!(
         daemon.get("/api/sweeps").json,
         json!([]),
@@ -52,7 +56,10 @@ fn every_invalid_field_gets_422_naming_it_and_nothing_is_queued() {
         (json!({"sample": "", "theta_l": [-20]}), "sample"),
         (json!({"sample": "gold"}), "theta_l"),
         (json!({"sample": "gold", "theta_l": []}), "theta_l"),
-        (json!({"sample": "gold", "theta_l": [-20, 15]}), "theta_l[1]"),
+        (
+            json!({"sample": "gold", "theta_l": [-20, 15]}),
+            "theta_l[1]",
+        ),
         (json!({"sample": "gold", "theta_l": [-95]}), "theta_l[0]"),
         (json!({"sample": "gold", "theta_l": ["x"]}), "theta_l[0]"),
         (
@@ -71,7 +78,10 @@ fn every_invalid_field_gets_422_naming_it_and_nothing_is_queued() {
             json!({"sample": "gold", "theta_l": [-20], "bracket": "sometimes"}),
             "bracket",
         ),
-        (json!({"sample": "gold", "theta_l": [-20], "extra": 1}), "extra"),
+        (
+            json!({"sample": "gold", "theta_l": [-20], "extra": 1}),
+            "extra",
+        ),
     ];
     for (body, field) in cases {
         let answer = daemon.post("/api/scans", &body);
@@ -93,8 +103,15 @@ fn every_invalid_field_gets_422_naming_it_and_nothing_is_queued() {
         "{{\"sample\":\"gold\",\"theta_l\":[-20],\"pad\":\"{}\"}}",
         "x".repeat(200_000)
     );
-    assert_eq!(daemon.post_raw("/api/scans", Some(TOKEN), &huge).status, 413);
-    assert_eq!(scan_count(&daemon), 0, "an invalid request must queue nothing");
+    assert_eq!(
+        daemon.post_raw("/api/scans", Some(TOKEN), &huge).status,
+        413
+    );
+    assert_eq!(
+        scan_count(&daemon),
+        0,
+        "an invalid request must queue nothing"
+    );
     std::fs::remove_dir_all(dir).ok();
 }
 
@@ -102,7 +119,8 @@ fn every_invalid_field_gets_422_naming_it_and_nothing_is_queued() {
 fn concurrent_scans_run_one_after_the_other_and_controls_work() {
     let dir = temp_dir("api-queue");
     let daemon = Daemon::start(&dir, &emulator_config(0.01));
-    let body = json!({"sample": "gold", "theta_l": [-20, -30], "bracket": {"shutter_s": [0.5, 0.05]}});
+    let body =
+        json!({"sample": "gold", "theta_l": [-20, -30], "bracket": {"shutter_s": [0.5, 0.05]}});
     let ids: Vec<i64> = std::thread::scope(|s| {
         let posts: Vec<_> = (0..2)
             .map(|_| s.spawn(|| daemon.post("/api/scans", &body)))
@@ -117,7 +135,9 @@ fn concurrent_scans_run_one_after_the_other_and_controls_work() {
             .collect()
     });
     // A third scan, paused while queued, then cancelled: it never runs.
-    let third = daemon.post("/api/scans", &body).json["id"].as_i64().unwrap();
+    let third = daemon.post("/api/scans", &body).json["id"]
+        .as_i64()
+        .unwrap();
     let paused = daemon.post(&format!("/api/scans/{third}/pause"), &json!({}));
     assert_eq!(paused.status, 200, "{:?}", paused.json);
     assert_eq!(paused.json["state"], "paused");
@@ -137,8 +157,12 @@ fn concurrent_scans_run_one_after_the_other_and_controls_work() {
         .iter()
         .filter_map(|e| e["scan_id"].as_i64())
         .collect();
-    let last_first = scan_of.iter().rposition(|s| *s == first["id"].as_i64().unwrap());
-    let first_second = scan_of.iter().position(|s| *s == second["id"].as_i64().unwrap());
+    let last_first = scan_of
+        .iter()
+        .rposition(|s| *s == first["id"].as_i64().unwrap());
+    let first_second = scan_of
+        .iter()
+        .position(|s| *s == second["id"].as_i64().unwrap());
     assert!(
         last_first.unwrap() < first_second.unwrap(),
         "scans interleaved: {scan_of:?}"
@@ -189,7 +213,10 @@ fn page_and_openapi_are_served() {
         "/api/sweeps",
         "/api/arm/stop",
     ] {
-        assert!(spec["paths"][path].is_object(), "{path} missing from OpenAPI");
+        assert!(
+            spec["paths"][path].is_object(),
+            "{path} missing from OpenAPI"
+        );
     }
     std::fs::remove_dir_all(dir).ok();
 }

@@ -1,9 +1,68 @@
-//! `gonio extract` (to be written).
+//! `gonio extract`: the captures of a scan → samples CSV.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use gonio_processing::extract::{self, ExtractOptions};
+use gonio_processing::samples;
+use indicatif::{ProgressBar, ProgressStyle};
 
 /// Arguments of `gonio extract`.
 #[derive(clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// Scan directory: setup.json plus captures (TIFF or camera raw with .json sidecars).
+    dir: PathBuf,
+    /// Output samples CSV (theta_l,theta_i,theta_r,r,g,b; β in camera RGB).
+    #[arg(long)]
+    out: PathBuf,
+    /// Reflectance of the white reference (1 = perfect reflecting diffuser).
+    #[arg(long, default_value_t = 1.0)]
+    white_reflectance: f64,
+    /// Drop points with |θi| or |θr| above this many degrees.
+    #[arg(long, default_value_t = 80.0)]
+    grazing_limit: f64,
+    /// Also write each θL's radiance map there as theta_l_<θL>.exr.
+    #[arg(long)]
+    hdr_dir: Option<PathBuf>,
+}
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("gonio extract is not available in this build yet")
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let options = ExtractOptions {
+        white_reflectance: args.white_reflectance,
+        grazing_limit_deg: args.grazing_limit,
+        hdr_dir: args.hdr_dir,
+        ..ExtractOptions::default()
+    };
+    let bar = ProgressBar::new(0).with_style(
+        ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} θL, {elapsed}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    bar.set_message("extracting");
+    let extraction = extract::extract_scan_with_progress(&args.dir, &options, |done, total| {
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+    });
+    bar.finish_and_clear();
+    let extraction = extraction?;
+    samples::write_csv(&args.out, &extraction.samples)
+        .with_context(|| format!("writing {}", args.out.display()))?;
+    let d = extraction.dropped;
+    println!(
+        "wrote {} samples from {} θL to {} (columns dropped: {} off the cylinder or unlit, {} grazing, {} saturated, {} dark white)",
+        extraction.samples.len(),
+        extraction.per_theta.len(),
+        args.out.display(),
+        d.off_cylinder,
+        d.grazing,
+        d.saturated,
+        d.dark_white,
+    );
+    if !extraction.skipped_without_sidecar.is_empty() {
+        eprintln!(
+            "warning: skipped {} image files without a .json sidecar (first: {})",
+            extraction.skipped_without_sidecar.len(),
+            extraction.skipped_without_sidecar[0].display()
+        );
+    }
+    Ok(())
 }

@@ -1,9 +1,127 @@
-//! `gonio fit` (to be written).
+//! `gonio fit`: a samples CSV → the fit JSON of one reflection model.
+
+use std::path::PathBuf;
+
+use anyhow::{bail, Context};
+use clap::ValueEnum;
+use gonio_processing::brdf::{Model, Roughness};
+use gonio_processing::fit::{self, FitMethod, FitOptions};
+use gonio_processing::samples::{self, Sample};
+
+/// Two θL values closer than this (degrees) are the same illumination direction.
+const THETA_L_MATCH_DEG: f64 = 1e-6;
+
+/// Reflection model to fit.
+#[derive(Clone, Copy, ValueEnum)]
+enum ModelArg {
+    CookTorrance,
+    Ward,
+}
+
+/// One roughness for all channels or one per channel.
+#[derive(Clone, Copy, ValueEnum)]
+enum RoughnessArg {
+    Shared,
+    PerChannel,
+}
+
+/// Minimisation method.
+#[derive(Clone, Copy, ValueEnum)]
+enum MethodArg {
+    /// Exact Kd, Ks at each roughness plus a global search over log m.
+    Robust,
+    /// Downhill simplex over all parameters (the paper's method).
+    NelderMead,
+}
 
 /// Arguments of `gonio fit`.
 #[derive(clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// Samples CSV (theta_l,theta_i,theta_r,r,g,b; degrees, β in camera RGB).
+    samples: PathBuf,
+    /// Reflection model.
+    #[arg(long, value_enum)]
+    model: ModelArg,
+    /// Roughness m shared by R, G, B or one per channel.
+    #[arg(long, value_enum, default_value = "shared")]
+    roughness: RoughnessArg,
+    /// Minimisation method of the eq. 10 loss.
+    #[arg(long, value_enum, default_value = "robust")]
+    method: MethodArg,
+    /// Fit only the samples of these θL (degrees, comma-separated, e.g. -20,-25).
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+    theta_l: Vec<f64>,
+    /// Polish the robust fit with Nelder–Mead over all parameters.
+    #[arg(long)]
+    polish: bool,
+    /// Output fit JSON.
+    #[arg(long)]
+    out: PathBuf,
+}
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("gonio fit is not available in this build yet")
+/// The samples whose θL is one of `wanted` (all when empty); an unknown θL is an error.
+fn select_theta_l(all: Vec<Sample>, wanted: &[f64]) -> anyhow::Result<Vec<Sample>> {
+    if wanted.is_empty() {
+        return Ok(all);
+    }
+    let same = |a: f64, b: f64| (a - b).abs() < THETA_L_MATCH_DEG;
+    let mut present: Vec<f64> = Vec::new();
+    for s in &all {
+        if !present.iter().any(|&p| same(p, s.theta_l)) {
+            present.push(s.theta_l);
+        }
+    }
+    for &w in wanted {
+        if !w.is_finite() {
+            bail!("--theta-l {w} is not a finite angle");
+        }
+        if !present.iter().any(|&p| same(p, w)) {
+            let list: Vec<String> = present.iter().map(|p| p.to_string()).collect();
+            bail!(
+                "θL {w} is not in the samples (present: {})",
+                list.join(", ")
+            );
+        }
+    }
+    Ok(all
+        .into_iter()
+        .filter(|s| wanted.iter().any(|&w| same(w, s.theta_l)))
+        .collect())
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let all = samples::read_csv(&args.samples)?;
+    let selected = select_theta_l(all, &args.theta_l)?;
+    let mut options = FitOptions::new(match args.model {
+        ModelArg::CookTorrance => Model::CookTorrance,
+        ModelArg::Ward => Model::Ward,
+    });
+    options.roughness = match args.roughness {
+        RoughnessArg::Shared => Roughness::Shared,
+        RoughnessArg::PerChannel => Roughness::PerChannel,
+    };
+    options.method = match args.method {
+        MethodArg::Robust => FitMethod::Robust,
+        MethodArg::NelderMead => FitMethod::NelderMead,
+    };
+    options.robust.polish = args.polish;
+    let result = fit::fit(&selected, &options)
+        .with_context(|| format!("fitting {}", args.samples.display()))?;
+    let json = serde_json::to_string_pretty(&result).context("serialising the fit")?;
+    std::fs::write(&args.out, json + "\n")
+        .with_context(|| format!("writing {}", args.out.display()))?;
+    let m = result.params().m;
+    println!(
+        "{} ({}, {}) on {} samples: loss {:.6}, m = {:?}, {} evaluations in {:.3} s -> {}",
+        result.model,
+        result.roughness,
+        result.method,
+        selected.len(),
+        result.loss,
+        &m[..options.roughness.count()],
+        result.evaluations,
+        result.seconds,
+        args.out.display(),
+    );
+    Ok(())
 }

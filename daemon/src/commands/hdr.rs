@@ -1,9 +1,62 @@
-//! `gonio hdr` (to be written).
+//! `gonio hdr`: merge a bracket of exposures into an OpenEXR radiance map.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use gonio_processing::capture::Frame;
+use gonio_processing::hdr::{self, MergeMethod, MergeOptions, SATURATED, UNDEREXPOSED};
+
+/// Merge method on the command line.
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum Method {
+    /// Linear merge for linear frames, Debevec–Malik for `"response":"nonlinear"` ones.
+    Auto,
+    /// Noise-weighted merge of linear counts.
+    Linear,
+    /// Debevec–Malik response recovery and merge.
+    DebevecMalik,
+}
 
 /// Arguments of `gonio hdr`.
 #[derive(clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// Output OpenEXR file (float32 RGB, exposure metadata in attributes).
+    #[arg(long)]
+    out: PathBuf,
+    /// Merge method.
+    #[arg(long, value_enum, default_value = "auto")]
+    method: Method,
+    /// Frames of one bracket: TIFF or camera raw files, each with a .json sidecar.
+    #[arg(required = true)]
+    frames: Vec<PathBuf>,
+}
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("gonio hdr is not available in this build yet")
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let frames = args
+        .frames
+        .iter()
+        .map(|path| Frame::read(path))
+        .collect::<Result<Vec<_>, _>>()?;
+    let options = MergeOptions {
+        method: match args.method {
+            Method::Auto => MergeMethod::Auto,
+            Method::Linear => MergeMethod::Linear,
+            Method::DebevecMalik => MergeMethod::DebevecMalik,
+        },
+        ..MergeOptions::default()
+    };
+    let map = hdr::merge(&frames, &options)?;
+    map.write_exr(&args.out)
+        .with_context(|| format!("writing {}", args.out.display()))?;
+    println!(
+        "merged {} frames ({}, {}×{}) into {}: {} saturated, {} underexposed pixels flagged",
+        frames.len(),
+        map.info.method,
+        map.width,
+        map.height,
+        args.out.display(),
+        map.count_flagged(SATURATED),
+        map.count_flagged(UNDEREXPOSED),
+    );
+    Ok(())
 }

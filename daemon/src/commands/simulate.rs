@@ -25,6 +25,9 @@ pub struct Args {
     /// Seed of the noise and hot-pixel positions, instead of the scene's.
     #[arg(long)]
     pub seed: Option<u64>,
+    /// Bin the sensor N×N (image size divided by N) for fast previews and tests.
+    #[arg(long, default_value_t = 1)]
+    pub binning: u32,
 }
 
 /// A built-in scene by name, otherwise a scene file.
@@ -48,6 +51,9 @@ fn write_json(path: &Path, value: &serde_json::Value) -> anyhow::Result<()> {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let mut scene = load_scene(&args.scene)?;
+    if args.binning != 1 {
+        scene = scene.binned(args.binning).context("--binning")?;
+    }
     if let Some(theta_l) = args.theta_l {
         scene.set_theta_l_deg(theta_l).context("--theta-l")?;
     }

@@ -1,9 +1,129 @@
-//! `gonio study` (to be written).
+//! `gonio study`: fit every non-empty combination of the θL in a samples CSV with both
+//! models, score each fit against a reference, and write the tables and the paper's
+//! figures (see `gonio_processing::study`).
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use gonio_processing::brdf::{Model, Roughness};
+use gonio_processing::color::CameraModel;
+use gonio_processing::reference::Reference;
+use gonio_processing::samples;
+use gonio_processing::study::{self, StudyOptions, Variant};
+
+/// Which roughness forms a study fits.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum RoughnessChoice {
+    /// One m shared by R, G, B (paper eq. 6, 7).
+    Shared,
+    /// One m per channel (paper eq. 8, 9), for goniochromatic samples.
+    PerChannel,
+    /// Both forms: the comparison the paper makes for its goniochromatic sample.
+    Both,
+}
+
+impl RoughnessChoice {
+    fn forms(self) -> &'static [Roughness] {
+        match self {
+            RoughnessChoice::Shared => &[Roughness::Shared],
+            RoughnessChoice::PerChannel => &[Roughness::PerChannel],
+            RoughnessChoice::Both => &[Roughness::Shared, Roughness::PerChannel],
+        }
+    }
+}
 
 /// Arguments of `gonio study`.
 #[derive(clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// Samples CSV (`theta_l,theta_i,theta_r,r,g,b`).
+    pub samples: PathBuf,
+    /// Reference CSV (`theta_i,theta_r,390,...,730` spectral radiance factor).
+    #[arg(long)]
+    pub reference: PathBuf,
+    /// Output directory for the tables and figures (created if missing).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Models to fit, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "cook-torrance,ward")]
+    pub models: Vec<Model>,
+    /// Roughness forms to fit: `both` for a goniochromatic sample.
+    #[arg(long, value_enum, default_value_t = RoughnessChoice::Shared)]
+    pub roughness: RoughnessChoice,
+    /// Skip the Nelder–Mead comparison (local-minimum count).
+    #[arg(long)]
+    pub no_nelder_mead: bool,
+    /// Relative loss excess over the robust fit at which a Nelder–Mead fit counts as a
+    /// local minimum.
+    #[arg(long, default_value_t = 1e-3)]
+    pub local_minimum_margin: f64,
+    /// Fit on every N-th sample of each θL (pixel-column stride); scores use all samples.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
+    pub stride: u32,
+}
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("gonio study is not available in this build yet")
+pub fn run(args: Args) -> anyhow::Result<()> {
+    if !(args.local_minimum_margin.is_finite() && args.local_minimum_margin >= 0.0) {
+        anyhow::bail!(
+            "--local-minimum-margin must be a finite number ≥ 0, got {}",
+            args.local_minimum_margin
+        );
+    }
+    let samples = samples::read_csv(&args.samples)
+        .with_context(|| format!("reading samples {}", args.samples.display()))?;
+    let reference = Reference::read_csv(&args.reference)
+        .with_context(|| format!("reading reference {}", args.reference.display()))?;
+    let mut variants = Vec::new();
+    for &model in &args.models {
+        for &roughness in args.roughness.forms() {
+            let variant = Variant { model, roughness };
+            if !variants.contains(&variant) {
+                variants.push(variant);
+            }
+        }
+    }
+    let options = StudyOptions {
+        variants,
+        compare_nelder_mead: !args.no_nelder_mead,
+        local_minimum_margin: args.local_minimum_margin,
+        stride: args.stride as usize,
+    };
+    let report = study::run_study(&samples, &reference, &CameraModel::builtin(), &options)
+        .with_context(|| format!("studying {}", args.samples.display()))?;
+    let written = study::write_outputs(&report, &args.out)?;
+
+    println!(
+        "{} θL, {} combinations × {} variants = {} fits on {} samples, scored at {} points in {:.2} s",
+        report.theta_l.len(),
+        report.results.len() / options.variants.len(),
+        options.variants.len(),
+        report.results.len(),
+        samples.len(),
+        report.points.len(),
+        report.seconds
+    );
+    println!("variant  n_θL  median ΔErr_p(G)  median ΔE_u′v′  NM above robust");
+    for g in report.summary() {
+        let median = |b: &Option<study::boxplot::BoxStats>| {
+            b.as_ref()
+                .map_or("-".to_string(), |b| format!("{:.4}", b.median))
+        };
+        println!(
+            "{:<26} {:>2}  {:>8}  {:>8}  {}/{}{}",
+            g.variant.label(),
+            g.size,
+            median(&g.err_p[1]),
+            median(&g.delta_e_uv),
+            g.nelder_mead_above,
+            g.nelder_mead_compared,
+            if g.failed > 0 {
+                format!("  ({} fits failed)", g.failed)
+            } else {
+                String::new()
+            }
+        );
+    }
+    for path in written {
+        println!("wrote {}", path.display());
+    }
+    Ok(())
 }

@@ -1,9 +1,446 @@
-//! `gonio tradeoff` (to be written).
+//! `gonio tradeoff`: what accuracy costs in time for one scene.
+//!
+//! One simulated scan of the scene (rendered here, or reused with `--scan`) is cut
+//! into cheaper scans: the first n of the θL spread over the scanned range, b of the
+//! bracket's exposures spread over its range (longest and shortest kept for b ≥ 2, the
+//! middle one for b = 1), every s-th pixel column, and a fit method. For each setting:
+//! - acquisition time from the hardware timing model ([`timing`]): arm travel from home
+//!   through the θL under the GRBL trapezoidal profile, and per θL each exposure plus
+//!   the camera's download latency;
+//! - processing time, measured: HDR merge + extraction of each θL used (with that
+//!   bracket; whole image columns, so the stride does not shorten it) plus the fit on
+//!   the strided samples. Rendering is simulation, not processing, and is not counted;
+//! - accuracy against the scene's truth: ΔErr_p per channel (eq. 11, truth as the
+//!   measurement) at the angles of the full scan, and relative Kd, Ks, m errors when the
+//!   fitted model is the truth's.
+//!
+//! Outputs in OUT: `tradeoff.csv` (one row per setting), `pareto.svg` (total time
+//! against ΔErr_p(G), the Pareto front drawn), `tradeoff.json` (the recommended setting:
+//! the cheapest one within 10 % of the best ΔErr_p(G) reached, and the extraction times).
+
+mod scan;
+mod timing;
+mod truth;
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::Context;
+use gonio_mock_hw::scene::Scene;
+use gonio_processing::brdf::{Model, Roughness};
+use gonio_processing::extract::ExtractOptions;
+use gonio_processing::fit::{self, FitMethod, FitOptions, FitResult};
+use gonio_processing::metrics;
+use gonio_processing::samples::Sample;
+use gonio_processing::study::figures::{xy_svg, Mark, XyPlot, XySeries};
+use gonio_processing::study::{pareto::pareto_front, subsample};
+
+use scan::{discover, extract_subset, spread, Position};
+use timing::{AcquisitionTime, HardwareTiming};
+use truth::{parameter_errors, Truth, TruthPoints};
+
+/// A setting counts as good enough when its ΔErr_p(G) is within this factor of the best.
+const GOOD_ENOUGH: f64 = 1.10;
 
 /// Arguments of `gonio tradeoff`.
 #[derive(clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// Scene file (TOML), or a built-in scene: gold, red, blue-green.
+    #[arg(long)]
+    pub scene: String,
+    /// Output directory for the table and the figure (created if missing).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Reuse this `gonio simulate` scan of the scene instead of rendering one.
+    #[arg(long)]
+    pub scan: Option<PathBuf>,
+    /// When rendering the scan here: bin the sensor N×N (image size divided by N).
+    #[arg(long, default_value_t = 1, conflicts_with = "scan")]
+    pub binning: u32,
+    /// Model to fit; default: the scene's own when it is cook-torrance or ward, else
+    /// cook-torrance.
+    #[arg(long)]
+    pub model: Option<Model>,
+    /// Roughness form to fit; default: the scene's own, else shared.
+    #[arg(long)]
+    pub roughness: Option<Roughness>,
+    /// Pixel-column strides to try, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "1,4,16")]
+    pub strides: Vec<usize>,
+    /// Fit methods to try, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "robust,nelder-mead")]
+    pub methods: Vec<FitMethod>,
+}
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("gonio tradeoff is not available in this build yet")
+/// One scan setting and what it cost and reached.
+struct Row {
+    theta_l: Vec<f64>,
+    shutters_s: Vec<f64>,
+    stride: usize,
+    method: FitMethod,
+    points: usize,
+    acquisition: AcquisitionTime,
+    extract_s: f64,
+    fit_s: f64,
+    outcome: Result<Accuracy, String>,
+}
+
+struct Accuracy {
+    fit: FitResult,
+    err_p: [f64; 3],
+    /// Relative errors of Kd, Ks, m, when the fitted model is the truth's.
+    parameters: Option<[f64; 3]>,
+}
+
+impl Row {
+    fn processing_s(&self) -> f64 {
+        self.extract_s + self.fit_s
+    }
+
+    fn total_s(&self) -> f64 {
+        self.acquisition.total_s() + self.processing_s()
+    }
+
+    fn err_p_g(&self) -> Option<f64> {
+        self.outcome.as_ref().ok().map(|a| a.err_p[1])
+    }
+
+    fn label(&self) -> String {
+        format!(
+            "{} θL, {} exp, stride {}, {}",
+            self.theta_l.len(),
+            self.shutters_s.len(),
+            self.stride,
+            self.method
+        )
+    }
+}
+
+fn join(values: &[f64]) -> String {
+    values
+        .iter()
+        .map(|v| format!("{v}"))
+        .collect::<Vec<_>>()
+        .join(";")
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    if args.strides.is_empty() || args.strides.contains(&0) {
+        anyhow::bail!("--strides must list integers ≥ 1");
+    }
+    if args.methods.is_empty() {
+        anyhow::bail!("--methods must list at least one fit method");
+    }
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    // Holds a scan rendered here until the end of the run.
+    let rendered;
+    let scan_dir: PathBuf = match &args.scan {
+        Some(dir) => dir.clone(),
+        None => {
+            rendered = tempfile::Builder::new()
+                .prefix(".scan-")
+                .tempdir_in(&args.out)
+                .context("creating a scan directory")?;
+            super::simulate::run(super::simulate::Args {
+                scene: args.scene.clone(),
+                out: rendered.path().to_path_buf(),
+                theta_l: None,
+                seed: None,
+                binning: args.binning,
+            })?;
+            rendered.path().to_path_buf()
+        }
+    };
+    let truth = Truth::read(&scan_dir.join("truth.json"))?;
+    if Scene::builtin(&args.scene).is_some() && truth.scene != args.scene {
+        anyhow::bail!(
+            "{} is a scan of scene `{}`, not `{}`",
+            scan_dir.display(),
+            truth.scene,
+            args.scene
+        );
+    }
+    let positions = discover(&scan_dir)?;
+    let bracket_len = positions
+        .iter()
+        .map(|p| p.exposures.len())
+        .min()
+        .unwrap_or(1);
+    let model = args
+        .model
+        .or(truth.model.map(|(m, _, _)| m))
+        .unwrap_or(Model::CookTorrance);
+    let roughness = args
+        .roughness
+        .or(truth.model.map(|(_, r, _)| r))
+        .unwrap_or(Roughness::Shared);
+
+    let extracted = extract_all(&scan_dir, &args.out, &positions, bracket_len, &truth)?;
+    let full: Vec<Sample> = extracted[bracket_len - 1]
+        .iter()
+        .flat_map(|e| e.samples.iter().copied())
+        .collect();
+    let points = TruthPoints::new(&truth, &full, &scan_dir.join("reference.csv"))?;
+
+    let timing = HardwareTiming::default();
+    let mut rows = Vec::new();
+    for n in 1..=positions.len() {
+        let used: Vec<usize> = spread(positions.len(), n);
+        let theta_l: Vec<f64> = used.iter().map(|&i| positions[i].theta_l).collect();
+        for b in 1..=bracket_len {
+            let chosen = spread(bracket_len, b);
+            let shutters_s: Vec<f64> = chosen
+                .iter()
+                .map(|&i| positions[used[0]].exposures[i].shutter_s)
+                .collect();
+            let acquisition = timing.scan(&theta_l, &shutters_s);
+            let extract_s: f64 = used.iter().map(|&i| extracted[b - 1][i].seconds).sum();
+            for &stride in &args.strides {
+                let samples: Vec<Sample> = used
+                    .iter()
+                    .flat_map(|&i| subsample(&extracted[b - 1][i].samples, stride))
+                    .collect();
+                for &method in &args.methods {
+                    let mut options = FitOptions::new(model);
+                    options.roughness = roughness;
+                    options.method = method;
+                    let start = Instant::now();
+                    let fitted = fit::fit(&samples, &options);
+                    let fit_s = start.elapsed().as_secs_f64();
+                    let outcome = fitted.map_err(|e| e.to_string()).and_then(|fit| {
+                        let err_p = metrics::err_p(&points.beta, &points.predict(&fit))
+                            .map_err(|e| e.to_string())?;
+                        Ok(Accuracy {
+                            parameters: parameter_errors(&truth, &fit),
+                            fit,
+                            err_p,
+                        })
+                    });
+                    rows.push(Row {
+                        theta_l: theta_l.clone(),
+                        shutters_s: shutters_s.clone(),
+                        stride,
+                        method,
+                        points: samples.len(),
+                        acquisition,
+                        extract_s,
+                        fit_s,
+                        outcome,
+                    });
+                }
+            }
+        }
+    }
+    write_outputs(
+        &args.out, &truth, model, roughness, &rows, &extracted, &positions,
+    )
+}
+
+/// Extractions of every θL with every bracket length: `[b − 1][position]`.
+fn extract_all(
+    scan_dir: &Path,
+    out: &Path,
+    positions: &[Position],
+    bracket_len: usize,
+    truth: &Truth,
+) -> anyhow::Result<Vec<Vec<scan::Extracted>>> {
+    let work = tempfile::Builder::new()
+        .prefix(".extract-")
+        .tempdir_in(out)
+        .context("creating a work directory")?;
+    let options = ExtractOptions {
+        white_reflectance: truth.white_reflectance,
+        ..ExtractOptions::default()
+    };
+    let mut all = Vec::new();
+    for b in 1..=bracket_len {
+        let chosen = spread(bracket_len, b);
+        let mut row = Vec::new();
+        for (i, position) in positions.iter().enumerate() {
+            let dir = work.path().join(format!("b{b}_p{i}"));
+            row.push(extract_subset(scan_dir, &dir, position, &chosen, &options)?);
+        }
+        eprintln!(
+            "extracted {} θL with {b} of {bracket_len} exposures in {:.2} s",
+            positions.len(),
+            row.iter().map(|e| e.seconds).sum::<f64>()
+        );
+        all.push(row);
+    }
+    Ok(all)
+}
+
+fn write_outputs(
+    out: &Path,
+    truth: &Truth,
+    model: Model,
+    roughness: Roughness,
+    rows: &[Row],
+    extracted: &[Vec<scan::Extracted>],
+    positions: &[Position],
+) -> anyhow::Result<()> {
+    let costs: Vec<(f64, f64)> = rows
+        .iter()
+        .map(|r| (r.total_s(), r.err_p_g().unwrap_or(f64::NAN)))
+        .collect();
+    let front = pareto_front(&costs);
+    let best = rows
+        .iter()
+        .filter_map(Row::err_p_g)
+        .fold(f64::INFINITY, f64::min);
+    let recommended = front
+        .iter()
+        .copied()
+        .find(|&i| costs[i].1 <= GOOD_ENOUGH * best);
+
+    let mut csv = String::from(
+        "n_theta_l,theta_l,bracket,shutters_s,stride,method,points,acquisition_s,travel_s,capture_s,\
+         processing_s,extract_s,fit_s,total_s,err_p_r,err_p_g,err_p_b,kd_rel_err,ks_rel_err,m_rel_err,\
+         pareto,recommended,status\n",
+    );
+    for (i, r) in rows.iter().enumerate() {
+        let head = format!(
+            "{},{},{},{},{},{},{},{:.3},{:.3},{:.3},{:.4},{:.4},{:.4},{:.3}",
+            r.theta_l.len(),
+            join(&r.theta_l),
+            r.shutters_s.len(),
+            join(&r.shutters_s),
+            r.stride,
+            r.method,
+            r.points,
+            r.acquisition.total_s(),
+            r.acquisition.travel_s,
+            r.acquisition.capture_s,
+            r.processing_s(),
+            r.extract_s,
+            r.fit_s,
+            r.total_s()
+        );
+        let scores = match &r.outcome {
+            Ok(a) => {
+                let p = a.parameters.map_or(",,".to_string(), |p| {
+                    format!("{:.5},{:.5},{:.5}", p[0], p[1], p[2])
+                });
+                format!(
+                    "{:.5},{:.5},{:.5},{p},{},{},ok",
+                    a.err_p[0],
+                    a.err_p[1],
+                    a.err_p[2],
+                    front.contains(&i),
+                    recommended == Some(i)
+                )
+            }
+            Err(e) => format!(",,,,,,false,false,\"failed: {}\"", e.replace('"', "'")),
+        };
+        let _ = writeln!(csv, "{head},{scores}");
+    }
+    let csv_path = out.join("tradeoff.csv");
+    std::fs::write(&csv_path, csv).with_context(|| format!("writing {}", csv_path.display()))?;
+
+    let series_of = |method: FitMethod| XySeries {
+        name: format!("{method} fits"),
+        mark: Mark::Points,
+        segments: vec![rows
+            .iter()
+            .zip(&costs)
+            .filter(|(r, _)| r.method == method)
+            .map(|(_, &c)| c)
+            .collect()],
+    };
+    let mut series = vec![
+        XySeries {
+            name: "Pareto front".into(),
+            mark: Mark::Lines,
+            segments: vec![front.iter().map(|&i| costs[i]).collect()],
+        },
+        series_of(FitMethod::Robust),
+        series_of(FitMethod::NelderMead),
+    ];
+    if let Some(i) = recommended {
+        series.push(XySeries {
+            name: format!("recommended: {}", rows[i].label()),
+            mark: Mark::Highlight,
+            segments: vec![vec![costs[i]]],
+        });
+    }
+    let plot = XyPlot {
+        title: format!(
+            "{}: accuracy against scan + processing time ({} {})",
+            truth.scene, model, roughness
+        ),
+        x_label: "acquisition + processing time (s, log scale)".into(),
+        y_label: "ΔErr_p (G) against the truth (log scale)".into(),
+        log_x: true,
+        log_y: true,
+        series,
+    };
+    let svg_path = out.join("pareto.svg");
+    xy_svg(&svg_path, &plot)?;
+
+    let row_json = |r: &Row| {
+        serde_json::json!({
+            "theta_l": r.theta_l,
+            "shutters_s": r.shutters_s,
+            "stride": r.stride,
+            "method": r.method,
+            "acquisition_s": r.acquisition.total_s(),
+            "processing_s": r.processing_s(),
+            "total_s": r.total_s(),
+            "err_p": r.outcome.as_ref().ok().map(|a| a.err_p),
+            "parameter_rel_err": r.outcome.as_ref().ok().and_then(|a| a.parameters),
+            "fit": r.outcome.as_ref().ok().map(|a| &a.fit),
+        })
+    };
+    let summary = serde_json::json!({
+        "scene": truth.scene,
+        "material": truth.material,
+        "model": model,
+        "roughness": roughness,
+        "settings": rows.len(),
+        "failed": rows.iter().filter(|r| r.outcome.is_err()).count(),
+        "best_err_p_g": best.is_finite().then_some(best),
+        "recommended": recommended.map(|i| row_json(&rows[i])),
+        "pareto_front": front.iter().map(|&i| row_json(&rows[i])).collect::<Vec<_>>(),
+        "extract_seconds_by_bracket_and_theta_l": extracted
+            .iter()
+            .map(|row| row.iter().zip(positions).map(|(e, p)| serde_json::json!({
+                "theta_l": p.theta_l,
+                "seconds": e.seconds,
+                "samples": e.samples.len(),
+            })).collect::<Vec<_>>())
+            .collect::<Vec<_>>(),
+    });
+    let json_path = out.join("tradeoff.json");
+    std::fs::write(&json_path, serde_json::to_string_pretty(&summary)? + "\n")
+        .with_context(|| format!("writing {}", json_path.display()))?;
+
+    println!(
+        "{}: {} settings ({} failed); Pareto front:",
+        truth.scene,
+        rows.len(),
+        rows.iter().filter(|r| r.outcome.is_err()).count()
+    );
+    println!("  total s  acquisition s  processing s  ΔErr_p(G)  setting");
+    for &i in &front {
+        let r = &rows[i];
+        println!(
+            "  {:>7.2}  {:>13.2}  {:>12.3}  {:>9.4}  {}{}",
+            r.total_s(),
+            r.acquisition.total_s(),
+            r.processing_s(),
+            costs[i].1,
+            r.label(),
+            if recommended == Some(i) {
+                "  <- recommended"
+            } else {
+                ""
+            }
+        );
+    }
+    for path in [csv_path, svg_path, json_path] {
+        println!("wrote {}", path.display());
+    }
+    Ok(())
 }

@@ -23,6 +23,20 @@
 //! - A silent controller gives [`DeviceError::Timeout`]; a garbled or truncated reply
 //!   to an idempotent command (queries, `G90 G0`, `G4 P0`, `$H`) is retried a bounded
 //!   number of times, then reported as [`DeviceError::Protocol`].
+//!
+//! ```no_run
+//! use gonio_drivers::grbl::{GrblArm, GrblArmConfig};
+//! use gonio_drivers::Arm;
+//! # fn main() -> Result<(), gonio_drivers::DeviceError> {
+//! let path = std::path::Path::new("/dev/serial/by-id/usb-1a86_USB_Serial-if00-port0");
+//! let mut arm = GrblArm::open(path, GrblArmConfig::default())?;
+//! let stop = arm.emergency_stop(); // hand this to whoever may need to stop the arm
+//! arm.home()?;
+//! arm.move_to(-20.0)?;
+//! # drop(stop);
+//! # Ok(())
+//! # }
+//! ```
 
 mod codes;
 mod protocol;
@@ -44,7 +58,9 @@ use crate::{Arm, ArmState, ArmStatus, DeviceError, EmergencyStop};
 pub const BAUD_RATE: u32 = 115_200;
 /// Port read timeout: how often a blocked read checks its deadline.
 const POLL_INTERVAL: Duration = Duration::from_millis(20);
-/// After a garbled line, how long to wait for a proper reply before giving up on it.
+/// After a garbled line, how long to wait for a proper reply before giving up on it;
+/// also how long a partial line may sit without more bytes before it counts as a
+/// truncated line (GRBL sends a whole line within milliseconds).
 const GARBLE_GRACE: Duration = Duration::from_millis(200);
 /// GRBL's soft-reset real-time byte (Ctrl-X).
 const SOFT_RESET: u8 = 0x18;
@@ -88,7 +104,7 @@ impl Default for GrblArmConfig {
             min_deg: -90.0,
             max_deg: 0.0,
             steps_per_deg: 80.0,
-            max_travel_deg: 95.0,
+            max_travel_deg: 180.0,
             homing_enabled: true,
             position_tolerance_deg: 0.01,
             banner_timeout: Duration::from_secs(3),
@@ -143,8 +159,9 @@ pub struct GrblArm {
     config: GrblArmConfig,
     /// `None` while disconnected.
     port: Option<Box<dyn SerialPort>>,
-    /// Received bytes not yet forming a full line.
+    /// Received bytes not yet forming a full line, and when the last byte came.
     pending: Vec<u8>,
+    last_rx: Instant,
     settings: Settings,
     firmware: String,
     /// Whether the machine position is known (homed since the last reset/reconnect).
@@ -175,6 +192,7 @@ impl GrblArm {
             config,
             port: None,
             pending: Vec::new(),
+            last_rx: Instant::now(),
             settings: Settings::default(),
             firmware: String::new(),
             homed: false,
@@ -349,8 +367,9 @@ impl GrblArm {
             return Ok(());
         }
         let mut backoff = self.config.reconnect_backoff;
+        let attempts = self.config.reconnect_attempts.max(1);
         let mut last = self.disconnected("not connected");
-        for attempt in 0..self.config.reconnect_attempts.max(1) {
+        for attempt in 0..attempts {
             if attempt > 0 {
                 thread::sleep(backoff);
                 backoff = (backoff * 2).min(self.config.reconnect_backoff * 16);
@@ -362,7 +381,9 @@ impl GrblArm {
                 Err(e) => last = e,
             }
         }
-        Err(last)
+        Err(self.disconnected(format_args!(
+            "reconnect failed after {attempts} attempts: {last}"
+        )))
     }
 
     // ---- line I/O ----------------------------------------------------------------
@@ -389,6 +410,13 @@ impl GrblArm {
                 }
                 return Ok(Some(line));
             }
+            if !self.pending.is_empty() && self.last_rx.elapsed() >= GARBLE_GRACE {
+                let line = String::from_utf8_lossy(&self.pending).trim().to_owned();
+                self.pending.clear();
+                if !line.is_empty() {
+                    return Ok(Some(line));
+                }
+            }
             if Instant::now() >= deadline {
                 return Ok(None);
             }
@@ -402,7 +430,10 @@ impl GrblArm {
                     let eof = io::Error::new(io::ErrorKind::UnexpectedEof, "port closed");
                     return Err(self.drop_port(&eof));
                 }
-                Ok(n) => self.pending.extend_from_slice(&buf[..n]),
+                Ok(n) => {
+                    self.pending.extend_from_slice(&buf[..n]);
+                    self.last_rx = Instant::now();
+                }
                 Err(e)
                     if matches!(
                         e.kind(),
@@ -435,11 +466,17 @@ impl GrblArm {
         Ok(())
     }
 
-    /// Wait up to the banner timeout for the start-up banner.
+    /// Wait up to the banner timeout for the start-up banner, then until the line has
+    /// been quiet for [`GARBLE_GRACE`] (a reset can leave a second banner in flight,
+    /// e.g. after a stop's own reset).
     fn wait_banner(&mut self) -> Result<bool, DeviceError> {
         let deadline = Instant::now() + self.config.banner_timeout;
         while let Some(line) = self.read_line(deadline)? {
             if matches!(parse_line(&line), Line::Banner(_)) {
+                while let Some(line) = self.read_line(Instant::now() + GARBLE_GRACE)? {
+                    let line = parse_line(&line);
+                    self.note(&line);
+                }
                 return Ok(true);
             }
         }
@@ -594,9 +631,8 @@ impl Arm for GrblArm {
         self.retrying(|arm| arm.transact("G4 P0", Until::Ok, timeout))?;
         let report = self.query_status()?;
         let at = report.machine_x().unwrap_or(f64::NAN);
-        if report.state != MachineState::Idle
-            || !((at - angle_deg).abs() <= self.config.position_tolerance_deg)
-        {
+        let on_target = (at - angle_deg).abs() <= self.config.position_tolerance_deg;
+        if report.state != MachineState::Idle || !on_target {
             return Err(DeviceError::Protocol(format!(
                 "after moving to {angle_deg:.3}° the controller reports {:?} at {at:.3}°",
                 report.state
@@ -626,6 +662,7 @@ impl Arm for GrblArm {
     /// Soft reset, wait for the banner, forget the alarm; home before the next move.
     fn clear_fault(&mut self) -> Result<(), DeviceError> {
         self.ensure_connected()?;
+        self.drain()?;
         self.write(&[SOFT_RESET])?;
         if !self.wait_banner()? {
             return Err(DeviceError::Timeout {

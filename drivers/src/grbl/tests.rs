@@ -58,7 +58,7 @@ fn fake() -> Fake {
                         match text.as_str() {
                             "$I" => "[VER:1.1h.fake:]\r\nok\r\n".into(),
                             "$$" => format!(
-                                "$22=1\r\n$100={:.3}\r\n$110=6000.000\r\n$120=500.000\r\n$130=95.000\r\nok\r\n",
+                                "$22=1\r\n$100={:.3}\r\n$110=6000.000\r\n$120=500.000\r\n$130=180.000\r\nok\r\n",
                                 s.steps_per_deg
                             ),
                             "$H" => {

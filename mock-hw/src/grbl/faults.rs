@@ -8,7 +8,8 @@ pub enum Fault {
     /// [`super::GrblEmulator::reconnect`] plugs it back in.
     Unplug,
     /// The controller hangs: input is ignored and nothing is sent, while the arm keeps
-    /// executing what it was doing. Undone by [`Fault::Responsive`].
+    /// executing what it was doing. Undone by [`Fault::Responsive`], or by a power cycle
+    /// ([`Fault::Unplug`] + reconnect) or [`Fault::ResetBanner`].
     Silent,
     /// Undo [`Fault::Silent`].
     Responsive,

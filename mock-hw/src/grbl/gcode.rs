@@ -1,5 +1,6 @@
 //! The G-code subset the emulated firmware executes, parsed and checked with GRBL's
-//! status codes: G0 G1 G4 G17 G20 G21 G54 G90 G91 G94, M3 M4 M5 M8 M9, words F N P S T X Y Z.
+//! status codes: G0 G1 G4 G17 G20 G21 G53 G54 G90 G91 G94, M3 M4 M5 M8 M9, words
+//! F N P S T X Y Z, and `$J=` jog blocks.
 //! Lines arrive upper-cased and without spaces or comments (the protocol strips them).
 
 use super::protocol::{fmt_fixed, status};
@@ -27,6 +28,10 @@ pub(crate) enum Spindle {
 pub(crate) struct Block {
     motion: Option<MotionMode>,
     dwell: bool,
+    /// G53: machine coordinates, absolute, for this block only.
+    machine_coords: bool,
+    /// G17, G54 or G94 given (modal commands that change nothing here).
+    fixed_modal: bool,
     incremental: Option<bool>,
     inches: Option<bool>,
     spindle: Option<Spindle>,
@@ -108,7 +113,7 @@ impl Block {
         // (modal group bit, effect)
         let group = match (letter, code) {
             (b'G', 0 | 1) => 0,
-            (b'G', 4) => 1,
+            (b'G', 4 | 53) => 1,
             (b'G', 17) => 2,
             (b'G', 20 | 21) => 3,
             (b'G', 54) => 4,
@@ -129,6 +134,7 @@ impl Block {
             (b'G', 0) => self.motion = Some(MotionMode::Seek),
             (b'G', 1) => self.motion = Some(MotionMode::Linear),
             (b'G', 4) => self.dwell = true,
+            (b'G', 53) => self.machine_coords = true,
             (b'G', 20) => self.inches = Some(true),
             (b'G', 21) => self.inches = Some(false),
             (b'G', 90) => self.incremental = Some(false),
@@ -139,7 +145,7 @@ impl Block {
             (b'M', 8) => self.coolant = Some(true),
             (b'M', 9) => self.coolant = Some(false),
             // G17, G54, G94: the only plane, coordinate system and feed mode.
-            _ => {}
+            _ => self.fixed_modal = true,
         }
         Ok(())
     }
@@ -235,16 +241,7 @@ impl ParserState {
         }
         let incremental = block.incremental.unwrap_or(self.incremental);
         let motion = if has_axes {
-            let mut target = self.position;
-            for (t, word) in target.iter_mut().zip(block.axes) {
-                if let Some(v) = word {
-                    *t = if incremental {
-                        *t + v * scale
-                    } else {
-                        v * scale
-                    };
-                }
-            }
+            let target = self.target(block, incremental, scale);
             let rate = match motion_mode {
                 MotionMode::Seek => f64::INFINITY,
                 MotionMode::Linear => feed,
@@ -285,6 +282,49 @@ impl ParserState {
         };
         let flood = if self.coolant { "F" } else { "" };
         format!("{spindle}{flood}")
+    }
+
+    /// The axis words of `block` as a machine target.
+    fn target(&self, block: &Block, incremental: bool, scale: f64) -> [f64; N_AXIS] {
+        let incremental = incremental && !block.machine_coords;
+        let mut target = self.position;
+        for (t, word) in target.iter_mut().zip(block.axes) {
+            if let Some(v) = word {
+                *t = if incremental {
+                    *t + v * scale
+                } else {
+                    v * scale
+                };
+            }
+        }
+        target
+    }
+
+    /// Check a `$J=` block: only G20/G21, G90/G91, G53, axis words, a required F and N.
+    /// Returns the target (machine units) and feed (units/min); the modal state is kept.
+    pub fn jog(&self, block: &Block) -> Result<([f64; N_AXIS], f64), u8> {
+        if block.motion.is_some()
+            || block.dwell
+            || block.fixed_modal
+            || block.spindle.is_some()
+            || block.coolant.is_some()
+        {
+            return Err(status::INVALID_JOG_COMMAND);
+        }
+        let inches = block.inches.unwrap_or(self.inches);
+        let scale = if inches { MM_PER_INCH } else { 1.0 };
+        let feed = block.f.ok_or(status::GCODE_UNDEFINED_FEED_RATE)? * scale;
+        if block.n.is_some_and(|n| n > MAX_LINE_NUMBER) {
+            return Err(status::GCODE_INVALID_LINE_NUMBER);
+        }
+        if block.p.is_some() || block.s.is_some() || block.t.is_some() {
+            return Err(status::GCODE_UNUSED_WORDS);
+        }
+        if block.axes.iter().all(Option::is_none) {
+            return Err(status::INVALID_JOG_COMMAND);
+        }
+        let incremental = block.incremental.unwrap_or(self.incremental);
+        Ok((self.target(block, incremental, scale), feed))
     }
 
     /// The `$G` report line (without line ending).

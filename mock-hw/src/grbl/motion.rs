@@ -258,6 +258,17 @@ impl Motion {
         }
     }
 
+    /// Current velocity vector (units/s).
+    pub fn velocity(&self, now: f64) -> [f64; N_AXIS] {
+        match &self.active {
+            Some(active) => {
+                let (_, v) = active.progress(now);
+                active.unit.map(|u| u * v)
+            }
+            None => [0.0; N_AXIS],
+        }
+    }
+
     /// Fraction of the active block covered, if one is executing.
     pub fn block_fraction(&self, now: f64) -> Option<f64> {
         self.active.as_ref().map(|a| {

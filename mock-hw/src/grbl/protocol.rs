@@ -22,6 +22,8 @@ pub(crate) mod status {
     pub const SYSTEM_GC_LOCK: u8 = 9;
     pub const SOFT_LIMIT_ERROR: u8 = 10;
     pub const OVERFLOW: u8 = 11;
+    pub const TRAVEL_EXCEEDED: u8 = 15;
+    pub const INVALID_JOG_COMMAND: u8 = 16;
     pub const GCODE_UNSUPPORTED_COMMAND: u8 = 20;
     pub const GCODE_MODAL_GROUP_VIOLATION: u8 = 21;
     pub const GCODE_UNDEFINED_FEED_RATE: u8 = 22;
@@ -60,6 +62,9 @@ const ALARM_REPORT_DELAY_S: f64 = 0.5;
 /// Homing gives up after this multiple of the axis' max travel.
 const HOMING_SEARCH_SCALAR: f64 = 1.5;
 const MM_PER_INCH: f64 = 25.4;
+/// An arm whose motor stops dead coasts to rest this many times faster than the axis'
+/// acceleration setting.
+const COAST_DECEL_FACTOR: f64 = 4.0;
 
 /// Fixed-point number as the firmware prints it (`-0` prints as `0`).
 pub(crate) fn fmt_fixed(value: f64, decimals: usize) -> String {
@@ -78,6 +83,7 @@ enum State {
     Hold,
     Alarm,
     Home,
+    Jog,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -121,6 +127,7 @@ struct Realtime {
     status: bool,
     hold: bool,
     resume: bool,
+    jog_cancel: bool,
 }
 
 /// The emulated firmware.
@@ -146,7 +153,11 @@ pub(crate) struct Controller {
     pending: Option<Pending>,
     /// After a hard or soft limit alarm: everything but `?` and reset is blocked.
     critical: bool,
+    /// A jog is decelerating to a stop; its remaining blocks are then dropped.
+    jog_cancelling: bool,
+    /// Machine time until which the firmware pauses (after printing an alarm).
     stall_until: f64,
+    /// An injected alarm waiting for the next half-done block.
     armed_alarm: Option<u8>,
     /// Print the stock build's optional status fields (`Pn`, `WCO`, `Ov`, `A`).
     status_extras: bool,
@@ -179,6 +190,7 @@ impl Controller {
             realtime: Realtime::default(),
             pending: None,
             critical: false,
+            jog_cancelling: false,
             stall_until: 0.0,
             armed_alarm: None,
             status_extras: config.status_extras,
@@ -193,8 +205,7 @@ impl Controller {
     /// Power lost (USB unplugged): the arm stays where it is, nothing is sent.
     pub fn power_off(&mut self, now: f64) {
         if self.power == Power::On {
-            self.motion.kill(now);
-            self.sync_world(now);
+            self.kill_motion(now);
         }
         self.power = Power::Off;
         self.out.clear();
@@ -229,7 +240,8 @@ impl Controller {
             b'?' => self.realtime.status = true,
             b'!' => self.realtime.hold = true,
             b'~' => self.realtime.resume = true,
-            // Extended real-time commands (overrides, jog cancel) are not emulated; the
+            0x85 => self.realtime.jog_cancel = true,
+            // Extended real-time commands (overrides, safety door) are not emulated; the
             // firmware drops any other byte above 0x7F too.
             0x80.. => {}
             _ => {
@@ -252,7 +264,7 @@ impl Controller {
         due
     }
 
-    /// Something changes with time: motion, a dwell, a boot or a stall.
+    /// Something changes with time: motion, a waiting line, a boot or queued output.
     pub fn busy(&self) -> bool {
         matches!(self.power, Power::Booting { .. })
             || !self.motion.is_idle()
@@ -270,6 +282,7 @@ impl Controller {
         }
         self.motion.update(now, &self.settings.axes);
         self.sync_world(now);
+        self.finish_jog_cancel(now);
         self.update_state();
         if now < self.stall_until {
             return;
@@ -295,6 +308,9 @@ impl Controller {
             if std::mem::take(&mut self.realtime.resume) {
                 self.cycle_start(now);
             }
+            if std::mem::take(&mut self.realtime.jog_cancel) && self.state == State::Jog {
+                self.cancel_jog(now);
+            }
         }
         self.advance_pending(now);
         self.process_input(now);
@@ -313,6 +329,7 @@ impl Controller {
         self.clear_input();
         self.pending = None;
         self.critical = false;
+        self.jog_cancelling = false;
         self.stall_until = now;
         self.emit(now, BANNER.to_vec());
         if self.state == State::Alarm {
@@ -358,7 +375,7 @@ impl Controller {
     fn soft_reset(&mut self, now: f64) {
         if !self.critical {
             let moving = match self.state {
-                State::Run | State::Home => true,
+                State::Run | State::Home | State::Jog => true,
                 State::Hold => !self.motion.hold_complete(now),
                 State::Idle | State::Alarm => false,
             };
@@ -375,9 +392,27 @@ impl Controller {
     }
 
     fn feed_hold(&mut self, now: f64) {
-        if matches!(self.state, State::Run | State::Idle) {
-            self.motion.hold(now);
-            self.state = State::Hold;
+        match self.state {
+            State::Run | State::Idle => {
+                self.motion.hold(now);
+                self.state = State::Hold;
+            }
+            State::Jog => self.cancel_jog(now),
+            State::Hold | State::Alarm | State::Home => {}
+        }
+    }
+
+    /// Jog cancel: decelerate to a stop, then drop the rest of the jog.
+    fn cancel_jog(&mut self, now: f64) {
+        self.motion.hold(now);
+        self.jog_cancelling = true;
+    }
+
+    fn finish_jog_cancel(&mut self, now: f64) {
+        if self.jog_cancelling && self.motion.hold_complete(now) {
+            self.jog_cancelling = false;
+            self.parser.position = self.kill_motion(now);
+            self.state = State::Idle;
         }
     }
 
@@ -395,7 +430,7 @@ impl Controller {
 
     fn update_state(&mut self) {
         match self.state {
-            State::Run if self.motion.is_idle() => self.state = State::Idle,
+            State::Run | State::Jog if self.motion.is_idle() => self.state = State::Idle,
             State::Idle if !self.motion.is_idle() => self.state = State::Run,
             _ => {}
         }
@@ -403,10 +438,21 @@ impl Controller {
 
     // ---- alarms and resets --------------------------------------------------------
 
+    /// Stop the steppers dead and drop all queued motion. The arm's inertia carries it
+    /// on, decelerating at `COAST_DECEL_FACTOR` times the axis acceleration, while the
+    /// motor slips steps: MPos no longer matches the arm until it is homed again.
+    fn kill_motion(&mut self, now: f64) -> [f64; N_AXIS] {
+        let vx = self.motion.velocity(now)[0];
+        let position = self.motion.kill(now);
+        let decel = COAST_DECEL_FACTOR * self.settings.axes[0].accel.max(1e-9);
+        self.offset_deg += vx * vx.abs() / (2.0 * decel);
+        self.sync_world(now);
+        position
+    }
+
     /// Kill motion, enter Alarm and print `ALARM:code`; the firmware then pauses.
     fn alarm_message(&mut self, code: u8, now: f64) {
-        self.motion.kill(now);
-        self.sync_world(now);
+        self.kill_motion(now);
         self.state = State::Alarm;
         self.emit_line(now, &format!("ALARM:{code}"));
         self.stall_until = now.max(self.stall_until) + ALARM_REPORT_DELAY_S;
@@ -427,13 +473,13 @@ impl Controller {
     /// The firmware's system abort: the executing line still gets its `ok`, input is
     /// flushed, the parser resets and the banner follows.
     fn abort(&mut self, now: f64) {
-        let position = self.motion.kill(now);
-        self.sync_world(now);
+        let position = self.kill_motion(now);
         if self.pending.take().is_some() {
             self.emit_status(now, Ok(()));
         }
         self.clear_input();
         self.critical = false;
+        self.jog_cancelling = false;
         self.parser = ParserState::new(position);
         self.emit(now, BANNER.to_vec());
         if self.state == State::Alarm {
@@ -447,7 +493,7 @@ impl Controller {
         let Some(code) = self.armed_alarm else {
             return;
         };
-        let moving = matches!(self.state, State::Run | State::Home);
+        let moving = matches!(self.state, State::Run | State::Home | State::Jog);
         if moving && self.motion.block_fraction(now).is_some_and(|f| f >= 0.5) {
             self.armed_alarm = None;
             self.raise_alarm(code, now);
@@ -539,7 +585,7 @@ impl Controller {
             Some(Ok(()))
         } else if line[0] == b'$' {
             self.system_command(&line[1..], now)
-        } else if self.state == State::Alarm {
+        } else if matches!(self.state, State::Alarm | State::Jog) {
             Some(Err(status::SYSTEM_GC_LOCK))
         } else {
             self.gcode_line(line, now)
@@ -563,6 +609,7 @@ impl Controller {
                 }
                 return Some(self.view_or_unlock(rest[0], now));
             }
+            Some(b'J') => return self.jog(rest, now),
             _ => {}
         }
         if !matches!(self.state, State::Idle | State::Alarm) {
@@ -607,10 +654,44 @@ impl Controller {
                 self.soft_reset(now);
                 None
             }
-            // Jogging, startup blocks and sleep are not emulated.
-            [b'#' | b'I' | b'J' | b'N' | b'S' | b'R', ..] => Some(Err(status::INVALID_STATEMENT)),
+            // Startup blocks and sleep are not emulated.
+            [b'#' | b'I' | b'N' | b'S' | b'R', ..] => Some(Err(status::INVALID_STATEMENT)),
             _ => Some(self.store_setting(rest)),
         }
+    }
+
+    /// `$J=…`: a jog, queued like a G1 move without touching the modal state. Soft
+    /// limits refuse it with `error:15` instead of an alarm.
+    fn jog(&mut self, rest: &[u8], now: f64) -> Option<Result<(), u8>> {
+        if !matches!(self.state, State::Idle | State::Jog) {
+            return Some(Err(status::IDLE_ERROR));
+        }
+        if rest.get(1) != Some(&b'=') {
+            return Some(Err(status::INVALID_STATEMENT));
+        }
+        let (target, feed) = match gcode::Block::parse(&rest[2..]).and_then(|b| self.parser.jog(&b))
+        {
+            Ok(jog) => jog,
+            Err(code) => return Some(Err(code)),
+        };
+        if self.settings.soft_limits && self.beyond_soft_limits(&target) {
+            return Some(Err(status::TRAVEL_EXCEEDED));
+        }
+        let from = self.quantize(self.parser.position);
+        self.parser.position = target;
+        let target = self.quantize(target);
+        if target == from {
+            return Some(Ok(()));
+        }
+        let block = motion::Block { target, rate: feed };
+        self.state = State::Jog;
+        if self.motion.is_full() {
+            self.pending = Some(Pending::Queue(block));
+            return None;
+        }
+        self.motion.push(block);
+        self.motion.update(now, &self.settings.axes);
+        Some(Ok(()))
     }
 
     fn view_or_unlock(&mut self, command: u8, now: f64) -> Result<(), u8> {
@@ -816,6 +897,7 @@ impl Controller {
             State::Hold => "Hold:1",
             State::Alarm => "Alarm",
             State::Home => "Home",
+            State::Jog => "Jog",
         };
         let mask = self.settings.status_report_mask;
         let label = if mask & 1 != 0 { "MPos" } else { "WPos" };
@@ -853,7 +935,10 @@ impl Controller {
         if x + self.offset_deg >= 0.0 {
             report.push_str("|Pn:X");
         }
-        let busy = matches!(self.state, State::Run | State::Hold | State::Home);
+        let busy = matches!(
+            self.state,
+            State::Run | State::Hold | State::Home | State::Jog
+        );
         if self.wco_counter > 0 {
             self.wco_counter -= 1;
         } else {
@@ -991,10 +1076,82 @@ mod tests {
             "<Run|MPos:-33.750,0.000,0.000|FS:600,0>\r\n"
         );
         assert_eq!(send(&mut c, "\x18", 6.0), "ALARM:3\r\n");
+        // Stopped dead at 10°/s: the arm (30° below MPos since power-up) coasts on
+        // 10²/(2·4·40) = 0.3125° while the motor slips.
+        assert!((world.arm_deg() - (-30.0 - 33.75 - 0.3125)).abs() < 1e-9);
         assert_eq!(
             send(&mut c, "?", 6.5),
             "\r\nGrbl 1.1h ['$' for help]\r\n[MSG:'$H'|'$X' to unlock]\r\n<Alarm|MPos:-33.750,0.000,0.000|FS:0,0>\r\n"
         );
+    }
+
+    #[test]
+    fn jogging_and_jog_cancel() {
+        let (mut c, _) = booted();
+        assert_eq!(send(&mut c, "$J=G91X-10F600\n", 1.0), "error:8\r\n");
+        send(&mut c, "$X\n", 1.0);
+        assert_eq!(send(&mut c, "$J=G91X-10\n", 1.0), "error:22\r\n");
+        assert_eq!(send(&mut c, "$J=G1X-10F600\n", 1.0), "error:16\r\n");
+        assert_eq!(send(&mut c, "$J=G91F600\n", 1.0), "error:16\r\n");
+        assert_eq!(send(&mut c, "$J=X-10F600S1\n", 1.0), "error:36\r\n");
+        assert_eq!(send(&mut c, "$J=X-200F600\n", 1.0), "error:15\r\n");
+        assert_eq!(send(&mut c, "$JX-1F600\n", 1.0), "error:3\r\n");
+        // 20° at 10°/s with 0.25 s ramps: 2.25 s.
+        assert_eq!(
+            send(&mut c, "$J=G91X-20F600\n?", 1.0),
+            "ok\r\n<Jog|MPos:0.000,0.000,0.000|FS:0,0>\r\n"
+        );
+        assert_eq!(send(&mut c, "G0X-5\n", 1.5), "error:9\r\n");
+        assert_eq!(
+            send(&mut c, "?", 3.3),
+            "<Idle|MPos:-20.000,0.000,0.000|FS:0,0>\r\n"
+        );
+        // The jog kept the parser in G90: this is absolute.
+        assert_eq!(
+            send(&mut c, "$J=X-40F600\n$J=X-60F600\n", 4.0),
+            "ok\r\nok\r\n"
+        );
+        assert_eq!(send(&mut c, "\u{85}", 5.0), "");
+        // Cancelled at 10°/s after 8.75°: 0.25 s and 1.25° to stop, the rest dropped.
+        assert_eq!(
+            send(&mut c, "?", 5.1),
+            "<Jog|MPos:-29.550,0.000,0.000|FS:360,0>\r\n"
+        );
+        assert_eq!(
+            send(&mut c, "?", 5.3),
+            "<Idle|MPos:-30.000,0.000,0.000|FS:0,0>\r\n"
+        );
+        assert_eq!(
+            send(&mut c, "G91G0X1\nG4P0\n?", 5.3),
+            "ok\r\n<Run|MPos:-30.000,0.000,0.000|FS:0,0>\r\n"
+        );
+        assert_eq!(send(&mut c, "", 9.0), "ok\r\n");
+        assert_eq!(
+            send(&mut c, "?", 9.0),
+            "<Idle|MPos:-29.000,0.000,0.000|FS:0,0>\r\n"
+        );
+    }
+
+    #[test]
+    fn full_receive_buffer_drops_bytes_and_full_planner_delays_ok() {
+        let (mut c, _) = booted();
+        send(&mut c, "$X\n$10=3\n", 1.0);
+        // While the dwell waits, the 128-byte ring keeps 127 bytes: 25 lines and "G4".
+        let flood = "G4P0\n".repeat(30);
+        assert_eq!(
+            send(&mut c, &format!("G4P10\n{flood}?"), 1.0),
+            "<Idle|MPos:0.000,0.000,0.000|Bf:15,1|FS:0,0>\r\n"
+        );
+        assert_eq!(send(&mut c, "", 11.0), "ok\r\n".repeat(26));
+        assert_eq!(send(&mut c, "\n", 11.0), "error:28\r\n");
+        // 15 planner blocks; the 16th move is answered when the first one is done.
+        let moves = "G91G1X-1F60\n".repeat(16);
+        assert_eq!(send(&mut c, &moves, 12.0), "ok\r\n".repeat(15));
+        assert_eq!(
+            send(&mut c, "?", 12.5125),
+            "<Run|MPos:-0.500,0.000,0.000|Bf:0,128|FS:60,0>\r\n"
+        );
+        assert_eq!(send(&mut c, "", 13.1), "ok\r\n");
     }
 
     #[test]

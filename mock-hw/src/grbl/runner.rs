@@ -126,12 +126,18 @@ impl Runner {
             Fault::Garble => self.faults.garble_next = true,
             Fault::Truncate => self.faults.truncate_next = true,
             Fault::AlarmDuringMotion(code) => self.controller.arm_alarm(code),
-            Fault::ResetBanner => self.controller.hard_reset(now),
+            Fault::ResetBanner => {
+                // A reset also ends a hang.
+                self.faults.silent = false;
+                self.controller.hard_reset(now);
+            }
         }
     }
 
     fn unplug(&mut self, now: f64) {
         self.pty = None;
+        // Losing power also ends a hang.
+        self.faults.silent = false;
         pty::remove_link(&self.link);
         self.controller.power_off(now);
     }

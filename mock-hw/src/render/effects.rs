@@ -21,6 +21,7 @@ pub(crate) fn mix(mut x: u64) -> u64 {
 pub(crate) struct NoiseModel {
     counts_per_electron: f64,
     read_var: f64,
+    read_sd: f64,
 }
 
 impl NoiseModel {
@@ -29,6 +30,7 @@ impl NoiseModel {
         Self {
             counts_per_electron: 1.0 / electrons_per_dn,
             read_var: noise.read_noise_dn * noise.read_noise_dn,
+            read_sd: noise.read_noise_dn,
         }
     }
 
@@ -40,8 +42,11 @@ impl NoiseModel {
     /// `signal` counts (above black) plus noise.
     #[inline]
     pub fn apply(&self, signal: f64, rng: &mut Pcg64Mcg) -> f64 {
-        let var = signal.max(0.0) * self.counts_per_electron + self.read_var;
         let z: f64 = rng.sample(StandardNormal);
+        if signal <= 0.0 {
+            return z * self.read_sd;
+        }
+        let var = signal * self.counts_per_electron + self.read_var;
         signal + z * var.sqrt()
     }
 }
@@ -73,10 +78,11 @@ pub(crate) fn hot_pixel_positions(count: u32, width: u32, height: u32, seed: u64
     let total = width as usize * height as usize;
     let count = (count as usize).min(total);
     let mut rng = Pcg64Mcg::seed_from_u64(mix(seed ^ 0x686F_7420_7069_7865));
+    let mut seen = std::collections::HashSet::with_capacity(count);
     let mut positions = Vec::with_capacity(count);
     while positions.len() < count {
         let p = rng.random_range(0..total);
-        if !positions.contains(&p) {
+        if seen.insert(p) {
             positions.push(p);
         }
     }

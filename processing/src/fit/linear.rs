@@ -11,10 +11,19 @@
 
 use super::Data;
 
-/// Stop reweighting once one pass lowers the loss by less than this fraction.
-const RELATIVE_TOLERANCE: f64 = 1e-10;
+/// Relative loss decrease at which a solve counts as converged.
+pub(crate) const FINE_TOLERANCE: f64 = 1e-9;
+/// Looser convergence for scanning a grid, where only the ranking of values matters.
+pub(crate) const COARSE_TOLERANCE: f64 = 1e-5;
 /// Cap on reweighting passes per solve.
 const MAX_PASSES: usize = 60;
+/// Smoothing of the weights, as a fraction of the mean residual: first value and per-pass
+/// factor. It ends at the solve's tolerance, which bounds the loss error the smoothing
+/// leaves (a fraction ε of the mean residual per point).
+const EPSILON_START: f64 = 0.1;
+const EPSILON_SHRINK: f64 = 0.1;
+/// Largest extrapolation factor tried along a pass's step.
+const MAX_EXTRAPOLATION: f64 = 64.0;
 
 /// Coefficients minimising eq. 10 at one roughness, with that loss.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -47,68 +56,110 @@ fn nnls2(saa: f64, sas: f64, sss: f64, say: f64, ssy: f64) -> (f64, f64) {
     }
 }
 
+/// Eq. 10 loss of (kd, ks); writes each point's residual norm when `residuals` is given.
+fn loss_of(
+    data: &Data,
+    spec: [&[f64]; 3],
+    kd: &[f64; 3],
+    ks: &[f64; 3],
+    mut residuals: Option<&mut [f64]>,
+) -> f64 {
+    let mut loss = 0.0;
+    for (p, (y, a)) in data.y.iter().zip(&data.diffuse).enumerate() {
+        let r: [f64; 3] = std::array::from_fn(|c| y[c] - kd[c] * a - ks[c] * spec[c][p]);
+        let norm = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
+        if let Some(out) = residuals.as_deref_mut() {
+            out[p] = norm;
+        }
+        loss += norm;
+    }
+    loss
+}
+
+/// One reweighted pass: the weighted NNLS solution of each channel.
+fn weighted_nnls(data: &Data, spec: [&[f64]; 3], weights: &[f64]) -> ([f64; 3], [f64; 3]) {
+    let mut kd = [0.0; 3];
+    let mut ks = [0.0; 3];
+    for c in 0..3 {
+        let (mut saa, mut sas, mut sss, mut say, mut ssy) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for (p, ((w, a), y)) in weights.iter().zip(&data.diffuse).zip(&data.y).enumerate() {
+            let s = spec[c][p];
+            let wa = w * a;
+            let ws = w * s;
+            saa += wa * a;
+            sas += wa * s;
+            sss += ws * s;
+            say += wa * y[c];
+            ssy += ws * y[c];
+        }
+        (kd[c], ks[c]) = nnls2(saa, sas, sss, say, ssy);
+    }
+    (kd, ks)
+}
+
 /// Minimises eq. 10 over Kd, Ks ≥ 0 given each channel's specular basis values `spec[c][p]`.
-/// `weights` carries the reweighting state between calls (resized to unit weights when its
-/// length does not match); `residuals` is scratch space.
+/// Converged when a pass at the final smoothing lowers the loss by less than `tolerance`
+/// (relative). `weights` and `residuals` are scratch space.
+///
+/// Weights are 1/max(‖r_p‖, ε) with ε a fraction of the mean residual that shrinks by
+/// [`EPSILON_SHRINK`] per pass from [`EPSILON_START`] to `tolerance` (continuation):
+/// capped weights keep the early passes from locking onto points that happen to have tiny
+/// residuals, which makes plain reweighting crawl. Each pass also extrapolates along its
+/// step (×2, ×4, … while the loss keeps falling, clamped to Kd, Ks ≥ 0).
 pub(crate) fn solve(
     data: &Data,
     spec: [&[f64]; 3],
+    tolerance: f64,
     weights: &mut Vec<f64>,
     residuals: &mut Vec<f64>,
 ) -> LinearFit {
     let n = data.y.len();
-    if weights.len() != n {
-        weights.clear();
-        weights.resize(n, 1.0);
-    }
+    weights.clear();
+    weights.resize(n, 1.0);
     residuals.resize(n, 0.0);
     let floor = data.residual_floor;
-    let mut best = LinearFit {
-        kd: [0.0; 3],
-        ks: [0.0; 3],
-        loss: f64::INFINITY,
-    };
-    let mut previous = f64::INFINITY;
+    let mut epsilon = EPSILON_START;
+    let mut current: Option<LinearFit> = None;
     for _ in 0..MAX_PASSES {
-        let mut kd = [0.0; 3];
-        let mut ks = [0.0; 3];
-        for c in 0..3 {
-            let (mut saa, mut sas, mut sss, mut say, mut ssy) = (0.0, 0.0, 0.0, 0.0, 0.0);
-            for p in 0..n {
-                let w = weights[p];
-                let a = data.diffuse[p];
-                let s = spec[c][p];
-                let y = data.y[p][c];
-                let wa = w * a;
-                let ws = w * s;
-                saa += wa * a;
-                sas += wa * s;
-                sss += ws * s;
-                say += wa * y;
-                ssy += ws * y;
+        let (kd, ks) = weighted_nnls(data, spec, weights);
+        let mut next = LinearFit {
+            kd,
+            ks,
+            loss: loss_of(data, spec, &kd, &ks, None),
+        };
+        if let Some(cur) = &current {
+            let mut t = 2.0;
+            while t <= MAX_EXTRAPOLATION {
+                let kd = std::array::from_fn(|c| (cur.kd[c] + t * (kd[c] - cur.kd[c])).max(0.0));
+                let ks = std::array::from_fn(|c| (cur.ks[c] + t * (ks[c] - cur.ks[c])).max(0.0));
+                let loss = loss_of(data, spec, &kd, &ks, None);
+                if loss >= next.loss {
+                    break;
+                }
+                next = LinearFit { kd, ks, loss };
+                t *= 2.0;
             }
-            (kd[c], ks[c]) = nnls2(saa, sas, sss, say, ssy);
         }
-        let mut loss = 0.0;
-        for p in 0..n {
-            let a = data.diffuse[p];
-            let y = &data.y[p];
-            let r: [f64; 3] =
-                std::array::from_fn(|c| y[c] - kd[c] * a - ks[c] * spec[c][p]);
-            let norm = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
-            residuals[p] = norm;
-            loss += norm;
+        let previous = current.map_or(f64::INFINITY, |c| c.loss);
+        let final_smoothing = epsilon <= tolerance;
+        if next.loss < previous {
+            current = Some(next);
         }
-        if loss < best.loss {
-            best = LinearFit { kd, ks, loss };
-        }
-        if loss <= floor || (previous.is_finite() && previous - loss <= RELATIVE_TOLERANCE * previous) {
+        let decrease = previous - next.loss;
+        if next.loss <= floor || (final_smoothing && decrease <= tolerance * previous) {
             break;
         }
-        previous = loss;
+        let best = current.as_ref().unwrap_or(&next);
+        loss_of(data, spec, &best.kd, &best.ks, Some(residuals));
+        let cap = (epsilon * best.loss / n as f64).max(floor);
         for (w, r) in weights.iter_mut().zip(residuals.iter()) {
-            *w = 1.0 / r.max(floor);
+            *w = 1.0 / r.max(cap);
         }
+        epsilon = (epsilon * EPSILON_SHRINK).max(tolerance);
     }
-    best
+    current.unwrap_or(LinearFit {
+        kd: [0.0; 3],
+        ks: [0.0; 3],
+        loss: loss_of(data, spec, &[0.0; 3], &[0.0; 3], None),
+    })
 }

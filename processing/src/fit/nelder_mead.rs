@@ -70,7 +70,12 @@ impl CostFunction for Objective<'_> {
 }
 
 /// Runs the simplex from `start`, vertex i moving parameter i by `steps[i]`.
-fn run(data: &Data, options: &FitOptions, start: &Params, steps: &[f64]) -> Result<Found, FitError> {
+fn run(
+    data: &Data,
+    options: &FitOptions,
+    start: &Params,
+    steps: &[f64],
+) -> Result<Found, FitError> {
     let nm = &options.nelder_mead;
     let x0 = pack(start, options.roughness);
     let mut simplex = vec![x0.clone()];
@@ -83,7 +88,11 @@ fn run(data: &Data, options: &FitOptions, start: &Params, steps: &[f64]) -> Resu
     let objective = Objective {
         data,
         roughness: options.roughness,
-        penalty: data.y.iter().map(|y| metrics::point_loss(y, &[0.0; 3])).sum(),
+        penalty: data
+            .y
+            .iter()
+            .map(|y| metrics::point_loss(y, &[0.0; 3]))
+            .sum(),
         evaluations: &evaluations,
     };
     let solver = NelderMead::new(simplex)
@@ -155,7 +164,12 @@ pub(crate) fn fit(data: &Data, options: &FitOptions) -> Result<Found, FitError> 
 
 /// A small simplex (5 % of each value) around a robust solution.
 pub(crate) fn polish(data: &Data, options: &FitOptions, start: &Params) -> Result<Found, FitError> {
-    let floor = 1e-3 * start.kd.iter().chain(&start.ks).fold(0.0, |a: f64, &b| a.max(b));
+    let floor = 1e-3
+        * start
+            .kd
+            .iter()
+            .chain(&start.ks)
+            .fold(0.0, |a: f64, &b| a.max(b));
     let steps = step_sizes(start, options.roughness, 0.05, floor.max(1e-9));
     run(data, options, start, &steps)
 }

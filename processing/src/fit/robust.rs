@@ -72,21 +72,38 @@ impl<'a> Profile<'a> {
         }
     }
 
-    /// Profile loss at roughness `m`; all channels use `m[0]` when `shared`.
-    fn eval(&mut self, m: [f64; 3], shared: bool) -> f64 {
+    /// Profile loss at roughness `m` (all channels use `m[0]` when `shared`), with the
+    /// inner solve converged to `tolerance`.
+    fn eval(&mut self, m: [f64; 3], shared: bool, tolerance: f64) -> f64 {
         let fit = if shared {
             self.update_spec(0, m[0]);
             let s = self.spec[0].as_slice();
-            linear::solve(self.data, [s, s, s], &mut self.weights, &mut self.residuals)
+            linear::solve(
+                self.data,
+                [s, s, s],
+                tolerance,
+                &mut self.weights,
+                &mut self.residuals,
+            )
         } else {
             for (c, &mc) in m.iter().enumerate() {
                 self.update_spec(c, mc);
             }
             let [r, g, b] = &self.spec;
-            linear::solve(self.data, [r, g, b], &mut self.weights, &mut self.residuals)
+            linear::solve(
+                self.data,
+                [r, g, b],
+                tolerance,
+                &mut self.weights,
+                &mut self.residuals,
+            )
         };
         self.evaluations += 1;
-        if self.best.as_ref().map_or(true, |(_, loss)| fit.loss < *loss) {
+        if self
+            .best
+            .as_ref()
+            .map_or(true, |(_, loss)| fit.loss < *loss)
+        {
             self.best = Some((
                 Params {
                     kd: fit.kd,
@@ -121,7 +138,10 @@ impl CostFunction for LineProfile<'_, '_> {
     fn cost(&self, ln_m: &f64) -> Result<f64, ArgminError> {
         let m = self.target.apply(self.base, ln_m.exp());
         let shared = matches!(self.target, Target::Shared);
-        Ok(self.profile.borrow_mut().eval(m, shared))
+        Ok(self
+            .profile
+            .borrow_mut()
+            .eval(m, shared, linear::FINE_TOLERANCE))
     }
 }
 
@@ -160,7 +180,13 @@ fn global_search(
     let shared = matches!(target, Target::Shared);
     let values: Vec<f64> = grid
         .iter()
-        .map(|x| profile.borrow_mut().eval(target.apply(base, x.exp()), shared))
+        .map(|x| {
+            profile.borrow_mut().eval(
+                target.apply(base, x.exp()),
+                shared,
+                linear::COARSE_TOLERANCE,
+            )
+        })
         .collect();
     let mut minima: Vec<usize> = (0..grid_points)
         .filter(|&k| {

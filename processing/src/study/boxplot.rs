@@ -38,7 +38,11 @@ impl BoxStats {
         let q3 = quantile_sorted(&v, 0.75);
         let iqr = q3 - q1;
         let (fence_low, fence_high) = (q1 - 1.5 * iqr, q3 + 1.5 * iqr);
-        let inside = || v.iter().copied().filter(|&x| x >= fence_low && x <= fence_high);
+        let inside = || {
+            v.iter()
+                .copied()
+                .filter(|&x| x >= fence_low && x <= fence_high)
+        };
         // The quartiles lie inside the fences, so both folds see at least one value.
         let whisker_low = inside().fold(f64::INFINITY, f64::min);
         let whisker_high = inside().fold(f64::NEG_INFINITY, f64::max);

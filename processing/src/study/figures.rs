@@ -44,6 +44,8 @@ pub enum Mark {
     Points,
     /// Polylines through each segment's points, in order.
     Lines,
+    /// Large hollow circles, to single out a few points.
+    Highlight,
 }
 
 /// One named x–y series; each segment is drawn separately (e.g. one line per θL).
@@ -54,14 +56,15 @@ pub struct XySeries {
     pub segments: Vec<Vec<(f64, f64)>>,
 }
 
-/// An x–y chart. With `log_x`, x values are plotted on a log₁₀ axis (they must be > 0;
-/// others are skipped).
+/// An x–y chart. With `log_x` (`log_y`), x (y) values are plotted on a log₁₀ axis
+/// (they must be > 0; others are skipped).
 #[derive(Debug, Clone)]
 pub struct XyPlot {
     pub title: String,
     pub x_label: String,
     pub y_label: String,
     pub log_x: bool,
+    pub log_y: bool,
     pub series: Vec<XySeries>,
 }
 
@@ -70,6 +73,15 @@ fn draw_error(path: &Path, err: impl std::fmt::Display) -> FigureError {
         path: path.to_path_buf(),
         message: err.to_string(),
     }
+}
+
+/// A tick label with three significant digits (no exponent).
+fn tick(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    let decimals = (2.0 - v.abs().log10().floor()).clamp(0.0, 8.0) as usize;
+    format!("{v:.decimals$}")
 }
 
 /// Padded `(lo, hi)` range of the values; a unit range around a single value.
@@ -156,8 +168,14 @@ pub fn box_plot_svg(
                 vec![(c - half, b.median), (c + half, b.median)],
                 vec![(c, b.q3), (c, b.whisker_high)],
                 vec![(c, b.q1), (c, b.whisker_low)],
-                vec![(c - half / 2.0, b.whisker_high), (c + half / 2.0, b.whisker_high)],
-                vec![(c - half / 2.0, b.whisker_low), (c + half / 2.0, b.whisker_low)],
+                vec![
+                    (c - half / 2.0, b.whisker_high),
+                    (c + half / 2.0, b.whisker_high),
+                ],
+                vec![
+                    (c - half / 2.0, b.whisker_low),
+                    (c + half / 2.0, b.whisker_low),
+                ],
             ]
         });
         chart
@@ -183,11 +201,11 @@ pub fn box_plot_svg(
 /// An x–y chart of points and polylines with a legend.
 pub fn xy_svg(path: &Path, plot: &XyPlot) -> Result<(), FigureError> {
     let err = |e: &dyn std::fmt::Display| draw_error(path, e);
-    let to_x = |x: f64| {
-        if plot.log_x {
-            (x > 0.0).then(|| x.log10())
+    let axis = |log: bool, v: f64| {
+        if log {
+            (v > 0.0).then(|| v.log10())
         } else {
-            Some(x)
+            Some(v)
         }
     };
     let transformed: Vec<Vec<Vec<(f64, f64)>>> = plot
@@ -198,7 +216,7 @@ pub fn xy_svg(path: &Path, plot: &XyPlot) -> Result<(), FigureError> {
                 .iter()
                 .map(|seg| {
                     seg.iter()
-                        .filter_map(|&(x, y)| to_x(x).map(|x| (x, y)))
+                        .filter_map(|&(x, y)| Some((axis(plot.log_x, x)?, axis(plot.log_y, y)?)))
                         .filter(|(x, y)| x.is_finite() && y.is_finite())
                         .collect()
                 })
@@ -218,14 +236,12 @@ pub fn xy_svg(path: &Path, plot: &XyPlot) -> Result<(), FigureError> {
         .y_label_area_size(70)
         .build_cartesian_2d(x_lo..x_hi, y_lo..y_hi)
         .map_err(|e| err(&e))?;
-    let log_x = plot.log_x;
+    let (log_x, log_y) = (plot.log_x, plot.log_y);
+    let unlog = |log: bool, v: f64| if log { 10f64.powf(v) } else { v };
     chart
         .configure_mesh()
-        .x_label_formatter(&|x| {
-            let v = if log_x { 10f64.powf(*x) } else { *x };
-            format!("{v:.3}")
-        })
-        .y_label_formatter(&|y| format!("{y:.3}"))
+        .x_label_formatter(&|x| tick(unlog(log_x, *x)))
+        .y_label_formatter(&|y| tick(unlog(log_y, *y)))
         .x_desc(plot.x_label.as_str())
         .y_desc(plot.y_label.as_str())
         .draw()
@@ -240,6 +256,14 @@ pub fn xy_svg(path: &Path, plot: &XyPlot) -> Result<(), FigureError> {
                         .iter()
                         .flatten()
                         .map(|&p| Circle::new(p, 2, color.filled())),
+                )
+                .map_err(|e| err(&e))?,
+            Mark::Highlight => chart
+                .draw_series(
+                    segments
+                        .iter()
+                        .flatten()
+                        .map(|&p| Circle::new(p, 8, color.stroke_width(3))),
                 )
                 .map_err(|e| err(&e))?,
             Mark::Lines => chart

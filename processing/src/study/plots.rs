@@ -12,6 +12,11 @@ use super::figures::{box_plot_svg, xy_svg, BoxSeries, Mark, XyPlot, XySeries};
 use super::{EvalPoint, GroupSummary, StudyError, StudyReport};
 use crate::metrics;
 
+/// Most points drawn per point series and per polyline (evenly thinned beyond), to keep
+/// the SVGs small.
+const MAX_MARKERS: usize = 1500;
+const MAX_LINE_POINTS: usize = 600;
+
 /// θL of the single-direction fit shown in Fig. 6 (paper: −25°).
 const FIG6_THETA_L: f64 = -25.0;
 /// θL of the single-direction fit shown in Fig. 8 (paper: −45°).
@@ -84,18 +89,19 @@ fn g_channel_plot(report: &StudyReport) -> XyPlot {
     let mut series = vec![XySeries {
         name: "reference".into(),
         mark: Mark::Points,
-        segments: vec![report
-            .points
-            .iter()
-            .map(|p| (p.theta_r, p.reference[1]))
-            .collect()],
+        segments: vec![thin(
+            report.points.iter().map(|p| (p.theta_r, p.reference[1])),
+            MAX_MARKERS,
+        )],
     }];
     let mut fitted_on = None;
     for &v in &report.options.variants {
         let Some(result) = report.single(v, FIG6_THETA_L) else {
             continue;
         };
-        let Ok(scores) = &result.outcome else { continue };
+        let Ok(scores) = &result.outcome else {
+            continue;
+        };
         fitted_on = Some(result.theta_l[0]);
         series.push(XySeries {
             name: v.label(),
@@ -103,9 +109,11 @@ fn g_channel_plot(report: &StudyReport) -> XyPlot {
             segments: lines
                 .iter()
                 .map(|line| {
-                    line.iter()
-                        .map(|p| (p.theta_r, scores.fit.predict(p.theta_i, p.theta_r)[1]))
-                        .collect()
+                    thin(
+                        line.iter()
+                            .map(|p| (p.theta_r, scores.fit.predict(p.theta_i, p.theta_r)[1])),
+                        MAX_LINE_POINTS,
+                    )
                 })
                 .collect(),
         });
@@ -118,6 +126,7 @@ fn g_channel_plot(report: &StudyReport) -> XyPlot {
         x_label: "θr (degrees)".into(),
         y_label: "β_G".into(),
         log_x: false,
+        log_y: false,
         series,
     }
 }
@@ -127,27 +136,29 @@ fn uv_plot(report: &StudyReport) -> XyPlot {
     let mut series = vec![XySeries {
         name: "reference".into(),
         mark: Mark::Points,
-        segments: vec![report
-            .points
-            .iter()
-            .filter_map(|p| uv(p.reference_xyz))
-            .collect()],
+        segments: vec![thin(
+            report.points.iter().filter_map(|p| uv(p.reference_xyz)),
+            MAX_MARKERS,
+        )],
     }];
     let mut fitted_on = None;
     for &v in &report.options.variants {
         let Some(result) = report.single(v, FIG8_THETA_L) else {
             continue;
         };
-        let Ok(scores) = &result.outcome else { continue };
+        let Ok(scores) = &result.outcome else {
+            continue;
+        };
         fitted_on = Some(result.theta_l[0]);
         series.push(XySeries {
             name: v.label(),
             mark: Mark::Points,
-            segments: vec![report
-                .points
-                .iter()
-                .filter_map(|p| uv(report.camera.xyz(scores.fit.predict(p.theta_i, p.theta_r))))
-                .collect()],
+            segments: vec![thin(
+                report.points.iter().filter_map(|p| {
+                    uv(report.camera.xyz(scores.fit.predict(p.theta_i, p.theta_r)))
+                }),
+                MAX_MARKERS,
+            )],
         });
     }
     XyPlot {
@@ -158,6 +169,23 @@ fn uv_plot(report: &StudyReport) -> XyPlot {
         x_label: "u′".into(),
         y_label: "v′".into(),
         log_x: false,
+        log_y: false,
         series,
     }
+}
+
+/// Every k-th item, k chosen so that at most `max` remain (first and last kept).
+fn thin(items: impl Iterator<Item = (f64, f64)>, max: usize) -> Vec<(f64, f64)> {
+    let all: Vec<(f64, f64)> = items.collect();
+    if all.len() <= max {
+        return all;
+    }
+    let step = all.len().div_ceil(max.max(2) - 1);
+    let mut out: Vec<(f64, f64)> = all.iter().step_by(step).copied().collect();
+    if let (Some(last), Some(kept)) = (all.last(), out.last()) {
+        if last != kept {
+            out.push(*last);
+        }
+    }
+    out
 }

@@ -65,13 +65,23 @@ fn combinations_csv(report: &StudyReport) -> String {
                     .chain(&s.err_p)
                     .map(|v| format!("{v:.6}"))
                     .chain([opt(s.delta_e_uv)])
-                    .chain(p.kd.iter().chain(&p.ks).chain(&p.m).map(|v| format!("{v:.6}")))
+                    .chain(
+                        p.kd.iter()
+                            .chain(&p.ks)
+                            .chain(&p.m)
+                            .map(|v| format!("{v:.6}")),
+                    )
                     .chain([opt(s.nelder_mead_loss), format!("{:.6}", s.fit.seconds)])
                     .collect();
                 let _ = writeln!(out, "{head},ok,{},", numbers.join(","));
             }
             Err(e) => {
-                let _ = writeln!(out, "{head},failed{},\"{}\"", ",".repeat(16), e.replace('"', "'"));
+                let _ = writeln!(
+                    out,
+                    "{head},failed{},\"{}\"",
+                    ",".repeat(16),
+                    e.replace('"', "'")
+                );
             }
         }
     }

@@ -113,7 +113,10 @@ pub fn router(shared: Arc<Shared>) -> Router {
     Router::new()
         .route("/", get(super::web::index))
         .route("/api/openapi.json", get(super::web::openapi))
-        .route("/api/health", get(|| async { Json(json!({ "status": "ok" })) }))
+        .route(
+            "/api/health",
+            get(|| async { Json(json!({ "status": "ok" })) }),
+        )
         .route("/api/hardware", get(hardware))
         .route("/api/hardware/log", get(hardware_log))
         .route("/api/scans", get(list_scans))
@@ -174,7 +177,6 @@ fn bounds(shared: &Shared) -> Bounds {
         limits: shared.config.limits,
         shutter_min_s: camera.shutter_min_s,
         shutter_max_s: camera.shutter_max_s,
-        auto_bracket: shared.default_bracket.clone(),
     }
 }
 
@@ -189,7 +191,11 @@ fn rfc3339(unix: i64) -> Option<String> {
 pub fn scan_view(shared: &Shared, scan: &ScanRecord) -> Value {
     let base = format!("/api/scans/{}", scan.id);
     let dir = shared.scan_dir(scan.id);
-    let file = |rel: &str| dir.join(rel).is_file().then(|| format!("{base}/files/{rel}"));
+    let file = |rel: &str| {
+        dir.join(rel)
+            .is_file()
+            .then(|| format!("{base}/files/{rel}"))
+    };
     let fits: serde_json::Map<String, Value> = FIT_MODELS
         .iter()
         .filter_map(|(model, name)| file(name).map(|url| ((*model).to_owned(), json!(url))))
@@ -293,10 +299,7 @@ async fn control(
     if !changed {
         return Err(ApiError::new(
             StatusCode::CONFLICT,
-            format!(
-                "scan {id} is {}: cannot {verb} it",
-                scan.state.as_str()
-            ),
+            format!("scan {id} is {}: cannot {verb} it", scan.state.as_str()),
         ));
     }
     shared.wake();
@@ -306,12 +309,23 @@ async fn control(
 }
 
 async fn pause_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
-    const FROM: &[ScanState] = &[ScanState::Queued, ScanState::Running, ScanState::Interrupted];
+    const FROM: &[ScanState] = &[
+        ScanState::Queued,
+        ScanState::Running,
+        ScanState::Interrupted,
+    ];
     control(shared, id, FROM, ScanState::Paused, "pause").await
 }
 
 async fn resume_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
-    control(shared, id, &[ScanState::Paused], ScanState::Queued, "resume").await
+    control(
+        shared,
+        id,
+        &[ScanState::Paused],
+        ScanState::Queued,
+        "resume",
+    )
+    .await
 }
 
 async fn cancel_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
@@ -331,9 +345,7 @@ async fn stop_arm(State(shared): AppState) -> ApiResult<Json<Value>> {
         Some(estop) => tokio::task::spawn_blocking(move || estop.stop())
             .await
             .map_err(internal)?
-            .map_err(|e| {
-                ApiError::new(StatusCode::SERVICE_UNAVAILABLE, format!("arm stop: {e}"))
-            }),
+            .map_err(|e| ApiError::new(StatusCode::SERVICE_UNAVAILABLE, format!("arm stop: {e}"))),
         None => Err(ApiError::new(
             StatusCode::SERVICE_UNAVAILABLE,
             "arm stop: the arm is not connected",
@@ -587,7 +599,11 @@ async fn plot(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Va
 async fn inject_fault(State(shared): AppState, body: Bytes) -> ApiResult<Json<Value>> {
     let emulators = match (&shared.emulators, shared.config.emulator.fault_injection) {
         (Some(emulators), true) => emulators.clone(),
-        _ => return Err(ApiError::not_found("fault injection (emulator.fault_injection is off)")),
+        _ => {
+            return Err(ApiError::not_found(
+                "fault injection (emulator.fault_injection is off)",
+            ))
+        }
     };
     let fault: InjectedFault = serde_json::from_slice(&body).map_err(|e| ApiError {
         status: StatusCode::UNPROCESSABLE_ENTITY,

@@ -6,6 +6,8 @@
 //! data_dir = "gonio-data"
 //! token = "secret"            # else GONIO_TOKEN, else generated into DATA/token
 //! max_body_bytes = 65536
+//! white_reflectance = 1.0      # of the white strip; emulated scans use the scene's
+//! # [setup] = processing's Setup fields, for real hardware (setup.json of each scan)
 //!
 //! [arm]                        # or: kind = "grbl", path = "/dev/ttyUSB0"
 //! kind = "emulator"
@@ -53,6 +55,9 @@ pub struct Config {
     pub limits: Limits,
     pub retry: RetryConfig,
     pub emulator: EmulatorConfig,
+    /// Reflectance of the white reference strip of the real setup (1 = perfect
+    /// reflecting diffuser); emulated scans take the scene's.
+    pub white_reflectance: f64,
     /// Geometry of the real setup (written to each scan's setup.json); emulated scans
     /// take the scene's geometry.
     pub setup: Option<Setup>,
@@ -70,6 +75,7 @@ impl Default for Config {
             limits: Limits::default(),
             retry: RetryConfig::default(),
             emulator: EmulatorConfig::default(),
+            white_reflectance: 1.0,
             setup: None,
         }
     }
@@ -106,9 +112,6 @@ pub enum CameraConfig {
         /// ISO set before each exposure.
         #[serde(default = "default_iso")]
         iso: u32,
-        /// Shutter times (s) of the "auto" bracket.
-        #[serde(default = "default_bracket")]
-        bracket_s: Vec<f64>,
     },
     Emulator {
         /// Builtin scene name (`gold`, `red`, `blue-green`) or path to a scene TOML.
@@ -185,10 +188,6 @@ fn default_iso() -> u32 {
     100
 }
 
-fn default_bracket() -> Vec<f64> {
-    vec![1.0 / 4.0, 1.0 / 15.0, 1.0 / 60.0, 1.0 / 250.0, 1.0 / 1000.0]
-}
-
 impl Config {
     /// Reads and checks a configuration file.
     pub fn load(path: &Path) -> anyhow::Result<Self> {
@@ -210,8 +209,19 @@ impl Config {
             min_deg.is_finite() && max_deg.is_finite() && min_deg < max_deg,
             "limits: min_deg ({min_deg}) must be below max_deg ({max_deg})"
         );
-        anyhow::ensure!(self.retry.attempts >= 1, "retry.attempts must be at least 1");
-        anyhow::ensure!(self.max_body_bytes >= 1024, "max_body_bytes must be at least 1024");
+        anyhow::ensure!(
+            self.white_reflectance.is_finite() && self.white_reflectance > 0.0,
+            "white_reflectance must be positive, got {}",
+            self.white_reflectance
+        );
+        anyhow::ensure!(
+            self.retry.attempts >= 1,
+            "retry.attempts must be at least 1"
+        );
+        anyhow::ensure!(
+            self.max_body_bytes >= 1024,
+            "max_body_bytes must be at least 1024"
+        );
         for (what, scale) in [
             ("arm.time_scale", self.arm_time_scale()),
             ("camera.time_scale", self.camera_time_scale()),
@@ -222,12 +232,6 @@ impl Config {
                     "{what} must be positive, got {scale}"
                 );
             }
-        }
-        if let CameraConfig::Gphoto2 { bracket_s, .. } = &self.camera {
-            anyhow::ensure!(
-                !bracket_s.is_empty() && bracket_s.iter().all(|s| s.is_finite() && *s > 0.0),
-                "camera.bracket_s must be a non-empty list of positive shutter times"
-            );
         }
         Ok(())
     }
@@ -255,7 +259,9 @@ mod tests {
     fn empty_config_runs_on_emulators() {
         let config = Config::from_toml_str("").unwrap();
         assert!(matches!(config.arm, ArmConfig::Emulator { .. }));
-        assert!(matches!(config.camera, CameraConfig::Emulator { ref scene, .. } if scene == "gold"));
+        assert!(
+            matches!(config.camera, CameraConfig::Emulator { ref scene, .. } if scene == "gold")
+        );
         assert_eq!(config.bind.port(), 8080);
     }
 
@@ -263,8 +269,8 @@ mod tests {
     fn grbl_arm_needs_a_path() {
         let err = Config::from_toml_str("[arm]\nkind = \"grbl\"\n").unwrap_err();
         assert!(format!("{err:#}").contains("path"), "{err:#}");
-        let config = Config::from_toml_str("[arm]\nkind = \"grbl\"\npath = \"/dev/ttyUSB0\"\n")
-            .unwrap();
+        let config =
+            Config::from_toml_str("[arm]\nkind = \"grbl\"\npath = \"/dev/ttyUSB0\"\n").unwrap();
         assert!(matches!(config.arm, ArmConfig::Grbl { .. }));
     }
 

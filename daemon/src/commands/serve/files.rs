@@ -122,7 +122,14 @@ mod tests {
             safe_join(base, "theta_l_-20.0/exp_00.tiff"),
             Some(base.join("theta_l_-20.0/exp_00.tiff"))
         );
-        for bad in ["../x", "/etc/passwd", "a/../../b", "", ".hidden", "a/.partial-1-x"] {
+        for bad in [
+            "../x",
+            "/etc/passwd",
+            "a/../../b",
+            "",
+            ".hidden",
+            "a/.partial-1-x",
+        ] {
             assert_eq!(safe_join(base, bad), None, "{bad}");
         }
     }

@@ -12,8 +12,8 @@ use gonio_mock_hw::camera::{CameraFault, CaptureTiming, EmulatedCamera, FaultInj
 use gonio_mock_hw::grbl::{Fault, GrblConfig, GrblEmulator};
 use gonio_mock_hw::scene::Scene;
 use gonio_mock_hw::world::World;
-use gonio_processing::geometry::Setup;
 use gonio_processing::capture::Response;
+use gonio_processing::geometry::Setup;
 use serde_json::Value;
 
 use super::config::{ArmConfig, CameraConfig, Config, Limits};
@@ -61,10 +61,10 @@ pub struct Devices {
     pub truth: Option<Value>,
     /// Levels and response written to every capture sidecar.
     pub sidecar: SidecarDefaults,
+    /// Reflectance of the white reference strip (1 = perfect reflecting diffuser).
+    pub white_reflectance: f64,
     /// ISO set for every exposure, where the body has one.
     pub iso: Option<u32>,
-    /// Shutter times (s) of the "auto" bracket.
-    pub default_bracket: Vec<f64>,
     pub emulators: Option<Arc<Emulators>>,
 }
 
@@ -158,19 +158,19 @@ pub fn open(config: &Config) -> anyhow::Result<Devices> {
                 setup: Some(setup),
                 truth: Some(scene.truth_json()),
                 sidecar,
+                white_reflectance: scene.white_reflectance(),
                 iso: Some(body.iso),
-                default_bracket: scene.bracket_s().to_vec(),
                 emulators,
             })
         }
-        CameraConfig::Gphoto2 { iso, bracket_s } => Ok(Devices {
+        CameraConfig::Gphoto2 { iso } => Ok(Devices {
             arm,
             camera: open_gphoto2()?,
             setup: config.setup.clone(),
             truth: None,
             sidecar: SidecarDefaults::default(),
+            white_reflectance: config.white_reflectance,
             iso: Some(*iso),
-            default_bracket: bracket_s.clone(),
             emulators: None,
         }),
     }
@@ -225,5 +225,7 @@ impl Emulators {
 }
 
 fn lock<T>(mutex: &std::sync::Mutex<T>) -> std::sync::MutexGuard<'_, T> {
-    mutex.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+    mutex
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner())
 }

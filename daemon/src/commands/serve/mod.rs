@@ -26,6 +26,9 @@ use config::Config;
 use shared::{ArmView, CameraView, HardwareStatus, Shared};
 use store::Store;
 
+/// Shutter range (s) assumed until the camera has told its own.
+const UNKNOWN_SHUTTER_RANGE_S: (f64, f64) = (1.0 / 8000.0, 30.0);
+
 /// Arguments of `gonio serve`.
 #[derive(clap::Args)]
 pub struct Args {
@@ -44,8 +47,7 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     tracing_subscriber::fmt()
         .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| "info".into()),
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
         )
         .with_writer(std::io::stderr)
         .init();
@@ -90,13 +92,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 model: None,
                 port: None,
                 state: "idle",
-                shutter_min_s: devices.default_bracket.iter().copied().fold(f64::INFINITY, f64::min),
-                shutter_max_s: devices.default_bracket.iter().copied().fold(0.0, f64::max),
+                shutter_min_s: UNKNOWN_SHUTTER_RANGE_S.0,
+                shutter_max_s: UNKNOWN_SHUTTER_RANGE_S.1,
                 error: None,
             },
         }),
         estop: Mutex::new(None),
-        default_bracket: devices.default_bracket.clone(),
         emulators: devices.emulators.clone(),
         config,
     });
@@ -125,7 +126,11 @@ async fn serve(shared: Arc<Shared>) -> anyhow::Result<()> {
         "data in {}, boot {}, {} hardware",
         shared.config.data_dir.display(),
         shared.boot,
-        if shared.emulators.is_some() { "emulated" } else { "real" }
+        if shared.emulators.is_some() {
+            "emulated"
+        } else {
+            "real"
+        }
     );
     axum::serve(listener, api::router(shared))
         .with_graceful_shutdown(async {

@@ -10,9 +10,9 @@ pub struct ScanPlan {
     pub sample: String,
     /// Light angles θL, degrees, in acquisition order.
     pub theta_l: Vec<f64>,
-    /// Shutter times of the bracket, seconds.
+    /// Shutter times of the bracket, seconds; empty for an automatic bracket.
     pub shutter_s: Vec<f64>,
-    /// Whether the bracket was chosen automatically.
+    /// Whether each θL's bracket is chosen from a metering capture.
     pub auto_bracket: bool,
 }
 
@@ -31,6 +31,9 @@ pub enum Step {
     Home,
     /// Move the arm to θL (degrees).
     Move { theta_l: f64 },
+    /// Take a metering capture at θL and choose its bracket; the capture steps of that
+    /// bracket are added to the plan after this one.
+    Meter { theta_l: f64 },
     /// Capture exposure `index` of the bracket at θL.
     Capture {
         theta_l: f64,
@@ -51,6 +54,7 @@ impl Step {
         match self {
             Step::Home => "home the arm".to_owned(),
             Step::Move { theta_l } => format!("move to θL {theta_l:.1}°"),
+            Step::Meter { theta_l } => format!("meter θL {theta_l:.1}°"),
             Step::Capture {
                 theta_l,
                 index,
@@ -74,20 +78,17 @@ pub fn exposure_stem(index: usize) -> String {
 }
 
 impl ScanPlan {
-    /// The steps of the plan, in execution order.
+    /// The steps of the plan, in execution order (an automatic bracket adds its
+    /// captures when its metering step is done).
     pub fn steps(&self) -> Vec<Step> {
         let mut steps = vec![Step::Home];
         for &theta_l in &self.theta_l {
             steps.push(Step::Move { theta_l });
+            if self.auto_bracket {
+                steps.push(Step::Meter { theta_l });
+            }
             steps.extend(
-                self.shutter_s
-                    .iter()
-                    .enumerate()
-                    .map(|(index, &shutter_s)| Step::Capture {
-                        theta_l,
-                        index,
-                        shutter_s,
-                    }),
+                Self::captures(theta_l, &self.shutter_s),
             );
             steps.push(Step::Hdr { theta_l });
         }
@@ -96,6 +97,19 @@ impl ScanPlan {
             model: (*model).to_owned(),
         }));
         steps
+    }
+
+    /// The capture steps of a bracket at θL.
+    pub fn captures(theta_l: f64, shutter_s: &[f64]) -> Vec<Step> {
+        shutter_s
+            .iter()
+            .enumerate()
+            .map(|(index, &shutter_s)| Step::Capture {
+                theta_l,
+                index,
+                shutter_s,
+            })
+            .collect()
     }
 }
 
@@ -126,6 +140,27 @@ mod tests {
         assert_eq!(steps[5], Step::Hdr { theta_l: -20.0 });
         assert_eq!(steps[11], Step::Extract);
         assert!(matches!(&steps[13], Step::Fit { model } if model == "ward"));
+    }
+
+    #[test]
+    fn auto_plan_meters_each_angle_instead_of_fixed_captures() {
+        let plan = ScanPlan {
+            sample: "gold".into(),
+            theta_l: vec![-20.0, -25.0],
+            shutter_s: vec![],
+            auto_bracket: true,
+        };
+        let steps = plan.steps();
+        assert_eq!(
+            &steps[..4],
+            &[
+                Step::Home,
+                Step::Move { theta_l: -20.0 },
+                Step::Meter { theta_l: -20.0 },
+                Step::Hdr { theta_l: -20.0 }
+            ]
+        );
+        assert_eq!(steps.len(), 1 + 2 * 3 + 3);
     }
 
     #[test]

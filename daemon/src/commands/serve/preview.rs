@@ -46,13 +46,14 @@ pub fn thumbnail_png(path: &Path) -> Result<Vec<u8>, PreviewError> {
         let k = (values.len() - 1) * 995 / 1000;
         f64::from(*values.select_nth_unstable(k).1).max(1.0)
     };
-    let out: ImageBuffer<Rgb<u8>, Vec<u8>> = ImageBuffer::from_fn(small.width(), small.height(), |x, y| {
-        let p = small.get_pixel(x, y);
-        Rgb(p.0.map(|v| {
-            let linear = (f64::from(v) / top).clamp(0.0, 1.0);
-            (255.0 * linear.powf(1.0 / 2.2)).round() as u8
-        }))
-    });
+    let out: ImageBuffer<Rgb<u8>, Vec<u8>> =
+        ImageBuffer::from_fn(small.width(), small.height(), |x, y| {
+            let p = small.get_pixel(x, y);
+            Rgb(p.0.map(|v| {
+                let linear = (f64::from(v) / top).clamp(0.0, 1.0);
+                (255.0 * linear.powf(1.0 / 2.2)).round() as u8
+            }))
+        });
     let mut png = Vec::new();
     out.write_to(&mut Cursor::new(&mut png), image::ImageFormat::Png)
         .map_err(image_err)?;

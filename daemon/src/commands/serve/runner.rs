@@ -55,6 +55,7 @@ pub struct Runner {
     truth: Option<Value>,
     sidecar: SidecarDefaults,
     iso: Option<u32>,
+    white_reflectance: f64,
 }
 
 impl Runner {
@@ -78,6 +79,7 @@ impl Runner {
             truth: devices.truth,
             sidecar: devices.sidecar,
             iso: devices.iso,
+            white_reflectance: devices.white_reflectance,
         }
     }
 
@@ -152,9 +154,9 @@ impl Runner {
                     status.arm.homed = false;
                     status.arm.error = None;
                 }
-                for id in self
-                    .store
-                    .transition_all(ScanState::Interrupted, ScanState::Running, None)?
+                for id in
+                    self.store
+                        .transition_all(ScanState::Interrupted, ScanState::Running, None)?
                 {
                     tracing::info!("scan {id}: arm back, resuming");
                     self.shared.publish(&self.store, id)?;
@@ -188,7 +190,7 @@ impl Runner {
                 status.arm.angle_deg = Some(s.angle_deg);
                 status.arm.homed = self.homed;
             }
-            Err(err) if matches!(err, DeviceError::Reset | DeviceError::Alarm { .. }) => {
+            Err(DeviceError::Reset | DeviceError::Alarm { .. }) => {
                 self.homed = false;
             }
             Err(err) => {
@@ -286,7 +288,10 @@ impl Runner {
         if removed > 0 {
             tracing::info!("{}: removed {removed} partial file(s)", dir.display());
         }
-        let files = [("setup.json", self.setup.as_ref().map(|s| json!(s))), ("truth.json", self.truth.clone())];
+        let files = [
+            ("setup.json", self.setup.as_ref().map(|s| json!(s))),
+            ("truth.json", self.truth.clone()),
+        ];
         for (name, value) in files {
             let path = dir.join(name);
             if let (Some(value), false) = (value, path.exists()) {
@@ -313,7 +318,8 @@ impl Runner {
                 shutter_s,
             } => self.capture(id, dir, *theta_l, *index, *shutter_s),
             Step::Hdr { .. } | Step::Extract | Step::Fit { .. } => {
-                process::run(step, dir).map_err(|err| StepError::Failed(format!("{}: {err}", step.describe())))
+                process::run(step, dir, self.white_reflectance)
+                    .map_err(|err| StepError::Failed(format!("{}: {err}", step.describe())))
             }
         }
     }
@@ -357,6 +363,12 @@ impl Runner {
                 }
                 Err(err) => {
                     tracing::warn!("scan {id}: {what} (try {}): {err}", attempt + 1);
+                    if matches!(err, DeviceError::Disconnected(_) | DeviceError::NotFound(_)) {
+                        // The driver already tried to reconnect: wait for the device.
+                        return Err(StepError::Interrupted(format!(
+                            "{what}: {err}; waiting for the arm to come back"
+                        )));
+                    }
                     let recoverable = matches!(err, DeviceError::Reset | DeviceError::Alarm { .. });
                     if recoverable {
                         self.homed = false;
@@ -482,8 +494,9 @@ impl Runner {
             // The image landed but the crash came before its sidecar: only the
             // exposure actually set is missing.
             Some(image) => {
-                let exposure =
-                    self.camera_op(id, &format!("exposure for {what}"), |c| c.set_exposure(requested))?;
+                let exposure = self.camera_op(id, &format!("exposure for {what}"), |c| {
+                    c.set_exposure(requested)
+                })?;
                 (image, exposure)
             }
             None => {
@@ -528,27 +541,18 @@ fn backoff(base_ms: u64, attempt: u32) -> Duration {
     Duration::from_millis(base_ms.saturating_mul(1 << (attempt - 1).min(10)))
 }
 
-/// Whether an arm error means the connection is gone (rather than a refusal).
+/// Whether an arm error that outlasted the retries means the connection is gone
+/// (rather than a refusal).
 fn is_connection_loss(err: &DeviceError) -> bool {
-    matches!(
-        err,
-        DeviceError::Io(_)
-            | DeviceError::Disconnected(_)
-            | DeviceError::Timeout { .. }
-            | DeviceError::NotFound(_)
-    )
+    matches!(err, DeviceError::Io(_) | DeviceError::Timeout { .. })
 }
 
 /// The captured image of `stem` in `dir`, whatever its extension (sidecars excluded).
 fn find_frame(dir: &Path, stem: &str) -> Option<PathBuf> {
     let entries = std::fs::read_dir(dir).ok()?;
-    entries
-        .filter_map(Result::ok)
-        .map(|e| e.path())
-        .find(|p| {
-            p.file_stem().is_some_and(|s| s == stem)
-                && p.extension().is_some_and(|e| e != "json")
-        })
+    entries.filter_map(Result::ok).map(|e| e.path()).find(|p| {
+        p.file_stem().is_some_and(|s| s == stem) && p.extension().is_some_and(|e| e != "json")
+    })
 }
 
 fn frame_result(scan_dir: &Path, image: &Path, reused: bool) -> Value {

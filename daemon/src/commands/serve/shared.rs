@@ -56,8 +56,6 @@ pub struct Shared {
     pub hardware: Mutex<HardwareStatus>,
     /// Stops the arm from any thread; replaced whenever the arm is reopened.
     pub estop: Mutex<Option<Arc<dyn EmergencyStop>>>,
-    /// Shutter times (s) of the "auto" bracket.
-    pub default_bracket: Vec<f64>,
     /// Present when the devices are emulated.
     pub emulators: Option<Arc<Emulators>>,
 }
@@ -65,7 +63,9 @@ pub struct Shared {
 /// Locks a mutex, recovering the data of a poisoned one (a panicked holder leaves
 /// plain data that is still consistent for these uses).
 pub fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
-    mutex.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+    mutex
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner())
 }
 
 impl Shared {

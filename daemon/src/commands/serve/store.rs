@@ -22,7 +22,13 @@ pub enum StoreError {
     },
     #[error("unknown state {0:?} in the database")]
     State(String),
+    #[error("a step cannot plan {0} further steps")]
+    TooManySteps(usize),
 }
+
+/// Planned steps are numbered this far apart, leaving room for the steps a step adds
+/// after itself (the captures of a metered bracket).
+const STEP_SPACING: u32 = 1000;
 
 fn json_err(what: &'static str) -> impl FnOnce(serde_json::Error) -> StoreError {
     move |source| StoreError::Json { what, source }
@@ -129,6 +135,7 @@ pub struct ScanRecord {
 /// One step as stored.
 #[derive(Debug, Clone, Serialize)]
 pub struct StepRecord {
+    /// Position key: increasing in execution order, not contiguous.
     pub index: u32,
     pub step: Step,
     pub state: StepState,
@@ -216,7 +223,8 @@ CREATE TABLE IF NOT EXISTS hardware_log (
 );
 ";
 
-const SCAN_COLUMNS: &str = "id, plan, state, error, sweep_id, not_before, created, started, finished,
+const SCAN_COLUMNS: &str =
+    "id, plan, state, error, sweep_id, not_before, created, started, finished,
     (SELECT COUNT(*) FROM steps WHERE scan_id = scans.id AND state = 'done'),
     (SELECT COUNT(*) FROM steps WHERE scan_id = scans.id),
     (SELECT step FROM steps WHERE scan_id = scans.id AND state != 'done' ORDER BY idx LIMIT 1)";
@@ -316,7 +324,9 @@ impl Store {
 
     pub fn sweep_ids(&self) -> Result<Vec<i64>, StoreError> {
         let mut stmt = self.conn.prepare("SELECT id FROM sweeps ORDER BY id")?;
-        let ids = stmt.query_map([], |r| r.get(0))?.collect::<Result<_, _>>()?;
+        let ids = stmt
+            .query_map([], |r| r.get(0))?
+            .collect::<Result<_, _>>()?;
         Ok(ids)
     }
 
@@ -506,16 +516,28 @@ impl Store {
         Ok(())
     }
 
-    /// Records a step as done with its result, in one transaction; when it was the
-    /// last step of a still running scan, the scan becomes done in the same transaction.
+    /// Records a step as done with its result and inserts the steps it planned
+    /// (`followers`, right after it), in one transaction; when it was the last step of
+    /// a still running scan, the scan becomes done in the same transaction.
     pub fn step_done(
         &mut self,
         scan_id: i64,
         index: u32,
         result: &Value,
+        followers: &[Step],
     ) -> Result<(), StoreError> {
+        if followers.len() >= STEP_SPACING as usize {
+            return Err(StoreError::TooManySteps(followers.len()));
+        }
         let tx = self.conn.transaction()?;
         let now = now_rfc3339();
+        for (k, step) in (1..).zip(followers) {
+            let step = serde_json::to_string(step).map_err(json_err("step"))?;
+            tx.execute(
+                "INSERT INTO steps (scan_id, idx, step, state) VALUES (?1, ?2, ?3, 'pending')",
+                params![scan_id, index + k, step],
+            )?;
+        }
         tx.execute(
             "UPDATE steps SET state = ?3, finished = ?4, result = ?5
              WHERE scan_id = ?1 AND idx = ?2",
@@ -586,11 +608,11 @@ fn insert_scans_tx(tx: &Transaction<'_>, scans: &[NewScan]) -> Result<Vec<i64>, 
             params![plan, scan.sweep_id, scan.not_before, created],
         )?;
         let id = tx.last_insert_rowid();
-        for (index, step) in scan.plan.steps().iter().enumerate() {
-            let step = serde_json::to_string(step).map_err(json_err("step"))?;
+        for (k, step) in (0u32..).zip(scan.plan.steps()) {
+            let step = serde_json::to_string(&step).map_err(json_err("step"))?;
             tx.execute(
                 "INSERT INTO steps (scan_id, idx, step, state) VALUES (?1, ?2, ?3, 'pending')",
-                params![id, index, step],
+                params![id, k * STEP_SPACING, step],
             )?;
         }
         ids.push(id);
@@ -631,26 +653,44 @@ mod tests {
             .unwrap();
         let id = ids[0];
         let scan = store.next_runnable(now_unix()).unwrap().unwrap();
-        assert_eq!((scan.id, scan.state, scan.done, scan.total), (id, ScanState::Queued, 0, 8));
+        assert_eq!(
+            (scan.id, scan.state, scan.done, scan.total),
+            (id, ScanState::Queued, 0, 8)
+        );
         assert!(store
             .transition(id, &[ScanState::Queued], ScanState::Running, None)
             .unwrap());
         let steps = store.steps(id).unwrap();
-        for step in &steps[..steps.len() - 1] {
+        // The first step plans one more right after itself.
+        let extra = Step::Capture {
+            theta_l: -20.0,
+            index: 2,
+            shutter_s: 0.001,
+        };
+        store.step_started(id, steps[0].index).unwrap();
+        store
+            .step_done(id, steps[0].index, &Value::Null, &[extra.clone()])
+            .unwrap();
+        let steps = store.steps(id).unwrap();
+        assert_eq!((steps.len(), &steps[1].step), (9, &extra));
+        for step in &steps[1..steps.len() - 1] {
             store.step_started(id, step.index).unwrap();
-            store.step_done(id, step.index, &Value::Null).unwrap();
+            store.step_done(id, step.index, &Value::Null, &[]).unwrap();
         }
         assert_eq!(store.scan(id).unwrap().unwrap().state, ScanState::Running);
-        store.step_started(id, 7).unwrap();
+        let last = steps[8].index;
+        store.step_started(id, last).unwrap();
         drop(store);
         // Reopened after a crash: the started step is not done and the scan resumes.
         let mut store = Store::open(&dir.join("gonio.sqlite")).unwrap();
         let scan = store.next_runnable(now_unix()).unwrap().unwrap();
-        assert_eq!((scan.id, scan.state, scan.done), (id, ScanState::Running, 7));
-        assert_eq!(store.steps(id).unwrap()[7].state, StepState::Started);
-        store.step_done(id, 7, &serde_json::json!({"ok": true})).unwrap();
+        assert_eq!((scan.id, scan.state, scan.done), (id, ScanState::Running, 8));
+        assert_eq!(store.steps(id).unwrap()[8].state, StepState::Started);
+        store
+            .step_done(id, last, &serde_json::json!({"ok": true}), &[])
+            .unwrap();
         let scan = store.scan(id).unwrap().unwrap();
-        assert_eq!((scan.state, scan.done), (ScanState::Done, 8));
+        assert_eq!((scan.state, scan.done), (ScanState::Done, 9));
         assert!(scan.finished.is_some());
         assert!(store.next_runnable(now_unix()).unwrap().is_none());
         std::fs::remove_dir_all(dir).unwrap();

@@ -30,8 +30,6 @@ pub struct Bounds {
     /// Shutter range of the camera, seconds.
     pub shutter_min_s: f64,
     pub shutter_max_s: f64,
-    /// The "auto" bracket, seconds.
-    pub auto_bracket: Vec<f64>,
 }
 
 /// Most θL of one scan.
@@ -71,7 +69,10 @@ fn theta_list(field: &str, value: Option<&Value>, limits: Limits) -> Result<Vec<
         .as_array()
         .ok_or_else(|| invalid(field, "must be an array of angles in degrees"))?;
     if items.is_empty() || items.len() > MAX_THETA_L {
-        return Err(invalid(field, format!("must hold 1 to {MAX_THETA_L} angles")));
+        return Err(invalid(
+            field,
+            format!("must hold 1 to {MAX_THETA_L} angles"),
+        ));
     }
     let mut out: Vec<f64> = Vec::with_capacity(items.len());
     for (i, item) in items.iter().enumerate() {
@@ -90,7 +91,10 @@ fn theta_list(field: &str, value: Option<&Value>, limits: Limits) -> Result<Vec<
             ));
         }
         // Directories are named with one decimal: angles must differ there too.
-        if out.iter().any(|t| format!("{t:.1}") == format!("{theta:.1}")) {
+        if out
+            .iter()
+            .any(|t| format!("{t:.1}") == format!("{theta:.1}"))
+        {
             return Err(invalid(&f, format!("{theta} is listed twice")));
         }
         out.push(theta);
@@ -98,12 +102,13 @@ fn theta_list(field: &str, value: Option<&Value>, limits: Limits) -> Result<Vec<
     Ok(out)
 }
 
-/// The bracket: absent or `"auto"`, or `{"shutter_s": [...]}`; returns the shutter
-/// times and whether they were chosen automatically.
+/// The bracket: absent or `"auto"` (metered at each θL: no shutter times yet), or
+/// `{"shutter_s": [...]}`; returns the shutter times and whether the bracket is
+/// automatic.
 fn bracket(value: Option<&Value>, bounds: &Bounds) -> Result<(Vec<f64>, bool), FieldError> {
     match value {
-        None | Some(Value::Null) => Ok((bounds.auto_bracket.clone(), true)),
-        Some(Value::String(s)) if s == "auto" => Ok((bounds.auto_bracket.clone(), true)),
+        None | Some(Value::Null) => Ok((Vec::new(), true)),
+        Some(Value::String(s)) if s == "auto" => Ok((Vec::new(), true)),
         Some(v @ Value::Object(_)) => {
             let map = object(v, &["shutter_s"])
                 .map_err(|e| invalid(format!("bracket.{}", e.field), e.message))?;
@@ -170,7 +175,10 @@ pub struct SweepPlan {
 /// Checks a `POST /api/sweeps` body: `samples` × `theta_l_sets` × `repeats` scans,
 /// repeat-major (each round completes before the next begins).
 pub fn sweep_request(body: &Value, bounds: &Bounds) -> Result<SweepPlan, FieldError> {
-    let map = object(body, &["samples", "theta_l_sets", "repeats", "bracket", "start_at"])?;
+    let map = object(
+        body,
+        &["samples", "theta_l_sets", "repeats", "bracket", "start_at"],
+    )?;
     let samples_value = map
         .get("samples")
         .ok_or_else(|| invalid("samples", "required"))?
@@ -215,11 +223,9 @@ pub fn sweep_request(body: &Value, bounds: &Bounds) -> Result<SweepPlan, FieldEr
             let text = v
                 .as_str()
                 .ok_or_else(|| invalid("start_at", "must be an RFC 3339 time string"))?;
-            let time = time::OffsetDateTime::parse(
-                text,
-                &time::format_description::well_known::Rfc3339,
-            )
-            .map_err(|e| invalid("start_at", format!("not an RFC 3339 time: {e}")))?;
+            let time =
+                time::OffsetDateTime::parse(text, &time::format_description::well_known::Rfc3339)
+                    .map_err(|e| invalid("start_at", format!("not an RFC 3339 time: {e}")))?;
             Some(time.unix_timestamp())
         }
     };
@@ -252,7 +258,6 @@ mod tests {
             },
             shutter_min_s: 1.0 / 4000.0,
             shutter_max_s: 30.0,
-            auto_bracket: vec![0.1, 0.01],
         }
     }
 
@@ -262,10 +267,13 @@ mod tests {
 
     #[test]
     fn valid_scan_defaults_to_the_auto_bracket() {
-        let plan = scan_request(&json!({"sample": "gold", "theta_l": [-20, -25.5]}), &bounds())
-            .unwrap();
+        let plan = scan_request(
+            &json!({"sample": "gold", "theta_l": [-20, -25.5]}),
+            &bounds(),
+        )
+        .unwrap();
         assert_eq!(plan.theta_l, vec![-20.0, -25.5]);
-        assert_eq!(plan.shutter_s, vec![0.1, 0.01]);
+        assert!(plan.shutter_s.is_empty());
         assert!(plan.auto_bracket);
         let plan = scan_request(
             &json!({"sample": "g", "theta_l": [-20], "bracket": {"shutter_s": [0.5]}}),
@@ -278,19 +286,37 @@ mod tests {
     #[test]
     fn each_invalid_field_is_named() {
         assert_eq!(field_of(json!({"theta_l": [-20]})), "sample");
-        assert_eq!(field_of(json!({"sample": "../x", "theta_l": [-20]})), "sample");
+        assert_eq!(
+            field_of(json!({"sample": "../x", "theta_l": [-20]})),
+            "sample"
+        );
         assert_eq!(field_of(json!({"sample": "g"})), "theta_l");
         assert_eq!(field_of(json!({"sample": "g", "theta_l": []})), "theta_l");
-        assert_eq!(field_of(json!({"sample": "g", "theta_l": [-20, 10]})), "theta_l[1]");
-        assert_eq!(field_of(json!({"sample": "g", "theta_l": [-20, "x"]})), "theta_l[1]");
-        assert_eq!(field_of(json!({"sample": "g", "theta_l": [-20, -20]})), "theta_l[1]");
+        assert_eq!(
+            field_of(json!({"sample": "g", "theta_l": [-20, 10]})),
+            "theta_l[1]"
+        );
+        assert_eq!(
+            field_of(json!({"sample": "g", "theta_l": [-20, "x"]})),
+            "theta_l[1]"
+        );
+        assert_eq!(
+            field_of(json!({"sample": "g", "theta_l": [-20, -20]})),
+            "theta_l[1]"
+        );
         let bracket = |b: Value| field_of(json!({"sample": "g", "theta_l": [-20], "bracket": b}));
         assert_eq!(bracket(json!({"shutter_s": []})), "bracket.shutter_s");
-        assert_eq!(bracket(json!({"shutter_s": [0.1, 60]})), "bracket.shutter_s[1]");
+        assert_eq!(
+            bracket(json!({"shutter_s": [0.1, 60]})),
+            "bracket.shutter_s[1]"
+        );
         assert_eq!(bracket(json!({"shutter_s": [-1]})), "bracket.shutter_s[0]");
         assert_eq!(bracket(json!({"shots": [1]})), "bracket.shots");
         assert_eq!(bracket(json!("manual")), "bracket");
-        assert_eq!(field_of(json!({"sample": "g", "theta_l": [-20], "x": 1})), "x");
+        assert_eq!(
+            field_of(json!({"sample": "g", "theta_l": [-20], "x": 1})),
+            "x"
+        );
         assert_eq!(field_of(json!([1])), "body");
     }
 

@@ -1,0 +1,145 @@
+//! A whole 6-θL scan over HTTP on the emulators: captures, HDR maps, samples and both
+//! fits land under the scan's files, progress streams as server-sent events, and the
+//! Cook–Torrance fit recovers the scene's true parameters.
+
+use std::io::{BufRead, BufReader};
+use std::time::Duration;
+
+use gonio_mock_hw::scene::Scene;
+use gonio_tests::{emulator_config, files_under, temp_dir, Daemon, SMALL_GOLD_SCENE};
+use serde_json::{json, Value};
+
+/// Reads the server-sent events of a scan until the stream ends; returns the JSON of
+/// every `progress` event.
+fn read_events(url: &str) -> Vec<Value> {
+    let response = ureq::get(url)
+        .timeout(Duration::from_secs(120))
+        .call()
+        .expect("events stream");
+    assert_eq!(response.content_type(), "text/event-stream");
+    BufReader::new(response.into_reader())
+        .lines()
+        .map_while(Result::ok)
+        .filter_map(|line| {
+            line.strip_prefix("data:")
+                .map(|d| serde_json::from_str(d.trim()).expect("event JSON"))
+        })
+        .collect()
+}
+
+fn assert_close(what: &str, got: f64, want: f64, rel: f64, abs: f64) {
+    assert!(
+        (got - want).abs() <= rel * want.abs() + abs,
+        "{what}: fitted {got}, true {want} (tolerance {rel}·|true| + {abs})"
+    );
+}
+
+#[test]
+fn six_angle_scan_completes_and_its_fit_recovers_the_scene() {
+    let dir = temp_dir("scan-fit");
+    let daemon = Daemon::start(&dir, &emulator_config(0.01));
+    let theta_l = [-20.0, -25.0, -30.0, -35.0, -40.0, -45.0];
+    let created = daemon.post(
+        "/api/scans",
+        &json!({"sample": "gold", "theta_l": theta_l, "bracket": "auto"}),
+    );
+    assert_eq!(created.status, 201, "{:?}", created.json);
+    let id = created.json["id"].as_i64().unwrap();
+    let events_url = format!("{}/api/scans/{id}/events", daemon.url);
+    let events = std::thread::spawn(move || read_events(&events_url));
+
+    let scan = daemon.wait_state(id, &["done", "failed"], Duration::from_secs(120));
+    assert_eq!(scan["state"], "done", "{scan}");
+
+    // Progress events: monotonic, ending with the done scan.
+    let events = events.join().unwrap();
+    assert!(events.len() >= 3, "{} events", events.len());
+    let done: Vec<u64> = events
+        .iter()
+        .map(|e| e["progress"]["done"].as_u64().unwrap())
+        .collect();
+    assert!(done.windows(2).all(|w| w[0] <= w[1]), "{done:?}");
+    let last = events.last().unwrap();
+    assert_eq!(last["state"], "done");
+    assert_eq!(last["progress"]["done"], last["progress"]["total"]);
+
+    // Every frame of the scene's bracket at every θL, each with its sidecar.
+    let scene = Scene::from_toml_str(SMALL_GOLD_SCENE).unwrap();
+    let bracket = scene.bracket_s();
+    assert_eq!(scan["bracket"]["shutter_s"], json!(bracket));
+    let scan_dir = daemon.data.join(format!("scans/{id}"));
+    let files = files_under(&scan_dir);
+    for theta in theta_l {
+        for (index, shutter_s) in bracket.iter().enumerate() {
+            let stem = format!("theta_l_{theta:.1}/exp_{index:02}");
+            assert!(files.contains(&format!("{stem}.tiff")), "{stem}.tiff");
+            let sidecar: Value = serde_json::from_slice(
+                &std::fs::read(scan_dir.join(format!("{stem}.json"))).unwrap(),
+            )
+            .unwrap();
+            assert_eq!(sidecar["theta_l"], json!(theta));
+            assert!((sidecar["shutter_s"].as_f64().unwrap() - shutter_s).abs() < 1e-9);
+            assert!(sidecar["time"].as_str().is_some());
+        }
+        assert!(
+            files.contains(&format!("hdr/theta_l_{theta:.1}.exr")),
+            "{files:?}"
+        );
+    }
+    assert!(files.iter().all(|f| !f.contains(".partial")), "{files:?}");
+
+    // Results are served, and the fit recovers the truth.
+    let samples = daemon.get(&format!("/api/scans/{id}/files/samples.csv"));
+    assert_eq!(samples.status, 200);
+    assert!(String::from_utf8_lossy(&samples.bytes).starts_with("theta_l,theta_i,theta_r,r,g,b"));
+    let fit = daemon.get(scan["results"]["fits"]["cook-torrance"].as_str().unwrap());
+    assert_eq!(fit.status, 200);
+    let fit = fit.json;
+    assert!(scan["results"]["fits"]["ward"].is_string());
+    let truth = scene.truth_json();
+    // Tolerances: the strips are noise-free here; what remains is HDR quantisation and
+    // the finite-distance geometry, a few percent at most.
+    for c in 0..3 {
+        let ks = truth["ks"][c].as_f64().unwrap();
+        assert_close(
+            &format!("ks[{c}]"),
+            fit["ks"][c].as_f64().unwrap(),
+            ks,
+            0.08,
+            0.2,
+        );
+        let kd = truth["kd"][c].as_f64().unwrap();
+        assert_close(
+            &format!("kd[{c}]"),
+            fit["kd"][c].as_f64().unwrap(),
+            kd,
+            0.08,
+            0.3,
+        );
+    }
+    let m = truth["m"][0].as_f64().unwrap();
+    assert_close("m", fit["m"][0].as_f64().unwrap(), m, 0.05, 0.0);
+
+    // The page's views of the scan.
+    let thumbnail = daemon.get(&format!("/api/scans/{id}/thumbnail.png"));
+    assert_eq!(thumbnail.status, 200);
+    assert_eq!(&thumbnail.bytes[1..4], b"PNG");
+    let plot = daemon.get(&format!("/api/scans/{id}/plot")).json;
+    let points = plot["samples"].as_array().unwrap().len();
+    assert!(points > 100, "{points} samples");
+    assert_eq!(
+        plot["fits"]["cook-torrance"]["predicted"]
+            .as_array()
+            .unwrap()
+            .len(),
+        points
+    );
+    // No escaping the scan directory through the files route.
+    assert_eq!(
+        daemon
+            .get(&format!("/api/scans/{id}/files/..%2F..%2Fgonio.sqlite"))
+            .status,
+        404
+    );
+    std::fs::remove_dir_all(dir).ok();
+}
