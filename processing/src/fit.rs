@@ -313,8 +313,7 @@ pub fn solve_at_roughness(
         &data,
         [&spec[0], &spec[1], &spec[2]],
         linear::FINE_TOLERANCE,
-        &mut Vec::new(),
-        &mut Vec::new(),
+        &mut linear::Workspace::default(),
     );
     Ok((
         Params {

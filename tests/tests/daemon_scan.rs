@@ -63,14 +63,27 @@ fn six_angle_scan_completes_and_its_fit_recovers_the_scene() {
     assert_eq!(last["state"], "done");
     assert_eq!(last["progress"]["done"], last["progress"]["total"]);
 
-    // Every frame of the scene's bracket at every θL, each with its sidecar.
-    let scene = Scene::from_toml_str(SMALL_GOLD_SCENE).unwrap();
-    let bracket = scene.bracket_s();
-    assert_eq!(scan["bracket"]["shutter_s"], json!(bracket));
+    // The automatic bracket metered every θL and planned its captures; every frame
+    // exists with its sidecar.
+    assert_eq!(scan["bracket"]["auto"], json!(true));
+    let steps = daemon.get(&format!("/api/scans/{id}/steps")).json;
+    let steps = steps.as_array().unwrap();
     let scan_dir = daemon.data.join(format!("scans/{id}"));
     let files = files_under(&scan_dir);
     for theta in theta_l {
-        for (index, shutter_s) in bracket.iter().enumerate() {
+        let metered = steps
+            .iter()
+            .find(|s| s["step"]["kind"] == "meter" && s["step"]["theta_l"] == json!(theta))
+            .unwrap_or_else(|| panic!("no metering at {theta}"));
+        let bracket = metered["result"]["shutter_s"].as_array().unwrap();
+        assert!(!bracket.is_empty() && bracket.len() <= 8, "{bracket:?}");
+        let captures: Vec<&Value> = steps
+            .iter()
+            .filter(|s| s["step"]["kind"] == "capture" && s["step"]["theta_l"] == json!(theta))
+            .collect();
+        assert_eq!(captures.len(), bracket.len());
+        for capture in captures {
+            let index = capture["step"]["index"].as_u64().unwrap();
             let stem = format!("theta_l_{theta:.1}/exp_{index:02}");
             assert!(files.contains(&format!("{stem}.tiff")), "{stem}.tiff");
             let sidecar: Value = serde_json::from_slice(
@@ -78,13 +91,11 @@ fn six_angle_scan_completes_and_its_fit_recovers_the_scene() {
             )
             .unwrap();
             assert_eq!(sidecar["theta_l"], json!(theta));
-            assert!((sidecar["shutter_s"].as_f64().unwrap() - shutter_s).abs() < 1e-9);
+            let planned = capture["step"]["shutter_s"].as_f64().unwrap();
+            assert!((sidecar["shutter_s"].as_f64().unwrap() - planned).abs() < 1e-9);
             assert!(sidecar["time"].as_str().is_some());
         }
-        assert!(
-            files.contains(&format!("hdr/theta_l_{theta:.1}.exr")),
-            "{files:?}"
-        );
+        assert!(files.contains(&format!("hdr/theta_l_{theta:.1}.exr")), "{files:?}");
     }
     assert!(files.iter().all(|f| !f.contains(".partial")), "{files:?}");
 
@@ -96,7 +107,7 @@ fn six_angle_scan_completes_and_its_fit_recovers_the_scene() {
     assert_eq!(fit.status, 200);
     let fit = fit.json;
     assert!(scan["results"]["fits"]["ward"].is_string());
-    let truth = scene.truth_json();
+    let truth = Scene::from_toml_str(SMALL_GOLD_SCENE).unwrap().truth_json();
     // Tolerances: the strips are noise-free here; what remains is HDR quantisation and
     // the finite-distance geometry, a few percent at most.
     for c in 0..3 {

@@ -56,21 +56,29 @@ fn nnls2(saa: f64, sas: f64, sss: f64, say: f64, ssy: f64) -> (f64, f64) {
     }
 }
 
-/// Eq. 10 loss of (kd, ks); writes each point's residual norm when `residuals` is given.
+/// Scratch buffers of [`solve`], reused across calls.
+#[derive(Debug, Default)]
+pub(crate) struct Workspace {
+    weights: Vec<f64>,
+    /// Residual norms of the current iterate, of the pass's candidate and of a trial.
+    current: Vec<f64>,
+    candidate: Vec<f64>,
+    trial: Vec<f64>,
+}
+
+/// Eq. 10 loss of (kd, ks), writing each point's residual norm to `residuals`.
 fn loss_of(
     data: &Data,
     spec: [&[f64]; 3],
     kd: &[f64; 3],
     ks: &[f64; 3],
-    mut residuals: Option<&mut [f64]>,
+    residuals: &mut [f64],
 ) -> f64 {
     let mut loss = 0.0;
-    for (p, (y, a)) in data.y.iter().zip(&data.diffuse).enumerate() {
+    for (p, ((y, a), out)) in data.y.iter().zip(&data.diffuse).zip(residuals).enumerate() {
         let r: [f64; 3] = std::array::from_fn(|c| y[c] - kd[c] * a - ks[c] * spec[c][p]);
         let norm = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
-        if let Some(out) = residuals.as_deref_mut() {
-            out[p] = norm;
-        }
+        *out = norm;
         loss += norm;
     }
     loss
@@ -78,28 +86,31 @@ fn loss_of(
 
 /// One reweighted pass: the weighted NNLS solution of each channel.
 fn weighted_nnls(data: &Data, spec: [&[f64]; 3], weights: &[f64]) -> ([f64; 3], [f64; 3]) {
+    let mut saa = 0.0;
+    let (mut sas, mut sss, mut say, mut ssy) = ([0.0; 3], [0.0; 3], [0.0; 3], [0.0; 3]);
+    for (p, ((w, a), y)) in weights.iter().zip(&data.diffuse).zip(&data.y).enumerate() {
+        let wa = w * a;
+        saa += wa * a;
+        for c in 0..3 {
+            let s = spec[c][p];
+            let ws = w * s;
+            sas[c] += wa * s;
+            sss[c] += ws * s;
+            say[c] += wa * y[c];
+            ssy[c] += ws * y[c];
+        }
+    }
     let mut kd = [0.0; 3];
     let mut ks = [0.0; 3];
     for c in 0..3 {
-        let (mut saa, mut sas, mut sss, mut say, mut ssy) = (0.0, 0.0, 0.0, 0.0, 0.0);
-        for (p, ((w, a), y)) in weights.iter().zip(&data.diffuse).zip(&data.y).enumerate() {
-            let s = spec[c][p];
-            let wa = w * a;
-            let ws = w * s;
-            saa += wa * a;
-            sas += wa * s;
-            sss += ws * s;
-            say += wa * y[c];
-            ssy += ws * y[c];
-        }
-        (kd[c], ks[c]) = nnls2(saa, sas, sss, say, ssy);
+        (kd[c], ks[c]) = nnls2(saa, sas[c], sss[c], say[c], ssy[c]);
     }
     (kd, ks)
 }
 
 /// Minimises eq. 10 over Kd, Ks ≥ 0 given each channel's specular basis values `spec[c][p]`.
 /// Converged when a pass at the final smoothing lowers the loss by less than `tolerance`
-/// (relative). `weights` and `residuals` are scratch space.
+/// (relative).
 ///
 /// Weights are 1/max(‖r_p‖, ε) with ε a fraction of the mean residual that shrinks by
 /// [`EPSILON_SHRINK`] per pass from [`EPSILON_START`] to `tolerance` (continuation):
@@ -110,56 +121,61 @@ pub(crate) fn solve(
     data: &Data,
     spec: [&[f64]; 3],
     tolerance: f64,
-    weights: &mut Vec<f64>,
-    residuals: &mut Vec<f64>,
+    ws: &mut Workspace,
 ) -> LinearFit {
     let n = data.y.len();
-    weights.clear();
-    weights.resize(n, 1.0);
-    residuals.resize(n, 0.0);
+    ws.weights.clear();
+    ws.weights.resize(n, 1.0);
+    for buffer in [&mut ws.current, &mut ws.candidate, &mut ws.trial] {
+        buffer.resize(n, 0.0);
+    }
     let floor = data.residual_floor;
     let mut epsilon = EPSILON_START;
     let mut current: Option<LinearFit> = None;
     for _ in 0..MAX_PASSES {
-        let (kd, ks) = weighted_nnls(data, spec, weights);
+        let (kd, ks) = weighted_nnls(data, spec, &ws.weights);
         let mut next = LinearFit {
             kd,
             ks,
-            loss: loss_of(data, spec, &kd, &ks, None),
+            loss: loss_of(data, spec, &kd, &ks, &mut ws.candidate),
         };
         if let Some(cur) = &current {
             let mut t = 2.0;
             while t <= MAX_EXTRAPOLATION {
                 let kd = std::array::from_fn(|c| (cur.kd[c] + t * (kd[c] - cur.kd[c])).max(0.0));
                 let ks = std::array::from_fn(|c| (cur.ks[c] + t * (ks[c] - cur.ks[c])).max(0.0));
-                let loss = loss_of(data, spec, &kd, &ks, None);
+                let loss = loss_of(data, spec, &kd, &ks, &mut ws.trial);
                 if loss >= next.loss {
                     break;
                 }
                 next = LinearFit { kd, ks, loss };
+                std::mem::swap(&mut ws.candidate, &mut ws.trial);
                 t *= 2.0;
             }
         }
         let previous = current.map_or(f64::INFINITY, |c| c.loss);
-        let final_smoothing = epsilon <= tolerance;
         if next.loss < previous {
             current = Some(next);
+            std::mem::swap(&mut ws.current, &mut ws.candidate);
         }
-        let decrease = previous - next.loss;
-        if next.loss <= floor || (final_smoothing && decrease <= tolerance * previous) {
+        let final_smoothing = epsilon <= tolerance;
+        if next.loss <= floor || (final_smoothing && previous - next.loss <= tolerance * previous) {
             break;
         }
-        let best = current.as_ref().unwrap_or(&next);
-        loss_of(data, spec, &best.kd, &best.ks, Some(residuals));
-        let cap = (epsilon * best.loss / n as f64).max(floor);
-        for (w, r) in weights.iter_mut().zip(residuals.iter()) {
+        let mean = current.map_or(next.loss, |c| c.loss) / n as f64;
+        let cap = (epsilon * mean).max(floor);
+        for (w, r) in ws.weights.iter_mut().zip(&ws.current) {
             *w = 1.0 / r.max(cap);
         }
         epsilon = (epsilon * EPSILON_SHRINK).max(tolerance);
     }
-    current.unwrap_or(LinearFit {
+    current.unwrap_or_else(|| LinearFit {
         kd: [0.0; 3],
         ks: [0.0; 3],
-        loss: loss_of(data, spec, &[0.0; 3], &[0.0; 3], None),
+        loss: data
+            .y
+            .iter()
+            .map(|y| (y[0] * y[0] + y[1] * y[1] + y[2] * y[2]).sqrt())
+            .sum(),
     })
 }

@@ -43,8 +43,7 @@ struct Profile<'a> {
     spec: [Vec<f64>; 3],
     /// The m each `spec` vector holds; NaN when not computed yet.
     spec_m: [f64; 3],
-    weights: Vec<f64>,
-    residuals: Vec<f64>,
+    workspace: linear::Workspace,
     evaluations: u64,
     best: Option<(Params, f64)>,
 }
@@ -56,8 +55,7 @@ impl<'a> Profile<'a> {
             data,
             spec: [vec![0.0; n], vec![0.0; n], vec![0.0; n]],
             spec_m: [f64::NAN; 3],
-            weights: Vec::new(),
-            residuals: Vec::new(),
+            workspace: linear::Workspace::default(),
             evaluations: 0,
             best: None,
         }
@@ -78,25 +76,13 @@ impl<'a> Profile<'a> {
         let fit = if shared {
             self.update_spec(0, m[0]);
             let s = self.spec[0].as_slice();
-            linear::solve(
-                self.data,
-                [s, s, s],
-                tolerance,
-                &mut self.weights,
-                &mut self.residuals,
-            )
+            linear::solve(self.data, [s, s, s], tolerance, &mut self.workspace)
         } else {
             for (c, &mc) in m.iter().enumerate() {
                 self.update_spec(c, mc);
             }
             let [r, g, b] = &self.spec;
-            linear::solve(
-                self.data,
-                [r, g, b],
-                tolerance,
-                &mut self.weights,
-                &mut self.residuals,
-            )
+            linear::solve(self.data, [r, g, b], tolerance, &mut self.workspace)
         };
         self.evaluations += 1;
         if self

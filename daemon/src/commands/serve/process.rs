@@ -21,7 +21,7 @@ pub fn run(step: &Step, dir: &Path, white_reflectance: f64) -> Result<Value, Str
         Step::Hdr { theta_l } => hdr(dir, *theta_l),
         Step::Extract => extract(dir, white_reflectance),
         Step::Fit { model } => fit_model(dir, model),
-        Step::Home | Step::Move { .. } | Step::Capture { .. } => {
+        Step::Home | Step::Move { .. } | Step::Meter { .. } | Step::Capture { .. } => {
             Err(format!("{} is not a processing step", step.describe()))
         }
     }

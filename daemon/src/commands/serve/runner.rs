@@ -7,17 +7,18 @@ use std::path::{Path, PathBuf};
 use std::sync::{mpsc, Arc};
 use std::time::Duration;
 
+use gonio_drivers::bracket::{auto_bracket, BracketError, BracketRegion, MeteringFrame};
 use gonio_drivers::{Arm, ArmState, Camera, DeviceError, Exposure};
 use gonio_processing::capture::Sidecar;
-use gonio_processing::geometry::Setup;
+use gonio_processing::geometry::{column_angles, Setup};
 use serde_json::{json, Value};
 
 use super::files::{remove_partials, write_atomic};
 use super::hardware::{ArmOpener, Devices, SidecarDefaults};
-use super::plan::{exposure_stem, theta_dir_name, Step};
+use super::plan::{exposure_stem, theta_dir_name, ScanPlan, Step};
 use super::process;
 use super::shared::{lock, scan_dir, Shared};
-use super::store::{now_rfc3339, now_unix, ScanRecord, ScanState, StepState, Store, StoreError};
+use super::store::{now_rfc3339, now_unix, ScanRecord, ScanState, Store, StoreError};
 
 /// Why a step did not complete.
 enum StepError {
@@ -48,6 +49,8 @@ pub struct Runner {
     arm: Option<Box<dyn Arm>>,
     camera: Box<dyn Camera>,
     camera_model: String,
+    /// Shutter times the camera allows, seconds.
+    allowed_s: Vec<f64>,
     homed: bool,
     /// Where the arm was last sent (degrees), if it got there.
     at_deg: Option<f64>,
@@ -73,6 +76,7 @@ impl Runner {
             arm: None,
             camera: devices.camera,
             camera_model: String::new(),
+            allowed_s: Vec::new(),
             homed: false,
             at_deg: None,
             setup: devices.setup,
@@ -107,6 +111,7 @@ impl Runner {
                     status.camera.shutter_min_s = *min;
                     status.camera.shutter_max_s = *max;
                 }
+                self.allowed_s = speeds;
                 status.camera.state = "idle";
             }
             (Err(err), _) | (_, Err(err)) => {
@@ -238,18 +243,16 @@ impl Runner {
             let reason = format!("preparing {}: {err}", dir.display());
             return self.finish_with(id, ScanState::Failed, &reason);
         }
-        for step in self.store.steps(id)? {
-            if step.state == StepState::Done {
-                continue;
-            }
-            if !self.still_running(id)? {
+        while self.still_running(id)? {
+            // Re-read each time: a step may have planned further steps.
+            let Some(step) = self.store.next_step(id)? else {
                 break;
-            }
+            };
             self.store.step_started(id, step.index)?;
             self.shared.publish(&self.store, id)?;
             match self.execute(id, &dir, &step.step) {
-                Ok(result) => {
-                    self.store.step_done(id, step.index, &result)?;
+                Ok((result, followers)) => {
+                    self.store.step_done(id, step.index, &result, &followers)?;
                 }
                 Err(StepError::Halted) => break,
                 Err(StepError::Interrupted(reason)) => {
@@ -302,26 +305,107 @@ impl Runner {
         Ok(())
     }
 
-    fn execute(&mut self, id: i64, dir: &Path, step: &Step) -> Result<Value, StepError> {
-        match step {
+    /// Executes one step; returns its result and the steps it adds after itself.
+    fn execute(
+        &mut self,
+        id: i64,
+        dir: &Path,
+        step: &Step,
+    ) -> Result<(Value, Vec<Step>), StepError> {
+        let result = match step {
             Step::Home => {
                 self.home(id)?;
-                Ok(json!({ "homed": true }))
+                json!({ "homed": true })
             }
             Step::Move { theta_l } => {
                 self.move_to(id, *theta_l)?;
-                Ok(json!({ "angle_deg": theta_l }))
+                json!({ "angle_deg": theta_l })
             }
+            Step::Meter { theta_l } => return self.meter(id, *theta_l),
             Step::Capture {
                 theta_l,
                 index,
                 shutter_s,
-            } => self.capture(id, dir, *theta_l, *index, *shutter_s),
+            } => self.capture(id, dir, *theta_l, *index, *shutter_s)?,
             Step::Hdr { .. } | Step::Extract | Step::Fit { .. } => {
                 process::run(step, dir, self.white_reflectance)
-                    .map_err(|err| StepError::Failed(format!("{}: {err}", step.describe())))
+                    .map_err(|err| StepError::Failed(format!("{}: {err}", step.describe())))?
+            }
+        };
+        Ok((result, Vec::new()))
+    }
+
+    /// Meters θL and plans its bracket: a capture at a middle shutter (shortened while
+    /// the strips clip), then the fewest allowed shutters that expose every strip pixel
+    /// well ([`auto_bracket`]).
+    fn meter(&mut self, id: i64, theta_l: f64) -> Result<(Value, Vec<Step>), StepError> {
+        let setup = self.setup.clone().ok_or_else(|| {
+            StepError::Failed("an automatic bracket needs the setup geometry ([setup])".into())
+        })?;
+        let allowed = self.allowed_s.clone();
+        let Some(mut shutter_s) = nearest_at_most(&allowed, METER_START_S) else {
+            return Err(StepError::Failed(
+                "the camera reported no shutter speeds to meter with".into(),
+            ));
+        };
+        if !self.homed || self.at_deg != Some(theta_l) {
+            self.move_to(id, theta_l)?;
+        }
+        let path = self
+            .shared
+            .config
+            .data_dir
+            .join("metering")
+            .join(format!("scan-{id}-{}.tiff", theta_dir_name(theta_l)));
+        let failed = |what: String| StepError::Failed(format!("metering θL {theta_l:.1}°: {what}"));
+        std::fs::create_dir_all(path.parent().unwrap_or(Path::new(".")))
+            .map_err(|e| failed(e.to_string()))?;
+        for _ in 0..METER_ATTEMPTS {
+            let exposure = Exposure {
+                shutter_s,
+                iso: self.iso,
+            };
+            self.camera_op(id, "metering exposure", |c| c.set_exposure(exposure))?;
+            let capture = self.camera_op(id, "metering capture", |c| c.capture_to(&path))?;
+            self.log(Some(id), "meter", &format!("θL {theta_l:.1}° at {shutter_s} s"))?;
+            let frame = image::open(&capture.path);
+            // The metering frame is not part of the scan.
+            let _ = std::fs::remove_file(&capture.path);
+            let frame = frame
+                .map_err(|e| failed(format!("reading the frame: {e}")))?
+                .into_rgb16();
+            let (width, height) = (frame.width() as usize, frame.height() as usize);
+            let metering = MeteringFrame {
+                width,
+                height,
+                channels: 3,
+                data: frame.as_raw(),
+                shutter_s: capture.exposure.shutter_s,
+            };
+            let region = strip_region(&setup, theta_l, width, height, self.sidecar);
+            match auto_bracket(&metering, &region, &allowed) {
+                Ok(bracket) => {
+                    let mut shutters = bracket.shutters_s.clone();
+                    shutters.reverse();
+                    let result = json!({
+                        "shutter_s": shutters,
+                        "metering_shutter_s": capture.exposure.shutter_s,
+                        "clipped_at_shortest": bracket.clipped_at_shortest,
+                        "dark_at_longest": bracket.dark_at_longest,
+                    });
+                    return Ok((result, ScanPlan::captures(theta_l, &shutters)));
+                }
+                Err(BracketError::MeteringClipped { .. }) => {
+                    shutter_s = nearest_at_most(&allowed, shutter_s / 16.0)
+                        .filter(|s| *s < shutter_s)
+                        .ok_or_else(|| failed("clipped even at the shortest shutter".into()))?;
+                }
+                Err(err) => return Err(failed(err.to_string())),
             }
         }
+        Err(failed(format!(
+            "still clipped after {METER_ATTEMPTS} metering captures"
+        )))
     }
 
     /// Runs `op` on the arm with bounded retries. Transient faults back off and retry;
@@ -533,6 +617,63 @@ impl Runner {
         write_atomic(&sidecar_path, &text)
             .map_err(|e| StepError::Failed(format!("{}: {e}", sidecar_path.display())))?;
         Ok(frame_result(dir, &image, false))
+    }
+}
+
+/// First metering shutter, seconds (the allowed one at or below it).
+const METER_START_S: f64 = 1.0 / 60.0;
+/// Metering captures before giving up on a scene that clips.
+const METER_ATTEMPTS: u32 = 4;
+
+/// The longest of `allowed` (seconds) at most `target`, else the shortest allowed.
+fn nearest_at_most(allowed: &[f64], target: f64) -> Option<f64> {
+    let shortest = allowed.iter().copied().min_by(f64::total_cmp)?;
+    Some(
+        allowed
+            .iter()
+            .copied()
+            .filter(|s| *s <= target * (1.0 + 1e-9))
+            .max_by(f64::total_cmp)
+            .unwrap_or(shortest),
+    )
+}
+
+/// The rows (±2 around each strip's centre) and the cylinder's columns at θL that the
+/// bracket must expose well, with the levels the sidecars carry.
+fn strip_region(
+    setup: &Setup,
+    theta_l: f64,
+    width: usize,
+    height: usize,
+    levels: SidecarDefaults,
+) -> BracketRegion {
+    let rows: Vec<usize> = [setup.sample_row, setup.white_row]
+        .iter()
+        .flat_map(|&centre| {
+            let centre = centre as usize;
+            centre.saturating_sub(2)..=centre + 2
+        })
+        .filter(|&r| r < height)
+        .collect();
+    let on_cylinder: Vec<usize> = column_angles(setup, theta_l)
+        .iter()
+        .enumerate()
+        .filter_map(|(u, a)| a.map(|_| u))
+        .filter(|&u| u < width)
+        .collect();
+    let columns = match (on_cylinder.first(), on_cylinder.last()) {
+        (Some(&first), Some(&last)) => first..last + 1,
+        _ => 0..width,
+    };
+    let black = levels.black_level.unwrap_or(0.0);
+    let white = levels.white_level.unwrap_or(65535.0);
+    let span = (white - black).max(1.0);
+    BracketRegion {
+        rows,
+        columns,
+        black_level: black,
+        clip_level: black + 0.95 * span,
+        noise_floor: (0.01 * span).max(1.0),
     }
 }
 

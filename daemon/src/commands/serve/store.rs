@@ -474,10 +474,23 @@ impl Store {
     }
 
     pub fn steps(&self, scan_id: i64) -> Result<Vec<StepRecord>, StoreError> {
-        let mut stmt = self.conn.prepare(
-            "SELECT idx, step, state, started, finished, result FROM steps
-             WHERE scan_id = ?1 ORDER BY idx",
-        )?;
+        self.query_steps("WHERE scan_id = ?1 ORDER BY idx", scan_id)
+    }
+
+    /// The first step of a scan not done yet.
+    pub fn next_step(&self, scan_id: i64) -> Result<Option<StepRecord>, StoreError> {
+        Ok(self
+            .query_steps(
+                "WHERE scan_id = ?1 AND state != 'done' ORDER BY idx LIMIT 1",
+                scan_id,
+            )?
+            .pop())
+    }
+
+    fn query_steps(&self, filter: &str, scan_id: i64) -> Result<Vec<StepRecord>, StoreError> {
+        let mut stmt = self.conn.prepare(&format!(
+            "SELECT idx, step, state, started, finished, result FROM steps {filter}"
+        ))?;
         let rows = stmt
             .query_map([scan_id], |r| {
                 Ok((
