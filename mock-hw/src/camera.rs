@@ -216,14 +216,19 @@ impl EmulatedCamera {
     }
 
     fn timeout(&self, what: &str, started: Instant) -> DeviceError {
-        let deadline =
-            Duration::from_secs_f64(self.timing.deadline_wall_s(self.exposure.shutter_s));
+        let deadline = wall(self.timing.deadline_wall_s(self.exposure.shutter_s));
         std::thread::sleep(deadline.saturating_sub(started.elapsed()));
         DeviceError::Timeout {
             what: what.to_string(),
             seconds: started.elapsed().as_secs_f64(),
         }
     }
+}
+
+/// A wait of `seconds`; negative, NaN or unrepresentable values (a bad `time_scale`)
+/// wait not at all.
+fn wall(seconds: f64) -> Duration {
+    Duration::try_from_secs_f64(seconds.max(0.0)).unwrap_or(Duration::ZERO)
 }
 
 /// The allowed value nearest to `value` on a log scale.
@@ -307,7 +312,7 @@ impl Camera for EmulatedCamera {
         let frame = render::render(&self.scene, &shot);
         let path = path.with_extension("tiff");
         let bytes = frame.encode_tiff()?;
-        let duration = Duration::from_secs_f64(self.timing.capture_duration_s(shot.shutter_s));
+        let duration = wall(self.timing.capture_duration_s(shot.shutter_s));
         std::thread::sleep(duration.saturating_sub(started.elapsed()));
         write_atomically(&path, &bytes)?;
         Ok(Capture {

@@ -96,9 +96,13 @@ impl Basis {
 
     /// β per channel for the given parameters.
     pub fn evaluate(&self, params: &Params) -> [f64; 3] {
-        std::array::from_fn(|c| {
-            params.kd[c] * self.diffuse + params.ks[c] * self.specular(params.m[c])
-        })
+        let [m0, m1, m2] = params.m;
+        let s0 = self.specular(m0);
+        // A shared roughness needs one lobe evaluation for all channels.
+        let s1 = if m1 == m0 { s0 } else { self.specular(m1) };
+        let s2 = if m2 == m0 { s0 } else { self.specular(m2) };
+        let s = [s0, s1, s2];
+        std::array::from_fn(|c| params.kd[c] * self.diffuse + params.ks[c] * s[c])
     }
 }
 

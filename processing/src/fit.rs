@@ -231,7 +231,7 @@ impl Data {
         }
         let y: Vec<[f64; 3]> = samples.iter().map(|s| s.rgb).collect();
         for (c, channel) in ['R', 'G', 'B'].into_iter().enumerate() {
-            if !(y.iter().map(|v| v[c]).sum::<f64>() > 0.0) {
+            if y.iter().map(|v| v[c]).sum::<f64>() <= 0.0 {
                 return Err(FitError::NoSignal { channel });
             }
         }
@@ -313,6 +313,7 @@ pub fn solve_at_roughness(
         &data,
         [&spec[0], &spec[1], &spec[2]],
         linear::FINE_TOLERANCE,
+        false,
         &mut linear::Workspace::default(),
     );
     Ok((

@@ -402,11 +402,15 @@ fn hat(z: usize) -> f64 {
     }
 }
 
-/// Quantised level 0..=255 of a normalised signal.
-fn level(frame: &Frame, index: usize) -> usize {
-    let s = (f64::from(frame.data[index]) - frame.black_level)
-        / (frame.white_level - frame.black_level);
-    (s.clamp(0.0, 1.0) * (LEVELS - 1) as f64).round() as usize
+/// Per-frame table from count to the quantised level 0..=255 of its normalised signal.
+fn level_table(frame: &Frame) -> Vec<u8> {
+    let range = frame.white_level - frame.black_level;
+    (0..=u16::MAX)
+        .map(|count| {
+            let s = (f64::from(count) - frame.black_level) / range;
+            (s.clamp(0.0, 1.0) * (LEVELS - 1) as f64).round() as u8
+        })
+        .collect()
 }
 
 fn merge_debevec_malik(
@@ -420,9 +424,19 @@ fn merge_debevec_malik(
     if distinct.len() < 2 {
         return Err(HdrError::SingleExposure);
     }
+    let tables: Vec<Vec<u8>> = frames.iter().map(level_table).collect();
+    let level = |j: usize, index: usize| usize::from(tables[j][usize::from(frames[j].data[index])]);
+    let bracket = Bracket {
+        level: &level,
+        frames: frames.len(),
+        pixels: frames[0].width * frames[0].height,
+        ln_h: &ln_h,
+        distinct_exposures: distinct.len(),
+    };
     let curves: Vec<Vec<f64>> = (0..3)
-        .map(|c| recover_response(frames, &ln_h, c, distinct.len(), options))
+        .map(|c| recover_response(&bracket, c, options))
         .collect::<Result<_, _>>()?;
+    let hat_table: [f64; LEVELS] = std::array::from_fn(hat);
     // Shortest exposure first, for the clipped-everywhere bound.
     let mut order: Vec<usize> = (0..frames.len()).collect();
     order.sort_by(|&a, &b| ln_h[a].total_cmp(&ln_h[b]));
@@ -437,18 +451,15 @@ fn merge_debevec_malik(
                 let index = 3 * width * y + i;
                 let g = &curves[i % 3];
                 let (mut sum, mut weights) = (0.0, 0.0);
-                for (frame, &ln) in frames.iter().zip(&ln_h) {
-                    let z = level(frame, index);
-                    sum += hat(z) * (g[z] - ln);
-                    weights += hat(z);
+                for (j, &ln) in ln_h.iter().enumerate() {
+                    let z = level(j, index);
+                    sum += hat_table[z] * (g[z] - ln);
+                    weights += hat_table[z];
                 }
                 let (radiance, flag) = if weights > 0.0 {
                     ((sum / weights).exp(), 0)
                 } else {
-                    match order
-                        .iter()
-                        .find(|&&j| level(&frames[j], index) == LEVELS - 1)
-                    {
+                    match order.iter().find(|&&j| level(j, index) == LEVELS - 1) {
                         Some(&j) => ((g[LEVELS - 1] - ln_h[j]).exp(), SATURATED),
                         None => (0.0, UNDEREXPOSED),
                     }
@@ -460,67 +471,92 @@ fn merge_debevec_malik(
     Ok((rgb, mask))
 }
 
-/// Recovers g(z) = ln(exposure value at level z) for channel `c` (Debevec & Malik
-/// 1997, §2.1): pixel locations chosen to span the levels of a mid exposure, rows
-/// w(z)(g(z) − ln E_i) = w(z) ln H_j, λ w(z) g″(z) = 0, and g(128) = 0.
-fn recover_response(
-    frames: &[Frame],
-    ln_h: &[f64],
-    c: usize,
+/// The quantised bracket as response recovery sees it.
+struct Bracket<'a, L: Fn(usize, usize) -> usize> {
+    /// Level of frame j at value index i (3 · pixel + channel).
+    level: &'a L,
+    frames: usize,
+    pixels: usize,
+    ln_h: &'a [f64],
     distinct_exposures: usize,
+}
+
+/// Adds one least-squares row (sparse coefficients, right-hand side) to AᵀA and Aᵀb.
+fn add_row(ata: &mut DMatrix<f64>, atb: &mut DVector<f64>, row: &[(usize, f64)], rhs: f64) {
+    for &(i, a) in row {
+        atb[i] += a * rhs;
+        for &(j, b) in row {
+            ata[(i, j)] += a * b;
+        }
+    }
+}
+
+/// Recovers g(z) = ln(exposure value at level z) for channel `c` (Debevec & Malik
+/// 1997, §2.1): pixel locations chosen to span the levels of a mid exposure (only
+/// those with a level strictly between 0 and 255 in some frame; with none, the linear
+/// response), rows
+/// w(z)(g(z) − ln E_i) = w(z) ln H_j, λ w(z) g″(z) = 0 and g(128) = 0, solved through
+/// the normal equations (Cholesky; the system is small and sparse).
+fn recover_response<L: Fn(usize, usize) -> usize>(
+    bracket: &Bracket<L>,
+    c: usize,
     options: &MergeOptions,
 ) -> Result<Vec<f64>, HdrError> {
-    let pixels = frames[0].width * frames[0].height;
+    let level = bracket.level;
     let wanted = options
         .response_samples
-        .max(2 * LEVELS / (distinct_exposures - 1) + 1)
-        .min(pixels);
+        .max(2 * LEVELS / (bracket.distinct_exposures - 1) + 1)
+        .min(bracket.pixels);
     // Candidates on a regular grid of about 16 × wanted pixels, sorted by level in
     // the middle exposure, then taken at even steps through that order.
-    let stride = (pixels / (16 * wanted)).max(1);
+    let stride = (bracket.pixels / (16 * wanted)).max(1);
     let mid = {
-        let mut order: Vec<usize> = (0..frames.len()).collect();
-        order.sort_by(|&a, &b| ln_h[a].total_cmp(&ln_h[b]));
+        let mut order: Vec<usize> = (0..bracket.frames).collect();
+        order.sort_by(|&a, &b| bracket.ln_h[a].total_cmp(&bracket.ln_h[b]));
         order[order.len() / 2]
     };
-    let mut candidates: Vec<(usize, usize)> = (0..pixels)
+    let mut candidates: Vec<(usize, usize)> = (0..bracket.pixels)
         .step_by(stride)
-        .map(|p| (level(&frames[mid], 3 * p + c), p))
+        .filter(|&p| (0..bracket.frames).any(|j| hat(level(j, 3 * p + c)) > 0.0))
+        .map(|p| (level(mid, 3 * p + c), p))
         .collect();
+    if candidates.is_empty() {
+        // Nothing constrains the response: take a linear one, g(z) = ln(z/128), so the
+        // channel's pixels (black or clipped everywhere, hence flagged) stay finite.
+        return Ok((0..LEVELS)
+            .map(|z| (z.max(1) as f64 / (LEVELS / 2) as f64).ln())
+            .collect());
+    }
     candidates.sort_unstable();
     let n = wanted.min(candidates.len());
     let chosen: Vec<usize> = (0..n)
         .map(|k| candidates[k * candidates.len() / n].1)
         .collect();
 
-    let rows = n * frames.len() + (LEVELS - 2) + 1;
-    let cols = LEVELS + n;
-    let mut a = DMatrix::<f64>::zeros(rows, cols);
-    let mut b = DVector::<f64>::zeros(rows);
-    let mut row = 0;
+    let unknowns = LEVELS + n;
+    let mut ata = DMatrix::<f64>::zeros(unknowns, unknowns);
+    let mut atb = DVector::<f64>::zeros(unknowns);
     for (i, &p) in chosen.iter().enumerate() {
-        for (frame, &ln) in frames.iter().zip(ln_h) {
-            let z = level(frame, 3 * p + c);
+        for (j, &ln) in bracket.ln_h.iter().enumerate() {
+            let z = level(j, 3 * p + c);
             let w = hat(z);
-            a[(row, z)] = w;
-            a[(row, LEVELS + i)] = -w;
-            b[row] = w * ln;
-            row += 1;
+            add_row(&mut ata, &mut atb, &[(z, w), (LEVELS + i, -w)], w * ln);
         }
     }
-    a[(row, LEVELS / 2)] = 1.0;
-    row += 1;
+    add_row(&mut ata, &mut atb, &[(LEVELS / 2, 1.0)], 0.0);
     for z in 1..LEVELS - 1 {
         let w = options.smoothness * hat(z);
-        a[(row, z - 1)] = w;
-        a[(row, z)] = -2.0 * w;
-        a[(row, z + 1)] = w;
-        row += 1;
+        add_row(&mut ata, &mut atb, &[(z - 1, w), (z, -2.0 * w), (z + 1, w)], 0.0);
     }
-    let x = a
-        .svd(true, true)
-        .solve(&b, 1e-10)
-        .map_err(|e| HdrError::Response(e.to_string()))?;
+    // A tiny ridge keeps levels seen by no sample (e.g. with λ = 0) determined.
+    let ridge = 1e-12 * ata.diagonal().max();
+    for k in 0..unknowns {
+        ata[(k, k)] += ridge;
+    }
+    let x = ata
+        .cholesky()
+        .ok_or_else(|| HdrError::Response(format!("channel {c}: degenerate bracket")))?
+        .solve(&atb);
     let g: Vec<f64> = x.iter().take(LEVELS).copied().collect();
     if g.iter().all(|v| v.is_finite()) {
         Ok(g)

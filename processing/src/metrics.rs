@@ -56,7 +56,7 @@ pub fn err_p(measured: &[[f64; 3]], estimated: &[[f64; 3]]) -> Result<[f64; 3], 
             .fold((0.0, 0.0), |(e, s), (m, est)| {
                 (e + (m[c] - est[c]).abs(), s + m[c])
             });
-        if !(sum > 0.0) {
+        if sum.is_nan() || sum <= 0.0 {
             return Err(MetricsError::NoSignal { channel: name });
         }
         *out = abs_err / sum;

@@ -248,7 +248,7 @@ pub fn run_study(
     }
     let fitted = subsample(samples, options.stride);
     let theta_l = distinct_theta_l(samples);
-    let combos = combinations::combinations(&theta_l).ok_or_else(|| StudyError::TooManyThetaL {
+    let combos = combinations::combinations(&theta_l).ok_or(StudyError::TooManyThetaL {
         count: theta_l.len(),
         max: combinations::MAX_THETA_L,
     })?;

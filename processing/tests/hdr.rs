@@ -190,6 +190,13 @@ fn all_saturated_is_flagged_with_a_finite_lower_bound() {
         // Lower bound from the shortest exposure: 0.98 / 0.1.
         assert!((f64::from(*v) - 9.8).abs() < 1e-4, "{v}");
     }
+    let dm = MergeOptions {
+        method: MergeMethod::DebevecMalik,
+        ..MergeOptions::default()
+    };
+    let merged = hdr::merge(&frames, &dm).unwrap();
+    assert_eq!(merged.count_flagged(SATURATED), W * H);
+    assert!(merged.rgb.iter().all(|v| v.is_finite() && *v > 0.0));
 }
 
 #[test]

@@ -1,20 +1,20 @@
-//! Exact minimisation of the eq. 10 loss over Kd, Ks ≥ 0 at a fixed roughness.
+//! Minimisation of the eq. 10 loss over Kd, Ks ≥ 0 at a fixed roughness.
 //!
 //! At fixed m both models are linear in (Kd_c, Ks_c), so eq. 10, Σ_p ‖y_p − ŷ_p‖₂, is a
 //! convex function of the six coefficients. It is minimised by iteratively reweighted
 //! least squares, a majorise–minimise scheme: with w_p = 1/‖r_p‖ of the current
 //! residuals, Σ_p w_p‖r_p‖²/2 + const majorises the loss, and each majoriser splits into
 //! one weighted two-variable non-negative least-squares problem per channel, solved in
-//! closed form. The first pass (unit weights, or the weights of a previous solve) is the
-//! ordinary NNLS start; the loss never rises by more than rounding and the best iterate is
-//! kept. Residuals below a tiny floor δ get weight 1/δ.
+//! closed form. The first pass (unit weights) is the ordinary NNLS solution. Weights are
+//! capped through a smoothing ε that shrinks to the requested tolerance, so the result
+//! is within that relative tolerance of the exact minimum; the best iterate is kept.
 
 use super::Data;
 
 /// Relative loss decrease at which a solve counts as converged.
 pub(crate) const FINE_TOLERANCE: f64 = 1e-9;
 /// Looser convergence for scanning a grid, where only the ranking of values matters.
-pub(crate) const COARSE_TOLERANCE: f64 = 1e-5;
+pub(crate) const COARSE_TOLERANCE: f64 = 1e-4;
 /// Cap on reweighting passes per solve.
 const MAX_PASSES: usize = 60;
 /// Smoothing of the weights, as a fraction of the mean residual: first value and per-pass
@@ -22,6 +22,8 @@ const MAX_PASSES: usize = 60;
 /// leaves (a fraction ε of the mean residual per point).
 const EPSILON_START: f64 = 0.1;
 const EPSILON_SHRINK: f64 = 0.1;
+/// First smoothing of a warm solve.
+const WARM_EPSILON_START: f64 = 1e-4;
 /// Largest extrapolation factor tried along a pass's step.
 const MAX_EXTRAPOLATION: f64 = 64.0;
 
@@ -64,6 +66,8 @@ pub(crate) struct Workspace {
     current: Vec<f64>,
     candidate: Vec<f64>,
     trial: Vec<f64>,
+    /// The last solution, the start of a warm solve.
+    last: Option<LinearFit>,
 }
 
 /// Eq. 10 loss of (kd, ks), writing each point's residual norm to `residuals`.
@@ -117,21 +121,34 @@ fn weighted_nnls(data: &Data, spec: [&[f64]; 3], weights: &[f64]) -> ([f64; 3], 
 /// capped weights keep the early passes from locking onto points that happen to have tiny
 /// residuals, which makes plain reweighting crawl. Each pass also extrapolates along its
 /// step (×2, ×4, … while the loss keeps falling, clamped to Kd, Ks ≥ 0).
+///
+/// A `warm` solve starts from the previous solution in `ws` (weights from its residuals at
+/// the new basis, smoothing from [`WARM_EPSILON_START`]): for a small change of m.
 pub(crate) fn solve(
     data: &Data,
     spec: [&[f64]; 3],
     tolerance: f64,
+    warm: bool,
     ws: &mut Workspace,
 ) -> LinearFit {
     let n = data.y.len();
-    ws.weights.clear();
-    ws.weights.resize(n, 1.0);
     for buffer in [&mut ws.current, &mut ws.candidate, &mut ws.trial] {
         buffer.resize(n, 0.0);
     }
     let floor = data.residual_floor;
     let mut epsilon = EPSILON_START;
     let mut current: Option<LinearFit> = None;
+    ws.weights.clear();
+    ws.weights.resize(n, 1.0);
+    if let (true, Some(last)) = (warm, ws.last) {
+        let loss = loss_of(data, spec, &last.kd, &last.ks, &mut ws.current);
+        let cap = (WARM_EPSILON_START * loss / n as f64).max(floor);
+        for (w, r) in ws.weights.iter_mut().zip(&ws.current) {
+            *w = 1.0 / r.max(cap);
+        }
+        current = Some(LinearFit { loss, ..last });
+        epsilon = (WARM_EPSILON_START * EPSILON_SHRINK).max(tolerance);
+    }
     for _ in 0..MAX_PASSES {
         let (kd, ks) = weighted_nnls(data, spec, &ws.weights);
         let mut next = LinearFit {

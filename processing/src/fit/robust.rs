@@ -1,6 +1,6 @@
 //! The robust method: exact Kd, Ks at each m (see `linear`) and a global search over log m.
 
-use std::cell::RefCell;
+use std::cell::{Cell, RefCell};
 
 use argmin::core::{CostFunction, Error as ArgminError, Executor};
 use argmin::solver::brent::BrentOpt;
@@ -18,7 +18,7 @@ const MAX_ROUNDS: usize = 6;
 const ROUND_TOLERANCE: f64 = 1e-9;
 /// Brent tolerance on ln m: relative and absolute parts.
 const BRENT_EPS: f64 = 1.5e-8;
-const BRENT_ABS: f64 = 1e-7;
+const BRENT_ABS: f64 = 1e-6;
 
 /// Which roughness a one-dimensional search moves.
 #[derive(Clone, Copy)]
@@ -71,25 +71,25 @@ impl<'a> Profile<'a> {
     }
 
     /// Profile loss at roughness `m` (all channels use `m[0]` when `shared`), with the
-    /// inner solve converged to `tolerance`.
-    fn eval(&mut self, m: [f64; 3], shared: bool, tolerance: f64) -> f64 {
+    /// inner solve converged to `tolerance`, warm-started from the previous solve if `warm`.
+    fn eval(&mut self, m: [f64; 3], shared: bool, tolerance: f64, warm: bool) -> f64 {
         let fit = if shared {
             self.update_spec(0, m[0]);
             let s = self.spec[0].as_slice();
-            linear::solve(self.data, [s, s, s], tolerance, &mut self.workspace)
+            linear::solve(self.data, [s, s, s], tolerance, warm, &mut self.workspace)
         } else {
             for (c, &mc) in m.iter().enumerate() {
                 self.update_spec(c, mc);
             }
             let [r, g, b] = &self.spec;
-            linear::solve(self.data, [r, g, b], tolerance, &mut self.workspace)
+            linear::solve(self.data, [r, g, b], tolerance, warm, &mut self.workspace)
         };
         self.evaluations += 1;
-        if self
-            .best
-            .as_ref()
-            .map_or(true, |(_, loss)| fit.loss < *loss)
-        {
+        let better = match &self.best {
+            Some((_, loss)) => fit.loss < *loss,
+            None => true,
+        };
+        if better {
             self.best = Some((
                 Params {
                     kd: fit.kd,
@@ -111,11 +111,13 @@ impl<'a> Profile<'a> {
     }
 }
 
-/// The profile along one roughness as a function of ln m, for Brent's method.
+/// The profile along one roughness as a function of ln m, for Brent's method. Its first
+/// evaluation starts cold, later ones warm from the previous (nearby) m.
 struct LineProfile<'p, 'a> {
     profile: &'p RefCell<Profile<'a>>,
     base: [f64; 3],
     target: Target,
+    warm: Cell<bool>,
 }
 
 impl CostFunction for LineProfile<'_, '_> {
@@ -124,10 +126,11 @@ impl CostFunction for LineProfile<'_, '_> {
     fn cost(&self, ln_m: &f64) -> Result<f64, ArgminError> {
         let m = self.target.apply(self.base, ln_m.exp());
         let shared = matches!(self.target, Target::Shared);
+        let warm = self.warm.replace(true);
         Ok(self
             .profile
             .borrow_mut()
-            .eval(m, shared, linear::FINE_TOLERANCE))
+            .eval(m, shared, linear::FINE_TOLERANCE, warm))
     }
 }
 
@@ -143,6 +146,7 @@ fn brent(
         profile,
         base,
         target,
+        warm: Cell::new(false),
     };
     let solver = BrentOpt::new(lo, hi).set_tolerance(BRENT_EPS, BRENT_ABS);
     Executor::new(line, solver)
@@ -171,6 +175,7 @@ fn global_search(
                 target.apply(base, x.exp()),
                 shared,
                 linear::COARSE_TOLERANCE,
+                false,
             )
         })
         .collect();

@@ -1,0 +1,210 @@
+//! `gonio study` and `gonio tradeoff` end to end: the built binary on small inputs.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use gonio_processing::brdf::{Model, Params};
+use gonio_processing::color::CameraModel;
+use gonio_processing::samples::{write_csv, Sample};
+
+fn gonio(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_gonio"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+/// A neutral Cook–Torrance material (coefficients ∝ the white's camera RGB), so a flat
+/// spectral reference reproduces it.
+fn material() -> Params {
+    let w = CameraModel::builtin().white_rgb();
+    Params::shared(w.map(|c| 0.2 * c), w.map(|c| 0.05 * c), 0.25)
+}
+
+/// Writes distant-geometry samples at two θL and a 2.5° reference grid of `p`.
+fn write_inputs(dir: &Path, p: &Params) {
+    let mut samples = Vec::new();
+    for theta_l in [-20.0, -40.0] {
+        for k in 0..=50 {
+            let theta_r = -50.0 + 2.0 * f64::from(k);
+            let theta_i = theta_l - theta_r;
+            if theta_i.abs() < 70.0 {
+                let rgb = Model::CookTorrance.evaluate(p, theta_i, theta_r);
+                samples.push(Sample {
+                    theta_l,
+                    theta_i,
+                    theta_r,
+                    rgb,
+                });
+            }
+        }
+    }
+    write_csv(&dir.join("samples.csv"), &samples).unwrap();
+    let white_g = CameraModel::builtin().white_rgb()[1];
+    let wavelengths: Vec<String> = (39..=73).map(|w| (10 * w).to_string()).collect();
+    let mut csv = format!("theta_i,theta_r,{}\n", wavelengths.join(","));
+    for i in -32..=32 {
+        for r in -32..=32 {
+            let (ti, tr) = (2.5 * f64::from(i), 2.5 * f64::from(r));
+            let f = Model::CookTorrance.evaluate(p, ti, tr)[1] / white_g;
+            csv.push_str(&format!(
+                "{ti},{tr},{}\n",
+                vec![f.to_string(); 35].join(",")
+            ));
+        }
+    }
+    std::fs::write(dir.join("reference.csv"), csv).unwrap();
+}
+
+#[test]
+fn study_writes_tables_and_figures_with_near_zero_error_for_the_true_model() {
+    let dir = tempfile::tempdir().unwrap();
+    write_inputs(dir.path(), &material());
+    let out = dir.path().join("study");
+    let p = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    let result = gonio(&[
+        "study",
+        &p("samples.csv"),
+        "--reference",
+        &p("reference.csv"),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(result.status.success(), "{}", text(&result.stderr));
+    let stdout = text(&result.stdout);
+    assert!(
+        stdout.contains("2 θL, 3 combinations × 2 variants = 6 fits"),
+        "{stdout}"
+    );
+    for name in [
+        "combinations.csv",
+        "boxplots.csv",
+        "local_minima.csv",
+        "study.json",
+    ] {
+        assert!(out.join(name).is_file(), "{name}");
+    }
+    for name in [
+        "fig6_g_channel",
+        "fig7_err_p_g",
+        "fig8_uv_chart",
+        "fig9_delta_e_uv",
+    ] {
+        let svg = std::fs::read_to_string(out.join(format!("{name}.svg"))).unwrap();
+        assert!(svg.starts_with("<svg"), "{name}");
+    }
+    // The generating model's ΔErr_p (G) is near zero for every combination.
+    let table = std::fs::read_to_string(out.join("combinations.csv")).unwrap();
+    let header: Vec<&str> = table.lines().next().unwrap().split(',').collect();
+    let g = header.iter().position(|h| *h == "err_p_g").unwrap();
+    let ct: Vec<f64> = table
+        .lines()
+        .skip(1)
+        .filter(|l| l.starts_with("cook-torrance,"))
+        .map(|l| l.split(',').nth(g).unwrap().parse().unwrap())
+        .collect();
+    assert_eq!(ct.len(), 3);
+    assert!(ct.iter().all(|&e| e < 5e-3), "{ct:?}");
+}
+
+#[test]
+fn study_rejects_bad_input_with_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    write_inputs(dir.path(), &material());
+    let p = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    let out = p("out");
+
+    // A malformed samples row: the error names the file.
+    std::fs::write(
+        dir.path().join("bad.csv"),
+        "theta_l,theta_i,theta_r,r,g,b\n-20,10,-30,1,2,3\n-20,oops,-30,1,2,3\n",
+    )
+    .unwrap();
+    let result = gonio(&[
+        "study",
+        &p("bad.csv"),
+        "--reference",
+        &p("reference.csv"),
+        "--out",
+        &out,
+    ]);
+    assert!(!result.status.success());
+    let stderr = text(&result.stderr);
+    assert!(stderr.contains("bad.csv"), "{stderr}");
+    assert_eq!(stderr.trim().lines().count(), 1, "one-line error: {stderr}");
+
+    // A missing reference.
+    let result = gonio(&[
+        "study",
+        &p("samples.csv"),
+        "--reference",
+        &p("none.csv"),
+        "--out",
+        &out,
+    ]);
+    assert!(!result.status.success());
+    assert!(text(&result.stderr).contains("none.csv"));
+
+    // Unknown model, zero stride.
+    let result = gonio(&[
+        "study",
+        &p("samples.csv"),
+        "--reference",
+        &p("reference.csv"),
+        "--out",
+        &out,
+        "--models",
+        "phong",
+    ]);
+    assert!(!result.status.success());
+    assert!(text(&result.stderr).contains("phong"));
+    let result = gonio(&[
+        "study",
+        &p("samples.csv"),
+        "--reference",
+        &p("reference.csv"),
+        "--out",
+        &out,
+        "--stride",
+        "0",
+    ]);
+    assert!(!result.status.success());
+    assert!(
+        !Path::new(&out).join("combinations.csv").exists(),
+        "nothing written on bad input"
+    );
+}
+
+#[test]
+fn tradeoff_rejects_unknown_scenes_and_bad_settings() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("t");
+    let result = gonio(&[
+        "tradeoff",
+        "--scene",
+        "no-such-scene",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!result.status.success());
+    assert!(
+        text(&result.stderr).contains("no-such-scene"),
+        "{}",
+        text(&result.stderr)
+    );
+    let result = gonio(&[
+        "tradeoff",
+        "--scene",
+        "gold",
+        "--out",
+        out.to_str().unwrap(),
+        "--strides",
+        "4,0",
+    ]);
+    assert!(!result.status.success());
+    assert!(text(&result.stderr).contains("--strides"));
+}
