@@ -208,3 +208,116 @@ fn tradeoff_rejects_unknown_scenes_and_bad_settings() {
     assert!(!result.status.success());
     assert!(text(&result.stderr).contains("--strides"));
 }
+
+/// A small Cook–Torrance scene: 400×120 pixels, two θL, a two-exposure bracket.
+const TINY_SCENE: &str = r#"
+name = "tiny"
+
+[setup]
+cylinder_radius_mm = 40.0
+camera_distance_mm = 700.0
+light_distance_mm = 1000.0
+focal_length_mm = 85.0
+pixel_pitch_um = 30.0
+image_width = 400
+image_height = 120
+sample_rows = [20, 40]
+white_rows = [79, 99]
+
+[scan]
+theta_l_deg = [-20.0, -35.0]
+bracket_s = [0.5, 0.01]
+
+[sample]
+model = "cook-torrance"
+kd = [9.0, 6.5, 2.0]
+ks = [25.0, 20.0, 7.0]
+m = [0.2]
+
+[white]
+reflectance = 0.99
+
+[light]
+spectrum = "illuminant-a"
+intensity = 6000.0
+
+[camera]
+model = "Tiny body"
+sensitivities = "nikon-d5100"
+bit_depth = 12
+black_level = 0
+white_level = 4095
+iso = 100
+
+[effects]
+seed = 5
+"#;
+
+#[test]
+fn tradeoff_on_a_tiny_scene_costs_every_setting_and_recommends_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("tiny.toml");
+    std::fs::write(&scene, TINY_SCENE).unwrap();
+    let out = dir.path().join("tradeoff");
+    let result = gonio(&[
+        "tradeoff",
+        "--scene",
+        scene.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--strides",
+        "1,2",
+        "--methods",
+        "robust",
+    ]);
+    assert!(result.status.success(), "{}", text(&result.stderr));
+    for name in ["tradeoff.csv", "pareto.svg", "tradeoff.json"] {
+        assert!(out.join(name).is_file(), "{name}");
+    }
+    let table = std::fs::read_to_string(out.join("tradeoff.csv")).unwrap();
+    let header: Vec<&str> = table.lines().next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let rows: Vec<Vec<String>> = table
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(str::to_string).collect())
+        .collect();
+    assert_eq!(
+        rows.len(),
+        2 * 2 * 2,
+        "θL counts × bracket lengths × strides"
+    );
+    let num = |row: &Vec<String>, name: &str| row[col(name)].parse::<f64>().unwrap();
+    for row in &rows {
+        assert_eq!(row[col("status")], "ok", "{row:?}");
+        let parts = num(row, "acquisition_s") + num(row, "processing_s");
+        assert!((num(row, "total_s") - parts).abs() < 2e-3, "{row:?}");
+    }
+    // Two θL cost more acquisition time than one; two exposures more than one.
+    let acquisition = |n: f64, b: f64| {
+        let row = rows
+            .iter()
+            .find(|r| num(r, "n_theta_l") == n && num(r, "bracket") == b)
+            .unwrap();
+        num(row, "acquisition_s")
+    };
+    assert!(acquisition(2.0, 1.0) > acquisition(1.0, 1.0));
+    assert!(acquisition(1.0, 2.0) > acquisition(1.0, 1.0));
+    // The full scan recovers the scene: small ΔErr_p and roughness error.
+    let full = rows
+        .iter()
+        .find(|r| num(r, "n_theta_l") == 2.0 && num(r, "bracket") == 2.0 && num(r, "stride") == 1.0)
+        .unwrap();
+    assert!(num(full, "err_p_g") < 0.05, "{full:?}");
+    assert!(num(full, "m_rel_err") < 0.1, "{full:?}");
+    assert_eq!(
+        rows.iter()
+            .filter(|r| r[col("recommended")] == "true")
+            .count(),
+        1
+    );
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("tradeoff.json")).unwrap()).unwrap();
+    assert_eq!(summary["scene"], "tiny");
+    assert!(summary["recommended"]["total_s"].as_f64().unwrap() > 0.0);
+}

@@ -1,6 +1,7 @@
 //! Benchmark of the θL-combination study: 3 samples × 63 combinations × 2 models with
 //! the robust fitter, on synthetic data at the geometry of the example scenes
-//! (full-resolution columns, six θL, 1 % noise). Target: ≤ 2 s on 2 cores.
+//! (full-resolution columns, six θL, 1 % noise), fitting every column or every 4th.
+//! Target: ≤ 2 s on 2 cores.
 //!
 //! Run: `cargo bench -p gonio-processing --bench study`
 
@@ -96,19 +97,24 @@ fn study(c: &mut Criterion) {
         .iter()
         .map(|p| (samples(p), reference(p, &camera)))
         .collect();
-    let options = StudyOptions {
-        compare_nelder_mead: false,
-        ..StudyOptions::default()
-    };
     let mut group = c.benchmark_group("study");
     group.sample_size(10);
-    group.bench_function("3_samples_x_63_combinations_x_2_models_robust", |b| {
-        b.iter(|| {
-            for (samples, reference) in &inputs {
-                run_study(samples, reference, &camera, &options).expect("study runs");
-            }
-        })
-    });
+    // Every column (stride 1), and every 4th column of each θL (stride 4, ~340 per θL).
+    for stride in [1, 4] {
+        let options = StudyOptions {
+            compare_nelder_mead: false,
+            stride,
+            ..StudyOptions::default()
+        };
+        let name = format!("3_samples_x_63_combinations_x_2_models_robust_stride_{stride}");
+        group.bench_function(name, |b| {
+            b.iter(|| {
+                for (samples, reference) in &inputs {
+                    run_study(samples, reference, &camera, &options).expect("study runs");
+                }
+            })
+        });
+    }
     group.finish();
     c.bench_function("combinations_of_6", |b| b.iter(|| combinations(&THETA_L)));
 }

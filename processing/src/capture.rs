@@ -224,6 +224,12 @@ struct Decoded {
 impl Frame {
     /// Reads an image and its sidecar; sidecar levels override the file's own.
     pub fn read(path: &Path) -> Result<Frame, CaptureError> {
+        if !path.is_file() {
+            return Err(CaptureError::Image {
+                path: path.to_path_buf(),
+                reason: "no such file".into(),
+            });
+        }
         let sidecar = read_sidecar(path)?;
         let ext = path
             .extension()

@@ -1,8 +1,9 @@
 //! Scan directory → radiance-factor samples in the camera-RGB domain (paper §2.2).
 //!
 //! `DIR/setup.json` holds the [`Setup`]; captures are found recursively (TIFF or camera
-//! raw with a JSON sidecar) and grouped by the sidecar's θL. Each group is merged into
-//! one radiance map ([`hdr::merge`]); the sample and white strips are each the mean of
+//! raw with a JSON sidecar) and grouped by the sidecar's θL. Each group is merged
+//! ([`hdr::merge`]) into one radiance map, of the strip rows only unless the maps are
+//! wanted as files ([`ExtractOptions::hdr_dir`]); the sample and white strips are each the mean of
 //! 5 rows around their centre rows; every pixel column maps to (θi, θr) through the
 //! setup geometry; then per channel c
 //!
@@ -198,17 +199,29 @@ pub fn extract_scan_with_progress(
         skipped_without_sidecar,
     };
     for (done, (theta_l, paths)) in groups.into_values().enumerate() {
-        let frames: Vec<Frame> = paths
+        // Without a map to write, only the strip rows are kept and merged.
+        let keep_full = options.hdr_dir.is_some();
+        let frames: Vec<(Frame, StripLayout)> = paths
             .par_iter()
-            .map(|p| Frame::read(p))
-            .collect::<Result<_, _>>()?;
+            .map(|path| {
+                let frame = Frame::read(path)?;
+                let layout = StripLayout::new(&setup, frame.width, frame.height, theta_l)?;
+                Ok(if keep_full {
+                    (frame, layout)
+                } else {
+                    layout.crop(&frame)
+                })
+            })
+            .collect::<Result<_, ExtractError>>()?;
+        let layout = frames[0].1;
+        let frames: Vec<Frame> = frames.into_iter().map(|(frame, _)| frame).collect();
         let map = hdr::merge(&frames, &options.merge)
             .map_err(|source| ExtractError::Hdr { theta_l, source })?;
         if let Some(hdr_dir) = &options.hdr_dir {
             map.write_exr(&hdr_dir.join(format!("theta_l_{theta_l:.1}.exr")))
                 .map_err(|source| ExtractError::Hdr { theta_l, source })?;
         }
-        let (samples, dropped) = extract_theta(&setup, &map, theta_l, options)?;
+        let (samples, dropped) = extract_theta(&setup, &map, &layout, theta_l, options);
         extraction.per_theta.push(ThetaSummary {
             theta_l,
             frames: frames.len(),
@@ -296,38 +309,83 @@ fn strip_mean(map: &HdrImage, x: usize, row: usize) -> ([f64; 3], u8) {
     (sum.map(|s| s / STRIP_ROWS as f64), flags)
 }
 
+/// Where the strips lie in a capture of a given size.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct StripLayout {
+    /// Sensor pixels per capture pixel: 1, or 2 for superpixel raw.
+    scale: usize,
+    sample_row: usize,
+    white_row: usize,
+}
+
+impl StripLayout {
+    fn new(setup: &Setup, width: usize, height: usize, theta_l: f64) -> Result<Self, ExtractError> {
+        let (sw, sh) = (setup.image_width as usize, setup.image_height as usize);
+        let scale = if (width, height) == (sw, sh) {
+            1
+        } else if (width, height) == (sw / 2, sh / 2) {
+            2
+        } else {
+            return Err(ExtractError::SizeMismatch {
+                theta_l,
+                width,
+                height,
+                setup_width: setup.image_width,
+                setup_height: setup.image_height,
+            });
+        };
+        let row = |which: &'static str, sensor_row: u32| {
+            let row = sensor_row as usize / scale;
+            if row < STRIP_ROWS / 2 || row + STRIP_ROWS / 2 >= height {
+                Err(ExtractError::RowOutside { which, row, height })
+            } else {
+                Ok(row)
+            }
+        };
+        Ok(Self {
+            scale,
+            sample_row: row("sample", setup.sample_row)?,
+            white_row: row("white", setup.white_row)?,
+        })
+    }
+
+    /// The frame cut down to the two strips (sample rows, then white rows) and the
+    /// layout of the cut frame.
+    fn crop(&self, frame: &Frame) -> (Frame, StripLayout) {
+        let half = STRIP_ROWS / 2;
+        let row_len = 3 * frame.width;
+        let mut data = Vec::with_capacity(2 * STRIP_ROWS * row_len);
+        for centre in [self.sample_row, self.white_row] {
+            let first = (centre - half) * row_len;
+            data.extend_from_slice(&frame.data[first..first + STRIP_ROWS * row_len]);
+        }
+        let cropped = Frame {
+            path: frame.path.clone(),
+            sidecar: frame.sidecar.clone(),
+            width: frame.width,
+            height: 2 * STRIP_ROWS,
+            data,
+            black_level: frame.black_level,
+            white_level: frame.white_level,
+        };
+        let layout = StripLayout {
+            scale: self.scale,
+            sample_row: half,
+            white_row: STRIP_ROWS + half,
+        };
+        (cropped, layout)
+    }
+}
+
 fn extract_theta(
     setup: &Setup,
     map: &HdrImage,
+    layout: &StripLayout,
     theta_l: f64,
     options: &ExtractOptions,
-) -> Result<(Vec<Sample>, DropCounts), ExtractError> {
-    let (width, height) = (map.width, map.height);
-    let (sw, sh) = (setup.image_width as usize, setup.image_height as usize);
-    let scale = if (width, height) == (sw, sh) {
-        1
-    } else if (width, height) == (sw / 2, sh / 2) {
-        2
-    } else {
-        return Err(ExtractError::SizeMismatch {
-            theta_l,
-            width,
-            height,
-            setup_width: setup.image_width,
-            setup_height: setup.image_height,
-        });
-    };
-    let row = |which: &'static str, sensor_row: u32| {
-        let row = sensor_row as usize / scale;
-        if row < STRIP_ROWS / 2 || row + STRIP_ROWS / 2 >= height {
-            Err(ExtractError::RowOutside { which, row, height })
-        } else {
-            Ok(row)
-        }
-    };
-    let sample_row = row("sample", setup.sample_row)?;
-    let white_row = row("white", setup.white_row)?;
-
+) -> (Vec<Sample>, DropCounts) {
+    let (width, scale) = (map.width, layout.scale);
+    let (sample_row, white_row) = (layout.sample_row, layout.white_row);
     let columns: Vec<_> = (0..width)
         .map(|x| {
             // Centre of the column in sensor pixels (a superpixel spans two columns).
@@ -377,5 +435,5 @@ fn extract_theta(
             });
         }
     }
-    Ok((samples, dropped))
+    (samples, dropped)
 }

@@ -196,6 +196,8 @@ pub(crate) struct Data {
     pub y: Vec<[f64; 3]>,
     /// Residual norms below this count as this in reweighting.
     pub residual_floor: f64,
+    /// Eq. 10 loss of the all-zero model, Σ_p ‖y_p‖: the scale of the data.
+    pub zero_loss: f64,
 }
 
 impl Data {
@@ -235,16 +237,14 @@ impl Data {
                 return Err(FitError::NoSignal { channel });
             }
         }
-        let mean_norm = y
-            .iter()
-            .map(|v| metrics::point_loss(v, &[0.0; 3]))
-            .sum::<f64>()
-            / y.len() as f64;
+        let zero_loss: f64 = y.iter().map(|v| metrics::point_loss(v, &[0.0; 3])).sum();
+        let mean_norm = zero_loss / y.len() as f64;
         Ok(Data {
             diffuse: bases.iter().map(|b| b.diffuse).collect(),
             bases,
             y,
             residual_floor: 1e-12 * mean_norm + f64::MIN_POSITIVE,
+            zero_loss,
         })
     }
 

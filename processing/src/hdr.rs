@@ -546,7 +546,12 @@ fn recover_response<L: Fn(usize, usize) -> usize>(
     add_row(&mut ata, &mut atb, &[(LEVELS / 2, 1.0)], 0.0);
     for z in 1..LEVELS - 1 {
         let w = options.smoothness * hat(z);
-        add_row(&mut ata, &mut atb, &[(z - 1, w), (z, -2.0 * w), (z + 1, w)], 0.0);
+        add_row(
+            &mut ata,
+            &mut atb,
+            &[(z - 1, w), (z, -2.0 * w), (z + 1, w)],
+            0.0,
+        );
     }
     // A tiny ridge keeps levels seen by no sample (e.g. with λ = 0) determined.
     let ridge = 1e-12 * ata.diagonal().max();

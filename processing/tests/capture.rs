@@ -169,6 +169,13 @@ fn unreadable_or_unsupported_images_give_typed_errors() {
         };
         assert!(expected, "{name}: {err:?}");
     }
+    let absent = dir.path().join("absent.tiff");
+    fs::write(absent.with_extension("json"), &side).unwrap();
+    let err = Frame::read(&absent).unwrap_err();
+    assert!(
+        matches!(err, CaptureError::Image { .. }) && err.to_string().contains("no such file"),
+        "{err}"
+    );
     let path = dir.path().join("picture.png");
     fs::write(&path, b"png").unwrap();
     fs::write(path.with_extension("json"), &side).unwrap();

@@ -127,6 +127,9 @@ fn synthetic_lambertian_scan_gives_the_known_beta() {
     })
     .unwrap();
     assert_eq!(*progress.borrow(), vec![(0, 2), (1, 2), (2, 2)]);
+    // Merging only the strip rows (no maps written) gives the same samples.
+    let strips_only = extract::extract_scan(dir.path(), &ExtractOptions::default()).unwrap();
+    assert_eq!(strips_only.samples, extraction.samples);
     assert_eq!(extraction.per_theta.len(), 2);
     assert_eq!(extraction.per_theta[0].theta_l, -45.0);
     assert!(

@@ -118,3 +118,23 @@ fn figure_into_a_missing_directory_is_an_error_naming_the_file() {
     let err = xy_svg(&path, &plot).unwrap_err();
     assert!(err.to_string().contains("fig.svg"), "{err}");
 }
+
+#[test]
+fn subsample_keeps_every_nth_sample_of_each_theta_l() {
+    use gonio_processing::samples::Sample;
+    use gonio_processing::study::subsample;
+    let sample = |theta_l: f64, theta_r: f64| Sample {
+        theta_l,
+        theta_i: theta_l - theta_r,
+        theta_r,
+        rgb: [1.0, 1.0, 1.0],
+    };
+    // Interleaved θL: counting restarts per θL.
+    let samples: Vec<Sample> = (0..10)
+        .map(|k| sample(if k % 2 == 0 { -20.0 } else { -30.0 }, f64::from(k)))
+        .collect();
+    let kept: Vec<f64> = subsample(&samples, 2).iter().map(|s| s.theta_r).collect();
+    assert_eq!(kept, vec![0.0, 1.0, 4.0, 5.0, 8.0, 9.0]);
+    assert_eq!(subsample(&samples, 1), samples);
+    assert_eq!(subsample(&samples, 100).len(), 2, "the first of each θL");
+}

@@ -220,3 +220,35 @@ fn page_and_openapi_are_served() {
     }
     std::fs::remove_dir_all(dir).ok();
 }
+
+#[test]
+fn sweep_waits_for_its_start_time_and_shows_one_progress_view() {
+    let dir = temp_dir("api-sweep");
+    let daemon = Daemon::start(&dir, &emulator_config(0.01));
+    let created = daemon.post(
+        "/api/sweeps",
+        &json!({"samples": ["a", "b"], "theta_l_sets": [[-20], [-30, -40]], "repeats": 2,
+                "bracket": {"shutter_s": [0.1]}, "start_at": "2099-01-01T22:00:00Z"}),
+    );
+    assert_eq!(created.status, 201, "{:?}", created.json);
+    assert_eq!(created.json["scans"].as_array().unwrap().len(), 8);
+    let id = created.json["id"].as_i64().unwrap();
+    std::thread::sleep(Duration::from_millis(1500));
+    let sweep = daemon.get(&format!("/api/sweeps/{id}")).json;
+    assert_eq!(sweep["state"], "waiting", "{sweep}");
+    assert_eq!(sweep["scans_by_state"]["queued"], 8);
+    assert_eq!(sweep["progress"]["done"], 0);
+    // 2 repeats × (2 scans of 1 θL + 2 scans of 2 θL), each θL move + capture + HDR,
+    // each scan home + extract + 2 fits.
+    assert_eq!(sweep["progress"]["total"], 2 * (2 * (4 + 3) + 2 * (4 + 6)));
+    assert_eq!(sweep["start_at"], "2099-01-01T22:00:00Z");
+    let log = daemon.get("/api/hardware/log").json;
+    assert!(
+        log.as_array()
+            .unwrap()
+            .iter()
+            .all(|e| e["action"] != "capture"),
+        "nothing may run before the start time: {log}"
+    );
+    std::fs::remove_dir_all(dir).ok();
+}

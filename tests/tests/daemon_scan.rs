@@ -95,7 +95,10 @@ fn six_angle_scan_completes_and_its_fit_recovers_the_scene() {
             assert!((sidecar["shutter_s"].as_f64().unwrap() - planned).abs() < 1e-9);
             assert!(sidecar["time"].as_str().is_some());
         }
-        assert!(files.contains(&format!("hdr/theta_l_{theta:.1}.exr")), "{files:?}");
+        assert!(
+            files.contains(&format!("hdr/theta_l_{theta:.1}.exr")),
+            "{files:?}"
+        );
     }
     assert!(files.iter().all(|f| !f.contains(".partial")), "{files:?}");
 

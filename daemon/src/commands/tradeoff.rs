@@ -16,7 +16,8 @@
 //!
 //! Outputs in OUT: `tradeoff.csv` (one row per setting), `pareto.svg` (total time
 //! against ΔErr_p(G), the Pareto front drawn), `tradeoff.json` (the recommended setting:
-//! the cheapest one within 10 % of the best ΔErr_p(G) reached, and the extraction times).
+//! the cheapest one whose ΔErr_p(G) is within 10 % of the best reached, or within
+//! `--tolerance` of it, and the extraction times).
 
 mod scan;
 mod timing;
@@ -40,8 +41,9 @@ use scan::{discover, extract_subset, spread, Position};
 use timing::{AcquisitionTime, HardwareTiming};
 use truth::{parameter_errors, Truth, TruthPoints};
 
-/// A setting counts as good enough when its ΔErr_p(G) is within this factor of the best.
-const GOOD_ENOUGH: f64 = 1.10;
+/// A setting is good enough when its ΔErr_p(G) is within this fraction of the best
+/// (or within the absolute `--tolerance`).
+const RELATIVE_SLACK: f64 = 0.10;
 
 /// Arguments of `gonio tradeoff`.
 #[derive(clap::Args)]
@@ -71,6 +73,10 @@ pub struct Args {
     /// Fit methods to try, comma-separated.
     #[arg(long, value_delimiter = ',', default_value = "robust,nelder-mead")]
     pub methods: Vec<FitMethod>,
+    /// Recommend the cheapest setting whose ΔErr_p(G) exceeds the best by at most this
+    /// much (absolute) or 10 % of the best, whichever is larger.
+    #[arg(long, default_value_t = 0.002)]
+    pub tolerance: f64,
 }
 
 /// One scan setting and what it cost and reached.
@@ -131,6 +137,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     if args.methods.is_empty() {
         anyhow::bail!("--methods must list at least one fit method");
+    }
+    if !(args.tolerance.is_finite() && args.tolerance >= 0.0) {
+        anyhow::bail!(
+            "--tolerance must be a finite number ≥ 0, got {}",
+            args.tolerance
+        );
     }
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
@@ -233,9 +245,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             }
         }
     }
-    write_outputs(
-        &args.out, &truth, model, roughness, &rows, &extracted, &positions,
-    )
+    let fitted = Fitted {
+        truth: &truth,
+        model,
+        roughness,
+        tolerance: args.tolerance,
+    };
+    write_outputs(&args.out, &fitted, &rows, &extracted, &positions)
+}
+
+/// What was fitted, against what, and the recommendation tolerance.
+struct Fitted<'a> {
+    truth: &'a Truth,
+    model: Model,
+    roughness: Roughness,
+    tolerance: f64,
 }
 
 /// Extractions of every θL with every bracket length: `[b − 1][position]`.
@@ -274,9 +298,7 @@ fn extract_all(
 
 fn write_outputs(
     out: &Path,
-    truth: &Truth,
-    model: Model,
-    roughness: Roughness,
+    fitted: &Fitted,
     rows: &[Row],
     extracted: &[Vec<scan::Extracted>],
     positions: &[Position],
@@ -290,10 +312,14 @@ fn write_outputs(
         .iter()
         .filter_map(Row::err_p_g)
         .fold(f64::INFINITY, f64::min);
-    let recommended = front
-        .iter()
-        .copied()
-        .find(|&i| costs[i].1 <= GOOD_ENOUGH * best);
+    let Fitted {
+        truth,
+        model,
+        roughness,
+        tolerance,
+    } = *fitted;
+    let good_enough = best + (RELATIVE_SLACK * best).max(tolerance);
+    let recommended = front.iter().copied().find(|&i| costs[i].1 <= good_enough);
 
     let mut csv = String::from(
         "n_theta_l,theta_l,bracket,shutters_s,stride,method,points,acquisition_s,travel_s,capture_s,\
@@ -401,6 +427,7 @@ fn write_outputs(
         "settings": rows.len(),
         "failed": rows.iter().filter(|r| r.outcome.is_err()).count(),
         "best_err_p_g": best.is_finite().then_some(best),
+        "good_enough_err_p_g": good_enough.is_finite().then_some(good_enough),
         "recommended": recommended.map(|i| row_json(&rows[i])),
         "pareto_front": front.iter().map(|&i| row_json(&rows[i])).collect::<Vec<_>>(),
         "extract_seconds_by_bracket_and_theta_l": extracted

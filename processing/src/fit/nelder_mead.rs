@@ -12,7 +12,6 @@ use argmin::solver::neldermead::NelderMead;
 
 use super::{Data, FitError, FitOptions, Found};
 use crate::brdf::{Params, Roughness, M_MIN};
-use crate::metrics;
 
 /// The penalised loss over a parameter vector.
 struct Objective<'a> {
@@ -88,11 +87,7 @@ fn run(
     let objective = Objective {
         data,
         roughness: options.roughness,
-        penalty: data
-            .y
-            .iter()
-            .map(|y| metrics::point_loss(y, &[0.0; 3]))
-            .sum(),
+        penalty: data.zero_loss,
         evaluations: &evaluations,
     };
     let solver = NelderMead::new(simplex)

@@ -14,8 +14,10 @@ const REFINE_WITHIN: f64 = 0.05;
 const MAX_REFINED: usize = 3;
 /// Per-channel roughness: rounds of channel-by-channel search at most.
 const MAX_ROUNDS: usize = 6;
-/// Per-channel roughness: stop once a round lowers the loss by less than this fraction.
-const ROUND_TOLERANCE: f64 = 1e-9;
+/// Per-channel roughness: stop once a round lowers the loss by less than this fraction of
+/// it plus [`ROUND_SIGNAL_TOLERANCE`] of the data's scale Σ‖y‖ (for near-exact fits).
+const ROUND_TOLERANCE: f64 = 1e-7;
+const ROUND_SIGNAL_TOLERANCE: f64 = 1e-9;
 /// Brent tolerance on ln m: relative and absolute parts.
 const BRENT_EPS: f64 = 1.5e-8;
 const BRENT_ABS: f64 = 1e-6;
@@ -238,7 +240,8 @@ pub(crate) fn fit(data: &Data, options: &FitOptions) -> Result<Found, FitError> 
                 }
             }
             let after = profile.borrow().best_loss();
-            if before - after <= ROUND_TOLERANCE * before {
+            if before - after <= ROUND_TOLERANCE * before + ROUND_SIGNAL_TOLERANCE * data.zero_loss
+            {
                 break;
             }
         }

@@ -3,6 +3,7 @@
 
 use std::convert::Infallible;
 use std::path::Path as FsPath;
+use std::sync::atomic::Ordering;
 use std::sync::Arc;
 
 use axum::body::Bytes;
@@ -22,7 +23,7 @@ use super::files::{is_partial, safe_join};
 use super::hardware::InjectedFault;
 use super::plan::{theta_dir_name, Step, FIT_MODELS};
 use super::preview;
-use super::shared::{lock, Shared};
+use super::shared::{lock, Shared, EMERGENCY_STOP};
 use super::store::{NewScan, ScanRecord, ScanState, StepState, Store, StoreError};
 use super::validate::{self, Bounds, FieldError};
 
@@ -340,6 +341,7 @@ async fn cancel_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<
 
 /// Stops the arm at once (feed hold, then reset) and pauses the running scan.
 async fn stop_arm(State(shared): AppState) -> ApiResult<Json<Value>> {
+    shared.stops.fetch_add(1, Ordering::AcqRel);
     let estop = lock(&shared.estop).clone();
     let stopped = match estop {
         Some(estop) => tokio::task::spawn_blocking(move || estop.stop())
@@ -352,11 +354,8 @@ async fn stop_arm(State(shared): AppState) -> ApiResult<Json<Value>> {
         )),
     };
     let paused = db(&shared, |shared, store| {
-        let ids = store.transition_all(
-            ScanState::Running,
-            ScanState::Paused,
-            Some("emergency stop by the operator"),
-        )?;
+        let ids =
+            store.transition_all(ScanState::Running, ScanState::Paused, Some(EMERGENCY_STOP))?;
         store.log(shared.boot, None, "stop", "emergency stop")?;
         for id in &ids {
             shared.publish(store, *id)?;

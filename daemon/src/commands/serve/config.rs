@@ -112,6 +112,10 @@ pub enum CameraConfig {
         /// ISO set before each exposure.
         #[serde(default = "default_iso")]
         iso: u32,
+        /// Camera model to pick when several are connected (libgphoto2 name).
+        model: Option<String>,
+        /// libgphoto2 port, e.g. `usb:001,004`.
+        port: Option<String>,
     },
     Emulator {
         /// Builtin scene name (`gold`, `red`, `blue-green`) or path to a scene TOML.
@@ -263,6 +267,20 @@ mod tests {
             matches!(config.camera, CameraConfig::Emulator { ref scene, .. } if scene == "gold")
         );
         assert_eq!(config.bind.port(), 8080);
+    }
+
+    #[test]
+    fn example_config_parses_to_the_defaults() {
+        let example =
+            Config::from_toml_str(include_str!("../../../assets/gonio.example.toml")).unwrap();
+        let default = Config::default();
+        assert_eq!(example.bind, default.bind);
+        assert_eq!(example.data_dir, default.data_dir);
+        assert_eq!(example.retry.attempts, default.retry.attempts);
+        assert!(matches!(
+            (example.arm, default.arm),
+            (ArmConfig::Emulator { time_scale: a }, ArmConfig::Emulator { time_scale: b }) if a == b
+        ));
     }
 
     #[test]

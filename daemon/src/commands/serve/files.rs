@@ -48,19 +48,20 @@ pub enum AtomicError<E> {
     Io(std::io::Error),
 }
 
-/// The temporary sibling of `path`: same directory, hidden, same extension (so
-/// encoders that pick the format by extension still work).
+/// The temporary sibling of `path`: same directory, hidden, named like the device
+/// drivers' temporaries (`.<name>.<pid>.partial`).
 fn temp_path(path: &Path) -> PathBuf {
     let name = path
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
-    path.with_file_name(format!(".partial-{}-{name}", std::process::id()))
+    path.with_file_name(format!(".{name}.{}.partial", std::process::id()))
 }
 
-/// Whether `name` is a leftover temporary file of [`write_atomic`].
+/// Whether `name` is a leftover temporary file of an atomic write (ours or a
+/// driver's).
 pub fn is_partial(name: &str) -> bool {
-    name.starts_with(".partial-")
+    name.starts_with('.') && name.ends_with(".partial")
 }
 
 /// Removes leftover temporary files under `dir` (after a crash), recursively.
@@ -128,7 +129,7 @@ mod tests {
             "a/../../b",
             "",
             ".hidden",
-            "a/.partial-1-x",
+            "a/.x.1.partial",
         ] {
             assert_eq!(safe_join(base, bad), None, "{bad}");
         }
@@ -149,7 +150,7 @@ mod tests {
         let path = dir.join("sub/x.json");
         write_atomic(&path, b"{}").unwrap();
         assert_eq!(fs::read(&path).unwrap(), b"{}");
-        fs::write(dir.join("sub/.partial-1-y.tiff"), b"half").unwrap();
+        fs::write(dir.join("sub/.y.tiff.1.partial"), b"half").unwrap();
         assert_eq!(remove_partials(&dir).unwrap(), 1);
         let names: Vec<_> = fs::read_dir(dir.join("sub")).unwrap().collect();
         assert_eq!(names.len(), 1);

@@ -7,6 +7,7 @@ use std::sync::Arc;
 
 use anyhow::Context;
 use gonio_drivers::grbl::{GrblArm, GrblArmConfig};
+use gonio_drivers::supervised_camera::{SupervisedCamera, SupervisorConfig, WorkerSpec};
 use gonio_drivers::{Arm, Camera, DeviceError};
 use gonio_mock_hw::camera::{CameraFault, CaptureTiming, EmulatedCamera, FaultInjector};
 use gonio_mock_hw::grbl::{Fault, GrblConfig, GrblEmulator};
@@ -17,6 +18,7 @@ use gonio_processing::geometry::Setup;
 use serde_json::Value;
 
 use super::config::{ArmConfig, CameraConfig, Config, Limits};
+use super::shared::lock;
 
 /// What every capture sidecar says besides the exposure (`None`: the camera's own).
 #[derive(Debug, Clone, Copy, Default)]
@@ -163,9 +165,9 @@ pub fn open(config: &Config) -> anyhow::Result<Devices> {
                 emulators,
             })
         }
-        CameraConfig::Gphoto2 { iso } => Ok(Devices {
+        CameraConfig::Gphoto2 { iso, model, port } => Ok(Devices {
             arm,
-            camera: open_gphoto2()?,
+            camera: open_gphoto2(model.as_deref(), port.as_deref())?,
             setup: config.setup.clone(),
             truth: None,
             sidecar: SidecarDefaults::default(),
@@ -176,16 +178,19 @@ pub fn open(config: &Config) -> anyhow::Result<Devices> {
     }
 }
 
-#[cfg(feature = "gphoto2")]
-fn open_gphoto2() -> anyhow::Result<Box<dyn Camera>> {
-    let camera = gonio_drivers::gphoto2_camera::GphotoCamera::open()
-        .context("opening the gphoto2 camera")?;
+/// The gphoto2 camera, run in the supervised `gonio-camera-worker` process (built
+/// with the `gphoto2` feature) beside this executable.
+fn open_gphoto2(model: Option<&str>, port: Option<&str>) -> anyhow::Result<Box<dyn Camera>> {
+    let mut args = Vec::new();
+    for (flag, value) in [("--model", model), ("--port", port)] {
+        if let Some(value) = value {
+            args.extend([flag.to_owned(), value.to_owned()]);
+        }
+    }
+    let spec = WorkerSpec::beside_current_exe(args).context("locating gonio-camera-worker")?;
+    let camera = SupervisedCamera::start(spec, SupervisorConfig::default())
+        .context("starting the gphoto2 camera worker (gonio-camera-worker)")?;
     Ok(Box::new(camera))
-}
-
-#[cfg(not(feature = "gphoto2"))]
-fn open_gphoto2() -> anyhow::Result<Box<dyn Camera>> {
-    anyhow::bail!("camera.kind = \"gphoto2\" needs gonio built with the `gphoto2` feature")
 }
 
 /// A fault the test hook injects into an emulator.
@@ -222,10 +227,4 @@ impl Emulators {
         }
         Ok(())
     }
-}
-
-fn lock<T>(mutex: &std::sync::Mutex<T>) -> std::sync::MutexGuard<'_, T> {
-    mutex
-        .lock()
-        .unwrap_or_else(|poisoned| poisoned.into_inner())
 }

@@ -16,6 +16,7 @@ mod web;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicU64;
 use std::sync::{mpsc, Arc, Mutex};
 
 use anyhow::Context;
@@ -98,6 +99,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             },
         }),
         estop: Mutex::new(None),
+        stops: AtomicU64::new(0),
         emulators: devices.emulators.clone(),
         config,
     });

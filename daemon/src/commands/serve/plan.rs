@@ -87,9 +87,7 @@ impl ScanPlan {
             if self.auto_bracket {
                 steps.push(Step::Meter { theta_l });
             }
-            steps.extend(
-                Self::captures(theta_l, &self.shutter_s),
-            );
+            steps.extend(Self::captures(theta_l, &self.shutter_s));
             steps.push(Step::Hdr { theta_l });
         }
         steps.push(Step::Extract);

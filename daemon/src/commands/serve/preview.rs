@@ -4,6 +4,7 @@
 use std::io::Cursor;
 use std::path::Path;
 
+use gonio_processing::fit::FitResult;
 use image::{ImageBuffer, Rgb};
 use serde_json::{json, Value};
 
@@ -71,14 +72,14 @@ pub fn plot_data(dir: &Path) -> Result<Value, PreviewError> {
         let Ok(text) = std::fs::read_to_string(&path) else {
             continue;
         };
-        let fit = super::process::read_fit(&text)
+        let fit: FitResult = serde_json::from_str(&text)
             .map_err(|e| PreviewError::Processing(format!("{name}: {e}")))?;
         let predicted: Vec<[f64; 3]> = samples
             .iter()
-            .map(|s| super::process::predict(&fit, s.theta_i, s.theta_r))
+            .map(|s| fit.predict(s.theta_i, s.theta_r))
             .collect();
-        let params: Value =
-            serde_json::from_str(&text).map_err(|e| PreviewError::Processing(e.to_string()))?;
+        let params = serde_json::to_value(&fit)
+            .map_err(|e| PreviewError::Processing(format!("{name}: {e}")))?;
         fits.insert(
             model.to_owned(),
             json!({ "params": params, "predicted": predicted }),

@@ -4,6 +4,7 @@
 //! resumes at the first step not done (after re-homing: the position is unknown then).
 
 use std::path::{Path, PathBuf};
+use std::sync::atomic::Ordering;
 use std::sync::{mpsc, Arc};
 use std::time::Duration;
 
@@ -17,7 +18,7 @@ use super::files::{remove_partials, write_atomic};
 use super::hardware::{ArmOpener, Devices, SidecarDefaults};
 use super::plan::{exposure_stem, theta_dir_name, ScanPlan, Step};
 use super::process;
-use super::shared::{lock, scan_dir, Shared};
+use super::shared::{lock, scan_dir, Shared, EMERGENCY_STOP};
 use super::store::{now_rfc3339, now_unix, ScanRecord, ScanState, Store, StoreError};
 
 /// Why a step did not complete.
@@ -329,7 +330,7 @@ impl Runner {
             } => self.capture(id, dir, *theta_l, *index, *shutter_s)?,
             Step::Hdr { .. } | Step::Extract | Step::Fit { .. } => {
                 process::run(step, dir, self.white_reflectance)
-                    .map_err(|err| StepError::Failed(format!("{}: {err}", step.describe())))?
+                    .map_err(|err| StepError::Failed(format!("{}: {err:#}", step.describe())))?
             }
         };
         Ok((result, Vec::new()))
@@ -367,7 +368,11 @@ impl Runner {
             };
             self.camera_op(id, "metering exposure", |c| c.set_exposure(exposure))?;
             let capture = self.camera_op(id, "metering capture", |c| c.capture_to(&path))?;
-            self.log(Some(id), "meter", &format!("θL {theta_l:.1}° at {shutter_s} s"))?;
+            self.log(
+                Some(id),
+                "meter",
+                &format!("θL {theta_l:.1}° at {shutter_s} s"),
+            )?;
             let frame = image::open(&capture.path);
             // The metering frame is not part of the scan.
             let _ = std::fs::remove_file(&capture.path);
@@ -412,13 +417,17 @@ impl Runner {
     /// a reset or alarm is cleared and the arm re-homed before the next try; a stop
     /// by the operator halts at once. A dead connection after the last try interrupts
     /// the scan, anything else fails it.
+    ///
+    /// With `home_first`, an arm whose position is unknown is homed before `op`.
     fn arm_op(
         &mut self,
         id: i64,
         what: &str,
+        home_first: bool,
         mut op: impl FnMut(&mut dyn Arm) -> Result<(), DeviceError>,
     ) -> Result<(), StepError> {
         let retry = self.shared.config.retry;
+        let stops = self.shared.stops.load(Ordering::Acquire);
         let mut last = None;
         for attempt in 0..retry.attempts {
             if attempt > 0 {
@@ -431,7 +440,7 @@ impl Runner {
                 return Err(StepError::Interrupted("arm disconnected".into()));
             };
             let mut rehomed = false;
-            let result = if self.homed || what == "home" {
+            let result = if self.homed || !home_first {
                 op(arm.as_mut())
             } else {
                 rehomed = true;
@@ -447,6 +456,11 @@ impl Runner {
                 }
                 Err(err) => {
                     tracing::warn!("scan {id}: {what} (try {}): {err}", attempt + 1);
+                    if self.shared.stops.load(Ordering::Acquire) != stops {
+                        self.homed = false;
+                        self.at_deg = None;
+                        return self.halt_after_stop(id);
+                    }
                     if matches!(err, DeviceError::Disconnected(_) | DeviceError::NotFound(_)) {
                         // The driver already tried to reconnect: wait for the device.
                         return Err(StepError::Interrupted(format!(
@@ -484,8 +498,25 @@ impl Runner {
         }
     }
 
+    /// After an emergency stop interrupted an arm operation: the operator's pause of
+    /// the scan is on its way; wait for it (bounded), else record it here, so the scan
+    /// never moves on by itself.
+    fn halt_after_stop(&mut self, id: i64) -> Result<(), StepError> {
+        let deadline = std::time::Instant::now() + Duration::from_secs(5);
+        while self.still_running(id)? && std::time::Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        self.store.transition(
+            id,
+            &[ScanState::Running],
+            ScanState::Paused,
+            Some(EMERGENCY_STOP),
+        )?;
+        Err(StepError::Halted)
+    }
+
     fn home(&mut self, id: i64) -> Result<(), StepError> {
-        self.arm_op(id, "home", |arm| arm.home())?;
+        self.arm_op(id, "home", false, |arm| arm.home())?;
         self.homed = true;
         self.at_deg = None;
         self.log(Some(id), "home", "")?;
@@ -495,7 +526,7 @@ impl Runner {
 
     fn move_to(&mut self, id: i64, theta_l: f64) -> Result<(), StepError> {
         self.at_deg = None;
-        self.arm_op(id, &format!("move to θL {theta_l:.1}°"), |arm| {
+        self.arm_op(id, &format!("move to θL {theta_l:.1}°"), true, |arm| {
             arm.move_to(theta_l)
         })?;
         self.at_deg = Some(theta_l);
@@ -574,7 +605,7 @@ impl Runner {
             iso: self.iso,
         };
         let what = format!("θL {theta_l:.1}° {stem}");
-        let image = match existing {
+        let (image, exposure) = match existing {
             // The image landed but the crash came before its sidecar: only the
             // exposure actually set is missing.
             Some(image) => {
@@ -599,7 +630,6 @@ impl Runner {
                 (capture.path, capture.exposure)
             }
         };
-        let (image, exposure) = image;
         let sidecar = Sidecar {
             shutter_s: exposure.shutter_s,
             iso: exposure.iso.map(f64::from),

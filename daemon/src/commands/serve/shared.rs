@@ -1,6 +1,7 @@
 //! State shared by the HTTP handlers and the hardware owner thread.
 
 use std::path::PathBuf;
+use std::sync::atomic::AtomicU64;
 use std::sync::{mpsc, Arc, Mutex, MutexGuard};
 
 use gonio_drivers::{ArmState, EmergencyStop};
@@ -10,6 +11,9 @@ use tokio::sync::broadcast;
 use super::config::Config;
 use super::hardware::Emulators;
 use super::store::{ScanRecord, Store, StoreError};
+
+/// Why a scan is paused after `POST /api/arm/stop`.
+pub const EMERGENCY_STOP: &str = "emergency stop by the operator";
 
 /// A live view of the devices, updated by the hardware owner.
 #[derive(Debug, Clone, Serialize)]
@@ -56,6 +60,9 @@ pub struct Shared {
     pub hardware: Mutex<HardwareStatus>,
     /// Stops the arm from any thread; replaced whenever the arm is reopened.
     pub estop: Mutex<Option<Arc<dyn EmergencyStop>>>,
+    /// Emergency stops so far: an arm operation that fails after this changed does
+    /// not retry.
+    pub stops: AtomicU64,
     /// Present when the devices are emulated.
     pub emulators: Option<Arc<Emulators>>,
 }

@@ -682,7 +682,12 @@ mod tests {
         };
         store.step_started(id, steps[0].index).unwrap();
         store
-            .step_done(id, steps[0].index, &Value::Null, &[extra.clone()])
+            .step_done(
+                id,
+                steps[0].index,
+                &Value::Null,
+                std::slice::from_ref(&extra),
+            )
             .unwrap();
         let steps = store.steps(id).unwrap();
         assert_eq!((steps.len(), &steps[1].step), (9, &extra));
@@ -697,7 +702,10 @@ mod tests {
         // Reopened after a crash: the started step is not done and the scan resumes.
         let mut store = Store::open(&dir.join("gonio.sqlite")).unwrap();
         let scan = store.next_runnable(now_unix()).unwrap().unwrap();
-        assert_eq!((scan.id, scan.state, scan.done), (id, ScanState::Running, 8));
+        assert_eq!(
+            (scan.id, scan.state, scan.done),
+            (id, ScanState::Running, 8)
+        );
         assert_eq!(store.steps(id).unwrap()[8].state, StepState::Started);
         store
             .step_done(id, last, &serde_json::json!({"ok": true}), &[])
