@@ -36,7 +36,7 @@ for scene in "${scenes[@]}"; do
     fi
     echo "== $scene: study"
     "$gonio" study "$scan/samples.csv" --reference "$scan/reference.csv" --out "$out/study" \
-        --roughness "$study_roughness" | tee "$out/study.txt"
+        --roughness "$study_roughness" --name "$scene" | tee "$out/study.txt"
     echo "== $scene: tradeoff"
     "$gonio" tradeoff --scene "$scene" --scan "$scan" --out "$out/tradeoff" \
         "${tradeoff_roughness[@]}" | tee "$out/tradeoff.txt"

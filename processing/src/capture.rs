@@ -8,6 +8,7 @@
 //! mean of the two greens.
 
 use std::fs;
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
@@ -224,11 +225,25 @@ struct Decoded {
 impl Frame {
     /// Reads an image and its sidecar; sidecar levels override the file's own.
     pub fn read(path: &Path) -> Result<Frame, CaptureError> {
+        Self::read_rows(path, |_, height| {
+            Ok::<_, CaptureError>(std::iter::once(0..height).collect())
+        })
+    }
+
+    /// Reads only some rows of a capture: `select(width, height)` gets the capture's
+    /// size (after superpixels for raw) and returns row ranges, which are stacked in
+    /// that order into the frame. Striped 16-bit RGB TIFFs decode only the strips that
+    /// hold those rows; other files are decoded whole and cut.
+    pub fn read_rows<E: From<CaptureError>>(
+        path: &Path,
+        select: impl FnOnce(usize, usize) -> Result<Vec<Range<usize>>, E>,
+    ) -> Result<Frame, E> {
         if !path.is_file() {
             return Err(CaptureError::Image {
                 path: path.to_path_buf(),
                 reason: "no such file".into(),
-            });
+            }
+            .into());
         }
         let sidecar = read_sidecar(path)?;
         let ext = path
@@ -237,11 +252,20 @@ impl Frame {
             .map(|e| e.to_ascii_lowercase())
             .unwrap_or_default();
         let decoded = if TIFF_EXTENSIONS.contains(&ext.as_str()) {
-            decode_tiff(path)?
+            match decode_tiff_rows(path, select)? {
+                Ok(decoded) => decoded,
+                Err(select) => {
+                    let full = decode_tiff(path)?;
+                    let bands = select(full.width, full.height)?;
+                    full.rows(path, &bands)?
+                }
+            }
         } else {
-            decode_raw(path)?
+            let full = decode_raw(path)?;
+            let bands = select(full.width, full.height)?;
+            full.rows(path, &bands)?
         };
-        Self::assemble(path, sidecar, decoded)
+        Ok(Self::assemble(path, sidecar, decoded)?)
     }
 
     /// Builds a frame from counts already in memory (RGB interleaved), checking sizes
@@ -336,6 +360,123 @@ impl Frame {
         let count = f64::from(self.data[3 * (y * self.width + x) + c]);
         (count - self.black_level) / (self.white_level - self.black_level)
     }
+}
+
+impl Decoded {
+    /// The given row ranges of the image, stacked.
+    fn rows(self, path: &Path, bands: &[Range<usize>]) -> Result<Decoded, CaptureError> {
+        if let [band] = bands {
+            if *band == (0..self.height) {
+                return Ok(self);
+            }
+        }
+        check_bands(path, bands, self.height)?;
+        let row_len = 3 * self.width;
+        let mut data = Vec::with_capacity(bands.iter().map(|b| b.len()).sum::<usize>() * row_len);
+        for band in bands {
+            data.extend_from_slice(&self.data[band.start * row_len..band.end * row_len]);
+        }
+        Ok(Decoded {
+            height: data.len() / row_len,
+            data,
+            ..self
+        })
+    }
+}
+
+fn check_bands(path: &Path, bands: &[Range<usize>], height: usize) -> Result<(), CaptureError> {
+    match bands.iter().find(|b| b.start >= b.end || b.end > height) {
+        Some(band) => Err(CaptureError::Layout {
+            path: path.to_path_buf(),
+            reason: format!("rows {band:?} are empty or outside the {height}-row image"),
+        }),
+        None if bands.is_empty() => Err(CaptureError::Layout {
+            path: path.to_path_buf(),
+            reason: "no rows selected".into(),
+        }),
+        None => Ok(()),
+    }
+}
+
+/// Decodes only the strips holding the selected rows of a chunky, striped, 16-bit RGB
+/// TIFF. `Ok(Err(select))` hands the selector back when the file has another layout.
+fn decode_tiff_rows<
+    E: From<CaptureError>,
+    S: FnOnce(usize, usize) -> Result<Vec<Range<usize>>, E>,
+>(
+    path: &Path,
+    select: S,
+) -> Result<Result<Decoded, S>, E> {
+    use tiff::decoder::{ChunkType, Decoder, DecodingResult};
+    use tiff::tags::{PlanarConfiguration, Tag};
+    use tiff::ColorType;
+    let image_error = |e: tiff::TiffError| CaptureError::Image {
+        path: path.to_path_buf(),
+        reason: e.to_string(),
+    };
+    let file = fs::File::open(path).map_err(|e| CaptureError::Image {
+        path: path.to_path_buf(),
+        reason: e.to_string(),
+    })?;
+    let Ok(mut decoder) = Decoder::new(std::io::BufReader::new(file)) else {
+        // Let the full decoder report what is wrong with the file.
+        return Ok(Err(select));
+    };
+    let (width, height) = decoder.dimensions().map_err(image_error)?;
+    let (width, height) = (width as usize, height as usize);
+    let chunky = decoder
+        .find_tag_unsigned::<u16>(Tag::PlanarConfiguration)
+        .map_err(image_error)?
+        .is_none_or(|v| v == PlanarConfiguration::Chunky.to_u16());
+    let rgb16 = matches!(decoder.colortype(), Ok(ColorType::RGB(16)));
+    if !(chunky && rgb16 && decoder.get_chunk_type() == ChunkType::Strip) {
+        return Ok(Err(select));
+    }
+    let rows_per_strip = decoder
+        .find_tag_unsigned::<u32>(Tag::RowsPerStrip)
+        .map_err(image_error)?
+        .map_or(height, |r| (r as usize).clamp(1, height.max(1)));
+    let bands = select(width, height)?;
+    check_bands(path, &bands, height)?;
+    let row_len = 3 * width;
+    let mut data = Vec::with_capacity(bands.iter().map(|b| b.len()).sum::<usize>() * row_len);
+    let mut cached: Option<(usize, Vec<u16>)> = None;
+    for band in &bands {
+        for row in band.clone() {
+            let strip = row / rows_per_strip;
+            if cached.as_ref().is_none_or(|(index, _)| *index != strip) {
+                let values = match decoder.read_chunk(strip as u32).map_err(image_error)? {
+                    DecodingResult::U16(values) => values,
+                    _ => {
+                        return Err(CaptureError::Layout {
+                            path: path.to_path_buf(),
+                            reason: "strip is not 16-bit".into(),
+                        }
+                        .into())
+                    }
+                };
+                cached = Some((strip, values));
+            }
+            let values = cached.as_ref().map_or(&[][..], |(_, v)| v.as_slice());
+            let start = (row - strip * rows_per_strip) * row_len;
+            let line = values
+                .get(start..start + row_len)
+                .ok_or_else(|| CaptureError::Layout {
+                    path: path.to_path_buf(),
+                    reason: format!("strip {strip} is too short for row {row}"),
+                })?;
+            data.extend_from_slice(line);
+        }
+    }
+    Ok(Ok(Decoded {
+        width,
+        height: data.len() / row_len,
+        stored: (width, height),
+        data,
+        black_level: 0.0,
+        white_level: f64::from(u16::MAX),
+        max_count: f64::from(u16::MAX),
+    }))
 }
 
 fn decode_tiff(path: &Path) -> Result<Decoded, CaptureError> {
@@ -463,7 +604,7 @@ fn decode_raw(path: &Path) -> Result<Decoded, CaptureError> {
 /// block, R and B as recorded, G the mean of the two greens (rounded half up on even
 /// blocks and half down on odd ones, so rounding adds no bias). `color_at(row, col)` is
 /// the CFA colour (0 R, 1 G, 2 B) at absolute sensor coordinates.
-#[cfg_attr(not(feature = "raw"), allow(dead_code))]
+#[cfg(any(feature = "raw", test))]
 fn superpixels(
     counts: &[u16],
     stride: usize,

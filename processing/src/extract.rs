@@ -21,6 +21,7 @@
 
 use std::collections::BTreeMap;
 use std::fs;
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
@@ -204,13 +205,21 @@ pub fn extract_scan_with_progress(
         let frames: Vec<(Frame, StripLayout)> = paths
             .par_iter()
             .map(|path| {
-                let frame = Frame::read(path)?;
-                let layout = StripLayout::new(&setup, frame.width, frame.height, theta_l)?;
-                Ok(if keep_full {
-                    (frame, layout)
+                if keep_full {
+                    let frame = Frame::read(path)?;
+                    let layout = StripLayout::new(&setup, frame.width, frame.height, theta_l)?;
+                    return Ok((frame, layout));
+                }
+                let frame = Frame::read_rows(path, |width, height| {
+                    StripLayout::new(&setup, width, height, theta_l).map(|l| l.bands())
+                })?;
+                // The selector accepted the size: full width, or half of it for raw.
+                let scale = if frame.width == setup.image_width as usize {
+                    1
                 } else {
-                    layout.crop(&frame)
-                })
+                    2
+                };
+                Ok((frame, StripLayout::strips_only(scale)))
             })
             .collect::<Result<_, ExtractError>>()?;
         let layout = frames[0].1;
@@ -349,31 +358,22 @@ impl StripLayout {
         })
     }
 
-    /// The frame cut down to the two strips (sample rows, then white rows) and the
-    /// layout of the cut frame.
-    fn crop(&self, frame: &Frame) -> (Frame, StripLayout) {
+    /// The row ranges of the two strips (sample, then white).
+    fn bands(&self) -> Vec<Range<usize>> {
         let half = STRIP_ROWS / 2;
-        let row_len = 3 * frame.width;
-        let mut data = Vec::with_capacity(2 * STRIP_ROWS * row_len);
-        for centre in [self.sample_row, self.white_row] {
-            let first = (centre - half) * row_len;
-            data.extend_from_slice(&frame.data[first..first + STRIP_ROWS * row_len]);
-        }
-        let cropped = Frame {
-            path: frame.path.clone(),
-            sidecar: frame.sidecar.clone(),
-            width: frame.width,
-            height: 2 * STRIP_ROWS,
-            data,
-            black_level: frame.black_level,
-            white_level: frame.white_level,
-        };
-        let layout = StripLayout {
-            scale: self.scale,
+        [self.sample_row, self.white_row]
+            .map(|centre| centre - half..centre + half + 1)
+            .to_vec()
+    }
+
+    /// The layout of a frame holding only [`StripLayout::bands`].
+    fn strips_only(scale: usize) -> Self {
+        let half = STRIP_ROWS / 2;
+        Self {
+            scale,
             sample_row: half,
             white_row: STRIP_ROWS + half,
-        };
-        (cropped, layout)
+        }
     }
 }
 

@@ -2,12 +2,15 @@
 //! Σ_p sqrt(Σ_c (β_c,mea − β_c,est)²) (a sum of Euclidean norms, not of squares).
 //!
 //! Two methods:
-//! - [`FitMethod::Robust`] (default): at fixed m the models are linear in Kd, Ks, so the
-//!   loss is minimised exactly over Kd, Ks ≥ 0 for each trial m (reweighted non-negative
-//!   least squares, see `linear`), and log m is searched globally: the whole range on a
-//!   grid, then Brent's method around the best grid points. Per-channel roughness starts
-//!   from the shared optimum and searches each channel's m in turn (grid, then Brent),
-//!   repeating until the loss stops falling. Optionally polished by Nelder–Mead.
+//! - [`FitMethod::Robust`] (default): at fixed m the models are linear in Kd, Ks and the
+//!   loss is convex in them, so it is minimised over Kd, Ks ≥ 0 for each trial m by
+//!   reweighted non-negative least squares (see `linear`; relative tolerance 1e-9, 1e-3
+//!   while scanning the grid). log m is searched globally: a grid over the whole range
+//!   (default 24 points on [1e-3, 2]), then Brent's method between the neighbours of every
+//!   grid local minimum within 5 % of the best. Per-channel roughness starts from the
+//!   shared optimum and searches each channel's m in turn (first round: grid then Brent;
+//!   later rounds: Brent near the current value) until a round stops lowering the loss.
+//!   Optionally polished by Nelder–Mead.
 //! - [`FitMethod::NelderMead`]: the paper's downhill simplex over all parameters at once
 //!   (argmin's `NelderMead`), kept as the baseline.
 //!
@@ -31,7 +34,7 @@ use crate::samples::Sample;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum FitMethod {
-    /// Exact Kd, Ks at each m plus a global search over log m.
+    /// Kd, Ks solved at each m (a convex problem) plus a global search over log m.
     #[default]
     Robust,
     /// Downhill simplex over all parameters (the paper's method).

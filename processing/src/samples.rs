@@ -21,13 +21,11 @@ pub struct Sample {
 pub const HEADER: [&str; 6] = ["theta_l", "theta_i", "theta_r", "r", "g", "b"];
 
 /// Why a samples CSV could not be read or written. Lines are 1-based and count the header.
+/// Each message is complete on its own (no separate source chain).
 #[derive(Debug, thiserror::Error)]
 pub enum SamplesError {
-    #[error("{path}: {source}")]
-    Io {
-        path: String,
-        source: std::io::Error,
-    },
+    #[error("{path}: {error}")]
+    Io { path: String, error: std::io::Error },
     #[error("samples CSV: header must start with `{expected}`, found `{found}`")]
     Header { expected: String, found: String },
     #[error("samples CSV line {line}: {message}")]
@@ -39,11 +37,11 @@ pub enum SamplesError {
         message: String,
     },
     #[error("samples CSV: {0}")]
-    Csv(#[from] csv::Error),
-    #[error("{path}: {source}")]
+    Csv(csv::Error),
+    #[error("{path}: {inner}")]
     InFile {
         path: String,
-        source: Box<SamplesError>,
+        inner: Box<SamplesError>,
     },
 }
 
@@ -51,13 +49,13 @@ impl SamplesError {
     /// Names the file a reader or writer error came from.
     fn in_file(self, path: &Path) -> Self {
         match self {
-            SamplesError::Io { source, .. } => SamplesError::Io {
+            SamplesError::Io { error, .. } => SamplesError::Io {
                 path: path.display().to_string(),
-                source,
+                error,
             },
             other => SamplesError::InFile {
                 path: path.display().to_string(),
-                source: Box::new(other),
+                inner: Box::new(other),
             },
         }
     }
@@ -65,9 +63,9 @@ impl SamplesError {
 
 /// Reads a samples CSV file.
 pub fn read_csv(path: &Path) -> Result<Vec<Sample>, SamplesError> {
-    let file = File::open(path).map_err(|source| SamplesError::Io {
+    let file = File::open(path).map_err(|error| SamplesError::Io {
         path: path.display().to_string(),
-        source,
+        error,
     })?;
     read_csv_from(file).map_err(|e| e.in_file(path))
 }
@@ -76,10 +74,10 @@ pub fn read_csv(path: &Path) -> Result<Vec<Sample>, SamplesError> {
 pub fn read_csv_from<R: Read>(reader: R) -> Result<Vec<Sample>, SamplesError> {
     let mut csv = csv::ReaderBuilder::new()
         .has_headers(true)
-        .flexible(false)
+        .flexible(true)
         .trim(csv::Trim::All)
         .from_reader(reader);
-    let header = csv.headers()?.clone();
+    let header = csv.headers().map_err(SamplesError::Csv)?.clone();
     let leading: Vec<&str> = header.iter().take(HEADER.len()).collect();
     if leading != HEADER {
         return Err(SamplesError::Header {
@@ -97,6 +95,17 @@ pub fn read_csv_from<R: Read>(reader: R) -> Result<Vec<Sample>, SamplesError> {
             None => SamplesError::Csv(e),
         })?;
         let line = record.position().map_or(0, csv::Position::line);
+        if record.len() < HEADER.len() {
+            return Err(SamplesError::Row {
+                line,
+                message: format!(
+                    "{} fields, expected at least {} ({})",
+                    record.len(),
+                    HEADER.len(),
+                    HEADER.join(",")
+                ),
+            });
+        }
         let mut values = [0.0; 6];
         for ((value, column), text) in values.iter_mut().zip(HEADER).zip(record.iter()) {
             let parsed: f64 = text.parse().map_err(|_| SamplesError::Field {
@@ -125,30 +134,31 @@ pub fn read_csv_from<R: Read>(reader: R) -> Result<Vec<Sample>, SamplesError> {
 
 /// Writes samples as CSV to a file (created or truncated).
 pub fn write_csv(path: &Path, samples: &[Sample]) -> Result<(), SamplesError> {
-    let file = File::create(path).map_err(|source| SamplesError::Io {
+    let file = File::create(path).map_err(|error| SamplesError::Io {
         path: path.display().to_string(),
-        source,
+        error,
     })?;
     let mut out = BufWriter::new(file);
     write_csv_to(&mut out, samples).map_err(|e| e.in_file(path))?;
-    out.flush().map_err(|source| SamplesError::Io {
+    out.flush().map_err(|error| SamplesError::Io {
         path: path.display().to_string(),
-        source,
+        error,
     })
 }
 
 /// Writes samples as CSV text to any writer; numbers use Rust's shortest round-trip form.
 pub fn write_csv_to<W: Write>(writer: W, samples: &[Sample]) -> Result<(), SamplesError> {
     let mut csv = csv::Writer::from_writer(writer);
-    csv.write_record(HEADER)?;
+    csv.write_record(HEADER).map_err(SamplesError::Csv)?;
     for s in samples {
         let row = [
             s.theta_l, s.theta_i, s.theta_r, s.rgb[0], s.rgb[1], s.rgb[2],
         ];
-        csv.write_record(row.iter().map(f64::to_string))?;
+        csv.write_record(row.iter().map(f64::to_string))
+            .map_err(SamplesError::Csv)?;
     }
-    csv.flush().map_err(|source| SamplesError::Io {
+    csv.flush().map_err(|error| SamplesError::Io {
         path: String::from("samples CSV output"),
-        source,
+        error,
     })
 }

@@ -18,6 +18,7 @@ mod plots;
 mod tables;
 
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
 use rayon::prelude::*;
@@ -238,6 +239,18 @@ pub fn run_study(
     camera: &CameraModel,
     options: &StudyOptions,
 ) -> Result<StudyReport, StudyError> {
+    run_study_with_progress(samples, reference, camera, options, |_, _| {})
+}
+
+/// [`run_study`], calling `progress(done, total)` after each (combination, variant) fit
+/// (from the worker threads, in completion order).
+pub fn run_study_with_progress(
+    samples: &[Sample],
+    reference: &Reference,
+    camera: &CameraModel,
+    options: &StudyOptions,
+    progress: impl Fn(usize, usize) + Sync,
+) -> Result<StudyReport, StudyError> {
     let start = Instant::now();
     check_samples(samples)?;
     if options.variants.is_empty() {
@@ -266,14 +279,18 @@ pub fn run_study(
         .iter()
         .flat_map(|c| options.variants.iter().map(move |v| (c, *v)))
         .collect();
+    let done = AtomicUsize::new(0);
     let results = jobs
         .par_iter()
-        .map(|&(combo, variant)| CombinationResult {
-            theta_l: combo.clone(),
-            variant,
-            outcome: score_combination(
-                &fitted, combo, variant, &points, &measured, camera, options,
-            ),
+        .map(|&(combo, variant)| {
+            let outcome =
+                score_combination(&fitted, combo, variant, &points, &measured, camera, options);
+            progress(done.fetch_add(1, Ordering::Relaxed) + 1, jobs.len());
+            CombinationResult {
+                theta_l: combo.clone(),
+                variant,
+                outcome,
+            }
         })
         .collect();
     Ok(StudyReport {
@@ -428,13 +445,18 @@ impl StudyReport {
 }
 
 /// Writes the tables and the figures of `report` into `dir` (created if missing);
-/// returns the files written.
-pub fn write_outputs(report: &StudyReport, dir: &Path) -> Result<Vec<PathBuf>, StudyError> {
+/// figure titles start with `name` (the sample's) when it is not empty. Returns the
+/// files written.
+pub fn write_outputs(
+    report: &StudyReport,
+    dir: &Path,
+    name: &str,
+) -> Result<Vec<PathBuf>, StudyError> {
     std::fs::create_dir_all(dir).map_err(|source| StudyError::Io {
         path: dir.to_path_buf(),
         source,
     })?;
     let mut written = write_tables(report, dir)?;
-    written.extend(write_figures(report, dir)?);
+    written.extend(write_figures(report, dir, name)?);
     Ok(written)
 }

@@ -222,3 +222,43 @@ fn capture_paths_are_recognised_case_insensitively() {
         Path::new("x/a.json")
     );
 }
+
+#[test]
+fn selected_rows_match_the_full_read_for_striped_and_other_tiffs() {
+    let dir = tempfile::tempdir().unwrap();
+    let (w, h) = (7u32, 40u32);
+    let data = counts(w, h);
+    let striped = dir.path().join("striped.tiff");
+    capture::write_tiff_capture(&striped, w, h, &data, &sidecar()).unwrap();
+    // An 8-bit TIFF takes the decode-everything path.
+    let rgb8 = dir.path().join("rgb8.tiff");
+    let bytes: Vec<u8> = data.iter().map(|&v| (v >> 8) as u8).collect();
+    image::RgbImage::from_raw(w, h, bytes)
+        .unwrap()
+        .save(&rgb8)
+        .unwrap();
+    fs::write(
+        rgb8.with_extension("json"),
+        serde_json::to_string(&sidecar()).unwrap(),
+    )
+    .unwrap();
+    for path in [&striped, &rgb8] {
+        let full = Frame::read(path).unwrap();
+        let seen = std::cell::Cell::new((0, 0));
+        let part = Frame::read_rows(path, |width, height| {
+            seen.set((width, height));
+            Ok::<_, CaptureError>(vec![31..36, 2..4])
+        })
+        .unwrap();
+        assert_eq!(seen.get(), (w as usize, h as usize));
+        assert_eq!((part.width, part.height), (w as usize, 7));
+        let row =
+            |f: &Frame, y: usize| f.data[3 * w as usize * y..3 * w as usize * (y + 1)].to_vec();
+        for (k, y) in [31, 32, 33, 34, 35, 2, 3].into_iter().enumerate() {
+            assert_eq!(row(&part, k), row(&full, y), "{path:?} row {y}");
+        }
+        let err =
+            Frame::read_rows(path, |_, _| Ok::<_, CaptureError>(vec![2..4, 38..41])).unwrap_err();
+        assert!(matches!(err, CaptureError::Layout { .. }), "{err}");
+    }
+}

@@ -1,7 +1,7 @@
 //! Fitting on synthetic data from known parameters. Tolerances (relative unless stated):
 //! noise-free data: m, Kd, Ks within 1e-4 (coefficients that are 0 within 1e-6·max β);
 //! 2 % noise: m within 3 %, Kd and Ks within 5 %. The robust loss must not exceed the
-//! minimum of a dense brute-force scan of m (400 log-spaced values, Kd and Ks exact at each)
+//! minimum of a dense brute-force scan of m (400 log-spaced values, Kd and Ks solved at each)
 //! by more than 1e-9 relative. Per-channel roughness with 2 % noise: m within 5 %.
 
 use gonio_processing::brdf::{Model, Params, Roughness};
@@ -336,6 +336,30 @@ fn nelder_mead_baseline_and_polish() {
         "{} vs {}",
         nm.loss,
         robust.loss
+    );
+    // Prediction uses the fitted parameters.
+    let s = &samples[100];
+    assert_eq!(
+        nm.predict(s.theta_i, s.theta_r),
+        model.evaluate(&nm.params(), s.theta_i, s.theta_r)
+    );
+    // Per-channel roughness: three m, and again no lower than robust.
+    let nm3 = fit(
+        &samples,
+        &options(model, Roughness::PerChannel, FitMethod::NelderMead),
+    )
+    .unwrap();
+    let robust3 = fit(
+        &samples,
+        &options(model, Roughness::PerChannel, FitMethod::Robust),
+    )
+    .unwrap();
+    assert!(matches!(nm3.m, FittedRoughness::PerChannel(_)));
+    assert!(
+        robust3.loss <= nm3.loss * (1.0 + 1e-7),
+        "{} > {}",
+        robust3.loss,
+        nm3.loss
     );
     let mut polish = options(model, Roughness::Shared, FitMethod::Robust);
     polish.robust.polish = true;

@@ -99,7 +99,7 @@ fn generating_model_scores_near_zero_on_every_combination() {
     );
 
     let dir = tempfile::tempdir().unwrap();
-    let written = write_outputs(&report, dir.path()).unwrap();
+    let written = write_outputs(&report, dir.path(), "synthetic").unwrap();
     for name in [
         "combinations.csv",
         "boxplots.csv",

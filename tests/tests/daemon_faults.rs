@@ -2,7 +2,7 @@
 //! (`emulator.fault_injection = true`): a serial unplug during a move interrupts the
 //! scan with a clear state and it resumes after the reconnect; the emergency stop
 //! pauses a scan mid-move; a busy or timing-out camera is retried a bounded number of
-//! times, then the scan fails with a clear error.
+//! times, then the scan fails with a clear error (and can be retried later).
 
 use std::time::{Duration, Instant};
 
@@ -159,5 +159,13 @@ fn busy_or_timing_out_camera_is_retried_then_fails_clearly() {
     );
     let scan = daemon.wait_state(next, &["done", "failed"], Duration::from_secs(60));
     assert_eq!(scan["state"], "done", "{scan}");
+
+    // The operator retries the failed scan once the camera is fine: it completes from
+    // its first step not done.
+    let resumed = daemon.post(&format!("/api/scans/{id}/resume"), &json!({}));
+    assert_eq!(resumed.status, 200, "{:?}", resumed.json);
+    let scan = daemon.wait_state(id, &["done", "failed"], Duration::from_secs(60));
+    assert_eq!(scan["state"], "done", "{scan}");
+    assert_eq!(scan["error"], Value::Null);
     std::fs::remove_dir_all(dir).ok();
 }

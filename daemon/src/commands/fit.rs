@@ -28,7 +28,7 @@ enum RoughnessArg {
 /// Minimisation method.
 #[derive(Clone, Copy, ValueEnum)]
 enum MethodArg {
-    /// Exact Kd, Ks at each roughness plus a global search over log m.
+    /// Kd, Ks solved at each roughness (a convex problem) plus a global search over log m.
     Robust,
     /// Downhill simplex over all parameters (the paper's method).
     NelderMead,

@@ -10,6 +10,7 @@ use gonio_processing::color::CameraModel;
 use gonio_processing::reference::Reference;
 use gonio_processing::samples;
 use gonio_processing::study::{self, StudyOptions, Variant};
+use indicatif::{ProgressBar, ProgressStyle};
 
 /// Which roughness forms a study fits.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -56,6 +57,9 @@ pub struct Args {
     /// local minimum.
     #[arg(long, default_value_t = 1e-3)]
     pub local_minimum_margin: f64,
+    /// Sample name shown in the figure titles.
+    #[arg(long, default_value = "")]
+    pub name: String,
     /// Fit on every N-th sample of each θL (pixel-column stride); scores use all samples.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
     pub stride: u32,
@@ -87,9 +91,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         local_minimum_margin: args.local_minimum_margin,
         stride: args.stride as usize,
     };
-    let report = study::run_study(&samples, &reference, &CameraModel::builtin(), &options)
-        .with_context(|| format!("studying {}", args.samples.display()))?;
-    let written = study::write_outputs(&report, &args.out)?;
+    let bar = ProgressBar::new(0).with_style(
+        ProgressStyle::with_template("studying [{bar:30}] {pos}/{len} fits, {elapsed}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let report = study::run_study_with_progress(
+        &samples,
+        &reference,
+        &CameraModel::builtin(),
+        &options,
+        |done, total| {
+            bar.set_length(total as u64);
+            bar.set_position(done as u64);
+        },
+    );
+    bar.finish_and_clear();
+    let report = report.with_context(|| format!("studying {}", args.samples.display()))?;
+    let written = study::write_outputs(&report, &args.out, &args.name)?;
 
     println!(
         "{} θL, {} combinations × {} variants = {} fits on {} samples, scored at {} points in {:.2} s",

@@ -14,10 +14,11 @@
 //!   measurement) at the angles of the full scan, and relative Kd, Ks, m errors when the
 //!   fitted model is the truth's.
 //!
-//! Outputs in OUT: `tradeoff.csv` (one row per setting), `pareto.svg` (total time
-//! against ΔErr_p(G), the Pareto front drawn), `tradeoff.json` (the recommended setting:
-//! the cheapest one whose ΔErr_p(G) is within 10 % of the best reached, or within
-//! `--tolerance` of it, and the extraction times).
+//! Settings are ranked by the worst channel's ΔErr_p. Outputs in OUT: `tradeoff.csv`
+//! (one row per setting), `pareto.svg` (total time against worst-channel ΔErr_p, the
+//! Pareto front drawn), `tradeoff.json` (the recommended setting: the cheapest whose
+//! worst-channel ΔErr_p is within 10 % of the best reached, or within `--tolerance` of
+//! it; and the extraction times).
 
 mod scan;
 mod timing;
@@ -41,8 +42,8 @@ use scan::{discover, extract_subset, spread, Position};
 use timing::{AcquisitionTime, HardwareTiming};
 use truth::{parameter_errors, Truth, TruthPoints};
 
-/// A setting is good enough when its ΔErr_p(G) is within this fraction of the best
-/// (or within the absolute `--tolerance`).
+/// A setting is good enough when its worst-channel ΔErr_p is within this fraction of
+/// the best (or within the absolute `--tolerance`).
 const RELATIVE_SLACK: f64 = 0.10;
 
 /// Arguments of `gonio tradeoff`.
@@ -73,8 +74,8 @@ pub struct Args {
     /// Fit methods to try, comma-separated.
     #[arg(long, value_delimiter = ',', default_value = "robust,nelder-mead")]
     pub methods: Vec<FitMethod>,
-    /// Recommend the cheapest setting whose ΔErr_p(G) exceeds the best by at most this
-    /// much (absolute) or 10 % of the best, whichever is larger.
+    /// Recommend the cheapest setting whose worst-channel ΔErr_p exceeds the best by at
+    /// most this much (absolute) or 10 % of the best, whichever is larger.
     #[arg(long, default_value_t = 0.002)]
     pub tolerance: f64,
 }
@@ -108,8 +109,12 @@ impl Row {
         self.acquisition.total_s() + self.processing_s()
     }
 
-    fn err_p_g(&self) -> Option<f64> {
-        self.outcome.as_ref().ok().map(|a| a.err_p[1])
+    /// The worst channel's ΔErr_p: the accuracy a setting is ranked by.
+    fn err_p_worst(&self) -> Option<f64> {
+        self.outcome
+            .as_ref()
+            .ok()
+            .map(|a| a.err_p.iter().copied().fold(0.0, f64::max))
     }
 
     fn label(&self) -> String {
@@ -305,12 +310,12 @@ fn write_outputs(
 ) -> anyhow::Result<()> {
     let costs: Vec<(f64, f64)> = rows
         .iter()
-        .map(|r| (r.total_s(), r.err_p_g().unwrap_or(f64::NAN)))
+        .map(|r| (r.total_s(), r.err_p_worst().unwrap_or(f64::NAN)))
         .collect();
     let front = pareto_front(&costs);
     let best = rows
         .iter()
-        .filter_map(Row::err_p_g)
+        .filter_map(Row::err_p_worst)
         .fold(f64::INFINITY, f64::min);
     let Fitted {
         truth,
@@ -397,7 +402,7 @@ fn write_outputs(
             truth.scene, model, roughness
         ),
         x_label: "acquisition + processing time (s, log scale)".into(),
-        y_label: "ΔErr_p (G) against the truth (log scale)".into(),
+        y_label: "worst-channel ΔErr_p against the truth (log scale)".into(),
         log_x: true,
         log_y: true,
         series,
@@ -426,8 +431,8 @@ fn write_outputs(
         "roughness": roughness,
         "settings": rows.len(),
         "failed": rows.iter().filter(|r| r.outcome.is_err()).count(),
-        "best_err_p_g": best.is_finite().then_some(best),
-        "good_enough_err_p_g": good_enough.is_finite().then_some(good_enough),
+        "best_err_p_worst": best.is_finite().then_some(best),
+        "good_enough_err_p_worst": good_enough.is_finite().then_some(good_enough),
         "recommended": recommended.map(|i| row_json(&rows[i])),
         "pareto_front": front.iter().map(|&i| row_json(&rows[i])).collect::<Vec<_>>(),
         "extract_seconds_by_bracket_and_theta_l": extracted
@@ -449,11 +454,11 @@ fn write_outputs(
         rows.len(),
         rows.iter().filter(|r| r.outcome.is_err()).count()
     );
-    println!("  total s  acquisition s  processing s  ΔErr_p(G)  setting");
+    println!("  total s  acquisition s  processing s  ΔErr_p(worst)  setting");
     for &i in &front {
         let r = &rows[i];
         println!(
-            "  {:>7.2}  {:>13.2}  {:>12.3}  {:>9.4}  {}{}",
+            "  {:>7.2}  {:>13.2}  {:>12.3}  {:>13.4}  {}{}",
             r.total_s(),
             r.acquisition.total_s(),
             r.processing_s(),

@@ -14,7 +14,7 @@ use super::Data;
 /// Relative loss decrease at which a solve counts as converged.
 pub(crate) const FINE_TOLERANCE: f64 = 1e-9;
 /// Looser convergence for scanning a grid, where only the ranking of values matters.
-pub(crate) const COARSE_TOLERANCE: f64 = 1e-4;
+pub(crate) const COARSE_TOLERANCE: f64 = 1e-3;
 /// Cap on reweighting passes per solve.
 const MAX_PASSES: usize = 60;
 /// Smoothing of the weights, as a fraction of the mean residual: first value and per-pass

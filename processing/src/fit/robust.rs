@@ -1,4 +1,4 @@
-//! The robust method: exact Kd, Ks at each m (see `linear`) and a global search over log m.
+//! The robust method: Kd, Ks solved at each m (see `linear`) and a global search over log m.
 
 use std::cell::{Cell, RefCell};
 
@@ -188,7 +188,12 @@ fn global_search(
         })
         .collect();
     minima.sort_by(|&a, &b| values[a].total_cmp(&values[b]));
-    let best = values[minima[0]];
+    let Some(&first) = minima.first() else {
+        return Err(FitError::Optimizer(
+            "the loss profile over m is not finite".into(),
+        ));
+    };
+    let best = values[first];
     for &k in minima
         .iter()
         .take(MAX_REFINED)

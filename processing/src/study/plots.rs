@@ -22,24 +22,40 @@ const FIG6_THETA_L: f64 = -25.0;
 /// θL of the single-direction fit shown in Fig. 8 (paper: −45°).
 const FIG8_THETA_L: f64 = -45.0;
 
-/// Writes the four figures into `dir`; returns their paths.
-pub fn write_figures(report: &StudyReport, dir: &Path) -> Result<Vec<PathBuf>, StudyError> {
+/// Writes the four figures into `dir`, titles prefixed by `name` when it is not empty;
+/// returns their paths.
+pub fn write_figures(
+    report: &StudyReport,
+    dir: &Path,
+    name: &str,
+) -> Result<Vec<PathBuf>, StudyError> {
+    let titled = |title: String| {
+        if name.is_empty() {
+            title
+        } else {
+            format!("{name}: {title}")
+        }
+    };
     let summary = report.summary();
     let fig6 = dir.join("fig6_g_channel.svg");
-    xy_svg(&fig6, &g_channel_plot(report))?;
+    let mut plot = g_channel_plot(report);
+    plot.title = titled(plot.title);
+    xy_svg(&fig6, &plot)?;
     let fig7 = dir.join("fig7_err_p_g.svg");
     box_plot_svg(
         &fig7,
-        "ΔErr_p of the G channel against the reference",
+        &titled("ΔErr_p of the G channel against the reference".into()),
         "ΔErr_p (G)",
         &box_series(report, &summary, |g| g.err_p[1].clone()),
     )?;
     let fig8 = dir.join("fig8_uv_chart.svg");
-    xy_svg(&fig8, &uv_plot(report))?;
+    let mut plot = uv_plot(report);
+    plot.title = titled(plot.title);
+    xy_svg(&fig8, &plot)?;
     let fig9 = dir.join("fig9_delta_e_uv.svg");
     box_plot_svg(
         &fig9,
-        "ΔE_u′v′ against the reference",
+        &titled("ΔE_u′v′ against the reference".into()),
         "mean ΔE_u′v′",
         &box_series(report, &summary, |g| g.delta_e_uv.clone()),
     )?;

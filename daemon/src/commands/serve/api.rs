@@ -318,11 +318,12 @@ async fn pause_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<J
     control(shared, id, FROM, ScanState::Paused, "pause").await
 }
 
+/// Re-queues a paused scan, or retries a failed one from its first step not done.
 async fn resume_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
     control(
         shared,
         id,
-        &[ScanState::Paused],
+        &[ScanState::Paused, ScanState::Failed],
         ScanState::Queued,
         "resume",
     )

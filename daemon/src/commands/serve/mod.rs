@@ -64,6 +64,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     std::fs::create_dir_all(&config.data_dir)
         .with_context(|| format!("creating data directory {}", config.data_dir.display()))?;
+    // One daemon per data directory: the OS drops the lock when the process ends,
+    // however it ends.
+    let lock_path = config.data_dir.join("daemon.lock");
+    let lock_file = std::fs::File::create(&lock_path)
+        .with_context(|| format!("creating {}", lock_path.display()))?;
+    lock_file.try_lock().map_err(|_| {
+        anyhow::anyhow!(
+            "another gonio serve is using {} (lock {} is held)",
+            config.data_dir.display(),
+            lock_path.display()
+        )
+    })?;
     let token = token(&config)?;
 
     let db_path = config.data_dir.join("gonio.sqlite");
@@ -114,7 +126,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .enable_all()
         .build()
         .context("starting the async runtime")?;
-    runtime.block_on(serve(shared))
+    let served = runtime.block_on(serve(shared));
+    drop(lock_file);
+    served
 }
 
 async fn serve(shared: Arc<Shared>) -> anyhow::Result<()> {

@@ -4,6 +4,7 @@
 use std::io::Cursor;
 use std::path::Path;
 
+use gonio_processing::capture::Frame;
 use gonio_processing::fit::FitResult;
 use image::{ImageBuffer, Rgb};
 use serde_json::{json, Value};
@@ -25,14 +26,25 @@ pub enum PreviewError {
     Processing(String),
 }
 
-/// A PNG thumbnail of a (16-bit, linear) frame: downscaled, normalised to its 99.5th
-/// percentile and gamma-encoded so dark frames stay visible.
+/// A PNG thumbnail of a capture (TIFF or camera raw, with its sidecar): downscaled,
+/// black level removed, normalised to its 99.5th percentile and gamma-encoded so dark
+/// frames stay visible.
 pub fn thumbnail_png(path: &Path) -> Result<Vec<u8>, PreviewError> {
     let image_err = |source| PreviewError::Image {
         path: path.display().to_string(),
         source,
     };
-    let frame = image::open(path).map_err(image_err)?.into_rgb16();
+    let capture = Frame::read(path).map_err(|e| PreviewError::Processing(e.to_string()))?;
+    let black = capture.black_level.clamp(0.0, f64::from(u16::MAX)) as u16;
+    let counts: Vec<u16> = capture
+        .data
+        .iter()
+        .map(|v| v.saturating_sub(black))
+        .collect();
+    let frame: ImageBuffer<Rgb<u16>, Vec<u16>> =
+        ImageBuffer::from_raw(capture.width as u32, capture.height as u32, counts).ok_or_else(
+            || PreviewError::Processing(format!("{}: inconsistent frame size", path.display())),
+        )?;
     let small = image::imageops::thumbnail(
         &frame,
         THUMBNAIL_SIZE.min(frame.width()),

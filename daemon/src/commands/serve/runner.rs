@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use gonio_drivers::bracket::{auto_bracket, BracketError, BracketRegion, MeteringFrame};
 use gonio_drivers::{Arm, ArmState, Camera, DeviceError, Exposure};
-use gonio_processing::capture::Sidecar;
+use gonio_processing::capture::{sidecar_path, Frame, Sidecar};
 use gonio_processing::geometry::{column_angles, Setup};
 use serde_json::{json, Value};
 
@@ -114,6 +114,7 @@ impl Runner {
                 }
                 self.allowed_s = speeds;
                 status.camera.state = "idle";
+                status.camera.error = None;
             }
             (Err(err), _) | (_, Err(err)) => {
                 tracing::warn!("camera: {err}");
@@ -130,7 +131,13 @@ impl Runner {
             return Ok(());
         }
         match self.store.next_runnable(now_unix())? {
-            Some(scan) => self.run_scan(scan),
+            Some(scan) => {
+                if self.allowed_s.is_empty() {
+                    // The camera was not ready at start: ask again before using it.
+                    self.identify_camera();
+                }
+                self.run_scan(scan)
+            }
             None => {
                 self.refresh_arm_status();
                 self.idle();
@@ -247,6 +254,9 @@ impl Runner {
         while self.still_running(id)? {
             // Re-read each time: a step may have planned further steps.
             let Some(step) = self.store.next_step(id)? else {
+                // Every step done (the last one while the scan was paused).
+                self.store
+                    .transition(id, &[ScanState::Running], ScanState::Done, None)?;
                 break;
             };
             self.store.step_started(id, step.index)?;
@@ -373,21 +383,23 @@ impl Runner {
                 "meter",
                 &format!("θL {theta_l:.1}° at {shutter_s} s"),
             )?;
-            let frame = image::open(&capture.path);
+            // Read like any capture (TIFF or camera raw, with its levels).
+            let sidecar = sidecar_path(&capture.path);
+            let frame = self
+                .write_sidecar(&sidecar, capture.exposure, theta_l)
+                .and_then(|()| Frame::read(&capture.path).map_err(|e| e.to_string()));
             // The metering frame is not part of the scan.
             let _ = std::fs::remove_file(&capture.path);
-            let frame = frame
-                .map_err(|e| failed(format!("reading the frame: {e}")))?
-                .into_rgb16();
-            let (width, height) = (frame.width() as usize, frame.height() as usize);
+            let _ = std::fs::remove_file(&sidecar);
+            let frame = frame.map_err(|e| failed(format!("reading the frame: {e}")))?;
             let metering = MeteringFrame {
-                width,
-                height,
+                width: frame.width,
+                height: frame.height,
                 channels: 3,
-                data: frame.as_raw(),
+                data: &frame.data,
                 shutter_s: capture.exposure.shutter_s,
             };
-            let region = strip_region(&setup, theta_l, width, height, self.sidecar);
+            let region = strip_region(&setup, theta_l, &frame);
             match auto_bracket(&metering, &region, &allowed) {
                 Ok(bracket) => {
                     let mut shutters = bracket.shutters_s.clone();
@@ -630,6 +642,13 @@ impl Runner {
                 (capture.path, capture.exposure)
             }
         };
+        self.write_sidecar(&sidecar_path, exposure, theta_l)
+            .map_err(StepError::Failed)?;
+        Ok(frame_result(dir, &image, false))
+    }
+
+    /// Writes the JSON sidecar of a capture (DESIGN.md) atomically at `path`.
+    fn write_sidecar(&self, path: &Path, exposure: Exposure, theta_l: f64) -> Result<(), String> {
         let sidecar = Sidecar {
             shutter_s: exposure.shutter_s,
             iso: exposure.iso.map(f64::from),
@@ -642,11 +661,8 @@ impl Runner {
             width: None,
             height: None,
         };
-        let text = serde_json::to_vec_pretty(&sidecar)
-            .map_err(|e| StepError::Failed(format!("sidecar of {what}: {e}")))?;
-        write_atomic(&sidecar_path, &text)
-            .map_err(|e| StepError::Failed(format!("{}: {e}", sidecar_path.display())))?;
-        Ok(frame_result(dir, &image, false))
+        let text = serde_json::to_vec_pretty(&sidecar).map_err(|e| e.to_string())?;
+        write_atomic(path, &text).map_err(|e| format!("{}: {e}", path.display()))
     }
 }
 
@@ -669,14 +685,9 @@ fn nearest_at_most(allowed: &[f64], target: f64) -> Option<f64> {
 }
 
 /// The rows (±2 around each strip's centre) and the cylinder's columns at θL that the
-/// bracket must expose well, with the levels the sidecars carry.
-fn strip_region(
-    setup: &Setup,
-    theta_l: f64,
-    width: usize,
-    height: usize,
-    levels: SidecarDefaults,
-) -> BracketRegion {
+/// bracket must expose well in `frame`, with its levels.
+fn strip_region(setup: &Setup, theta_l: f64, frame: &Frame) -> BracketRegion {
+    let (width, height) = (frame.width, frame.height);
     let rows: Vec<usize> = [setup.sample_row, setup.white_row]
         .iter()
         .flat_map(|&centre| {
@@ -695,14 +706,12 @@ fn strip_region(
         (Some(&first), Some(&last)) => first..last + 1,
         _ => 0..width,
     };
-    let black = levels.black_level.unwrap_or(0.0);
-    let white = levels.white_level.unwrap_or(65535.0);
-    let span = (white - black).max(1.0);
+    let span = (frame.white_level - frame.black_level).max(1.0);
     BracketRegion {
         rows,
         columns,
-        black_level: black,
-        clip_level: black + 0.95 * span,
+        black_level: frame.black_level,
+        clip_level: frame.black_level + 0.95 * span,
         noise_floor: (0.01 * span).max(1.0),
     }
 }

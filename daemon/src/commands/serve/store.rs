@@ -441,7 +441,9 @@ impl Store {
         tx.execute(
             "UPDATE scans SET state = ?2, error = ?3,
                 started = CASE WHEN ?2 = 'running' AND started IS NULL THEN ?4 ELSE started END,
-                finished = CASE WHEN ?2 IN ('done', 'failed', 'cancelled') THEN ?4 ELSE finished END
+                finished = CASE WHEN ?2 IN ('done', 'failed', 'cancelled') THEN ?4
+                                WHEN ?2 IN ('queued', 'running') THEN NULL
+                                ELSE finished END
              WHERE id = ?1",
             params![id, to.as_str(), error, now],
         )?;
