@@ -116,10 +116,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         config,
     });
     let runner = runner::Runner::new(shared.clone(), runner_store, wake_rx, devices);
-    std::thread::Builder::new()
+    let owner = std::thread::Builder::new()
         .name("hardware".into())
         .spawn(move || runner.run())
         .context("starting the hardware thread")?;
+    // The hardware owner only ends by panicking: then end the process too, so that a
+    // supervisor restarts it and the queue resumes, rather than serve without hardware.
+    std::thread::Builder::new()
+        .name("hardware-watch".into())
+        .spawn(move || {
+            let _ = owner.join();
+            tracing::error!("the hardware thread stopped; exiting");
+            std::process::exit(2);
+        })
+        .context("starting the hardware watch thread")?;
 
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
