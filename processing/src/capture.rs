@@ -30,7 +30,9 @@ pub enum Response {
 pub struct Sidecar {
     /// Exposure time in seconds.
     pub shutter_s: f64,
-    /// ISO speed; `null` where the body has no ISO setting (taken as 100).
+    /// ISO speed; `null` where the body has no ISO setting (taken as 100). Written as
+    /// an integer when it is whole (`"iso":100`), as cameras report it.
+    #[serde(serialize_with = "serialize_iso")]
     pub iso: Option<f64>,
     /// Light-arm angle θL in degrees.
     pub theta_l: f64,
@@ -51,6 +53,16 @@ pub struct Sidecar {
     /// Image height in pixels as stored in the file, checked when present.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub height: Option<u32>,
+}
+
+fn serialize_iso<S: serde::Serializer>(iso: &Option<f64>, s: S) -> Result<S::Ok, S::Error> {
+    match iso {
+        Some(v) if v.fract() == 0.0 && (0.0..=u32::MAX as f64).contains(v) => {
+            s.serialize_u32(*v as u32)
+        }
+        Some(v) => s.serialize_f64(*v),
+        None => s.serialize_none(),
+    }
 }
 
 impl Sidecar {

@@ -262,3 +262,20 @@ fn selected_rows_match_the_full_read_for_striped_and_other_tiffs() {
         assert!(matches!(err, CaptureError::Layout { .. }), "{err}");
     }
 }
+
+#[test]
+fn sidecar_writes_whole_iso_as_integer() {
+    let json = serde_json::to_value(sidecar()).unwrap();
+    assert_eq!(json["iso"], serde_json::json!(200));
+    assert!(json["iso"].is_u64());
+    let fractional = Sidecar {
+        iso: Some(320.5),
+        ..sidecar()
+    };
+    assert_eq!(serde_json::to_value(fractional).unwrap()["iso"], 320.5);
+    let none = Sidecar {
+        iso: None,
+        ..sidecar()
+    };
+    assert!(serde_json::to_value(none).unwrap()["iso"].is_null());
+}

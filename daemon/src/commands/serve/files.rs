@@ -1,67 +1,31 @@
 //! Durable file writes and safe paths inside the data directory.
 
-use std::fs::{self, File};
-use std::io::Write;
+use std::fs;
 use std::path::{Component, Path, PathBuf};
 
-/// Writes `bytes` to `path` atomically: a temporary file beside it, fsync, rename,
-/// then fsync of the directory. A reader never sees a partial file.
+pub use gonio_drivers::atomic_file::{is_partial, AtomicWriteError};
+use gonio_drivers::atomic_file::{write_atomically, write_atomically_with};
+
+/// Writes `bytes` to `path` atomically (see `gonio_drivers::atomic_file`), creating the
+/// directory first.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    let dir = path.parent().unwrap_or(Path::new("."));
-    fs::create_dir_all(dir)?;
-    let tmp = temp_path(path);
-    {
-        let mut file = File::create(&tmp)?;
-        file.write_all(bytes)?;
-        file.sync_all()?;
-    }
-    fs::rename(&tmp, path)?;
-    File::open(dir)?.sync_all()
+    fs::create_dir_all(parent(path))?;
+    write_atomically(path, bytes)
 }
 
 /// Runs `write` on a temporary path beside `path`, then fsyncs and renames it into
-/// place (for writers that take a path, such as image encoders).
+/// place (for writers that take a path, such as image encoders), creating the
+/// directory first.
 pub fn write_atomic_with<E>(
     path: &Path,
     write: impl FnOnce(&Path) -> Result<(), E>,
-) -> Result<(), AtomicError<E>> {
-    let dir = path.parent().unwrap_or(Path::new("."));
-    fs::create_dir_all(dir).map_err(AtomicError::Io)?;
-    let tmp = temp_path(path);
-    if let Err(err) = write(&tmp) {
-        let _ = fs::remove_file(&tmp);
-        return Err(AtomicError::Write(err));
-    }
-    File::open(&tmp)
-        .and_then(|f| f.sync_all())
-        .and_then(|()| fs::rename(&tmp, path))
-        .and_then(|()| File::open(dir)?.sync_all())
-        .map_err(AtomicError::Io)
+) -> Result<(), AtomicWriteError<E>> {
+    fs::create_dir_all(parent(path))?;
+    write_atomically_with(path, write)
 }
 
-/// Failure of [`write_atomic_with`]: the writer's own error or the file system's.
-#[derive(Debug, thiserror::Error)]
-pub enum AtomicError<E> {
-    #[error("{0}")]
-    Write(E),
-    #[error("I/O: {0}")]
-    Io(std::io::Error),
-}
-
-/// The temporary sibling of `path`: same directory, hidden, named like the device
-/// drivers' temporaries (`.<name>.<pid>.partial`).
-fn temp_path(path: &Path) -> PathBuf {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    path.with_file_name(format!(".{name}.{}.partial", std::process::id()))
-}
-
-/// Whether `name` is a leftover temporary file of an atomic write (ours or a
-/// driver's).
-pub fn is_partial(name: &str) -> bool {
-    name.starts_with('.') && name.ends_with(".partial")
+fn parent(path: &Path) -> &Path {
+    path.parent().unwrap_or(Path::new("."))
 }
 
 /// Removes leftover temporary files under `dir` (after a crash), recursively.
