@@ -26,7 +26,8 @@ for scene in "${scenes[@]}"; do
     cp "$scan/truth.json" "$scan/setup.json" "$out/"
     white=$(grep -o '"white_reflectance": *[0-9.eE+-]*' "$scan/truth.json" | sed 's/.*: *//')
     echo "== $scene: extract (white reflectance $white)"
-    "$gonio" extract "$scan" --out "$scan/samples.csv" --white-reflectance "$white" | tee "$out/extract.txt"
+    "$gonio" extract "$scan" --out "$scan/samples.csv" --white-reflectance "$white" \
+        | sed "s|$scans/|<scans>/|g" | tee "$out/extract.txt"
     # The goniochromatic sample is also fitted with one roughness per channel (paper eq. 8, 9).
     study_roughness=shared
     tradeoff_roughness=()
