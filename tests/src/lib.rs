@@ -10,9 +10,10 @@ use std::time::{Duration, Instant};
 
 use serde_json::Value;
 
-/// The `gonio` binary of the profile the tests were built with, built on first use
-/// (`cargo build -p gonio-daemon`), so `cargo test --workspace` works on a clean
-/// checkout.
+/// The `gonio` binary of the profile the tests were built with, brought up to date on
+/// first use, so `cargo test --workspace` works on a clean checkout. The update runs
+/// `cargo test --workspace --no-run`: the same feature resolution as the workspace test
+/// run that is executing us, so there it finds the binary fresh and rebuilds nothing.
 pub fn gonio_bin() -> &'static Path {
     static BIN: OnceLock<PathBuf> = OnceLock::new();
     BIN.get_or_init(|| {
@@ -30,7 +31,7 @@ pub fn gonio_bin() -> &'static Path {
             None => "dev".to_owned(),
         };
         let status = Command::new(env!("CARGO"))
-            .args(["build", "--quiet", "-p", "gonio-daemon", "--bin", "gonio"])
+            .args(["test", "--quiet", "--workspace", "--no-run"])
             .arg("--profile")
             .arg(&profile)
             .arg("--target-dir")
