@@ -4,44 +4,15 @@
 use std::path::Path;
 use std::process::Command;
 
-const SCENE: &str = r#"
-name = "tiny"
-
-[setup]
-cylinder_radius_mm = 40.0
-camera_distance_mm = 700.0
-light_distance_mm = 1000.0
-focal_length_mm = 85.0
-pixel_pitch_um = 30.0
-image_width = 400
-image_height = 120
-sample_rows = [20, 40]
-white_rows = [79, 99]
-
-[scan]
-theta_l_deg = [-20.0, -35.0]
-bracket_s = [0.5, 0.01]
-
+/// The tiny fixture scene with a noisy Cook–Torrance sample.
+fn tiny_scene() -> String {
+    include_str!("fixtures/tiny_scene.toml").to_owned()
+        + r#"
 [sample]
 model = "cook-torrance"
 kd = [9.0, 6.5, 2.0]
 ks = [25.0, 20.0, 7.0]
 m = [0.07]
-
-[white]
-reflectance = 0.99
-
-[light]
-spectrum = "illuminant-a"
-intensity = 6000.0
-
-[camera]
-model = "Tiny body"
-sensitivities = "nikon-d5100"
-bit_depth = 12
-black_level = 0
-white_level = 4095
-iso = 100
 
 [effects]
 seed = 5
@@ -49,7 +20,8 @@ seed = 5
 [effects.noise]
 electrons_per_dn = 9.0
 read_noise_dn = 1.2
-"#;
+"#
+}
 
 fn gonio(args: &[&str]) -> std::process::Output {
     Command::new(env!("CARGO_BIN_EXE_gonio"))
@@ -67,7 +39,7 @@ fn json(path: &Path) -> serde_json::Value {
 fn simulate_writes_a_complete_scan() {
     let dir = tempfile::tempdir().unwrap();
     let scene = dir.path().join("tiny.toml");
-    std::fs::write(&scene, SCENE).unwrap();
+    std::fs::write(&scene, tiny_scene()).unwrap();
     let out = dir.path().join("scan");
     let result = gonio(&[
         "--scene",
@@ -135,7 +107,7 @@ fn simulate_writes_a_complete_scan() {
 fn theta_l_and_seed_override_the_scene() {
     let dir = tempfile::tempdir().unwrap();
     let scene = dir.path().join("tiny.toml");
-    std::fs::write(&scene, SCENE).unwrap();
+    std::fs::write(&scene, tiny_scene()).unwrap();
     let run = |name: &str, seed: &str| {
         let out = dir.path().join(name);
         let args = [
@@ -177,7 +149,7 @@ fn bad_scenes_fail_with_a_clear_message() {
     let scene = dir.path().join("bad.toml");
     std::fs::write(
         &scene,
-        SCENE.replace("focal_length_mm = 85.0", "focal_length_mm = -85.0"),
+        tiny_scene().replace("focal_length_mm = 85.0", "focal_length_mm = -85.0"),
     )
     .unwrap();
     let out = dir.path().join("scan");

@@ -209,55 +209,26 @@ fn tradeoff_rejects_unknown_scenes_and_bad_settings() {
     assert!(text(&result.stderr).contains("--strides"));
 }
 
-/// A small Cook–Torrance scene: 400×120 pixels, two θL, a two-exposure bracket.
-const TINY_SCENE: &str = r#"
-name = "tiny"
-
-[setup]
-cylinder_radius_mm = 40.0
-camera_distance_mm = 700.0
-light_distance_mm = 1000.0
-focal_length_mm = 85.0
-pixel_pitch_um = 30.0
-image_width = 400
-image_height = 120
-sample_rows = [20, 40]
-white_rows = [79, 99]
-
-[scan]
-theta_l_deg = [-20.0, -35.0]
-bracket_s = [0.5, 0.01]
-
+/// The tiny fixture scene with a noise-free Cook–Torrance sample.
+fn tiny_scene() -> String {
+    include_str!("fixtures/tiny_scene.toml").to_owned()
+        + r#"
 [sample]
 model = "cook-torrance"
 kd = [9.0, 6.5, 2.0]
 ks = [25.0, 20.0, 7.0]
 m = [0.2]
 
-[white]
-reflectance = 0.99
-
-[light]
-spectrum = "illuminant-a"
-intensity = 6000.0
-
-[camera]
-model = "Tiny body"
-sensitivities = "nikon-d5100"
-bit_depth = 12
-black_level = 0
-white_level = 4095
-iso = 100
-
 [effects]
 seed = 5
-"#;
+"#
+}
 
 #[test]
 fn tradeoff_on_a_tiny_scene_costs_every_setting_and_recommends_one() {
     let dir = tempfile::tempdir().unwrap();
     let scene = dir.path().join("tiny.toml");
-    std::fs::write(&scene, TINY_SCENE).unwrap();
+    std::fs::write(&scene, tiny_scene()).unwrap();
     let out = dir.path().join("tradeoff");
     let result = gonio(&[
         "tradeoff",

@@ -5,7 +5,8 @@
 //! - [`FitMethod::Robust`] (default): at fixed m the models are linear in Kd, Ks and the
 //!   loss is convex in them, so it is minimised over Kd, Ks ≥ 0 for each trial m by
 //!   reweighted non-negative least squares (see `linear`; relative tolerance 1e-9, 1e-3
-//!   while scanning the grid). log m is searched globally: a grid over the whole range
+//!   while scanning the grid; each solve after the first starts from the previous m's
+//!   solution). log m is searched globally: a grid over the whole range
 //!   (default 24 points on [1e-3, 2]), then Brent's method between the neighbours of every
 //!   grid local minimum within 5 % of the best. Per-channel roughness starts from the
 //!   shared optimum and searches each channel's m in turn (first round: grid then Brent;

@@ -101,16 +101,34 @@ fn weighted_nnls(data: &Data, spec: [&[f64]; 3], weights: &[f64]) -> ([f64; 3], 
     let s = [&spec[0][..n], &spec[1][..n], &spec[2][..n]];
     let mut saa = 0.0;
     let (mut sas, mut sss, mut say, mut ssy) = ([0.0; 3], [0.0; 3], [0.0; 3], [0.0; 3]);
-    for p in 0..n {
-        let wa = w[p] * a[p];
-        saa += wa * a[p];
-        for c in 0..3 {
-            let sc = s[c][p];
-            let ws = w[p] * sc;
-            sas[c] += wa * sc;
-            sss[c] += ws * sc;
-            say[c] += wa * y[p][c];
-            ssy[c] += ws * y[p][c];
+    if std::ptr::eq(s[0], s[1]) && std::ptr::eq(s[0], s[2]) {
+        // One specular basis for all channels: its sums are shared too.
+        let s = s[0];
+        for p in 0..n {
+            let wa = w[p] * a[p];
+            let ws = w[p] * s[p];
+            saa += wa * a[p];
+            sas[0] += wa * s[p];
+            sss[0] += ws * s[p];
+            for c in 0..3 {
+                say[c] += wa * y[p][c];
+                ssy[c] += ws * y[p][c];
+            }
+        }
+        sas = [sas[0]; 3];
+        sss = [sss[0]; 3];
+    } else {
+        for p in 0..n {
+            let wa = w[p] * a[p];
+            saa += wa * a[p];
+            for c in 0..3 {
+                let sc = s[c][p];
+                let ws = w[p] * sc;
+                sas[c] += wa * sc;
+                sss[c] += ws * sc;
+                say[c] += wa * y[p][c];
+                ssy[c] += ws * y[p][c];
+            }
         }
     }
     let mut kd = [0.0; 3];
@@ -196,7 +214,7 @@ pub(crate) fn solve(
         }
         epsilon = (epsilon * EPSILON_SHRINK).max(tolerance);
     }
-    current.unwrap_or_else(|| LinearFit {
+    let fit = current.unwrap_or_else(|| LinearFit {
         kd: [0.0; 3],
         ks: [0.0; 3],
         loss: data
@@ -204,5 +222,7 @@ pub(crate) fn solve(
             .iter()
             .map(|y| (y[0] * y[0] + y[1] * y[1] + y[2] * y[2]).sqrt())
             .sum(),
-    })
+    });
+    ws.last = Some(fit);
+    fit
 }

@@ -158,7 +158,8 @@ fn brent(
     Ok(())
 }
 
-/// Grid over the whole ln m range along `target`, then Brent around the best grid minima.
+/// Grid over the whole ln m range along `target` (each grid solve warm-started from the
+/// previous grid point's), then Brent around the best grid minima.
 fn global_search(
     profile: &RefCell<Profile<'_>>,
     base: [f64; 3],
@@ -172,12 +173,13 @@ fn global_search(
     let shared = matches!(target, Target::Shared);
     let values: Vec<f64> = grid
         .iter()
-        .map(|x| {
+        .enumerate()
+        .map(|(k, x)| {
             profile.borrow_mut().eval(
                 target.apply(base, x.exp()),
                 shared,
                 linear::COARSE_TOLERANCE,
-                false,
+                k > 0,
             )
         })
         .collect();
