@@ -17,6 +17,23 @@ pub struct Sample {
     pub rgb: [f64; 3],
 }
 
+impl Sample {
+    /// The name of the first field (in CSV column order) that is NaN or infinite.
+    pub fn non_finite_field(&self) -> Option<&'static str> {
+        [
+            ("theta_l", self.theta_l),
+            ("theta_i", self.theta_i),
+            ("theta_r", self.theta_r),
+            ("r", self.rgb[0]),
+            ("g", self.rgb[1]),
+            ("b", self.rgb[2]),
+        ]
+        .into_iter()
+        .find(|(_, v)| !v.is_finite())
+        .map(|(field, _)| field)
+    }
+}
+
 /// The six leading columns of a samples CSV, in order.
 pub const HEADER: [&str; 6] = ["theta_l", "theta_i", "theta_r", "r", "g", "b"];
 

@@ -78,3 +78,25 @@ fn missing_file_names_the_path() {
         .to_string();
     assert!(message.contains("/nonexistent/gonio.csv"), "{message}");
 }
+
+#[test]
+fn non_finite_field_names_the_first_bad_column() {
+    let good = Sample {
+        theta_l: -20.0,
+        theta_i: 10.0,
+        theta_r: -10.0,
+        rgb: [1.0, 2.0, 3.0],
+    };
+    assert_eq!(good.non_finite_field(), None);
+    let bad = Sample {
+        theta_r: f64::INFINITY,
+        rgb: [1.0, f64::NAN, 3.0],
+        ..good
+    };
+    assert_eq!(bad.non_finite_field(), Some("theta_r"));
+    let bad_g = Sample {
+        rgb: [1.0, f64::NAN, 3.0],
+        ..good
+    };
+    assert_eq!(bad_g.non_finite_field(), Some("g"));
+}
