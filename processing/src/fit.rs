@@ -214,15 +214,7 @@ impl Data {
         }
         let mut bases = Vec::with_capacity(samples.len());
         for (index, s) in samples.iter().enumerate() {
-            let fields = [
-                ("theta_l", s.theta_l),
-                ("theta_i", s.theta_i),
-                ("theta_r", s.theta_r),
-                ("r", s.rgb[0]),
-                ("g", s.rgb[1]),
-                ("b", s.rgb[2]),
-            ];
-            if let Some((field, _)) = fields.iter().find(|(_, v)| !v.is_finite()) {
+            if let Some(field) = s.non_finite_field() {
                 return Err(FitError::NonFinite { index, field });
             }
             let basis = model.basis(s.theta_i, s.theta_r);
