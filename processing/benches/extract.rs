@@ -7,26 +7,16 @@
 use std::path::{Path, PathBuf};
 
 use criterion::{criterion_group, criterion_main, Criterion};
+mod common;
+
+use common::{d200_setup, THETA_L};
 use gonio_processing::capture::{self, Response, Sidecar};
 use gonio_processing::extract::{self, ExtractOptions};
-use gonio_processing::geometry::Setup;
 
 const BRACKET: [f64; 4] = [0.5, 0.125, 1.0 / 30.0, 0.01];
-const THETA_L: [f64; 6] = [-20.0, -25.0, -30.0, -35.0, -40.0, -45.0];
 
 fn write_synthetic_scan(dir: &Path) {
-    let setup = Setup {
-        cylinder_radius_mm: 40.0,
-        camera_distance_mm: 700.0,
-        light_distance_mm: 1000.0,
-        focal_length_mm: 85.0,
-        pixel_pitch_um: 6.1,
-        image_width: 3872,
-        image_height: 2592,
-        principal_point_x: None,
-        sample_row: 1100,
-        white_row: 1491,
-    };
+    let setup = d200_setup();
     let json = serde_json::to_string(&setup).expect("setup JSON");
     std::fs::write(dir.join("setup.json"), json).expect("write setup.json");
     let (w, h) = (setup.image_width as usize, setup.image_height as usize);

@@ -5,36 +5,22 @@
 //!
 //! Run: `cargo bench -p gonio-processing --bench study`
 
+mod common;
+
+use common::{d200_setup, THETA_L};
 use criterion::{criterion_group, criterion_main, Criterion};
 use gonio_processing::brdf::{Model, Params};
 use gonio_processing::color::CameraModel;
-use gonio_processing::geometry::{column_angles, Setup};
+use gonio_processing::geometry::column_angles;
 use gonio_processing::reference::Reference;
 use gonio_processing::samples::Sample;
 use gonio_processing::study::combinations::combinations;
 use gonio_processing::study::{run_study, StudyOptions};
 
-const THETA_L: [f64; 6] = [-20.0, -25.0, -30.0, -35.0, -40.0, -45.0];
-
-fn setup() -> Setup {
-    Setup {
-        cylinder_radius_mm: 40.0,
-        camera_distance_mm: 700.0,
-        light_distance_mm: 1000.0,
-        focal_length_mm: 85.0,
-        pixel_pitch_um: 6.1,
-        image_width: 3872,
-        image_height: 2592,
-        principal_point_x: None,
-        sample_row: 1100,
-        white_row: 1491,
-    }
-}
-
 /// Samples of Cook–Torrance `params` at every column within 80° of the normal, with
 /// deterministic 1 % multiplicative noise.
 fn samples(params: &Params) -> Vec<Sample> {
-    let setup = setup();
+    let setup = d200_setup();
     let mut state = 0x2545_f491_4f6c_dd1d_u64;
     let mut noise = || {
         state ^= state << 13;
