@@ -39,6 +39,7 @@ fn write_inputs(dir: &Path, p: &Params) {
                     theta_i,
                     theta_r,
                     rgb,
+                    cosines: None,
                 });
             }
         }

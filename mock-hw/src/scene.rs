@@ -226,7 +226,7 @@ struct ScanFile {
 pub enum Sample {
     /// β_c = kd_c.
     Lambertian { kd: [f64; 3] },
-    /// β_c = ks_c·D·G/(π (n·l)(n·v)) + kd_c (DESIGN.md, F = 1).
+    /// β_c = ks_c·D·G/(π (n·l)(n·v)) + kd_c (docs/ARCHITECTURE.md, F = 1).
     CookTorrance {
         kd: [f64; 3],
         ks: [f64; 3],

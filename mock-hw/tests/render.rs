@@ -100,7 +100,7 @@ fn column_angles(scene: &Scene, u: u32, theta_l: f64) -> Option<(f64, f64)> {
     ))
 }
 
-/// Cook–Torrance in angle form (DESIGN.md), camera-RGB β.
+/// Cook–Torrance in angle form (docs/ARCHITECTURE.md, "Quantities and models"), camera-RGB β.
 fn cook_torrance(kd: [f64; 3], ks: [f64; 3], m: f64, ti: f64, tr: f64) -> [f64; 3] {
     let (ti, tr) = (ti.to_radians(), tr.to_radians());
     let alpha = (ti - tr) / 2.0;

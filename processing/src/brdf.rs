@@ -1,5 +1,6 @@
 //! Cook–Torrance and isotropic Ward reflection models in the paper's form (eq. 6–9, F = 1),
-//! as radiance factor β per camera channel at in-plane angles (θi, θr) in degrees.
+//! as radiance factor β per camera channel, at in-plane angles (θi, θr) in degrees or at
+//! the 3D cosines of a surface point ([`Cosines`]).
 //!
 //! Both models are linear in their coefficients: β_c = Kd_c·a + Ks_c·s(m_c), with a
 //! diffuse basis `a` (1 for Cook–Torrance, 1/π for Ward) and a specular lobe
@@ -65,6 +66,66 @@ impl Params {
     }
 }
 
+/// The four cosines a reflection model needs at one surface point: n·l (cos θi), n·v
+/// (cos θr), n·h (cos α) and v·h, with l, v the unit directions to the light and the
+/// camera and h = (l + v)/|l + v| the half vector. In the plane of the light they follow
+/// from the signed in-plane angles ([`Cosines::in_plane`]); off that plane (the strip's
+/// rows above and below it) from the true 3D directions ([`Cosines::from_directions`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Cosines {
+    pub n_dot_l: f64,
+    pub n_dot_v: f64,
+    pub n_dot_h: f64,
+    pub v_dot_h: f64,
+}
+
+impl Cosines {
+    /// In-plane cosines at signed (θi, θr) in degrees (specular at θr = θi):
+    /// n·h = cos((θi − θr)/2), v·h = cos((θi + θr)/2).
+    pub fn in_plane(theta_i_deg: f64, theta_r_deg: f64) -> Self {
+        let theta_i = theta_i_deg.to_radians();
+        let theta_r = theta_r_deg.to_radians();
+        Cosines {
+            n_dot_l: theta_i.cos(),
+            n_dot_v: theta_r.cos(),
+            n_dot_h: ((theta_i - theta_r) / 2.0).cos(),
+            v_dot_h: ((theta_i + theta_r) / 2.0).cos(),
+        }
+    }
+
+    /// Cosines from the unit normal `n` and the (not necessarily unit) vectors from the
+    /// surface point to the light and to the camera. A zero vector, or light and camera in
+    /// exactly opposite directions, gives cosines that mark the point as grazing (0).
+    pub fn from_directions(n: [f64; 3], to_light: [f64; 3], to_camera: [f64; 3]) -> Self {
+        let unit = |v: [f64; 3]| {
+            let len = dot(v, v).sqrt();
+            if len > 0.0 && len.is_finite() {
+                v.map(|x| x / len)
+            } else {
+                [0.0; 3]
+            }
+        };
+        let l = unit(to_light);
+        let v = unit(to_camera);
+        let h = unit([l[0] + v[0], l[1] + v[1], l[2] + v[2]]);
+        Cosines {
+            n_dot_l: dot(n, l),
+            n_dot_v: dot(n, v),
+            n_dot_h: dot(n, h),
+            v_dot_h: dot(v, h),
+        }
+    }
+
+    /// The cosines in CSV column order (`n_dot_l,n_dot_v,n_dot_h,v_dot_h`).
+    pub fn to_array(self) -> [f64; 4] {
+        [self.n_dot_l, self.n_dot_v, self.n_dot_h, self.v_dot_h]
+    }
+}
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
 /// The model at one (θi, θr), as the basis of its linear form β_c = Kd_c·diffuse + Ks_c·specular(m_c).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Basis {
@@ -115,12 +176,19 @@ impl Model {
         }
     }
 
-    /// The linear basis of the model at (θi, θr) in degrees.
+    /// The linear basis of the model at in-plane (θi, θr) in degrees.
     pub fn basis(self, theta_i_deg: f64, theta_r_deg: f64) -> Basis {
-        let theta_i = theta_i_deg.to_radians();
-        let theta_r = theta_r_deg.to_radians();
-        let cos_i = theta_i.cos();
-        let cos_r = theta_r.cos();
+        self.basis_at(&Cosines::in_plane(theta_i_deg, theta_r_deg))
+    }
+
+    /// The linear basis of the model at one surface point, from its 3D cosines.
+    pub fn basis_at(self, cosines: &Cosines) -> Basis {
+        let Cosines {
+            n_dot_l: cos_i,
+            n_dot_v: cos_r,
+            n_dot_h,
+            v_dot_h,
+        } = *cosines;
         // `!(x >= y)` also masks NaN.
         if !(cos_i >= COS_GRAZING && cos_r >= COS_GRAZING) {
             return Basis {
@@ -129,13 +197,21 @@ impl Model {
                 gain: 0.0,
             };
         }
-        let cos_alpha = ((theta_i - theta_r) / 2.0).cos().clamp(COS_ALPHA_MIN, 1.0);
+        let cos_alpha = if n_dot_h.is_nan() {
+            COS_ALPHA_MIN
+        } else {
+            n_dot_h.clamp(COS_ALPHA_MIN, 1.0)
+        };
         let cos_alpha2 = cos_alpha * cos_alpha;
         let tan2_alpha = ((1.0 - cos_alpha2) / cos_alpha2).max(0.0);
         match self {
             Model::CookTorrance => {
-                // v·h = cos((θi + θr)/2) > 0 for directions before grazing.
-                let v_dot_h = ((theta_i + theta_r) / 2.0).cos().max(COS_GRAZING);
+                // v·h > 0 for directions before grazing.
+                let v_dot_h = if v_dot_h.is_nan() {
+                    COS_GRAZING
+                } else {
+                    v_dot_h.max(COS_GRAZING)
+                };
                 let masking = 2.0 * cos_alpha * cos_r / v_dot_h;
                 let shadowing = 2.0 * cos_alpha * cos_i / v_dot_h;
                 let g = 1f64.min(masking).min(shadowing);
@@ -153,9 +229,14 @@ impl Model {
         }
     }
 
-    /// β per channel (R, G, B) at (θi, θr) in degrees.
+    /// β per channel (R, G, B) at in-plane (θi, θr) in degrees.
     pub fn evaluate(&self, params: &Params, theta_i_deg: f64, theta_r_deg: f64) -> [f64; 3] {
         self.basis(theta_i_deg, theta_r_deg).evaluate(params)
+    }
+
+    /// β per channel (R, G, B) at one surface point given by its 3D cosines.
+    pub fn evaluate_at(&self, params: &Params, cosines: &Cosines) -> [f64; 3] {
+        self.basis_at(cosines).evaluate(params)
     }
 }
 

@@ -25,7 +25,7 @@ pub enum Response {
     Nonlinear,
 }
 
-/// The JSON sidecar of a capture (DESIGN.md). Unknown keys are ignored.
+/// The JSON sidecar of a capture (docs/ARCHITECTURE.md, "File formats"). Unknown keys are ignored.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Sidecar {
     /// Exposure time in seconds.

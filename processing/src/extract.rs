@@ -432,6 +432,7 @@ fn extract_theta(
                 theta_i: a.theta_i,
                 theta_r: a.theta_r,
                 rgb,
+                cosines: None,
             });
         }
     }

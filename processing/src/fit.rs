@@ -161,10 +161,15 @@ impl FitResult {
         }
     }
 
-    /// β the fit predicts at (θi, θr) in degrees.
+    /// β the fit predicts at in-plane (θi, θr) in degrees.
     pub fn predict(&self, theta_i_deg: f64, theta_r_deg: f64) -> [f64; 3] {
         self.model
             .evaluate(&self.params(), theta_i_deg, theta_r_deg)
+    }
+
+    /// β the fit predicts at a sample's point (its 3D cosines when it has them).
+    pub fn predict_sample(&self, sample: &Sample) -> [f64; 3] {
+        self.model.evaluate_at(&self.params(), &sample.cosines())
     }
 }
 
@@ -217,7 +222,7 @@ impl Data {
             if let Some(field) = s.non_finite_field() {
                 return Err(FitError::NonFinite { index, field });
             }
-            let basis = model.basis(s.theta_i, s.theta_r);
+            let basis = model.basis_at(&s.cosines());
             if basis.diffuse == 0.0 {
                 return Err(FitError::Grazing {
                     index,

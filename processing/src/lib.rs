@@ -1,6 +1,6 @@
 //! gonio-processing: the science of image-based BRDF measurement, pure and synchronous.
 //!
-//! Conventions (one place for all of them, see also `DESIGN.md`):
+//! Conventions (the one place for all of them is `docs/ARCHITECTURE.md`; in short):
 //! - Angles are degrees in public types, files and the CLI; radians inside computations.
 //! - In-plane, signed "anormal" angles from the surface normal, with the specular
 //!   direction at θr = θi. The half vector makes α = (θi − θr)/2 with the normal,

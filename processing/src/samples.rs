@@ -1,6 +1,9 @@
 //! Samples CSV: one row per surface point, header `theta_l,theta_i,theta_r,r,g,b`
 //! (angles in degrees, β in the camera-RGB domain). Extra columns may follow the six
-//! named ones; they are ignored on reading.
+//! named ones. The four optional columns `n_dot_l,n_dot_v,n_dot_h,v_dot_h` (see
+//! [`COSINE_COLUMNS`]) carry the point's true 3D cosines; when a file has all four, the
+//! models are evaluated with them instead of the in-plane angles. Other extra columns are
+//! ignored on reading.
 
 use std::fs::File;
 use std::io::{BufWriter, Read, Write};
@@ -8,16 +11,41 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
+use crate::brdf::Cosines;
+
 /// One measured surface point: angles in degrees, β per camera channel.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Sample {
     pub theta_l: f64,
+    /// In-plane incidence angle (the angle of the light's projection on the plane of the
+    /// light and the camera for points off that plane).
     pub theta_i: f64,
+    /// In-plane viewing angle, as `theta_i`.
     pub theta_r: f64,
     pub rgb: [f64; 3],
+    /// The point's true 3D cosines, when known; `None` means in-plane.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cosines: Option<Cosines>,
 }
 
 impl Sample {
+    /// A sample in the plane of the light: its cosines follow from (θi, θr).
+    pub fn in_plane(theta_l: f64, theta_i: f64, theta_r: f64, rgb: [f64; 3]) -> Self {
+        Sample {
+            theta_l,
+            theta_i,
+            theta_r,
+            rgb,
+            cosines: None,
+        }
+    }
+
+    /// The cosines the models are evaluated with: the stored 3D ones, or the in-plane ones.
+    pub fn cosines(&self) -> Cosines {
+        self.cosines
+            .unwrap_or_else(|| Cosines::in_plane(self.theta_i, self.theta_r))
+    }
+
     /// The name of the first field (in CSV column order) that is NaN or infinite.
     pub fn non_finite_field(&self) -> Option<&'static str> {
         [
@@ -29,6 +57,12 @@ impl Sample {
             ("b", self.rgb[2]),
         ]
         .into_iter()
+        .chain(
+            self.cosines
+                .map(Cosines::to_array)
+                .into_iter()
+                .flat_map(|c| COSINE_COLUMNS.into_iter().zip(c)),
+        )
         .find(|(_, v)| !v.is_finite())
         .map(|(field, _)| field)
     }
@@ -36,6 +70,9 @@ impl Sample {
 
 /// The six leading columns of a samples CSV, in order.
 pub const HEADER: [&str; 6] = ["theta_l", "theta_i", "theta_r", "r", "g", "b"];
+
+/// The optional columns of a point's 3D cosines, in the order they are written.
+pub const COSINE_COLUMNS: [&str; 4] = ["n_dot_l", "n_dot_v", "n_dot_h", "v_dot_h"];
 
 /// Why a samples CSV could not be read or written. Lines are 1-based and count the header.
 /// Each message is complete on its own (no separate source chain).
@@ -102,6 +139,21 @@ pub fn read_csv_from<R: Read>(reader: R) -> Result<Vec<Sample>, SamplesError> {
             found: header.iter().collect::<Vec<_>>().join(","),
         });
     }
+    // Indices of the cosine columns: all four or none.
+    let cosine_index: Vec<usize> = COSINE_COLUMNS
+        .iter()
+        .filter_map(|name| header.iter().position(|h| h == *name))
+        .collect();
+    let cosine_index = match cosine_index.len() {
+        0 => None,
+        4 => Some(cosine_index),
+        _ => {
+            return Err(SamplesError::Header {
+                expected: format!("all or none of {}", COSINE_COLUMNS.join(",")),
+                found: header.iter().collect::<Vec<_>>().join(","),
+            })
+        }
+    };
     let mut samples = Vec::new();
     for record in csv.records() {
         let record = record.map_err(|e| match e.position() {
@@ -125,28 +177,54 @@ pub fn read_csv_from<R: Read>(reader: R) -> Result<Vec<Sample>, SamplesError> {
         }
         let mut values = [0.0; 6];
         for ((value, column), text) in values.iter_mut().zip(HEADER).zip(record.iter()) {
-            let parsed: f64 = text.parse().map_err(|_| SamplesError::Field {
-                line,
-                column,
-                message: format!("`{text}` is not a number"),
-            })?;
-            if !parsed.is_finite() {
-                return Err(SamplesError::Field {
-                    line,
-                    column,
-                    message: format!("`{text}` is not finite"),
-                });
-            }
-            *value = parsed;
+            *value = parse_field(text, line, column)?;
         }
+        let cosines = match &cosine_index {
+            None => None,
+            Some(index) => {
+                let mut c = [0.0; 4];
+                for ((value, column), &i) in c.iter_mut().zip(COSINE_COLUMNS).zip(index) {
+                    let text = record.get(i).ok_or_else(|| SamplesError::Field {
+                        line,
+                        column,
+                        message: String::from("missing"),
+                    })?;
+                    *value = parse_field(text, line, column)?;
+                }
+                Some(Cosines {
+                    n_dot_l: c[0],
+                    n_dot_v: c[1],
+                    n_dot_h: c[2],
+                    v_dot_h: c[3],
+                })
+            }
+        };
         samples.push(Sample {
             theta_l: values[0],
             theta_i: values[1],
             theta_r: values[2],
             rgb: [values[3], values[4], values[5]],
+            cosines,
         });
     }
     Ok(samples)
+}
+
+/// One CSV field as a finite number.
+fn parse_field(text: &str, line: u64, column: &'static str) -> Result<f64, SamplesError> {
+    let parsed: f64 = text.parse().map_err(|_| SamplesError::Field {
+        line,
+        column,
+        message: format!("`{text}` is not a number"),
+    })?;
+    if !parsed.is_finite() {
+        return Err(SamplesError::Field {
+            line,
+            column,
+            message: format!("`{text}` is not finite"),
+        });
+    }
+    Ok(parsed)
 }
 
 /// Writes samples as CSV to a file (created or truncated).
@@ -164,15 +242,25 @@ pub fn write_csv(path: &Path, samples: &[Sample]) -> Result<(), SamplesError> {
 }
 
 /// Writes samples as CSV text to any writer; numbers use Rust's shortest round-trip form.
+/// When any sample carries 3D cosines, every row gets the four cosine columns (in-plane
+/// cosines for samples without).
 pub fn write_csv_to<W: Write>(writer: W, samples: &[Sample]) -> Result<(), SamplesError> {
+    let with_cosines = samples.iter().any(|s| s.cosines.is_some());
     let mut csv = csv::Writer::from_writer(writer);
-    csv.write_record(HEADER).map_err(SamplesError::Csv)?;
+    let cosine_header: &[&str] = if with_cosines { &COSINE_COLUMNS } else { &[] };
+    csv.write_record(HEADER.iter().chain(cosine_header))
+        .map_err(SamplesError::Csv)?;
     for s in samples {
         let row = [
             s.theta_l, s.theta_i, s.theta_r, s.rgb[0], s.rgb[1], s.rgb[2],
         ];
-        csv.write_record(row.iter().map(f64::to_string))
-            .map_err(SamplesError::Csv)?;
+        let cosines = with_cosines.then(|| s.cosines().to_array());
+        csv.write_record(
+            row.iter()
+                .chain(cosines.iter().flatten())
+                .map(f64::to_string),
+        )
+        .map_err(SamplesError::Csv)?;
     }
     csv.flush().map_err(|error| SamplesError::Io {
         path: String::from("samples CSV output"),

@@ -158,3 +158,24 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn cosines_from_in_plane_directions_match_the_angle_form() {
+    use gonio_processing::brdf::Cosines;
+    // Normal along +x; the light at signed θi (counter-clockwise), the camera at −θr.
+    for (ti, tr) in [(30.0, 30.0), (-10.0, 40.0), (60.0, -20.0), (5.0, 80.0)] {
+        let (ti_r, tr_r) = (f64::to_radians(ti), f64::to_radians(tr));
+        let from_dirs = Cosines::from_directions(
+            [1.0, 0.0, 0.0],
+            [ti_r.cos(), ti_r.sin(), 0.0],
+            [tr_r.cos(), -tr_r.sin(), 0.0],
+        );
+        let angles = Cosines::in_plane(ti, tr);
+        for (a, b) in from_dirs.to_array().into_iter().zip(angles.to_array()) {
+            assert!(
+                (a - b).abs() < 1e-12,
+                "({ti}, {tr}): {from_dirs:?} vs {angles:?}"
+            );
+        }
+    }
+}

@@ -32,6 +32,7 @@ fn synthetic(model: Model, p: &Params, theta_ls: &[f64], noise: f64) -> Vec<Samp
                 theta_i,
                 theta_r,
                 rgb,
+                cosines: None,
             });
         }
     }

@@ -7,12 +7,14 @@ fn samples() -> Vec<Sample> {
             theta_i: -30.125,
             theta_r: 10.1,
             rgb: [1.0 / 3.0, 50.0, 1e-7],
+            cosines: None,
         },
         Sample {
             theta_l: -45.0,
             theta_i: 0.0,
             theta_r: -44.9,
             rgb: [0.0, 99.5, 12.25],
+            cosines: None,
         },
     ]
 }
@@ -86,6 +88,7 @@ fn non_finite_field_names_the_first_bad_column() {
         theta_i: 10.0,
         theta_r: -10.0,
         rgb: [1.0, 2.0, 3.0],
+        cosines: None,
     };
     assert_eq!(good.non_finite_field(), None);
     let bad = Sample {
@@ -99,4 +102,33 @@ fn non_finite_field_names_the_first_bad_column() {
         ..good
     };
     assert_eq!(bad_g.non_finite_field(), Some("g"));
+}
+
+#[test]
+fn cosine_columns_round_trip_and_reach_the_models() {
+    use gonio_processing::brdf::{Cosines, Model, Params};
+    // A point above the plane of the light: its true cosines differ from the in-plane ones.
+    let cosines = Cosines::from_directions([1.0, 0.0, 0.0], [0.8, 0.5, 0.2], [1.0, -0.4, 0.2]);
+    let mut with = samples();
+    with[0].cosines = Some(cosines);
+    let mut text = Vec::new();
+    gonio_processing::samples::write_csv_to(&mut text, &with).unwrap();
+    let text = String::from_utf8(text).unwrap();
+    assert!(
+        text.starts_with("theta_l,theta_i,theta_r,r,g,b,n_dot_l,n_dot_v,n_dot_h,v_dot_h\n"),
+        "{text}"
+    );
+    let read = read_csv_from(text.as_bytes()).unwrap();
+    assert_eq!(read[0].cosines, Some(cosines));
+    // The sample without 3D cosines was written with its in-plane ones.
+    assert_eq!(read[1].cosines(), samples()[1].cosines());
+
+    let p = Params::shared([1.0, 2.0, 3.0], [4.0, 5.0, 6.0], 0.2);
+    let at = Model::CookTorrance.evaluate_at(&p, &read[0].cosines());
+    let in_plane = Model::CookTorrance.evaluate(&p, read[0].theta_i, read[0].theta_r);
+    assert_ne!(at, in_plane);
+
+    let three = "theta_l,theta_i,theta_r,r,g,b,n_dot_l,n_dot_v,n_dot_h\n";
+    let err = read_csv_from(three.as_bytes()).unwrap_err();
+    assert!(err.to_string().contains("v_dot_h"), "{err}");
 }

@@ -1,4 +1,4 @@
-//! The HTTP API (DESIGN.md "HTTP API"): JSON under `/api`, the web page at `/`.
+//! The HTTP API (docs/ARCHITECTURE.md, "HTTP API"): JSON under `/api`, the web page at `/`.
 //! Mutating routes need the bearer token; reads are open.
 
 use std::convert::Infallible;

@@ -647,7 +647,7 @@ impl Runner {
         Ok(frame_result(dir, &image, false))
     }
 
-    /// Writes the JSON sidecar of a capture (DESIGN.md) atomically at `path`.
+    /// Writes the JSON sidecar of a capture (docs/ARCHITECTURE.md, "File formats") atomically at `path`.
     fn write_sidecar(&self, path: &Path, exposure: Exposure, theta_l: f64) -> Result<(), String> {
         let sidecar = Sidecar {
             shutter_s: exposure.shutter_s,
