@@ -12,14 +12,15 @@
 //!   shared optimum and searches each channel's m in turn (first round: grid then Brent;
 //!   later rounds: Brent near the current value) until a round stops lowering the loss.
 //!   Optionally polished by Nelder–Mead.
-//! - [`FitMethod::NelderMead`]: the paper's downhill simplex over all parameters at once
-//!   (argmin's `NelderMead`), kept as the baseline.
+//! - [`FitMethod::NelderMead`]: the paper's downhill simplex over all parameters at once,
+//!   MATLAB's fminsearch with its defaults (see `nelder_mead`), kept as the baseline.
 //!
 //! β are in the camera-RGB domain (a white gives G = 100), so Kd is typically 0–100.
 
 mod linear;
 mod nelder_mead;
 mod robust;
+mod simplex;
 
 use std::fmt;
 use std::str::FromStr;
@@ -65,27 +66,31 @@ impl Default for RobustOptions {
     }
 }
 
-/// Settings of the Nelder–Mead method.
+/// Settings of the Nelder–Mead method: fminsearch's, with its defaults.
 #[derive(Debug, Clone, PartialEq)]
 pub struct NelderMeadOptions {
     /// Starting roughness; Kd and Ks start from the data (lowest and peak β).
     pub initial_m: f64,
-    /// Initial simplex: each vertex moves one parameter by this fraction of its start
-    /// value (Kd, Ks at least by this fraction of the largest β).
-    pub simplex_scale: f64,
-    /// Stop when the standard deviation of the loss over the simplex falls below this.
-    pub sd_tolerance: f64,
-    /// Iteration cap.
-    pub max_iters: u64,
+    /// TolX: stop when no vertex is farther than this from the best in any parameter
+    /// (absolute) and TolFun also holds.
+    pub tol_x: f64,
+    /// TolFun: stop when no vertex's loss exceeds the best by more than this (absolute)
+    /// and TolX also holds.
+    pub tol_fun: f64,
+    /// MaxIter; `None` for fminsearch's 200 × the number of parameters.
+    pub max_iter: Option<usize>,
+    /// MaxFunEvals; `None` for fminsearch's 200 × the number of parameters.
+    pub max_fun_evals: Option<usize>,
 }
 
 impl Default for NelderMeadOptions {
     fn default() -> Self {
         NelderMeadOptions {
             initial_m: 0.3,
-            simplex_scale: 0.5,
-            sd_tolerance: 1e-9,
-            max_iters: 5000,
+            tol_x: 1e-4,
+            tol_fun: 1e-4,
+            max_iter: None,
+            max_fun_evals: None,
         }
     }
 }
