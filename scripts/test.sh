@@ -3,6 +3,14 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
+# ---- numpy and OpenCV: the Debevec–Malik test compares our merge with OpenCV's ----
+if ! python3 -c 'import cv2, numpy' 2>/dev/null; then
+    echo "installing numpy and opencv-python-headless"
+    python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore \
+        numpy==2.2.6 opencv-python-headless==4.12.0.88 </dev/null
+fi
+export GONIO_REQUIRE_OPENCV=1
+
 cargo test --workspace --locked
 
 # ---- gonio-drivers with the `gphoto2` feature, against libgphoto2's virtual camera ----

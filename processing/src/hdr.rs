@@ -8,8 +8,9 @@
 //!   valid exposure), so noisy samples do not bias their own weights.
 //! - **Debevec–Malik (1997)** for non-linear frames: counts quantised to 256 levels,
 //!   the log response g(z) recovered per channel by least squares from sampled pixels
-//!   with hat weights and a second-difference smoothness term λ, fixed by g(128) = 0;
-//!   then ln E = Σ w(z)(g(z) − ln H) / Σ w(z).
+//!   with hat weights, a second-difference smoothness term λ and g(128) = 0, made
+//!   monotone; then ln E = Σ w(z)(g(z) − ln H) / Σ w(z) with w(z) the inverse variance
+//!   of level z from a noise model fitted to the bracket (see `response`).
 //!
 //! Radiance is relative: for the linear method, normalised signal (0 black, 1 clipping)
 //! per second of exposure at ISO 100; for Debevec–Malik the scale fixed by g(128) = 0.
@@ -19,21 +20,20 @@
 //! value: if any frame clipped, the lower bound from the shortest clipped exposure
 //! ([`SATURATED`]); otherwise (black in every frame) 0 ([`UNDEREXPOSED`]).
 
+mod response;
+
 use std::path::{Path, PathBuf};
 
-use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 use thiserror::Error;
 
 use crate::capture::{Frame, Response};
+use response::{Observations, LEVELS};
 
 /// Mask bit: some channel of the pixel was clipped in every frame that saw it.
 pub const SATURATED: u8 = 1;
 /// Mask bit: some channel of the pixel was near black in every frame.
 pub const UNDEREXPOSED: u8 = 2;
-
-/// Levels of the Debevec–Malik response table.
-const LEVELS: usize = 256;
 
 /// Which merge to run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -74,10 +74,10 @@ pub struct MergeOptions {
     pub min_signal: f64,
     /// Normalised signals above this are treated as clipped (linear method).
     pub max_signal: f64,
-    /// Debevec–Malik smoothness weight λ.
+    /// Debevec–Malik smoothness weight λ, relative to the data's weight per level.
     pub smoothness: f64,
-    /// Debevec–Malik pixel locations sampled per channel (at least enough that
-    /// samples × (distinct exposures − 1) covers the 256 levels).
+    /// Debevec–Malik: about this many pixel locations per channel are sampled evenly in
+    /// rank, and as many evenly in brightness (fewer where the image has fewer usable).
     pub response_samples: usize,
 }
 
@@ -89,7 +89,7 @@ impl Default for MergeOptions {
             min_signal: 0.002,
             max_signal: 0.98,
             smoothness: 50.0,
-            response_samples: 100,
+            response_samples: 1000,
         }
     }
 }
@@ -391,17 +391,6 @@ fn merge_linear(frames: &[Frame], options: &MergeOptions) -> (Vec<f32>, Vec<u8>)
     (rgb, mask)
 }
 
-/// Debevec–Malik hat weight of level z ∈ 0..=255.
-fn hat(z: usize) -> f64 {
-    let (min, max) = (0.0, (LEVELS - 1) as f64);
-    let z = z as f64;
-    if z <= 0.5 * (min + max) {
-        z - min
-    } else {
-        max - z
-    }
-}
-
 /// Per-frame table from count to the quantised level 0..=255 of its normalised signal.
 fn level_table(frame: &Frame) -> Vec<u8> {
     let range = frame.white_level - frame.black_level;
@@ -426,17 +415,23 @@ fn merge_debevec_malik(
     }
     let tables: Vec<Vec<u8>> = frames.iter().map(level_table).collect();
     let level = |j: usize, index: usize| usize::from(tables[j][usize::from(frames[j].data[index])]);
-    let bracket = Bracket {
+    let observations = Observations {
         level: &level,
         frames: frames.len(),
         pixels: frames[0].width * frames[0].height,
         ln_h: &ln_h,
-        distinct_exposures: distinct.len(),
     };
-    let curves: Vec<Vec<f64>> = (0..3)
-        .map(|c| recover_response(&bracket, c, options))
+    let curves: Vec<response::Curve> = (0..3)
+        .map(|c| {
+            response::recover(
+                &observations,
+                c,
+                options.response_samples,
+                options.smoothness,
+            )
+            .ok_or_else(|| HdrError::Response(format!("channel {c}: degenerate bracket")))
+        })
         .collect::<Result<_, _>>()?;
-    let hat_table: [f64; LEVELS] = std::array::from_fn(hat);
     // Shortest exposure first, for the clipped-everywhere bound.
     let mut order: Vec<usize> = (0..frames.len()).collect();
     order.sort_by(|&a, &b| ln_h[a].total_cmp(&ln_h[b]));
@@ -449,12 +444,13 @@ fn merge_debevec_malik(
         .for_each(|(y, (row_rgb, row_mask))| {
             for (i, value) in row_rgb.iter_mut().enumerate() {
                 let index = 3 * width * y + i;
-                let g = &curves[i % 3];
+                let curve = &curves[i % 3];
+                let g = &curve.g;
                 let (mut sum, mut weights) = (0.0, 0.0);
                 for (j, &ln) in ln_h.iter().enumerate() {
                     let z = level(j, index);
-                    sum += hat_table[z] * (g[z] - ln);
-                    weights += hat_table[z];
+                    sum += curve.weight[z] * (g[z] - ln);
+                    weights += curve.weight[z];
                 }
                 let (radiance, flag) = if weights > 0.0 {
                     ((sum / weights).exp(), 0)
@@ -469,105 +465,4 @@ fn merge_debevec_malik(
             }
         });
     Ok((rgb, mask))
-}
-
-/// The quantised bracket as response recovery sees it.
-struct Bracket<'a, L: Fn(usize, usize) -> usize> {
-    /// Level of frame j at value index i (3 · pixel + channel).
-    level: &'a L,
-    frames: usize,
-    pixels: usize,
-    ln_h: &'a [f64],
-    distinct_exposures: usize,
-}
-
-/// Adds one least-squares row (sparse coefficients, right-hand side) to AᵀA and Aᵀb.
-fn add_row(ata: &mut DMatrix<f64>, atb: &mut DVector<f64>, row: &[(usize, f64)], rhs: f64) {
-    for &(i, a) in row {
-        atb[i] += a * rhs;
-        for &(j, b) in row {
-            ata[(i, j)] += a * b;
-        }
-    }
-}
-
-/// Recovers g(z) = ln(exposure value at level z) for channel `c` (Debevec & Malik
-/// 1997, §2.1): pixel locations chosen to span the levels of a mid exposure (only
-/// those with a level strictly between 0 and 255 in some frame; with none, the linear
-/// response), rows
-/// w(z)(g(z) − ln E_i) = w(z) ln H_j, λ w(z) g″(z) = 0 and g(128) = 0, solved through
-/// the normal equations (Cholesky; the system is small and sparse).
-fn recover_response<L: Fn(usize, usize) -> usize>(
-    bracket: &Bracket<L>,
-    c: usize,
-    options: &MergeOptions,
-) -> Result<Vec<f64>, HdrError> {
-    let level = bracket.level;
-    let wanted = options
-        .response_samples
-        .max(2 * LEVELS / (bracket.distinct_exposures - 1) + 1)
-        .min(bracket.pixels);
-    // Candidates on a regular grid of about 16 × wanted pixels, sorted by level in
-    // the middle exposure, then taken at even steps through that order.
-    let stride = (bracket.pixels / (16 * wanted)).max(1);
-    let mid = {
-        let mut order: Vec<usize> = (0..bracket.frames).collect();
-        order.sort_by(|&a, &b| bracket.ln_h[a].total_cmp(&bracket.ln_h[b]));
-        order[order.len() / 2]
-    };
-    let mut candidates: Vec<(usize, usize)> = (0..bracket.pixels)
-        .step_by(stride)
-        .filter(|&p| (0..bracket.frames).any(|j| hat(level(j, 3 * p + c)) > 0.0))
-        .map(|p| (level(mid, 3 * p + c), p))
-        .collect();
-    if candidates.is_empty() {
-        // Nothing constrains the response: take a linear one, g(z) = ln(z/128), so the
-        // channel's pixels (black or clipped everywhere, hence flagged) stay finite.
-        return Ok((0..LEVELS)
-            .map(|z| (z.max(1) as f64 / (LEVELS / 2) as f64).ln())
-            .collect());
-    }
-    candidates.sort_unstable();
-    let n = wanted.min(candidates.len());
-    let chosen: Vec<usize> = (0..n)
-        .map(|k| candidates[k * candidates.len() / n].1)
-        .collect();
-
-    let unknowns = LEVELS + n;
-    let mut ata = DMatrix::<f64>::zeros(unknowns, unknowns);
-    let mut atb = DVector::<f64>::zeros(unknowns);
-    for (i, &p) in chosen.iter().enumerate() {
-        for (j, &ln) in bracket.ln_h.iter().enumerate() {
-            let z = level(j, 3 * p + c);
-            let w = hat(z);
-            add_row(&mut ata, &mut atb, &[(z, w), (LEVELS + i, -w)], w * ln);
-        }
-    }
-    add_row(&mut ata, &mut atb, &[(LEVELS / 2, 1.0)], 0.0);
-    for z in 1..LEVELS - 1 {
-        let w = options.smoothness * hat(z);
-        add_row(
-            &mut ata,
-            &mut atb,
-            &[(z - 1, w), (z, -2.0 * w), (z + 1, w)],
-            0.0,
-        );
-    }
-    // A tiny ridge keeps levels seen by no sample (e.g. with λ = 0) determined.
-    let ridge = 1e-12 * ata.diagonal().max();
-    for k in 0..unknowns {
-        ata[(k, k)] += ridge;
-    }
-    let x = ata
-        .cholesky()
-        .ok_or_else(|| HdrError::Response(format!("channel {c}: degenerate bracket")))?
-        .solve(&atb);
-    let g: Vec<f64> = x.iter().take(LEVELS).copied().collect();
-    if g.iter().all(|v| v.is_finite()) {
-        Ok(g)
-    } else {
-        Err(HdrError::Response(format!(
-            "channel {c}: non-finite response"
-        )))
-    }
 }

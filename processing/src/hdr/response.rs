@@ -1,0 +1,386 @@
+//! Debevec–Malik response recovery (Debevec & Malik 1997, §2.1) for noisy, clipped
+//! brackets quantised to 256 levels, one channel at a time, and the merge weight of each
+//! level. See docs/ARCHITECTURE.md, "HDR merge".
+//!
+//! 1. Samples: pixel locations with a level strictly between 0 and 255 in at least two
+//!    frames (only those constrain g), chosen evenly both in rank and in value of the sum
+//!    of their levels over the bracket (which grows with radiance), so the dark and bright
+//!    ends of every frame's range are covered as well as the bulk.
+//! 2. Least squares for g(z) = ln(exposure at level z) and ln E of each sample: rows
+//!    w(z)(g(z) − ln E_i) = w(z) ln H_j with Debevec–Malik's hat w (0 at levels 0 and
+//!    255), smoothness rows λ·s̄·w(z)/128·g″(z) = 0 (s̄ the root-mean data weight per
+//!    level, so λ does not depend on the number of samples), and g(128) = 0 exactly. The
+//!    ln E_i are eliminated exactly (Schur complement), leaving a 256 × 256 Cholesky solve.
+//! 3. g is made non-decreasing (pool-adjacent-violators).
+//! 4. Merge weights: the noise is added before the response, so the variance of
+//!    g(z) − ln H is σ²(z) = a·e^(−g(z)) + b·e^(−2g(z)) + g′(z)²/12 (shot noise, read
+//!    noise, quantisation). a, b ≥ 0 are fitted to the differences between a sample's
+//!    estimates in two frames adjacent in exposure (their variance is σ²(z₁) + σ²(z₂),
+//!    whatever E is), and level z gets the weight 1/σ²(z) (levels 0 and 255: 0). With too
+//!    few such pairs the hat weights are kept.
+
+use nalgebra::{DMatrix, DVector};
+
+/// Levels of the response table.
+pub(super) const LEVELS: usize = 256;
+/// The level fixed at g = 0.
+const MID: usize = LEVELS / 2;
+/// Top level: clipped.
+const TOP: usize = LEVELS - 1;
+/// Least number of sample pairs for the noise fit.
+const MIN_PAIRS: usize = 32;
+
+/// A quantised bracket as recovery reads it.
+pub(super) struct Observations<'a, L: Fn(usize, usize) -> usize> {
+    /// Level of frame j at value index i (3 · pixel + channel).
+    pub level: &'a L,
+    pub frames: usize,
+    pub pixels: usize,
+    /// ln of each frame's exposure (shutter × ISO/100).
+    pub ln_h: &'a [f64],
+}
+
+/// A recovered response and the merge weight of each level.
+#[derive(Debug, Clone)]
+pub(super) struct Curve {
+    /// g(z): ln of the exposure that gives level z, with g(128) = 0; non-decreasing.
+    pub g: [f64; LEVELS],
+    /// Weight of a value at level z in the merge (inverse variance of g(z) − ln H); 0 at
+    /// levels 0 and 255.
+    pub weight: [f64; LEVELS],
+}
+
+/// Debevec–Malik hat of level z: z for the lower half, 255 − z for the upper (0 at the ends).
+pub(super) fn hat(z: usize) -> f64 {
+    z.min(TOP - z) as f64
+}
+
+fn usable(z: usize) -> bool {
+    z > 0 && z < TOP
+}
+
+/// The linear response g(z) = ln(z/128) (level 0 as level 1), for a channel that nothing
+/// constrains, with hat weights.
+pub(super) fn linear() -> Curve {
+    Curve {
+        g: std::array::from_fn(|z| (z.max(1) as f64 / MID as f64).ln()),
+        weight: std::array::from_fn(hat),
+    }
+}
+
+/// Recovers channel `c`'s response from about `wanted` samples with smoothness `lambda`.
+/// `None` when the least-squares system is degenerate; the linear response when no pixel
+/// is usable in two frames.
+pub(super) fn recover<L: Fn(usize, usize) -> usize>(
+    obs: &Observations<L>,
+    c: usize,
+    wanted: usize,
+    lambda: f64,
+) -> Option<Curve> {
+    let samples = choose_samples(obs, c, wanted);
+    if samples.is_empty() {
+        return Some(linear());
+    }
+    let levels: Vec<Vec<usize>> = samples
+        .iter()
+        .map(|&p| (0..obs.frames).map(|j| (obs.level)(j, 3 * p + c)).collect())
+        .collect();
+    let g = monotone(solve(&levels, obs.ln_h, lambda)?, &levels);
+    let weight = match noise_variance(&levels, obs.ln_h, &g) {
+        Some(sigma2) => std::array::from_fn(|z| if usable(z) { 1.0 / sigma2[z] } else { 0.0 }),
+        None => std::array::from_fn(hat),
+    };
+    Some(Curve { g, weight })
+}
+
+/// Pixels usable in at least two frames, chosen evenly in rank and in the value of the
+/// sum of their levels (at most about 2 × `wanted`).
+fn choose_samples<L: Fn(usize, usize) -> usize>(
+    obs: &Observations<L>,
+    c: usize,
+    wanted: usize,
+) -> Vec<usize> {
+    // A regular grid of about 16 × wanted candidates.
+    let stride = (obs.pixels / (16 * wanted.max(1))).max(1);
+    let mut candidates: Vec<(usize, usize)> = (0..obs.pixels)
+        .step_by(stride)
+        .filter_map(|p| {
+            let mut sum = 0;
+            let mut usable_frames = 0;
+            for j in 0..obs.frames {
+                let z = (obs.level)(j, 3 * p + c);
+                sum += z;
+                usable_frames += usize::from(usable(z));
+            }
+            (usable_frames >= 2).then_some((sum, p))
+        })
+        .collect();
+    if candidates.len() <= 2 * wanted {
+        return candidates.into_iter().map(|(_, p)| p).collect();
+    }
+    candidates.sort_unstable();
+    let n = candidates.len();
+    let (lo, hi) = (candidates[0].0 as f64, candidates[n - 1].0 as f64);
+    let mut chosen: Vec<usize> = (0..wanted)
+        .flat_map(|k| {
+            let by_rank = k * n / wanted;
+            let target = lo + (hi - lo) * (k as f64 + 0.5) / wanted as f64;
+            let by_value = candidates
+                .partition_point(|&(sum, _)| (sum as f64) < target)
+                .min(n - 1);
+            [by_rank, by_value]
+        })
+        .collect();
+    chosen.sort_unstable();
+    chosen.dedup();
+    chosen.into_iter().map(|i| candidates[i].1).collect()
+}
+
+/// Weighted least squares for g with the sample radiances eliminated; `None` if singular.
+fn solve(levels: &[Vec<usize>], ln_h: &[f64], lambda: f64) -> Option<[f64; LEVELS]> {
+    let mut normal = DMatrix::<f64>::zeros(LEVELS, LEVELS);
+    let mut rhs = DVector::<f64>::zeros(LEVELS);
+    let mut entries: Vec<(usize, f64, f64)> = Vec::with_capacity(ln_h.len());
+    for sample in levels {
+        // Row ω(z)(g(z) − ln E) = ω(z) ln H per frame; entries (z, ω², ln H).
+        entries.clear();
+        entries.extend(
+            sample
+                .iter()
+                .zip(ln_h)
+                .map(|(&z, &ln)| (z, hat(z) * hat(z), ln))
+                .filter(|&(_, w2, _)| w2 > 0.0),
+        );
+        let total: f64 = entries.iter().map(|e| e.1).sum();
+        if total <= 0.0 {
+            continue;
+        }
+        let weighted_ln: f64 = entries.iter().map(|e| e.1 * e.2).sum();
+        for &(z, w2, ln) in &entries {
+            normal[(z, z)] += w2;
+            rhs[z] += w2 * ln - w2 * weighted_ln / total;
+            for &(z2, w2b, _) in &entries {
+                normal[(z, z2)] -= w2 * w2b / total;
+            }
+        }
+    }
+    // Smoothness scaled to the data: λ times the mean data weight per level.
+    let data_weight = (0..LEVELS).map(|z| normal[(z, z)]).sum::<f64>() / LEVELS as f64;
+    let scale = lambda * data_weight.max(f64::MIN_POSITIVE).sqrt() / MID as f64;
+    for z in 1..TOP {
+        let k = scale * hat(z);
+        let row = [(z - 1, k), (z, -2.0 * k), (z + 1, k)];
+        for &(a, ka) in &row {
+            for &(b, kb) in &row {
+                normal[(a, b)] += ka * kb;
+            }
+        }
+    }
+    // g(128) = 0 exactly.
+    for k in 0..LEVELS {
+        normal[(MID, k)] = 0.0;
+        normal[(k, MID)] = 0.0;
+    }
+    normal[(MID, MID)] = 1.0;
+    rhs[MID] = 0.0;
+    // A tiny ridge keeps levels that neither data nor smoothness reach determined.
+    let ridge = 1e-12 * normal.diagonal().max();
+    for k in 0..LEVELS {
+        normal[(k, k)] += ridge;
+    }
+    let x = normal.cholesky()?.solve(&rhs);
+    let g: [f64; LEVELS] = std::array::from_fn(|z| x[z]);
+    g.iter().all(|v| v.is_finite()).then_some(g)
+}
+
+/// g made non-decreasing by pool-adjacent-violators, each level weighted by how often it
+/// was observed (plus one), then shifted back to g(128) = 0.
+fn monotone(g: [f64; LEVELS], levels: &[Vec<usize>]) -> [f64; LEVELS] {
+    let mut count = [1.0; LEVELS];
+    for &z in levels.iter().flatten() {
+        count[z] += 1.0;
+    }
+    // Blocks of (mean, weight, length).
+    let mut blocks: Vec<(f64, f64, usize)> = Vec::with_capacity(LEVELS);
+    for z in 0..LEVELS {
+        blocks.push((g[z], count[z], 1));
+        while blocks.len() > 1 && blocks[blocks.len() - 2].0 > blocks[blocks.len() - 1].0 {
+            let (m2, w2, n2) = blocks.pop().expect("two blocks");
+            let last = blocks.last_mut().expect("two blocks");
+            let w = last.1 + w2;
+            *last = ((last.0 * last.1 + m2 * w2) / w, w, last.2 + n2);
+        }
+    }
+    let mut out = [0.0; LEVELS];
+    let mut z = 0;
+    for (mean, _, length) in blocks {
+        out[z..z + length].fill(mean);
+        z += length;
+    }
+    let shift = out[MID];
+    out.map(|v| v - shift)
+}
+
+/// σ²(z) of g(z) − ln H (see the module comment), or `None` without enough pairs.
+fn noise_variance(levels: &[Vec<usize>], ln_h: &[f64], g: &[f64; LEVELS]) -> Option<[f64; LEVELS]> {
+    // g′(z) by central differences, floored so a flat stretch still quantises.
+    let slope: [f64; LEVELS] = std::array::from_fn(|z| {
+        let (a, b) = (z.saturating_sub(1), (z + 1).min(TOP));
+        ((g[b] - g[a]) / (b - a) as f64).max(1e-6)
+    });
+    let quantisation: [f64; LEVELS] = slope.map(|s| s * s / 12.0);
+    let shot: [f64; LEVELS] = g.map(|v| (-v).exp());
+    // Equations d² ≈ a·(u₁ + u₂) + b·(u₁² + u₂²) + q₁ + q₂ for pairs of frames adjacent in
+    // exposure where both levels are usable.
+    let mut order: Vec<usize> = (0..ln_h.len()).collect();
+    order.sort_by(|&a, &b| ln_h[a].total_cmp(&ln_h[b]));
+    let mut pairs: Vec<([f64; 2], f64, f64)> = Vec::new();
+    for sample in levels {
+        let mut previous: Option<usize> = None;
+        for &j in &order {
+            let z = sample[j];
+            if !usable(z) {
+                continue;
+            }
+            if let Some(k) = previous {
+                let zk = sample[k];
+                let d = (g[z] - ln_h[j]) - (g[zk] - ln_h[k]);
+                let (u1, u2) = (shot[z], shot[zk]);
+                pairs.push((
+                    [u1 + u2, u1 * u1 + u2 * u2],
+                    d * d,
+                    quantisation[z] + quantisation[zk],
+                ));
+            }
+            previous = Some(j);
+        }
+    }
+    if pairs.len() < MIN_PAIRS {
+        return None;
+    }
+    // Non-negative least squares in two unknowns, reweighted by the predicted variance of
+    // d² (∝ its square) so that every pair counts by its relative error.
+    let mut coef = [0.0, 0.0];
+    let mut weights: Vec<f64> = pairs
+        .iter()
+        .map(|p| 1.0 / (p.1 + p.2).powi(2).max(1e-300))
+        .collect();
+    for _ in 0..4 {
+        coef = nnls2(&pairs, &weights);
+        for (w, p) in weights.iter_mut().zip(&pairs) {
+            let predicted = coef[0] * p.0[0] + coef[1] * p.0[1] + p.2;
+            *w = 1.0 / predicted.powi(2).max(1e-300);
+        }
+    }
+    let sigma2: [f64; LEVELS] =
+        std::array::from_fn(|z| coef[0] * shot[z] + coef[1] * shot[z] * shot[z] + quantisation[z]);
+    sigma2
+        .iter()
+        .all(|v| v.is_finite() && *v > 0.0)
+        .then_some(sigma2)
+}
+
+/// argmin over a, b ≥ 0 of Σ w (a·x₀ + b·x₁ + q − y)².
+fn nnls2(pairs: &[([f64; 2], f64, f64)], weights: &[f64]) -> [f64; 2] {
+    let mut m = [[0.0; 2]; 2];
+    let mut v = [0.0; 2];
+    for ((x, y, q), &w) in pairs.iter().zip(weights) {
+        let r = y - q;
+        for a in 0..2 {
+            v[a] += w * x[a] * r;
+            for b in 0..2 {
+                m[a][b] += w * x[a] * x[b];
+            }
+        }
+    }
+    let single = |a: usize| {
+        if m[a][a] > 0.0 {
+            (v[a] / m[a][a]).max(0.0)
+        } else {
+            0.0
+        }
+    };
+    let det = m[0][0] * m[1][1] - m[0][1] * m[1][0];
+    if det > 0.0 {
+        let a = (v[0] * m[1][1] - v[1] * m[0][1]) / det;
+        let b = (m[0][0] * v[1] - m[1][0] * v[0]) / det;
+        if a >= 0.0 && b >= 0.0 {
+            return [a, b];
+        }
+    }
+    // The minimum lies on a bound: the better of the two one-unknown fits.
+    let candidates = [[single(0), 0.0], [0.0, single(1)]];
+    let cost = |c: &[f64; 2]| -> f64 {
+        pairs
+            .iter()
+            .zip(weights)
+            .map(|((x, y, q), w)| w * (c[0] * x[0] + c[1] * x[1] + q - y).powi(2))
+            .sum()
+    };
+    if cost(&candidates[0]) <= cost(&candidates[1]) {
+        candidates[0]
+    } else {
+        candidates[1]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn monotone_pools_violations_and_keeps_g128_at_zero() {
+        let mut g: [f64; LEVELS] = std::array::from_fn(|z| (z as f64 - 128.0) / 50.0);
+        g[10] = g[14] + 0.5;
+        g[200] = g[195] - 0.3;
+        let out = monotone(g, &[]);
+        assert!(out.windows(2).all(|w| w[0] <= w[1]));
+        assert_eq!(out[MID], 0.0);
+        // Levels away from the violations are untouched.
+        for z in (20..190).chain(210..LEVELS) {
+            assert!((out[z] - g[z]).abs() < 1e-12, "level {z}");
+        }
+    }
+
+    /// A linear 8-bit camera (level = 128·x) with shot and read noise: the variance of
+    /// ln x at level z is s·e^(−g) + r²·e^(−2g) plus quantisation, with g = ln(z/128).
+    #[test]
+    fn noise_model_recovers_shot_and_read_noise() {
+        let (shot, read) = (2e-3, 4e-3);
+        let g: [f64; LEVELS] = std::array::from_fn(|z| (z.max(1) as f64 / 128.0).ln());
+        let ln_h: Vec<f64> = (0..5).map(|k| (2f64.powi(k - 4)).ln()).collect();
+        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+        let mut uniform = move || {
+            state ^= state >> 12;
+            state ^= state << 25;
+            state ^= state >> 27;
+            ((state.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+        };
+        let levels: Vec<Vec<usize>> = (0..2000)
+            .map(|_| {
+                let e = 0.02 * 100f64.powf(uniform());
+                ln_h.iter()
+                    .map(|ln| {
+                        let x = e * ln.exp();
+                        let sigma = (shot * x + read * read).sqrt();
+                        let normal = (-2.0 * uniform().ln()).sqrt()
+                            * (std::f64::consts::TAU * uniform()).cos();
+                        ((x + sigma * normal) * 128.0).round().clamp(0.0, 255.0) as usize
+                    })
+                    .collect()
+            })
+            .collect();
+        let sigma2 = noise_variance(&levels, &ln_h, &g).expect("enough pairs");
+        for z in [20, 60, 128, 220] {
+            let x = (z as f64 / 128.0).max(1e-9);
+            let slope = 1.0 / z as f64;
+            let truth = shot / x + read * read / (x * x) + slope * slope / 12.0;
+            let ratio = sigma2[z] / truth;
+            assert!(
+                (0.8..1.25).contains(&ratio),
+                "level {z}: {} vs {truth}",
+                sigma2[z]
+            );
+        }
+    }
+}
