@@ -11,6 +11,9 @@ use gonio_processing::fit::{
 use gonio_processing::metrics;
 use gonio_processing::samples::Sample;
 
+mod common;
+use common::Rng;
+
 const ALL_THETA_L: [f64; 6] = [-20.0, -25.0, -30.0, -35.0, -40.0, -45.0];
 
 /// Samples of the distant-source geometry (θi = θL − φ, θr = φ), φ every 0.5°, both
@@ -26,7 +29,7 @@ fn synthetic(model: Model, p: &Params, theta_ls: &[f64], noise: f64) -> Vec<Samp
                 continue;
             }
             let clean = model.evaluate(p, theta_i, theta_r);
-            let rgb = clean.map(|b| b * (1.0 + noise * rng.gaussian()));
+            let rgb = clean.map(|b| b * (1.0 + noise * rng.normal()));
             out.push(Sample {
                 theta_l,
                 theta_i,
@@ -37,21 +40,6 @@ fn synthetic(model: Model, p: &Params, theta_ls: &[f64], noise: f64) -> Vec<Samp
         }
     }
     out
-}
-
-/// xorshift64* with Box–Muller: deterministic noise without extra dependencies.
-struct Rng(u64);
-impl Rng {
-    fn uniform(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        ((self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-    }
-    fn gaussian(&mut self) -> f64 {
-        let (u, v) = (self.uniform(), self.uniform());
-        (-2.0 * u.ln()).sqrt() * (2.0 * std::f64::consts::PI * v).cos()
-    }
 }
 
 fn options(model: Model, roughness: Roughness, method: FitMethod) -> FitOptions {

@@ -7,6 +7,9 @@ use gonio_processing::hdr::{
     self, HdrError, MergeMethod, MergeOptions, NoiseModel, SATURATED, UNDEREXPOSED,
 };
 
+mod common;
+use common::Rng;
+
 const W: usize = 64;
 const H: usize = 48;
 const BLACK: f64 = 600.0;
@@ -20,21 +23,6 @@ const BRACKET: [f64; 7] = [
     1.0 / 4.0,
     1.0 / 2.0,
 ];
-
-/// Deterministic standard normal deviates (xorshift64* + Box–Muller).
-struct Noise(u64);
-
-impl Noise {
-    fn uniform(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        ((self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-    }
-    fn normal(&mut self) -> f64 {
-        (-2.0 * self.uniform().ln()).sqrt() * (std::f64::consts::TAU * self.uniform()).cos()
-    }
-}
 
 /// Known radiance (normalised signal per second at ISO 100) spanning 3.5 decades.
 fn radiance(x: usize, y: usize, c: usize) -> f64 {
@@ -68,7 +56,7 @@ fn sidecar(shutter_s: f64, response: Response) -> Sidecar {
 fn linear_frame(
     shutter_s: f64,
     noise: &NoiseModel,
-    rng: &mut Noise,
+    rng: &mut Rng,
     scene: impl Fn(usize, usize, usize) -> f64,
 ) -> Frame {
     let mut data = Vec::with_capacity(W * H * 3);
@@ -96,7 +84,7 @@ fn linear_frame(
 }
 
 fn bracket(shutters: &[f64], scene: impl Fn(usize, usize, usize) -> f64 + Copy) -> Vec<Frame> {
-    let mut rng = Noise(0x9e37_79b9_7f4a_7c15);
+    let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
     let noise = NoiseModel::default();
     shutters
         .iter()

@@ -21,23 +21,11 @@ use std::process::Command;
 use gonio_processing::capture::{Frame, Response, Sidecar};
 use gonio_processing::hdr::{self, MergeMethod, MergeOptions};
 
+mod common;
+use common::Rng;
+
 const W: usize = 160;
 const H: usize = 120;
-
-/// Deterministic uniform and normal deviates (xorshift64* + Box–Muller).
-struct Rng(u64);
-
-impl Rng {
-    fn uniform(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        ((self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-    }
-    fn normal(&mut self) -> f64 {
-        (-2.0 * self.uniform().ln()).sqrt() * (std::f64::consts::TAU * self.uniform()).cos()
-    }
-}
 
 /// Camera: a filmic response (gamma 2.2 with a soft S), shot and read noise on the
 /// normalised exposure x (1 = clipping), 8-bit quantisation.

@@ -277,30 +277,26 @@ mod tests {
     fn caps_and_clipping_hold() {
         // MaxFunEvals is checked before each iteration, as in fminsearch: it may be
         // passed by at most the n + 1 evaluations of one shrink.
-        let capped = Settings {
+        let capped = |settings: Settings| {
+            let free = [f64::NEG_INFINITY, f64::INFINITY];
+            minimize(
+                rosenbrock,
+                &[-1.2, 1.0],
+                &[free[0]; 2],
+                &[free[1]; 2],
+                &settings,
+            )
+        };
+        let found = capped(Settings {
             max_fun_evals: 40,
             ..Settings::fminsearch(2)
-        };
-        let found = minimize(
-            rosenbrock,
-            &[-1.2, 1.0],
-            &[f64::NEG_INFINITY; 2],
-            &[f64::INFINITY; 2],
-            &capped,
-        );
+        });
         assert_eq!(found.stop, Stop::MaxFunEvals);
         assert!((40..=42).contains(&found.evaluations));
-        let capped = Settings {
+        let found = capped(Settings {
             max_iter: 10,
             ..Settings::fminsearch(2)
-        };
-        let found = minimize(
-            rosenbrock,
-            &[-1.2, 1.0],
-            &[f64::NEG_INFINITY; 2],
-            &[f64::INFINITY; 2],
-            &capped,
-        );
+        });
         assert_eq!((found.stop, found.iterations), (Stop::MaxIter, 10));
         // The unconstrained minimum (1, 1) lies outside x ≤ 0.5: the search ends on the
         // bound, at the constrained minimum (0.5, 0.25), and never evaluates outside.

@@ -51,7 +51,7 @@ pub(super) struct Curve {
 }
 
 /// Debevec–Malik hat of level z: z for the lower half, 255 − z for the upper (0 at the ends).
-pub(super) fn hat(z: usize) -> f64 {
+fn hat(z: usize) -> f64 {
     z.min(TOP - z) as f64
 }
 
@@ -61,7 +61,7 @@ fn usable(z: usize) -> bool {
 
 /// The linear response g(z) = ln(z/128) (level 0 as level 1), for a channel that nothing
 /// constrains, with hat weights.
-pub(super) fn linear() -> Curve {
+fn linear() -> Curve {
     Curve {
         g: std::array::from_fn(|z| (z.max(1) as f64 / MID as f64).ln()),
         weight: std::array::from_fn(hat),
