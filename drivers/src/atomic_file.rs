@@ -14,7 +14,13 @@ pub enum AtomicWriteError<E> {
     #[error("{0}")]
     Write(E),
     #[error("I/O: {0}")]
-    Io(#[from] io::Error),
+    Io(io::Error),
+}
+
+impl<E> From<io::Error> for AtomicWriteError<E> {
+    fn from(error: io::Error) -> Self {
+        AtomicWriteError::Io(error)
+    }
 }
 
 /// Write `bytes` to `path` atomically. On error the temporary is removed.

@@ -7,7 +7,7 @@ use thiserror::Error;
 #[derive(Debug, Error)]
 pub enum DeviceError {
     #[error("I/O error: {0}")]
-    Io(#[from] std::io::Error),
+    Io(std::io::Error),
     #[error("timed out after {seconds:.1} s waiting for {what}")]
     Timeout { what: String, seconds: f64 },
     #[error("rejected with error:{code} ({meaning})")]
@@ -31,6 +31,14 @@ pub enum DeviceError {
     NotFound(String),
     #[error("protocol error: {0}")]
     Protocol(String),
+}
+
+// Messages quote their cause instead of returning it as `source()`, so that a chain
+// printer shows it once (docs/ARCHITECTURE.md, "Errors").
+impl From<std::io::Error> for DeviceError {
+    fn from(error: std::io::Error) -> Self {
+        DeviceError::Io(error)
+    }
 }
 
 impl DeviceError {

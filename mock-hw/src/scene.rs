@@ -19,10 +19,10 @@ use spectral::{CameraDomain, Spectrum};
 /// Why a scene could not be loaded.
 #[derive(Debug, Error)]
 pub enum SceneError {
-    #[error("cannot read {path}: {source}")]
+    #[error("cannot read {path}: {error}")]
     Io {
         path: PathBuf,
-        source: std::io::Error,
+        error: std::io::Error,
     },
     #[error("scene {origin}: {message}")]
     Parse { origin: String, message: String },
@@ -475,9 +475,9 @@ const BLUE_GREEN: &str = include_str!("../scenes/blue-green.toml");
 impl Scene {
     /// Reads a scene file; relative paths inside resolve against its directory.
     pub fn load(path: &Path) -> Result<Scene, SceneError> {
-        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
+        let text = std::fs::read_to_string(path).map_err(|error| SceneError::Io {
             path: path.to_path_buf(),
-            source,
+            error,
         })?;
         let base = path.parent().unwrap_or(Path::new("."));
         Self::parse(&text, &path.display().to_string(), base)

@@ -113,15 +113,15 @@ impl Sidecar {
 pub enum CaptureError {
     #[error("{image}: sidecar {sidecar} is missing")]
     MissingSidecar { image: PathBuf, sidecar: PathBuf },
-    #[error("{path}: cannot read sidecar: {source}")]
+    #[error("{path}: cannot read sidecar: {error}")]
     SidecarIo {
         path: PathBuf,
-        source: std::io::Error,
+        error: std::io::Error,
     },
-    #[error("{path}: invalid sidecar JSON: {source}")]
+    #[error("{path}: invalid sidecar JSON: {error}")]
     SidecarJson {
         path: PathBuf,
-        source: serde_json::Error,
+        error: serde_json::Error,
     },
     #[error("{path}: sidecar field '{field}': {reason}")]
     InvalidSidecar {
@@ -185,12 +185,12 @@ pub fn read_sidecar(image: &Path) -> Result<Sidecar, CaptureError> {
                 sidecar: path,
             })
         }
-        Err(source) => return Err(CaptureError::SidecarIo { path, source }),
+        Err(error) => return Err(CaptureError::SidecarIo { path, error }),
     };
     let sidecar: Sidecar =
-        serde_json::from_str(&text).map_err(|source| CaptureError::SidecarJson {
+        serde_json::from_str(&text).map_err(|error| CaptureError::SidecarJson {
             path: path.clone(),
-            source,
+            error,
         })?;
     sidecar.validate(&path)?;
     Ok(sidecar)
@@ -218,7 +218,7 @@ pub fn write_tiff_capture(
         .map_err(|e| image_error(e.to_string()))?;
     let json = serde_json::to_string_pretty(sidecar).map_err(|e| image_error(e.to_string()))?;
     let side = sidecar_path(path);
-    fs::write(&side, json).map_err(|source| CaptureError::SidecarIo { path: side, source })
+    fs::write(&side, json).map_err(|error| CaptureError::SidecarIo { path: side, error })
 }
 
 /// Decoded file contents before the sidecar is applied.

@@ -71,22 +71,19 @@ impl Default for ExtractOptions {
 pub enum ExtractError {
     #[error("{path}: {reason}")]
     Setup { path: PathBuf, reason: String },
-    #[error("{path}: invalid setup: {source}")]
-    Geometry {
-        path: PathBuf,
-        source: GeometryError,
-    },
-    #[error("{path}: cannot list directory: {source}")]
+    #[error("{path}: invalid setup: {error}")]
+    Geometry { path: PathBuf, error: GeometryError },
+    #[error("{path}: cannot list directory: {error}")]
     Walk {
         path: PathBuf,
-        source: std::io::Error,
+        error: std::io::Error,
     },
     #[error("{dir}: no captures (image files with a .json sidecar) found")]
     NoCaptures { dir: PathBuf },
     #[error(transparent)]
     Capture(#[from] CaptureError),
-    #[error("θL {theta_l}°: {source}")]
-    Hdr { theta_l: f64, source: HdrError },
+    #[error("θL {theta_l}°: {error}")]
+    Hdr { theta_l: f64, error: HdrError },
     #[error("θL {theta_l}°: captures are {width}×{height}, but the setup is {setup_width}×{setup_height} (or half of it)")]
     SizeMismatch {
         theta_l: f64,
@@ -186,9 +183,9 @@ pub fn extract_scan_with_progress(
         });
     }
     if let Some(hdr_dir) = &options.hdr_dir {
-        fs::create_dir_all(hdr_dir).map_err(|source| ExtractError::Walk {
+        fs::create_dir_all(hdr_dir).map_err(|error| ExtractError::Walk {
             path: hdr_dir.clone(),
-            source,
+            error,
         })?;
     }
     let total = groups.len();
@@ -225,10 +222,10 @@ pub fn extract_scan_with_progress(
         let layout = frames[0].1;
         let frames: Vec<Frame> = frames.into_iter().map(|(frame, _)| frame).collect();
         let map = hdr::merge(&frames, &options.merge)
-            .map_err(|source| ExtractError::Hdr { theta_l, source })?;
+            .map_err(|error| ExtractError::Hdr { theta_l, error })?;
         if let Some(hdr_dir) = &options.hdr_dir {
             map.write_exr(&hdr_dir.join(format!("theta_l_{theta_l:.1}.exr")))
-                .map_err(|source| ExtractError::Hdr { theta_l, source })?;
+                .map_err(|error| ExtractError::Hdr { theta_l, error })?;
         }
         let (samples, dropped) = extract_theta(&setup, &map, &layout, theta_l, options);
         extraction.per_theta.push(ThetaSummary {
@@ -279,17 +276,17 @@ pub fn read_setup(path: &Path) -> Result<Setup, ExtractError> {
     let text = fs::read_to_string(path).map_err(|e| setup_error(format!("cannot read: {e}")))?;
     let setup: Setup =
         serde_json::from_str(&text).map_err(|e| setup_error(format!("invalid setup JSON: {e}")))?;
-    setup.validate().map_err(|source| ExtractError::Geometry {
+    setup.validate().map_err(|error| ExtractError::Geometry {
         path: path.to_path_buf(),
-        source,
+        error,
     })?;
     Ok(setup)
 }
 
 fn find_captures(dir: &Path, out: &mut Vec<PathBuf>) -> Result<(), ExtractError> {
-    let walk_error = |source| ExtractError::Walk {
+    let walk_error = |error| ExtractError::Walk {
         path: dir.to_path_buf(),
-        source,
+        error,
     };
     for entry in fs::read_dir(dir).map_err(walk_error)? {
         let entry = entry.map_err(walk_error)?;

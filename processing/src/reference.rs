@@ -20,10 +20,10 @@ use crate::color::{CameraModel, ColorError};
 /// Errors reading reference data.
 #[derive(Debug, Error)]
 pub enum ReferenceError {
-    #[error("{path}: {source}")]
+    #[error("{path}: {error}")]
     Io {
         path: PathBuf,
-        source: std::io::Error,
+        error: std::io::Error,
     },
     #[error("{name}: line {line}: {reason}")]
     Parse {
@@ -31,8 +31,8 @@ pub enum ReferenceError {
         line: usize,
         reason: String,
     },
-    #[error("{name}: {source}")]
-    Color { name: String, source: ColorError },
+    #[error("{name}: {error}")]
+    Color { name: String, error: ColorError },
     #[error("{name}: no rows")]
     Empty { name: String },
 }
@@ -119,9 +119,9 @@ pub struct Reference {
 impl Reference {
     /// Reads a reference CSV and converts it with the built-in camera model.
     pub fn read_csv(path: &Path) -> Result<Self, ReferenceError> {
-        let file = std::fs::File::open(path).map_err(|source| ReferenceError::Io {
+        let file = std::fs::File::open(path).map_err(|error| ReferenceError::Io {
             path: path.to_path_buf(),
-            source,
+            error,
         })?;
         Self::from_reader(file, &path.display().to_string(), &CameraModel::builtin())
     }
@@ -211,9 +211,9 @@ impl Reference {
             }
             let rgb = camera
                 .camera_rgb(&spectrum)
-                .map_err(|source| ReferenceError::Color {
+                .map_err(|error| ReferenceError::Color {
                     name: name.to_string(),
-                    source,
+                    error,
                 })?;
             points.push(ReferencePoint {
                 theta_i,

@@ -54,14 +54,20 @@ pub enum StudyError {
     #[error("the column stride must be at least 1")]
     ZeroStride,
     #[error("reference at the sample angles: {0}")]
-    Reference(#[from] MetricsError),
-    #[error("cannot write {path}: {source}")]
+    Reference(MetricsError),
+    #[error("cannot write {path}: {error}")]
     Io {
         path: PathBuf,
-        source: std::io::Error,
+        error: std::io::Error,
     },
     #[error(transparent)]
     Figure(#[from] FigureError),
+}
+
+impl From<MetricsError> for StudyError {
+    fn from(error: MetricsError) -> Self {
+        StudyError::Reference(error)
+    }
 }
 
 /// A model with its roughness form: one fitted variant of a study.
@@ -444,9 +450,9 @@ pub fn write_outputs(
     dir: &Path,
     name: &str,
 ) -> Result<Vec<PathBuf>, StudyError> {
-    std::fs::create_dir_all(dir).map_err(|source| StudyError::Io {
+    std::fs::create_dir_all(dir).map_err(|error| StudyError::Io {
         path: dir.to_path_buf(),
-        source,
+        error,
     })?;
     let mut written = write_tables(report, dir)?;
     written.extend(write_figures(report, dir, name)?);

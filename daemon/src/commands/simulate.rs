@@ -31,12 +31,12 @@ pub struct Args {
 }
 
 /// A built-in scene by name, otherwise a scene file.
-fn load_scene(spec: &str) -> anyhow::Result<Scene> {
+pub fn load_scene(spec: &str) -> anyhow::Result<Scene> {
     match Scene::builtin(spec) {
         Some(scene) => Ok(scene),
         None => Scene::load(Path::new(spec)).with_context(|| {
             format!(
-                "loading scene `{spec}` (built-in scenes: {})",
+                "not a built-in scene ({}), read as a file",
                 Scene::BUILTIN.join(", ")
             )
         }),

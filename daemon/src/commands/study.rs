@@ -72,10 +72,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             args.local_minimum_margin
         );
     }
-    let samples = samples::read_csv(&args.samples)
-        .with_context(|| format!("reading samples {}", args.samples.display()))?;
-    let reference = Reference::read_csv(&args.reference)
-        .with_context(|| format!("reading reference {}", args.reference.display()))?;
+    // Both readers name the file in their errors.
+    let samples = samples::read_csv(&args.samples)?;
+    let reference = Reference::read_csv(&args.reference)?;
     let mut variants = Vec::new();
     for &model in &args.models {
         for &roughness in args.roughness.forms() {

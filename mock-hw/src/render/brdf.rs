@@ -154,9 +154,9 @@ pub struct Table {
 
 impl Table {
     fn read(path: &Path, domain: &CameraDomain) -> Result<Self, SceneError> {
-        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
+        let text = std::fs::read_to_string(path).map_err(|error| SceneError::Io {
             path: path.to_path_buf(),
-            source,
+            error,
         })?;
         let what = path.display().to_string();
         let bad = |line: usize, reason: String| SceneError::Table {

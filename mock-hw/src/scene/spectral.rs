@@ -45,9 +45,9 @@ pub fn nikon_d5100() -> [Spectrum; 3] {
 /// Reads a table with a header line and rows `wavelength_nm,v1,..,vN` covering exactly
 /// 390–730 nm in 10 nm steps.
 pub fn read_table<const N: usize>(path: &Path) -> Result<[Spectrum; N], SceneError> {
-    let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
+    let text = std::fs::read_to_string(path).map_err(|error| SceneError::Io {
         path: path.to_path_buf(),
-        source,
+        error,
     })?;
     parse_table::<N>(&text, &path.display().to_string())
 }

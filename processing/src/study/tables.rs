@@ -15,9 +15,9 @@ use super::boxplot::BoxStats;
 use super::{StudyError, StudyReport};
 
 fn write_file(path: PathBuf, text: &str) -> Result<PathBuf, StudyError> {
-    std::fs::write(&path, text).map_err(|source| StudyError::Io {
+    std::fs::write(&path, text).map_err(|error| StudyError::Io {
         path: path.clone(),
-        source,
+        error,
     })?;
     Ok(path)
 }

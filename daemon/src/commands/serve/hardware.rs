@@ -90,11 +90,7 @@ fn emulated_arm_config(limits: Limits, emulator: &GrblConfig) -> GrblArmConfig {
 
 /// Loads a scene by builtin name or file path.
 fn load_scene(name_or_path: &str) -> anyhow::Result<Scene> {
-    if let Some(scene) = Scene::builtin(name_or_path) {
-        return Ok(scene);
-    }
-    Scene::load(Path::new(name_or_path))
-        .with_context(|| format!("camera.scene {name_or_path:?}: not a builtin scene, and"))
+    crate::commands::simulate::load_scene(name_or_path).context("camera.scene")
 }
 
 /// Opens the devices of `config`.

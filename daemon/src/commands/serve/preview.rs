@@ -17,10 +17,10 @@ const THUMBNAIL_SIZE: u32 = 360;
 /// Errors of the previews.
 #[derive(Debug, thiserror::Error)]
 pub enum PreviewError {
-    #[error("{path}: {source}")]
+    #[error("{path}: {error}")]
     Image {
         path: String,
-        source: image::ImageError,
+        error: image::ImageError,
     },
     #[error("{0}")]
     Processing(String),
@@ -30,9 +30,9 @@ pub enum PreviewError {
 /// black level removed, normalised to its 99.5th percentile and gamma-encoded so dark
 /// frames stay visible.
 pub fn thumbnail_png(path: &Path) -> Result<Vec<u8>, PreviewError> {
-    let image_err = |source| PreviewError::Image {
+    let image_err = |error| PreviewError::Image {
         path: path.display().to_string(),
-        source,
+        error,
     };
     let capture = Frame::read(path).map_err(|e| PreviewError::Processing(e.to_string()))?;
     let black = capture.black_level.clamp(0.0, f64::from(u16::MAX)) as u16;

@@ -14,11 +14,11 @@ use super::plan::{ScanPlan, Step};
 #[derive(Debug, thiserror::Error)]
 pub enum StoreError {
     #[error("database: {0}")]
-    Sql(#[from] rusqlite::Error),
-    #[error("stored JSON of {what}: {source}")]
+    Sql(rusqlite::Error),
+    #[error("stored JSON of {what}: {error}")]
     Json {
         what: &'static str,
-        source: serde_json::Error,
+        error: serde_json::Error,
     },
     #[error("unknown state {0:?} in the database")]
     State(String),
@@ -30,8 +30,14 @@ pub enum StoreError {
 /// after itself (the captures of a metered bracket).
 const STEP_SPACING: u32 = 1000;
 
+impl From<rusqlite::Error> for StoreError {
+    fn from(error: rusqlite::Error) -> Self {
+        StoreError::Sql(error)
+    }
+}
+
 fn json_err(what: &'static str) -> impl FnOnce(serde_json::Error) -> StoreError {
-    move |source| StoreError::Json { what, source }
+    move |error| StoreError::Json { what, error }
 }
 
 /// Life cycle of a scan.

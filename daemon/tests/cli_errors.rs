@@ -1,0 +1,75 @@
+//! Every offline command reports a missing input in one line that names the file and
+//! its cause once (an error that quotes its cause does not also chain it).
+
+use std::process::Command;
+
+const NOT_FOUND: &str = "No such file or directory";
+
+/// Runs `gonio args` in `dir`, expects failure, returns stderr.
+fn failing(dir: &std::path::Path, args: &[&str]) -> String {
+    let output = Command::new(env!("CARGO_BIN_EXE_gonio"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .expect("gonio runs");
+    assert!(!output.status.success(), "{args:?} succeeded");
+    String::from_utf8_lossy(&output.stderr).into_owned()
+}
+
+fn assert_once(stderr: &str, needle: &str) {
+    assert_eq!(
+        stderr.matches(needle).count(),
+        1,
+        "`{needle}` should appear once in: {stderr}"
+    );
+}
+
+#[test]
+fn missing_inputs_are_named_once_with_their_cause_once() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("header.csv"),
+        "theta_l,theta_i,theta_r,r,g,b\n",
+    )
+    .unwrap();
+    let cases: &[(&[&str], &str)] = &[
+        (
+            &["simulate", "--scene", "silver", "--out", "scan"],
+            "silver",
+        ),
+        (&["tradeoff", "--scene", "silver", "--out", "t"], "silver"),
+        (
+            &["fit", "missing.csv", "--model", "ward", "--out", "f.json"],
+            "missing.csv",
+        ),
+        (
+            &["study", "missing.csv", "--reference", "r.csv", "--out", "s"],
+            "missing.csv",
+        ),
+        (
+            &[
+                "study",
+                "header.csv",
+                "--reference",
+                "ref.csv",
+                "--out",
+                "s",
+            ],
+            "ref.csv",
+        ),
+        (&["extract", "nowhere", "--out", "s.csv"], "nowhere"),
+    ];
+    for (args, path) in cases {
+        let stderr = failing(dir.path(), args);
+        assert!(stderr.starts_with("error: "), "{args:?}: {stderr}");
+        assert_eq!(stderr.trim_end().lines().count(), 1, "{args:?}: {stderr}");
+        assert_once(&stderr, NOT_FOUND);
+        assert_once(&stderr, path);
+    }
+    // The message the chain used to repeat.
+    let stderr = failing(dir.path(), &["simulate", "--scene", "silver", "--out", "x"]);
+    assert!(
+        stderr.contains(&format!("cannot read silver: {NOT_FOUND}")),
+        "{stderr}"
+    );
+}
