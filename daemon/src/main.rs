@@ -1,8 +1,10 @@
 //! `gonio`: the measurement daemon (`serve`) and the offline processing commands.
 
 mod commands;
+mod interrupt;
+mod progress;
 
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 
 /// Image-based BRDF measurement: acquire, process, emulate.
 #[derive(Parser)]
@@ -31,7 +33,12 @@ enum Command {
 }
 
 fn main() {
-    let cli = Cli::parse();
+    let matches = Cli::command().get_matches();
+    let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|err| err.exit());
+    match matches.subcommand_name() {
+        Some("serve") | None => {}
+        Some(name) => interrupt::install(name.to_owned()),
+    }
     let result = match cli.command {
         Command::Serve(args) => commands::serve::run(args),
         Command::Simulate(args) => commands::simulate::run(args),

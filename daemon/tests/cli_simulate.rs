@@ -76,15 +76,18 @@ fn simulate_writes_a_complete_scan() {
             assert_eq!(sidecar["iso"], 100);
             assert_eq!(sidecar["theta_l"], theta_l.parse::<f64>().unwrap());
             assert_eq!(sidecar["camera"], "Tiny body");
+            // The 12-bit counts are stored in the top 12 bits; levels in stored units.
             assert_eq!(sidecar["black_level"], 0);
-            assert_eq!(sidecar["white_level"], 4095);
+            assert_eq!(sidecar["white_level"], 4095 * 16);
+            assert_eq!(sidecar["significant_bits"], 12);
             assert!(sidecar.get("response").is_none());
             assert!(sidecar["time"].as_str().unwrap().contains('T'));
             let image = image::open(stem.with_extension("tiff")).unwrap();
             assert_eq!((image.width(), image.height()), (400, 120));
             let rgb = image.to_rgb16();
             // Between the strips: dark, only read noise.
-            assert!(rgb.get_pixel(200, 60).0.iter().all(|v| *v <= 10));
+            assert!(rgb.get_pixel(200, 60).0.iter().all(|v| *v <= 10 * 16));
+            assert!(rgb.pixels().all(|p| p.0.iter().all(|v| v % 16 == 0)));
         }
     }
     // Longer exposures collect more light on the white strip.

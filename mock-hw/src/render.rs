@@ -33,12 +33,15 @@ use crate::scene::Scene;
 use brdf::Geom;
 use effects::NoiseModel;
 
-/// A 16-bit RGB image, rows top to bottom, channels interleaved.
+/// An RGB image of sensor counts, rows top to bottom, channels interleaved, and how
+/// they are stored in a 16-bit file.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Frame16 {
     width: u32,
     height: u32,
     data: Vec<u16>,
+    /// Left shift from a count to its stored value (16 − bit depth for linear counts).
+    shift: u32,
 }
 
 impl Frame16 {
@@ -50,7 +53,7 @@ impl Frame16 {
         self.height
     }
 
-    /// Interleaved R, G, B values, row-major.
+    /// Interleaved R, G, B sensor counts (or the 8-bit response's codes ×257), row-major.
     pub fn data(&self) -> &[u16] {
         &self.data
     }
@@ -61,15 +64,30 @@ impl Frame16 {
         [self.data[i], self.data[i + 1], self.data[i + 2]]
     }
 
-    /// Encodes as an RGB 16-bit TIFF (LZW with horizontal differencing).
+    /// The values as stored in the file: counts in the top bits of 16 (an N-bit count
+    /// times 2^(16−N)), so that the file spans the 16-bit range.
+    pub fn stored(&self) -> Vec<u16> {
+        self.data.iter().map(|&v| v << self.shift).collect()
+    }
+
+    /// Encodes as an RGB 16-bit TIFF that common readers decode with no extra codec
+    /// (docs/ARCHITECTURE.md, "Captures"): Deflate with horizontal differencing, values
+    /// as [`Frame16::stored`].
     pub fn encode_tiff(&self) -> std::io::Result<Vec<u8>> {
-        use tiff::encoder::{colortype::RGB16, Compression, Predictor, TiffEncoder};
+        use tiff::encoder::{colortype::RGB16, Compression, DeflateLevel, Predictor, TiffEncoder};
+        let stored;
+        let values = if self.shift == 0 {
+            &self.data
+        } else {
+            stored = self.stored();
+            &stored
+        };
         let mut out = Cursor::new(Vec::new());
         TiffEncoder::new(&mut out)
             .and_then(|e| {
-                e.with_compression(Compression::Lzw)
+                e.with_compression(Compression::Deflate(DeflateLevel::Fast))
                     .with_predictor(Predictor::Horizontal)
-                    .write_image::<RGB16>(self.width, self.height, &self.data)
+                    .write_image::<RGB16>(self.width, self.height, values)
             })
             .map_err(|e| std::io::Error::other(format!("TIFF encoding: {e}")))?;
         Ok(out.into_inner())
@@ -94,10 +112,26 @@ pub struct Shot {
 /// How the stored values relate to light, as the capture sidecar states it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct FileLevels {
+    /// Black level in stored units.
     pub black_level: u32,
+    /// White (clipping) level in stored units.
     pub white_level: u32,
     /// `true`: the 8-bit non-linear response (sidecar `"response":"nonlinear"`).
     pub nonlinear: bool,
+    /// Bits of each stored 16-bit value that carry signal, at its top: the sensor's bit
+    /// depth, or 8 for the non-linear response (each code stored ×257).
+    pub significant_bits: u32,
+}
+
+impl FileLevels {
+    /// Left shift from a rendered count to its stored value.
+    fn shift(&self) -> u32 {
+        if self.nonlinear {
+            0
+        } else {
+            16 - self.significant_bits
+        }
+    }
 }
 
 /// The levels of the files `scene` renders.
@@ -107,12 +141,18 @@ pub fn file_levels(scene: &Scene) -> FileLevels {
             black_level: 0,
             white_level: 65_535,
             nonlinear: true,
+            significant_bits: 8,
         },
-        None => FileLevels {
-            black_level: scene.camera().black_level,
-            white_level: scene.camera().white_level,
-            nonlinear: false,
-        },
+        None => {
+            let camera = scene.camera();
+            let shift = 16 - camera.bit_depth;
+            FileLevels {
+                black_level: camera.black_level << shift,
+                white_level: camera.white_level << shift,
+                nonlinear: false,
+                significant_bits: camera.bit_depth,
+            }
+        }
     }
 }
 
@@ -353,5 +393,6 @@ pub fn render(scene: &Scene, shot: &Shot) -> Frame16 {
         width,
         height,
         data,
+        shift: file_levels(scene).shift(),
     }
 }

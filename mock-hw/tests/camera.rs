@@ -133,16 +133,16 @@ fn capture_renders_at_the_arm_angle_and_takes_its_time() {
     let (w, h, data) = read_tiff(&capture.path);
     assert_eq!((w, h), (400, 120));
     let expected = render_frame(cam.scene(), -25.0, exposure.shutter_s);
-    assert_eq!(data, expected.data());
+    assert_eq!(data, expected.stored());
 
     world.set_arm_deg(-40.0);
     let moved = cam.capture_to(&dir.path().join("b.tiff")).unwrap();
     let (_, _, data) = read_tiff(&moved.path);
     assert_eq!(
         data,
-        render_frame(cam.scene(), -40.0, exposure.shutter_s).data()
+        render_frame(cam.scene(), -40.0, exposure.shutter_s).stored()
     );
-    assert_ne!(data, expected.data());
+    assert_ne!(data, expected.stored());
     assert_eq!(
         entries(dir.path()),
         ["a.tiff", "b.tiff"],

@@ -50,6 +50,7 @@ fn write_synthetic_scan(dir: &Path) {
                 black_level: Some(0.0),
                 white_level: Some(4095.0),
                 response: Response::Linear,
+                significant_bits: None,
                 width: None,
                 height: None,
             };

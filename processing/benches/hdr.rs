@@ -48,6 +48,7 @@ fn frame(shutter_s: f64, response: Response) -> Frame {
         black_level: Some(black),
         white_level: Some(white),
         response,
+        significant_bits: None,
         width: None,
         height: None,
     };

@@ -19,6 +19,8 @@ use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
 
+use crate::color::WHITE_BETA_G;
+
 /// Cosines below this count as at or past grazing.
 const COS_GRAZING: f64 = 1e-9;
 /// Smallest cos α used in tan²α.
@@ -176,6 +178,22 @@ impl Model {
         }
     }
 
+    /// The diffuse term's weight a in β_d = Kd·a: 1 for Cook–Torrance (eq. 6), 1/π for
+    /// Ward (eq. 7). The papers' two models put Kd on scales π apart.
+    pub fn diffuse_weight(self) -> f64 {
+        match self {
+            Model::CookTorrance => 1.0,
+            Model::Ward => 1.0 / PI,
+        }
+    }
+
+    /// The diffuse albedo ρd per channel of a fit with diffuse coefficients `kd`: the
+    /// diffuse radiance factor β_d = Kd·a over a perfect white's β_G = 100, so that both
+    /// models report it on one scale (docs/ARCHITECTURE.md, "Quantities and models").
+    pub fn diffuse_albedo(self, kd: [f64; 3]) -> [f64; 3] {
+        kd.map(|k| k * self.diffuse_weight() / WHITE_BETA_G)
+    }
+
     /// The linear basis of the model at in-plane (θi, θr) in degrees.
     pub fn basis(self, theta_i_deg: f64, theta_r_deg: f64) -> Basis {
         self.basis_at(&Cosines::in_plane(theta_i_deg, theta_r_deg))
@@ -216,13 +234,13 @@ impl Model {
                 let shadowing = 2.0 * cos_alpha * cos_i / v_dot_h;
                 let g = 1f64.min(masking).min(shadowing);
                 Basis {
-                    diffuse: 1.0,
+                    diffuse: self.diffuse_weight(),
                     tan2_alpha,
                     gain: g / (PI * cos_alpha2 * cos_alpha2 * cos_i * cos_r),
                 }
             }
             Model::Ward => Basis {
-                diffuse: 1.0 / PI,
+                diffuse: self.diffuse_weight(),
                 tan2_alpha,
                 gain: 1.0 / (4.0 * PI * (cos_i * cos_r).sqrt()),
             },

@@ -47,6 +47,11 @@ pub struct Sidecar {
     pub white_level: Option<f64>,
     #[serde(default)]
     pub response: Response,
+    /// How many of the 16 bits of a TIFF value carry signal, at its top: an N-bit
+    /// sensor count is stored times 2^(16−N) (docs/ARCHITECTURE.md, "File formats").
+    /// Informative; the levels above are in stored units.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub significant_bits: Option<u32>,
     /// Image width in pixels as stored in the file, checked when present.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub width: Option<u32>,
@@ -93,6 +98,14 @@ impl Sidecar {
                 "theta_l",
                 format!("{} is not an angle in [-180, 180] degrees", self.theta_l),
             ));
+        }
+        if let Some(bits) = self.significant_bits {
+            if !(1..=16).contains(&bits) {
+                return Err(bad(
+                    "significant_bits",
+                    format!("{bits} is not a bit count in 1..=16"),
+                ));
+            }
         }
         for (field, level) in [
             ("black_level", self.black_level),

@@ -20,6 +20,9 @@ const NIKON_D5100_CSV: &str =
 /// First and last wavelength (nm) of the eq. 4/5 sums.
 pub const SUM_RANGE_NM: (f64, f64) = (400.0, 700.0);
 
+/// β_G of a perfect reflecting diffuser: the camera-RGB domain's scale (eq. 5).
+pub const WHITE_BETA_G: f64 = 100.0;
+
 /// Errors of spectral tables and spectra.
 #[derive(Debug, Error)]
 pub enum ColorError {
@@ -167,7 +170,7 @@ impl CameraModel {
                 what: "Σ ḡ(λ) I(λ)".into(),
             });
         }
-        let k = 100.0 / g_sum;
+        let k = WHITE_BETA_G / g_sum;
         let mut white_rgb = [0.0; 3];
         for s in &weighted_sensitivity {
             for c in 0..3 {

@@ -144,6 +144,11 @@ pub struct FitResult {
     pub kd: [f64; 3],
     pub ks: [f64; 3],
     pub m: FittedRoughness,
+    /// Diffuse albedo per channel, on one scale for every model
+    /// ([`Model::diffuse_albedo`] of `kd`); `None` only in fit files written before it
+    /// was added.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rho_d: Option<[f64; 3]>,
     /// Eq. 10 loss at the fitted parameters.
     pub loss: f64,
     /// Eq. 11 per channel on the fitted samples.
@@ -295,6 +300,7 @@ pub fn fit(samples: &[Sample], options: &FitOptions) -> Result<FitResult, FitErr
         kd: params.kd,
         ks: params.ks,
         m,
+        rho_d: Some(options.model.diffuse_albedo(params.kd)),
         loss: data.loss(&params),
         err_p,
         method: options.method,

@@ -15,6 +15,7 @@ fn sidecar() -> Sidecar {
         black_level: None,
         white_level: None,
         response: Response::Linear,
+        significant_bits: None,
         width: None,
         height: None,
     }

@@ -90,6 +90,7 @@ fn write_scan(dir: &Path, theta_ls: &[f64], scene: &Scene) {
                 black_level: Some(black),
                 white_level: Some(white),
                 response: Response::Linear,
+                significant_bits: None,
                 width: Some(W),
                 height: Some(H),
             };

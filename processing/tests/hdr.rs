@@ -47,6 +47,7 @@ fn sidecar(shutter_s: f64, response: Response) -> Sidecar {
         black_level: Some(BLACK),
         white_level: Some(WHITE),
         response,
+        significant_bits: None,
         width: None,
         height: None,
     }

@@ -107,6 +107,8 @@ pub struct Daemon {
     /// Base URL, e.g. `http://127.0.0.1:40123`.
     pub url: String,
     pub data: PathBuf,
+    /// The daemon's stderr (its log).
+    pub log: PathBuf,
     stdout_lines: Vec<String>,
 }
 
@@ -138,14 +140,14 @@ impl Daemon {
 
     fn spawn(dir: &Path, config: &Path) -> Daemon {
         let data = dir.join("data");
-        let log = std::fs::File::create(dir.join(format!(
+        let log_path = dir.join(format!(
             "daemon-{}.log",
             std::time::SystemTime::now()
                 .duration_since(std::time::UNIX_EPOCH)
                 .map(|d| d.as_millis())
                 .unwrap_or(0)
-        )))
-        .expect("creating the daemon log");
+        ));
+        let log = std::fs::File::create(&log_path).expect("creating the daemon log");
         let mut child = Command::new(gonio_bin())
             .arg("serve")
             .arg("--config")
@@ -192,6 +194,7 @@ impl Daemon {
             child,
             url,
             data,
+            log: log_path,
             stdout_lines,
         }
     }
@@ -205,6 +208,26 @@ impl Daemon {
     pub fn kill9(mut self) {
         self.child.kill().expect("killing the daemon");
         self.child.wait().expect("reaping the daemon");
+    }
+
+    /// Sends SIGINT (Ctrl-C) and waits for the process to end, at most `timeout`.
+    pub fn interrupt(mut self, timeout: Duration) -> std::process::ExitStatus {
+        let sent = Command::new("kill")
+            .args(["-INT", &self.child.id().to_string()])
+            .status()
+            .expect("running kill");
+        assert!(sent.success(), "kill -INT failed");
+        let deadline = Instant::now() + timeout;
+        loop {
+            if let Some(status) = self.child.try_wait().expect("waiting for the daemon") {
+                return status;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "the daemon still runs {timeout:?} after SIGINT"
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
     }
 
     fn request(&self, method: &str, path: &str, token: Option<&str>, body: Option<&str>) -> Answer {

@@ -141,6 +141,7 @@ fn concurrent_scans_run_one_after_the_other_and_controls_work() {
     let paused = daemon.post(&format!("/api/scans/{third}/pause"), &json!({}));
     assert_eq!(paused.status, 200, "{:?}", paused.json);
     assert_eq!(paused.json["state"], "paused");
+    assert_eq!(paused.json["actions"], json!(["resume", "cancel"]));
 
     let timeout = Duration::from_secs(90);
     let first = daemon.wait_state(ids[0].min(ids[1]), &["done", "failed"], timeout);

@@ -50,6 +50,8 @@ fn six_angle_scan_completes_and_its_fit_recovers_the_scene() {
 
     let scan = daemon.wait_state(id, &["done", "failed"], Duration::from_secs(120));
     assert_eq!(scan["state"], "done", "{scan}");
+    // A finished scan can no longer be paused, resumed or cancelled.
+    assert_eq!(scan["actions"], json!([]), "{scan}");
 
     // Progress events: monotonic, ending with the done scan.
     let events = events.join().unwrap();
@@ -94,6 +96,9 @@ fn six_angle_scan_completes_and_its_fit_recovers_the_scene() {
             let planned = capture["step"]["shutter_s"].as_f64().unwrap();
             assert!((sidecar["shutter_s"].as_f64().unwrap() - planned).abs() < 1e-9);
             assert!(sidecar["time"].as_str().is_some());
+            // The small scene's 12-bit counts sit in the top bits of the 16-bit TIFF.
+            assert_eq!(sidecar["significant_bits"], 12);
+            assert_eq!(sidecar["white_level"], 4095 * 16);
         }
         assert!(
             files.contains(&format!("hdr/theta_l_{theta:.1}.exr")),

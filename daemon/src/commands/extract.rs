@@ -5,7 +5,8 @@ use std::path::PathBuf;
 use anyhow::Context;
 use gonio_processing::extract::{self, ExtractOptions};
 use gonio_processing::samples;
-use indicatif::{ProgressBar, ProgressStyle};
+
+use crate::progress;
 
 /// Arguments of `gonio extract`.
 #[derive(clap::Args)]
@@ -33,10 +34,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         hdr_dir: args.hdr_dir,
         ..ExtractOptions::default()
     };
-    let bar = ProgressBar::new(0).with_style(
-        ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} θL, {elapsed}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
+    let bar = progress::bar(0, "θL");
     bar.set_message("extracting");
     let extraction = extract::extract_scan_with_progress(&args.dir, &options, |done, total| {
         bar.set_length(total as u64);

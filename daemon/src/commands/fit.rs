@@ -8,6 +8,8 @@ use gonio_processing::brdf::{Model, Roughness};
 use gonio_processing::fit::{self, FitMethod, FitOptions};
 use gonio_processing::samples::{self, Sample};
 
+use crate::progress;
+
 /// Two θL values closer than this (degrees) are the same illumination direction.
 const THETA_L_MATCH_DEG: f64 = 1e-6;
 
@@ -105,23 +107,42 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         MethodArg::NelderMead => FitMethod::NelderMead,
     };
     options.robust.polish = args.polish;
+    let spinner = progress::spinner(format!("fitting {} samples", selected.len()));
     let result = fit::fit(&selected, &options)
-        .with_context(|| format!("fitting {}", args.samples.display()))?;
+        .with_context(|| format!("fitting {}", args.samples.display()));
+    spinner.finish_and_clear();
+    let result = result?;
     let json = serde_json::to_string_pretty(&result).context("serialising the fit")?;
     std::fs::write(&args.out, json + "\n")
         .with_context(|| format!("writing {}", args.out.display()))?;
     let m = result.params().m;
     println!(
-        "{} ({}, {}) on {} samples: loss {:.6}, m = {:?}, {} evaluations in {:.3} s -> {}",
+        "{} ({}, {}) on {} samples: loss {:.6}, {} evaluations in {:.3} s -> {}",
         result.model,
         result.roughness,
         result.method,
         selected.len(),
         result.loss,
-        &m[..options.roughness.count()],
         result.evaluations,
         result.seconds,
         args.out.display(),
+    );
+    let rgb = |v: &[f64], precision: usize| {
+        v.iter()
+            .map(|x| format!("{x:.precision$}"))
+            .collect::<Vec<_>>()
+            .join(" ")
+    };
+    println!(
+        "  Kd {}  Ks {}  m {}",
+        rgb(&result.kd, 3),
+        rgb(&result.ks, 3),
+        rgb(&m[..options.roughness.count()], 4)
+    );
+    let albedo = result.model.diffuse_albedo(result.kd);
+    println!(
+        "  ρd {}  (diffuse albedo on one scale: Kd/100 for Cook–Torrance, Kd/(100π) for Ward)",
+        rgb(&albedo, 4)
     );
     Ok(())
 }

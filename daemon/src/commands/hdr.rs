@@ -6,6 +6,8 @@ use anyhow::Context;
 use gonio_processing::capture::Frame;
 use gonio_processing::hdr::{self, MergeMethod, MergeOptions, SATURATED, UNDEREXPOSED};
 
+use crate::progress;
+
 /// Merge method on the command line.
 #[derive(Clone, Copy, clap::ValueEnum)]
 enum Method {
@@ -32,11 +34,15 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    let bar = progress::bar(args.frames.len() as u64, "frames");
+    bar.set_message("decoding");
     let frames = args
         .frames
         .iter()
-        .map(|path| Frame::read(path))
+        .map(|path| Frame::read(path).inspect(|_| bar.inc(1)))
         .collect::<Result<Vec<_>, _>>()?;
+    bar.finish_and_clear();
+    let spinner = progress::spinner(format!("merging {} frames", frames.len()));
     let options = MergeOptions {
         method: match args.method {
             Method::Auto => MergeMethod::Auto,
@@ -46,8 +52,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ..MergeOptions::default()
     };
     let map = hdr::merge(&frames, &options)?;
+    spinner.set_message(format!("writing {}", args.out.display()));
     map.write_exr(&args.out)
         .with_context(|| format!("writing {}", args.out.display()))?;
+    spinner.finish_and_clear();
     println!(
         "merged {} frames ({}, {}×{}) into {}: {} saturated, {} underexposed pixels flagged",
         frames.len(),

@@ -6,9 +6,12 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use gonio_drivers::atomic_file::write_atomically;
+use gonio_drivers::camera_choice::format_shutter;
 use gonio_mock_hw::render::{self, reference};
 use gonio_mock_hw::scene::Scene;
 use gonio_processing::geometry::Setup;
+
+use crate::progress;
 
 /// Arguments of `gonio simulate`.
 #[derive(clap::Args)]
@@ -50,6 +53,17 @@ fn write_json(path: &Path, value: &serde_json::Value) -> anyhow::Result<()> {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    let out = args.out.clone();
+    let (count, scene) = render_scan(args)?;
+    println!(
+        "{count} captures of scene `{scene}` written to {}",
+        out.display()
+    );
+    Ok(())
+}
+
+/// Writes the scan `args` asks for; returns the number of captures and the scene's name.
+pub fn render_scan(args: Args) -> anyhow::Result<(usize, String)> {
     let mut scene = load_scene(&args.scene)?;
     if args.binning != 1 {
         scene = scene.binned(args.binning).context("--binning")?;
@@ -73,15 +87,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     let levels = render::file_levels(&scene);
     let total = scene.theta_l_deg().len() * scene.bracket_s().len();
-    let progress = indicatif::ProgressBar::new(total as u64).with_style(
-        indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} captures {msg} [{elapsed}]")
-            .context("progress template")?,
-    );
+    let bar = progress::bar(total as u64, "captures");
     for &theta_l in scene.theta_l_deg() {
         let dir = out.join(format!("theta_l_{theta_l:.1}"));
         std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
         for (index, &shutter_s) in scene.bracket_s().iter().enumerate() {
-            progress.set_message(format!("θL {theta_l:.1}°, {shutter_s} s"));
+            bar.set_message(format!("θL {theta_l:.1}°, {}", format_shutter(shutter_s)));
             let frame = render::render_frame(&scene, theta_l, shutter_s);
             let image = dir.join(format!("exp_{index:02}.tiff"));
             frame
@@ -97,20 +108,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 "time": time,
                 "black_level": levels.black_level,
                 "white_level": levels.white_level,
+                "significant_bits": levels.significant_bits,
                 "scene": scene.name(),
             });
             if levels.nonlinear {
                 sidecar["response"] = "nonlinear".into();
             }
             write_json(&image.with_extension("json"), &sidecar)?;
-            progress.inc(1);
+            bar.inc(1);
         }
     }
-    progress.finish_and_clear();
-    println!(
-        "{total} captures of scene `{}` written to {}",
-        scene.name(),
-        out.display()
-    );
-    Ok(())
+    bar.finish_and_clear();
+    Ok((total, scene.name().to_owned()))
 }

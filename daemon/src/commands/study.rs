@@ -10,7 +10,8 @@ use gonio_processing::color::CameraModel;
 use gonio_processing::reference::Reference;
 use gonio_processing::samples;
 use gonio_processing::study::{self, StudyOptions, Variant};
-use indicatif::{ProgressBar, ProgressStyle};
+
+use crate::progress;
 
 /// Which roughness forms a study fits.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -90,10 +91,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         local_minimum_margin: args.local_minimum_margin,
         stride: args.stride as usize,
     };
-    let bar = ProgressBar::new(0).with_style(
-        ProgressStyle::with_template("studying [{bar:30}] {pos}/{len} fits, {elapsed}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
+    let bar = progress::bar(0, "fits");
+    bar.set_message("studying");
     let report = study::run_study_with_progress(
         &samples,
         &reference,

@@ -38,6 +38,8 @@ use gonio_processing::samples::Sample;
 use gonio_processing::study::figures::{xy_svg, Mark, XyPlot, XySeries};
 use gonio_processing::study::{pareto::pareto_front, subsample};
 
+use crate::interrupt::RemoveOnInterrupt;
+use crate::progress;
 use scan::{discover, extract_subset, spread, Position};
 use timing::{AcquisitionTime, HardwareTiming};
 use truth::{parameter_errors, Truth, TruthPoints};
@@ -156,18 +158,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let scan_dir: PathBuf = match &args.scan {
         Some(dir) => dir.clone(),
         None => {
-            rendered = tempfile::Builder::new()
+            let dir = tempfile::Builder::new()
                 .prefix(".scan-")
                 .tempdir_in(&args.out)
                 .context("creating a scan directory")?;
-            super::simulate::run(super::simulate::Args {
+            let guard = RemoveOnInterrupt::new(dir.path());
+            let (count, _) = super::simulate::render_scan(super::simulate::Args {
                 scene: args.scene.clone(),
-                out: rendered.path().to_path_buf(),
+                out: dir.path().to_path_buf(),
                 theta_l: None,
                 seed: None,
                 binning: args.binning,
             })?;
-            rendered.path().to_path_buf()
+            // The scan is deleted at the end: its path is not worth printing.
+            eprintln!("rendered {count} captures of scene `{}`", args.scene);
+            rendered = (dir, guard);
+            rendered.0.path().to_path_buf()
         }
     };
     let truth = Truth::read(&scan_dir.join("truth.json"))?;
@@ -202,6 +208,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let points = TruthPoints::new(&truth, &full, &scan_dir.join("reference.csv"))?;
 
     let timing = HardwareTiming::default();
+    let settings = positions.len() * bracket_len * args.strides.len() * args.methods.len();
+    let bar = progress::bar(settings as u64, "settings");
+    bar.set_message("fitting");
     let mut rows = Vec::new();
     for n in 1..=positions.len() {
         let used: Vec<usize> = spread(positions.len(), n);
@@ -246,10 +255,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                         fit_s,
                         outcome,
                     });
+                    bar.inc(1);
                 }
             }
         }
     }
+    bar.finish_and_clear();
     let fitted = Fitted {
         truth: &truth,
         model,
@@ -283,21 +294,28 @@ fn extract_all(
         white_reflectance: truth.white_reflectance,
         ..ExtractOptions::default()
     };
+    let _guard = RemoveOnInterrupt::new(work.path());
+    let bar = progress::bar((bracket_len * positions.len()) as u64, "extractions");
     let mut all = Vec::new();
     for b in 1..=bracket_len {
         let chosen = spread(bracket_len, b);
+        bar.set_message(format!("{b} of {bracket_len} exposures"));
         let mut row = Vec::new();
         for (i, position) in positions.iter().enumerate() {
             let dir = work.path().join(format!("b{b}_p{i}"));
             row.push(extract_subset(scan_dir, &dir, position, &chosen, &options)?);
+            bar.inc(1);
         }
-        eprintln!(
-            "extracted {} θL with {b} of {bracket_len} exposures in {:.2} s",
-            positions.len(),
-            row.iter().map(|e| e.seconds).sum::<f64>()
-        );
+        bar.suspend(|| {
+            eprintln!(
+                "extracted {} θL with {b} of {bracket_len} exposures in {:.2} s",
+                positions.len(),
+                row.iter().map(|e| e.seconds).sum::<f64>()
+            )
+        });
         all.push(row);
     }
+    bar.finish_and_clear();
     Ok(all)
 }
 

@@ -216,6 +216,11 @@ pub fn scan_view(shared: &Shared, scan: &ScanRecord) -> Value {
         "theta_l": scan.plan.theta_l,
         "bracket": { "shutter_s": scan.plan.shutter_s, "auto": scan.plan.auto_bracket },
         "progress": { "done": scan.done, "total": scan.total },
+        "actions": CONTROLS
+            .iter()
+            .filter(|(_, from)| from.contains(&scan.state))
+            .map(|(verb, _)| *verb)
+            .collect::<Vec<_>>(),
         "current_step": scan.current_step,
         "created": scan.created,
         "started": scan.started,
@@ -309,21 +314,46 @@ async fn control(
     Ok(Json(scan_view(&shared, &scan)))
 }
 
-async fn pause_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
-    const FROM: &[ScanState] = &[
-        ScanState::Queued,
-        ScanState::Running,
-        ScanState::Interrupted,
-    ];
-    control(shared, id, FROM, ScanState::Paused, "pause").await
+/// The states each control verb applies to; a scan's JSON lists the verbs its state
+/// allows (`actions`), so that the page offers only those.
+const CONTROLS: [(&str, &[ScanState]); 3] = [
+    (
+        "pause",
+        &[
+            ScanState::Queued,
+            ScanState::Running,
+            ScanState::Interrupted,
+        ],
+    ),
+    // Re-queues a paused scan, or retries a failed one from its first step not done.
+    ("resume", &[ScanState::Paused, ScanState::Failed]),
+    (
+        "cancel",
+        &[
+            ScanState::Queued,
+            ScanState::Running,
+            ScanState::Paused,
+            ScanState::Interrupted,
+        ],
+    ),
+];
+
+fn applies_to(verb: &str) -> &'static [ScanState] {
+    CONTROLS
+        .iter()
+        .find(|(name, _)| *name == verb)
+        .map_or(&[], |(_, from)| from)
 }
 
-/// Re-queues a paused scan, or retries a failed one from its first step not done.
+async fn pause_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
+    control(shared, id, applies_to("pause"), ScanState::Paused, "pause").await
+}
+
 async fn resume_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
     control(
         shared,
         id,
-        &[ScanState::Paused, ScanState::Failed],
+        applies_to("resume"),
         ScanState::Queued,
         "resume",
     )
@@ -331,13 +361,14 @@ async fn resume_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<
 }
 
 async fn cancel_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
-    const FROM: &[ScanState] = &[
-        ScanState::Queued,
-        ScanState::Running,
-        ScanState::Paused,
-        ScanState::Interrupted,
-    ];
-    control(shared, id, FROM, ScanState::Cancelled, "cancel").await
+    control(
+        shared,
+        id,
+        applies_to("cancel"),
+        ScanState::Cancelled,
+        "cancel",
+    )
+    .await
 }
 
 /// Stops the arm at once (feed hold, then reset) and pauses the running scan.

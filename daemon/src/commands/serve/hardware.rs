@@ -26,6 +26,7 @@ pub struct SidecarDefaults {
     pub black_level: Option<f64>,
     pub white_level: Option<f64>,
     pub response: Response,
+    pub significant_bits: Option<u32>,
 }
 
 /// Opens (and reopens, after a disconnect) the arm.
@@ -129,19 +130,16 @@ pub fn open(config: &Config) -> anyhow::Result<Devices> {
             let setup: Setup = serde_json::from_value(scene.setup().setup_json())
                 .context("converting the scene setup")?;
             let body = scene.camera();
-            let sidecar = if scene.effects().response.is_some() {
-                // The emulated developed images span the full 16-bit range.
-                SidecarDefaults {
-                    black_level: Some(0.0),
-                    white_level: Some(65535.0),
-                    response: Response::Nonlinear,
-                }
-            } else {
-                SidecarDefaults {
-                    black_level: Some(f64::from(body.black_level)),
-                    white_level: Some(f64::from(body.white_level)),
-                    response: Response::Linear,
-                }
+            let levels = camera.file_levels();
+            let sidecar = SidecarDefaults {
+                black_level: Some(f64::from(levels.black_level)),
+                white_level: Some(f64::from(levels.white_level)),
+                response: if levels.nonlinear {
+                    Response::Nonlinear
+                } else {
+                    Response::Linear
+                },
+                significant_bits: Some(levels.significant_bits),
             };
             let emulators = grbl.map(|grbl| {
                 Arc::new(Emulators {

@@ -27,6 +27,9 @@ use config::Config;
 use shared::{ArmView, CameraView, HardwareStatus, Shared};
 use store::Store;
 
+/// How long requests in flight may take to finish once a stop is asked for.
+const SHUTDOWN_GRACE: std::time::Duration = std::time::Duration::from_secs(2);
+
 /// Shutter range (s) assumed until the camera has told its own.
 const UNKNOWN_SHUTTER_RANGE_S: (f64, f64) = (1.0 / 8000.0, 30.0);
 
@@ -51,6 +54,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
         )
         .with_writer(std::io::stderr)
+        // Colours only for a person at a terminal: plain text in files and journals.
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .init();
     let mut config = match &args.config {
         Some(path) => Config::load(path)?,
@@ -158,13 +163,25 @@ async fn serve(shared: Arc<Shared>) -> anyhow::Result<()> {
             "real"
         }
     );
-    axum::serve(listener, api::router(shared))
-        .with_graceful_shutdown(async {
-            // Without a signal handler the process would just end: same outcome.
-            let _ = tokio::signal::ctrl_c().await;
-        })
-        .await
-        .context("HTTP server")
+    let (stopping_tx, stopping) = tokio::sync::oneshot::channel();
+    let server = axum::serve(listener, api::router(shared)).with_graceful_shutdown(async {
+        let signal = crate::interrupt::wait_for_signal().await;
+        tracing::info!(
+            "{signal}: stopping; a scan in progress resumes at its first unfinished step \
+             when gonio serve starts again"
+        );
+        let _ = stopping_tx.send(());
+    });
+    // Event streams stay open as long as their pages do: give requests in flight a
+    // bounded time to finish, then stop anyway.
+    tokio::select! {
+        served = server => served.context("HTTP server"),
+        Ok(()) = stopping => {
+            tokio::time::sleep(SHUTDOWN_GRACE).await;
+            tracing::info!("closing the connections still open");
+            Ok(())
+        }
+    }
 }
 
 /// The bearer token: from the config, else `GONIO_TOKEN`, else the one in DATA/token,

@@ -1,6 +1,7 @@
 //! Scans as data: a validated request expands into the ordered steps the hardware
 //! owner executes, stored before anything moves.
 
+use gonio_drivers::camera_choice::format_shutter;
 use serde::{Deserialize, Serialize};
 
 /// What a scan measures, after validation ("auto" bracket already resolved).
@@ -59,7 +60,10 @@ impl Step {
                 theta_l,
                 index,
                 shutter_s,
-            } => format!("capture θL {theta_l:.1}° exposure {index} ({shutter_s} s)"),
+            } => format!(
+                "capture θL {theta_l:.1}° exposure {index} ({})",
+                format_shutter(*shutter_s)
+            ),
             Step::Hdr { theta_l } => format!("HDR merge θL {theta_l:.1}°"),
             Step::Extract => "extract samples".to_owned(),
             Step::Fit { model } => format!("fit {model}"),

@@ -658,6 +658,7 @@ impl Runner {
             black_level: self.sidecar.black_level,
             white_level: self.sidecar.white_level,
             response: self.sidecar.response,
+            significant_bits: self.sidecar.significant_bits,
             width: None,
             height: None,
         };

@@ -1,0 +1,86 @@
+//! Ctrl-C (SIGINT) and SIGTERM during an offline command: a word on stderr saying what
+//! was stopped, the command's registered temporary directories removed, exit status
+//! 130 (128 + SIGINT). `gonio serve` handles its signals itself (graceful shutdown).
+
+use std::path::{Path, PathBuf};
+use std::sync::{Mutex, PoisonError};
+
+/// Temporary directories to remove if the command is interrupted.
+static TEMPORARY: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+/// Exit status after an interruption.
+const EXIT_INTERRUPTED: i32 = 130;
+
+/// Watches for SIGINT and SIGTERM on a thread of its own while `command` runs.
+pub fn install(command: String) {
+    let watcher = std::thread::Builder::new()
+        .name("signals".into())
+        .spawn(move || {
+            let runtime = match tokio::runtime::Builder::new_current_thread()
+                .enable_io()
+                .build()
+            {
+                Ok(runtime) => runtime,
+                // Without a watcher the default action applies: the process just ends.
+                Err(_) => return,
+            };
+            let signal = runtime.block_on(wait_for_signal());
+            let removed = remove_registered();
+            eprintln!(
+                "\ngonio {command}: interrupted by {signal}; stopped before finishing{}",
+                if removed > 0 {
+                    format!(" ({removed} temporary directories removed)")
+                } else {
+                    String::new()
+                }
+            );
+            std::process::exit(EXIT_INTERRUPTED);
+        });
+    // Failing to start the watcher leaves the default signal action: acceptable.
+    drop(watcher);
+}
+
+/// Waits for SIGINT or SIGTERM and names the one that came.
+pub async fn wait_for_signal() -> &'static str {
+    #[cfg(unix)]
+    {
+        use tokio::signal::unix::{signal, SignalKind};
+        if let Ok(mut term) = signal(SignalKind::terminate()) {
+            return tokio::select! {
+                _ = tokio::signal::ctrl_c() => "Ctrl-C (SIGINT)",
+                _ = term.recv() => "SIGTERM",
+            };
+        }
+    }
+    let _ = tokio::signal::ctrl_c().await;
+    "Ctrl-C (SIGINT)"
+}
+
+fn remove_registered() -> usize {
+    let dirs = std::mem::take(&mut *TEMPORARY.lock().unwrap_or_else(PoisonError::into_inner));
+    dirs.iter()
+        .filter(|dir| std::fs::remove_dir_all(dir).is_ok())
+        .count()
+}
+
+/// Keeps `dir` registered for removal on interruption until dropped.
+pub struct RemoveOnInterrupt(PathBuf);
+
+impl RemoveOnInterrupt {
+    pub fn new(dir: &Path) -> Self {
+        TEMPORARY
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .push(dir.to_path_buf());
+        Self(dir.to_path_buf())
+    }
+}
+
+impl Drop for RemoveOnInterrupt {
+    fn drop(&mut self) {
+        TEMPORARY
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .retain(|d| d != &self.0);
+    }
+}
