@@ -207,6 +207,14 @@ pub fn scan_view(shared: &Shared, scan: &ScanRecord) -> Value {
         .iter()
         .filter_map(|t| file(&format!("hdr/{}.exr", theta_dir_name(*t))))
         .collect();
+    // A frame to preview once a capture has landed in a θL directory.
+    let has_frame = scan.plan.theta_l.iter().any(|t| {
+        std::fs::read_dir(dir.join(theta_dir_name(*t))).is_ok_and(|entries| {
+            entries
+                .flatten()
+                .any(|e| !e.file_name().to_string_lossy().starts_with('.'))
+        })
+    });
     json!({
         "id": scan.id,
         "sample": scan.plan.sample,
@@ -238,6 +246,7 @@ pub fn scan_view(shared: &Shared, scan: &ScanRecord) -> Value {
             "samples": file("samples.csv"),
             "fits": fits,
             "hdr": hdr,
+            "thumbnail": has_frame.then(|| format!("{base}/thumbnail.png")),
         },
     })
 }
