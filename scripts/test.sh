@@ -11,12 +11,11 @@ if ! python3 -c 'import cv2, numpy' 2>/dev/null; then
 fi
 export GONIO_REQUIRE_OPENCV=1
 
-cargo test --workspace --locked
-
-# ---- gonio-drivers with the `gphoto2` feature, against libgphoto2's virtual camera ----
-# Building the feature needs libgphoto2-dev, libclang-dev (bindgen) and pkg-config.
+# Debian packages the tests need: Chromium for the page's browser test
+# (tests/tests/page_browser.rs); libgphoto2-dev, libclang-dev (bindgen) and pkg-config
+# to build the `gphoto2` feature.
 missing=()
-for pkg in libgphoto2-dev libclang-dev pkg-config; do
+for pkg in chromium libgphoto2-dev libclang-dev pkg-config; do
     dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")
 done
 if ((${#missing[@]})); then
@@ -25,6 +24,12 @@ if ((${#missing[@]})); then
     apt-get update -q </dev/null
     apt-get install -y -q --no-install-recommends "${missing[@]}" </dev/null
 fi
+
+# The workspace, including the README's offline commands (daemon/tests/readme_commands.rs)
+# and the page in Chromium.
+cargo test --workspace --locked
+
+# ---- gonio-drivers with the `gphoto2` feature, against libgphoto2's virtual camera ----
 cargo test -p gonio-drivers --features gphoto2 --locked --no-run
 
 # Debian's libgphoto2 (2.5.30) has no virtual camera. The PyPI wheel gphoto2==2.6.4
