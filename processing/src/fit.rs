@@ -136,7 +136,7 @@ impl FittedRoughness {
     }
 }
 
-/// A fit, serialised exactly as the fit JSON of the design document.
+/// A fit, serialised as the fit JSON (docs/ARCHITECTURE.md, "File formats").
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FitResult {
     pub model: Model,
