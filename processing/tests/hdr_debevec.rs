@@ -124,6 +124,7 @@ fn gonio_merge(bracket: &Bracket) -> (Vec<f64>, Vec<u8>) {
                 black_level: None,
                 white_level: None,
                 response: Response::Nonlinear,
+                significant_bits: None,
                 width: None,
                 height: None,
             };
