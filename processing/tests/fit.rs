@@ -392,6 +392,7 @@ fn fit_json_has_the_design_shape() {
         "kd",
         "ks",
         "m",
+        "rho_d",
         "loss",
         "err_p",
         "method",
