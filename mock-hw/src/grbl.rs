@@ -1,32 +1,47 @@
-//! An emulated GRBL 1.1h controller driving the light arm, served on a pseudo-terminal.
+//! An emulated GRBL 1.1h controller driving the light arm, served on a pseudo-terminal,
+//! answering byte for byte as the firmware does (gnea/grbl 1.1h.20190830, stock build).
 //!
 //! A driver opens [`GrblEmulator::device_path`] with `serialport` at 115200 8N1 exactly
 //! as it opens `/dev/ttyUSB0`. The path is a symlink that survives
 //! [`Fault::Unplug`] + [`GrblEmulator::reconnect`] (like `/dev/serial/by-id/...`).
+//! Opening the port resets the board as DTR resets an Arduino-based controller: the
+//! banner arrives on every open, and the machine position restarts at zero.
 //!
-//! Machine X is the arm angle in degrees. The homing switch sits at the positive end,
-//! physically θ = 0: after `$H`, MPos X = −`$27` (0 with the default pull-off) and soft
-//! limits allow X in [−`$130`, 0]. Until the arm is homed, MPos counts from wherever the
-//! board powered up, so it differs from the physical angle, which is what the shared
-//! [`World`] holds. Motion follows trapezoidal velocity profiles (blocks run stop to
-//! stop) in machine time, which runs `1 / time_scale` times faster than real time.
-//! When the steppers stop dead (soft reset while moving, a limit alarm, power loss) the
-//! arm coasts on and slips steps, so MPos is off until the next `$H`.
+//! The arm is one axis (X unless [`GrblConfig::arm_axis`] says otherwise), in degrees.
+//! Its homing switch sits at the positive end, physically θ = 0: after `$H` its MPos is
+//! −`$27` and soft limits allow [−`$130`, 0]. Until it is homed, MPos counts from
+//! wherever the board powered up, so it differs from the physical angle, which is what
+//! the shared [`World`] holds. The other two axes carry nothing; their switches sit
+//! [`GrblConfig::idle_axis_switch`] above where they power up. Motion follows
+//! trapezoidal velocity profiles (blocks run stop to stop) in machine time, which runs
+//! `1 / time_scale` times faster than real time. When the steppers stop dead (reset
+//! while moving, a limit alarm, power loss) the arm coasts on and slips steps, so MPos
+//! is off until the next `$H`.
 //!
-//! What the firmware does and this emulator does not: arcs and other G-codes outside
-//! G0 G1 G4 G17 G20 G21 G53 G54 G90 G91 G94 M3 M4 M5 M8 M9 (`error:20`), check mode
-//! (`$C`), sleep (`$SLP`), startup blocks (`$Nx=`), overrides and the safety door, and
-//! junction blending between consecutive blocks. Jogging (`$J=`, jog cancel 0x85) is
-//! emulated.
+//! The modules form a line, each using only those before it: `faults`, `config`,
+//! `report` (what the firmware prints), `settings`, `gcode`, `motion`, `homing`,
+//! `serial` (input), `protocol` (the state machine), `pty`, `runner` (the thread).
+//!
+//! What the firmware does and this emulator does not: arcs, probing and G-codes outside
+//! G0 G1 G4 G10 G17 G20 G21 G53 G54–G59 G90 G91 G92 G92.1 G94 M3 M4 M5 M8 M9
+//! (`error:20`), check mode (`$C`), sleep (`$SLP`), startup blocks (`$Nx=`), overrides,
+//! the safety door and the control pins, and junction blending between consecutive
+//! blocks; a homing phase moves every axis of its cycle in one block rather than
+//! stopping each at its switch. Jogging (`$J=`, jog cancel 0x85) is emulated.
 
+mod config;
 mod faults;
 mod gcode;
+mod homing;
 mod motion;
 mod protocol;
 mod pty;
+mod report;
 mod runner;
+mod serial;
 mod settings;
 
+pub use config::{Axis, AxisSet, GrblConfig, ScheduledFault};
 pub use faults::Fault;
 
 use std::io;
@@ -38,57 +53,6 @@ use crate::world::World;
 use faults::LineFaults;
 use protocol::Controller;
 use runner::{Clock, Command, Runner};
-
-/// Emulator settings. The arm axis (X) uses degrees as GRBL's machine unit.
-#[derive(Debug, Clone, PartialEq)]
-pub struct GrblConfig {
-    /// Real seconds per machine second: 1.0 = real time, 0.01 = 100× faster.
-    pub time_scale: f64,
-    /// `$100`, steps per degree.
-    pub steps_per_deg: f64,
-    /// `$110`, degrees per minute.
-    pub max_rate_deg_per_min: f64,
-    /// `$120`, degrees per second².
-    pub accel_deg_per_s2: f64,
-    /// `$130`, degrees: soft limits allow X in [−max_travel, 0].
-    pub max_travel_deg: f64,
-    /// `$22`: boot locked in Alarm until `$H` or `$X`.
-    pub homing_enabled: bool,
-    /// `$20` (needs homing enabled, as in the firmware).
-    pub soft_limits: bool,
-    /// `$25`, homing seek rate, degrees per minute.
-    pub homing_seek_deg_per_min: f64,
-    /// `$24`, homing locate feed rate, degrees per minute.
-    pub homing_feed_deg_per_min: f64,
-    /// `$27`, pull-off after homing, degrees (MPos X after `$H` is minus this).
-    pub homing_pulloff_deg: f64,
-    /// Machine seconds from power-up or hardware reset to the banner.
-    pub boot_delay_s: f64,
-    /// Status reports also carry the stock 1.1h build's optional fields, as the firmware
-    /// prints them: `Pn:X` while the arm presses the home switch, `WCO:` on every 10th
-    /// report (30th while busy) and `Ov:` (with `A:`) one report later. When false,
-    /// reports are `<State|MPos:x,y,z|FS:feed,spindle>` only.
-    pub status_extras: bool,
-}
-
-impl Default for GrblConfig {
-    fn default() -> Self {
-        GrblConfig {
-            time_scale: 1.0,
-            steps_per_deg: 80.0,
-            max_rate_deg_per_min: 1200.0,
-            accel_deg_per_s2: 40.0,
-            max_travel_deg: 180.0,
-            homing_enabled: true,
-            soft_limits: true,
-            homing_seek_deg_per_min: 600.0,
-            homing_feed_deg_per_min: 100.0,
-            homing_pulloff_deg: 0.0,
-            boot_delay_s: 0.5,
-            status_extras: false,
-        }
-    }
-}
 
 /// Duration in real seconds of a move of `distance_deg` from rest to rest under a
 /// trapezoidal velocity profile (triangular when the cruise rate is not reached).
@@ -117,10 +81,11 @@ impl GrblEmulator {
     /// Power up a controller on a new pty. The arm starts at `world`'s angle, which the
     /// emulator updates continuously as the arm moves.
     pub fn start(config: GrblConfig, world: World) -> io::Result<GrblEmulator> {
-        if !(config.time_scale.is_finite() && config.time_scale > 0.0) {
+        let problems = config.problems();
+        if !problems.is_empty() {
             return Err(io::Error::new(
                 io::ErrorKind::InvalidInput,
-                format!("time_scale must be positive, got {}", config.time_scale),
+                problems.join("; "),
             ));
         }
         let link_dir = tempfile::Builder::new().prefix("gonio-grbl-").tempdir()?;
@@ -129,12 +94,16 @@ impl GrblEmulator {
         let clock = Clock::new(config.time_scale);
         let controller = Controller::new(&config, world, clock.now());
         let (commands, receiver) = mpsc::channel();
+        let mut schedule = config.faults.clone();
+        schedule.sort_by(|a, b| a.at_s.total_cmp(&b.at_s));
         let runner = Runner {
             controller,
             pty: Some(pty),
+            port_open: false,
             link: link.clone(),
             clock,
             faults: LineFaults::default(),
+            schedule,
             commands: receiver,
         };
         let thread = std::thread::Builder::new()

@@ -37,7 +37,7 @@ fn rig(time_scale: f64) -> (GrblEmulator, World, GrblArm) {
     let world = World::new(-7.5);
     let config = GrblConfig {
         time_scale,
-        ..GrblConfig::default()
+        ..GrblConfig::arm_board()
     };
     let emulator = GrblEmulator::start(config, world.clone()).unwrap();
     let arm = GrblArm::open(emulator.device_path(), driver_config()).unwrap();
@@ -64,7 +64,7 @@ fn homes_and_moves_through_the_scan_angles() {
     assert_eq!(arm.status().unwrap().state, ArmState::NeedsHoming);
     assert!(matches!(arm.move_to(-20.0), Err(DeviceError::Reset)));
     arm.home().unwrap();
-    assert!(world.arm_deg().abs() < 0.05);
+    assert!((world.arm_deg() + 1.0).abs() < 0.05);
     for deg in SCAN_DEG {
         move_and_check(&mut arm, &world, deg);
     }
@@ -83,7 +83,7 @@ fn settings_mismatch_is_refused() {
         GrblConfig {
             time_scale: 0.01,
             steps_per_deg: 100.0,
-            ..GrblConfig::default()
+            ..GrblConfig::arm_board()
         },
         World::new(0.0),
     )

@@ -1,12 +1,19 @@
-//! Faults a test can inject into the emulated controller, and the corruption of replies.
+//! Faults a test (or a schedule in the emulator's configuration) can inject into the
+//! emulated controller, and the corruption of replies.
 
-/// A fault injected with [`super::GrblEmulator::inject`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+use serde::Deserialize;
+
+/// A fault injected with `GrblEmulator::inject`, or on a schedule.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum Fault {
     /// USB unplugged: the pty master closes (the driver's reads and writes fail with a
     /// broken pipe / EIO), the device link disappears and the board loses power.
-    /// [`super::GrblEmulator::reconnect`] plugs it back in.
+    /// `GrblEmulator::reconnect` (or [`Fault::Replug`]) plugs it back in.
     Unplug,
+    /// Plug the board back in after [`Fault::Unplug`] (or replug it): a new pty behind
+    /// the same device path, and the board boots again.
+    Replug,
     /// The controller hangs: input is ignored and nothing is sent, while the arm keeps
     /// executing what it was doing. Undone by [`Fault::Responsive`], or by a power cycle
     /// ([`Fault::Unplug`] + reconnect) or [`Fault::ResetBanner`].

@@ -3,7 +3,8 @@
 
 use std::collections::VecDeque;
 
-use super::settings::{AxisSettings, N_AXIS};
+use super::report::N_AXIS;
+use super::settings::AxisSettings;
 
 /// Planner blocks the firmware buffers (`BLOCK_BUFFER_SIZE - 1`).
 pub(crate) const PLANNER_BLOCKS: usize = 15;
@@ -192,6 +193,8 @@ pub(crate) struct Motion {
     active: Option<ActiveMove>,
     /// Position when no block is active (machine units).
     rest: [f64; N_AXIS],
+    /// Machine time the last block finished.
+    rest_since: f64,
     /// A feed hold keeps queued blocks from starting.
     held: bool,
 }
@@ -202,7 +205,23 @@ impl Motion {
             queue: VecDeque::new(),
             active: None,
             rest: position,
+            rest_since: 0.0,
             held: false,
+        }
+    }
+
+    /// Machine time the last block finished (while idle).
+    pub fn idle_since(&self) -> f64 {
+        self.rest_since
+    }
+
+    /// Start `block` at machine time `t0` (which may be past) when nothing moves;
+    /// [`Motion::update`] then finishes it if its time is up.
+    pub fn start_at(&mut self, block: Block, t0: f64, axes: &[AxisSettings; N_AXIS]) {
+        if self.is_idle() {
+            self.active = Some(ActiveMove::new(self.rest, &block, axes, t0));
+        } else {
+            self.push(block);
         }
     }
 
@@ -235,6 +254,7 @@ impl Motion {
                 }
                 t_free = active.end_time();
                 self.rest = active.target;
+                self.rest_since = t_free;
                 self.active = None;
             }
             if self.held {
@@ -324,6 +344,7 @@ impl Motion {
     pub fn kill(&mut self, now: f64) -> [f64; N_AXIS] {
         let (position, _) = self.state(now);
         self.rest = position;
+        self.rest_since = now;
         self.active = None;
         self.queue.clear();
         self.held = false;

@@ -1,80 +1,26 @@
-//! The firmware's protocol state machine: serial receive with real-time command pick-off,
-//! line assembly, `$` system commands, G-code execution, alarms, resets and reports.
-//! Driven by machine time (seconds); output is queued with the time it may be sent.
+//! The firmware's state machine (protocol.c, system.c, motion_control.c of GRBL 1.1h):
+//! real-time commands, the main loop executing lines, `$` system commands, G-code
+//! execution, feed hold, homing, alarms, resets and reports. Driven by machine time
+//! (seconds); output is queued with the time it may be sent.
 
 use std::collections::VecDeque;
 
-use super::gcode::{self, ParserState};
+use super::config::GrblConfig;
+use super::gcode::{self, CoordSystems, ParserState, N_COORDINATE_SYSTEMS};
+use super::homing::{self, Switches};
 use super::motion::{self, Motion};
-use super::settings::{Settings, N_AXIS};
-use super::GrblConfig;
+use super::report::{
+    self, alarm, status, text, ReportCounters, ReportState, StatusSnapshot, BANNER, N_AXIS,
+};
+use super::serial::{Line, SerialInput};
+use super::settings::Settings;
 use crate::world::World;
 
-/// GRBL status codes (`error:N`).
-pub(crate) mod status {
-    pub const EXPECTED_COMMAND_LETTER: u8 = 1;
-    pub const BAD_NUMBER_FORMAT: u8 = 2;
-    pub const INVALID_STATEMENT: u8 = 3;
-    pub const NEGATIVE_VALUE: u8 = 4;
-    pub const SETTING_DISABLED: u8 = 5;
-    pub const SETTING_STEP_PULSE_MIN: u8 = 6;
-    pub const IDLE_ERROR: u8 = 8;
-    pub const SYSTEM_GC_LOCK: u8 = 9;
-    pub const SOFT_LIMIT_ERROR: u8 = 10;
-    pub const OVERFLOW: u8 = 11;
-    pub const TRAVEL_EXCEEDED: u8 = 15;
-    pub const INVALID_JOG_COMMAND: u8 = 16;
-    pub const GCODE_UNSUPPORTED_COMMAND: u8 = 20;
-    pub const GCODE_MODAL_GROUP_VIOLATION: u8 = 21;
-    pub const GCODE_UNDEFINED_FEED_RATE: u8 = 22;
-    pub const GCODE_COMMAND_VALUE_NOT_INTEGER: u8 = 23;
-    pub const GCODE_WORD_REPEATED: u8 = 25;
-    pub const GCODE_INVALID_LINE_NUMBER: u8 = 27;
-    pub const GCODE_VALUE_WORD_MISSING: u8 = 28;
-    pub const GCODE_UNUSED_WORDS: u8 = 36;
-    pub const GCODE_MAX_VALUE_EXCEEDED: u8 = 38;
-}
-
-/// GRBL alarm codes (`ALARM:N`).
-pub(crate) mod alarm {
-    pub const HARD_LIMIT: u8 = 1;
-    pub const SOFT_LIMIT: u8 = 2;
-    pub const ABORT_CYCLE: u8 = 3;
-    pub const HOMING_FAIL_RESET: u8 = 6;
-    pub const HOMING_FAIL_APPROACH: u8 = 9;
-}
-
-/// The welcome message, with the firmware's leading line break.
-pub(crate) const BANNER: &[u8] = b"\r\nGrbl 1.1h ['$' for help]\r\n";
-const MSG_UNLOCK_HINT: &str = "[MSG:'$H'|'$X' to unlock]";
-const MSG_UNLOCKED: &str = "[MSG:Caution: Unlocked]";
-const MSG_RESET_TO_CONTINUE: &str = "[MSG:Reset to continue]";
-const MSG_RESTORING_DEFAULTS: &str = "[MSG:Restoring defaults]";
-const HELP: &str = "[HLP:$$ $# $G $I $N $x=val $Nx=line $J=line $SLP $C $X $H ~ ! ? ctrl-x]";
-const VERSION: &str = "1.1h.20190830";
-const OPTIONS: &str = "[OPT:V,15,128]";
-
-/// Serial receive ring size; it holds one byte less.
-const RX_BUFFER_SIZE: usize = 128;
-const LINE_BUFFER_SIZE: usize = 80;
 /// The firmware pauses this long after printing an alarm, s.
 const ALARM_REPORT_DELAY_S: f64 = 0.5;
-/// Homing gives up after this multiple of the axis' max travel.
-const HOMING_SEARCH_SCALAR: f64 = 1.5;
-const MM_PER_INCH: f64 = 25.4;
 /// An arm whose motor stops dead coasts to rest this many times faster than the axis'
 /// acceleration setting.
 const COAST_DECEL_FACTOR: f64 = 4.0;
-
-/// Fixed-point number as the firmware prints it (`-0` prints as `0`).
-pub(crate) fn fmt_fixed(value: f64, decimals: usize) -> String {
-    let value = if value == 0.0 || !value.is_finite() {
-        0.0
-    } else {
-        value
-    };
-    format!("{value:.decimals$}")
-}
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum State {
@@ -93,16 +39,10 @@ enum Power {
     On,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum HomingPhase {
-    Seek { fails: bool },
-    PullOff,
-}
-
 /// The line being executed while it waits for the machine; answered when done.
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Pending {
-    /// `G4`: wait for all queued motion to finish, dwell, then queue `then`.
+    /// Wait for all queued motion to finish, dwell, then queue `then`.
     Sync {
         dwell_s: f64,
         then: Option<motion::Block>,
@@ -113,21 +53,15 @@ enum Pending {
     },
     /// Planner full: queue the block when a slot frees.
     Queue(motion::Block),
-    Home(HomingPhase),
+    /// `$H`: running `phase`; after it, the debounce delay until `resume_at`.
+    Home {
+        phase: homing::Phase,
+        resume_at: Option<f64>,
+    },
     /// Target past the soft limits while moving: feed hold, then `ALARM:2`.
     SoftLimit,
     /// The line that raised a critical alarm, answered after the reset.
     Locked,
-}
-
-/// Real-time commands picked off the serial stream, executed at the next checkpoint.
-#[derive(Debug, Clone, Copy, Default)]
-struct Realtime {
-    reset: bool,
-    status: bool,
-    hold: bool,
-    resume: bool,
-    jog_cancel: bool,
 }
 
 /// The emulated firmware.
@@ -135,35 +69,38 @@ struct Realtime {
 pub(crate) struct Controller {
     settings: Settings,
     factory_settings: Settings,
+    /// Work coordinate systems G54–G59, kept in EEPROM.
+    coords: CoordSystems,
     build_info: String,
     parser: ParserState,
     motion: Motion,
     state: State,
     power: Power,
     boot_delay_s: f64,
-    /// Physical arm angle minus machine X, degrees: arbitrary until homed.
-    offset_deg: f64,
+    homing_cycles: Vec<u8>,
+    arm_axis: usize,
+    /// Physical position minus machine position, per axis: arbitrary until homed. Each
+    /// axis' switch closes at physical 0 and above (the arm's at θ = 0).
+    offset: [f64; N_AXIS],
+    /// Which axes have a homing switch wired.
+    wired: [bool; N_AXIS],
     world: World,
-    rx: VecDeque<u8>,
-    line: Vec<u8>,
-    line_overflow: bool,
-    in_paren_comment: bool,
-    in_semicolon_comment: bool,
-    realtime: Realtime,
+    input: SerialInput,
     pending: Option<Pending>,
-    /// After a hard or soft limit alarm: everything but `?` and reset is blocked.
+    /// After a hard or soft limit alarm: nothing but a reset is serviced.
     critical: bool,
+    /// A reset happened during an alarm pause: the firmware really restarts when the
+    /// pause ends, dropping what arrived meanwhile.
+    flush_after_stall: bool,
     /// A jog is decelerating to a stop; its remaining blocks are then dropped.
     jog_cancelling: bool,
     /// Machine time until which the firmware pauses (after printing an alarm).
     stall_until: f64,
     /// An injected alarm waiting for the next half-done block.
     armed_alarm: Option<u8>,
-    /// Print the stock build's optional status fields (`Pn`, `WCO`, `Ov`, `A`).
-    status_extras: bool,
-    /// The firmware's refresh counters for the `WCO` and `Ov` fields.
-    wco_counter: u8,
-    ovr_counter: u8,
+    /// Limit switches as last seen (hard limits trigger on a change).
+    pins: [bool; N_AXIS],
+    counters: ReportCounters,
     out: VecDeque<(f64, Vec<u8>)>,
 }
 
@@ -171,38 +108,43 @@ impl Controller {
     /// A controller that powers up at machine time `now` (banner after the boot delay).
     pub fn new(config: &GrblConfig, world: World, now: f64) -> Self {
         let settings = Settings::from_config(config);
+        let arm_axis = config.arm_axis.index();
+        let idle = config.idle_axis_switch;
+        let mut offset = [-idle.unwrap_or(0.0); N_AXIS];
+        offset[arm_axis] = world.arm_deg();
+        let mut wired = [idle.is_some(); N_AXIS];
+        wired[arm_axis] = true;
         let mut controller = Controller {
             factory_settings: settings.clone(),
             settings,
+            coords: [[0.0; N_AXIS]; N_COORDINATE_SYSTEMS],
             build_info: String::new(),
             parser: ParserState::new([0.0; N_AXIS]),
             motion: Motion::new([0.0; N_AXIS]),
             state: State::Idle,
             power: Power::Off,
             boot_delay_s: config.boot_delay_s.max(0.0),
-            offset_deg: 0.0,
+            homing_cycles: config.homing_cycles.iter().map(|c| c.mask).collect(),
+            arm_axis,
+            offset,
+            wired,
             world,
-            rx: VecDeque::new(),
-            line: Vec::new(),
-            line_overflow: false,
-            in_paren_comment: false,
-            in_semicolon_comment: false,
-            realtime: Realtime::default(),
+            input: SerialInput::default(),
             pending: None,
             critical: false,
+            flush_after_stall: false,
             jog_cancelling: false,
             stall_until: 0.0,
             armed_alarm: None,
-            status_extras: config.status_extras,
-            wco_counter: 0,
-            ovr_counter: 0,
+            pins: [false; N_AXIS],
+            counters: ReportCounters::new(config.status_extras),
             out: VecDeque::new(),
         };
         controller.power_on(now);
         controller
     }
 
-    /// Power lost (USB unplugged): the arm stays where it is, nothing is sent.
+    /// Power lost (USB unplugged): the machine stays where it is, nothing is sent.
     pub fn power_off(&mut self, now: f64) {
         if self.power == Power::On {
             self.kill_motion(now);
@@ -219,7 +161,8 @@ impl Controller {
         };
     }
 
-    /// A hardware reset (DTR toggle): reboot, position lost.
+    /// A hardware reset (DTR toggles as the port opens): the microcontroller restarts,
+    /// the machine position is lost.
     pub fn hard_reset(&mut self, now: f64) {
         self.power_off(now);
         self.power_on(now);
@@ -232,24 +175,8 @@ impl Controller {
 
     /// One byte from the serial line.
     pub fn receive(&mut self, byte: u8) {
-        if self.power != Power::On {
-            return;
-        }
-        match byte {
-            0x18 => self.realtime.reset = true,
-            b'?' => self.realtime.status = true,
-            b'!' => self.realtime.hold = true,
-            b'~' => self.realtime.resume = true,
-            0x85 => self.realtime.jog_cancel = true,
-            // Extended real-time commands (overrides, safety door) are not emulated; the
-            // firmware drops any other byte above 0x7F too.
-            0x80.. => {}
-            _ => {
-                if self.rx.len() < RX_BUFFER_SIZE - 1 {
-                    self.rx.push_back(byte);
-                }
-                // Otherwise the byte is lost, as in the firmware's full receive ring.
-            }
+        if self.power == Power::On {
+            self.input.receive(byte);
         }
     }
 
@@ -282,35 +209,42 @@ impl Controller {
         }
         self.motion.update(now, &self.settings.axes);
         self.sync_world(now);
+        self.check_hard_limits(now);
         self.finish_jog_cancel(now);
         self.update_state();
         if now < self.stall_until {
             return;
         }
-        if std::mem::take(&mut self.realtime.reset) {
+        if std::mem::take(&mut self.flush_after_stall) {
+            self.input.clear();
+        }
+        if std::mem::take(&mut self.input.realtime.reset) {
             self.soft_reset(now);
         }
-        if std::mem::take(&mut self.realtime.status) {
-            let report = self.status_report(now);
-            self.emit_line(now, &report);
-        }
+        // During a critical alarm the firmware spins waiting for a reset and answers
+        // nothing, not even `?`; during homing it runs no real-time commands.
         if self.critical {
             return;
+        }
+        if self.state == State::Home && self.pending.is_some() {
+            self.advance_pending(now);
+            return;
+        }
+        if std::mem::take(&mut self.input.realtime.status) {
+            self.emit_status_report(now);
         }
         self.check_armed_alarm(now);
         if self.critical || now < self.stall_until {
             return;
         }
-        if self.state != State::Home {
-            if std::mem::take(&mut self.realtime.hold) {
-                self.feed_hold(now);
-            }
-            if std::mem::take(&mut self.realtime.resume) {
-                self.cycle_start(now);
-            }
-            if std::mem::take(&mut self.realtime.jog_cancel) && self.state == State::Jog {
-                self.cancel_jog(now);
-            }
+        if std::mem::take(&mut self.input.realtime.hold) {
+            self.feed_hold(now);
+        }
+        if std::mem::take(&mut self.input.realtime.resume) {
+            self.cycle_start(now);
+        }
+        if std::mem::take(&mut self.input.realtime.jog_cancel) && self.state == State::Jog {
+            self.cancel_jog(now);
         }
         self.advance_pending(now);
         self.process_input(now);
@@ -318,39 +252,59 @@ impl Controller {
 
     fn boot(&mut self, now: f64) {
         self.power = Power::On;
+        let (position, _) = self.motion.state(now);
+        for (o, p) in self.offset.iter_mut().zip(position) {
+            *o += p;
+        }
         self.motion.set_position([0.0; N_AXIS]);
         self.parser = ParserState::new([0.0; N_AXIS]);
-        self.offset_deg = self.world.arm_deg();
+        // HOMING_INIT_LOCK: a board with homing enabled powers up locked.
         self.state = if self.settings.homing {
             State::Alarm
         } else {
             State::Idle
         };
-        self.clear_input();
         self.pending = None;
+        self.stall_until = now;
+        self.pins = self.limit_pins(now);
+        self.restart(now);
+    }
+
+    /// What the firmware's `main` does after power-up and after every reset: clear the
+    /// system state and input, greet, and tell why it is locked.
+    fn restart(&mut self, now: f64) {
+        self.input.clear();
+        self.flush_after_stall = now < self.stall_until;
+        self.counters.reset();
         self.critical = false;
         self.jog_cancelling = false;
-        self.stall_until = now;
         self.emit(now, BANNER.to_vec());
+        // CHECK_LIMITS_AT_INIT.
+        if self.settings.hard_limits && self.pins.iter().any(|&p| p) {
+            self.state = State::Alarm;
+            self.emit_line(now, text::CHECK_LIMITS);
+        }
         if self.state == State::Alarm {
-            self.emit_line(now, MSG_UNLOCK_HINT);
+            self.emit_line(now, text::UNLOCK_HINT);
+        } else {
+            self.state = State::Idle;
         }
     }
 
-    fn clear_input(&mut self) {
-        self.wco_counter = 0;
-        self.ovr_counter = 0;
-        self.rx.clear();
-        self.line.clear();
-        self.line_overflow = false;
-        self.in_paren_comment = false;
-        self.in_semicolon_comment = false;
-        self.realtime = Realtime::default();
+    /// Where each switch closes, in machine coordinates.
+    fn switches(&self) -> Switches {
+        std::array::from_fn(|i| self.wired[i].then_some(-self.offset[i]))
+    }
+
+    fn limit_pins(&self, now: f64) -> [bool; N_AXIS] {
+        let (position, _) = self.motion.state(now);
+        homing::pressed(&self.switches(), &position)
     }
 
     fn sync_world(&self, now: f64) {
         let (position, _) = self.motion.state(now);
-        self.world.set_arm_deg(position[0] + self.offset_deg);
+        let arm = self.arm_axis;
+        self.world.set_arm_deg(position[arm] + self.offset[arm]);
     }
 
     fn emit(&mut self, now: f64, bytes: Vec<u8>) {
@@ -372,6 +326,8 @@ impl Controller {
 
     // ---- real-time commands -------------------------------------------------------
 
+    /// Ctrl-X (`mc_reset`): stopping the steppers while they move raises ALARM:3
+    /// (ALARM:6 while homing); then the system aborts.
     fn soft_reset(&mut self, now: f64) {
         if !self.critical {
             let moving = match self.state {
@@ -428,6 +384,13 @@ impl Controller {
         }
     }
 
+    /// The main loop is suspended (it executes no line) while a feed hold is complete
+    /// and while a jog cancel decelerates; during the deceleration of a feed hold it
+    /// still runs.
+    fn suspended(&self, now: f64) -> bool {
+        self.jog_cancelling || self.state == State::Hold && self.motion.hold_complete(now)
+    }
+
     fn update_state(&mut self) {
         match self.state {
             State::Run | State::Jog if self.motion.is_idle() => self.state = State::Idle,
@@ -442,10 +405,11 @@ impl Controller {
     /// on, decelerating at `COAST_DECEL_FACTOR` times the axis acceleration, while the
     /// motor slips steps: MPos no longer matches the arm until it is homed again.
     fn kill_motion(&mut self, now: f64) -> [f64; N_AXIS] {
-        let vx = self.motion.velocity(now)[0];
+        let arm = self.arm_axis;
+        let v = self.motion.velocity(now)[arm];
         let position = self.motion.kill(now);
-        let decel = COAST_DECEL_FACTOR * self.settings.axes[0].accel.max(1e-9);
-        self.offset_deg += vx * vx.abs() / (2.0 * decel);
+        let decel = COAST_DECEL_FACTOR * self.settings.axes[arm].accel.max(1e-9);
+        self.offset[arm] += v * v.abs() / (2.0 * decel);
         self.sync_world(now);
         position
     }
@@ -463,30 +427,22 @@ impl Controller {
     fn raise_alarm(&mut self, code: u8, now: f64) {
         self.alarm_message(code, now);
         if code == alarm::HARD_LIMIT || code == alarm::SOFT_LIMIT {
-            self.emit_line(now, MSG_RESET_TO_CONTINUE);
+            self.emit_line(now, text::RESET_TO_CONTINUE);
             self.critical = true;
         } else {
             self.abort(now);
         }
     }
 
-    /// The firmware's system abort: the executing line still gets its `ok`, input is
-    /// flushed, the parser resets and the banner follows.
+    /// The firmware's system abort: the executing line still gets its `ok`, everything
+    /// received is dropped, the parser resets (G92 cleared) and the banner follows.
     fn abort(&mut self, now: f64) {
         let position = self.kill_motion(now);
         if self.pending.take().is_some() {
             self.emit_status(now, Ok(()));
         }
-        self.clear_input();
-        self.critical = false;
-        self.jog_cancelling = false;
         self.parser = ParserState::new(position);
-        self.emit(now, BANNER.to_vec());
-        if self.state == State::Alarm {
-            self.emit_line(now, MSG_UNLOCK_HINT);
-        } else {
-            self.state = State::Idle;
-        }
+        self.restart(now);
     }
 
     fn check_armed_alarm(&mut self, now: f64) {
@@ -497,6 +453,20 @@ impl Controller {
         if moving && self.motion.block_fraction(now).is_some_and(|f| f >= 0.5) {
             self.armed_alarm = None;
             self.raise_alarm(code, now);
+        }
+    }
+
+    /// `$21`: a switch changing outside Alarm and homing stops everything (ALARM:1).
+    fn check_hard_limits(&mut self, now: f64) {
+        let pins = self.limit_pins(now);
+        let changed = pins != self.pins;
+        self.pins = pins;
+        if changed
+            && self.settings.hard_limits
+            && !self.critical
+            && !matches!(self.state, State::Alarm | State::Home)
+        {
+            self.raise_alarm(alarm::HARD_LIMIT, now);
         }
     }
 
@@ -531,11 +501,7 @@ impl Controller {
                     self.queue_block(block, now);
                 }
             }
-            Pending::Home(phase) => {
-                if self.motion.is_idle() {
-                    self.homing_step(phase, now);
-                }
-            }
+            Pending::Home { phase, resume_at } => self.homing_step(phase, resume_at, now),
             Pending::SoftLimit => {
                 if self.motion.hold_complete(now) {
                     self.pending = Some(Pending::Locked);
@@ -546,49 +512,33 @@ impl Controller {
         }
     }
 
-    /// Move received bytes into the line buffer and execute complete lines, as long as
-    /// no line is waiting for the machine.
+    /// Execute complete lines while the main loop is free to: no line waiting for the
+    /// machine, no alarm pause, no completed feed hold.
     fn process_input(&mut self, now: f64) {
-        while self.pending.is_none() && !self.critical && now >= self.stall_until {
-            let Some(c) = self.rx.pop_front() else {
+        while self.pending.is_none()
+            && !self.critical
+            && now >= self.stall_until
+            && !self.suspended(now)
+        {
+            let Some(line) = self.input.next_line() else {
                 return;
             };
-            if c == b'\n' || c == b'\r' {
-                let line = std::mem::take(&mut self.line);
-                let overflow = self.line_overflow;
-                self.line_overflow = false;
-                self.in_paren_comment = false;
-                self.in_semicolon_comment = false;
-                self.execute_line(&line, overflow, now);
-            } else if self.line_overflow || self.in_paren_comment || self.in_semicolon_comment {
-                if c == b')' {
-                    self.in_paren_comment = false;
-                }
-            } else if c <= b' ' || c == b'/' {
-                // Whitespace and control characters are dropped; block delete is ignored.
-            } else if c == b'(' {
-                self.in_paren_comment = true;
-            } else if c == b';' {
-                self.in_semicolon_comment = true;
-            } else if self.line.len() >= LINE_BUFFER_SIZE - 1 {
-                self.line_overflow = true;
-            } else {
-                self.line.push(c.to_ascii_uppercase());
-            }
+            self.execute_line(&line, now);
         }
     }
 
-    fn execute_line(&mut self, line: &[u8], overflow: bool, now: f64) {
-        let result = if overflow {
+    fn execute_line(&mut self, line: &Line, now: f64) {
+        let text = &line.text;
+        let result = if line.overflow {
             Some(Err(status::OVERFLOW))
-        } else if line.is_empty() {
+        } else if text.is_empty() {
             Some(Ok(()))
-        } else if line[0] == b'$' {
-            self.system_command(&line[1..], now)
+        } else if text[0] == b'$' {
+            self.system_command(&text[1..], now)
         } else if matches!(self.state, State::Alarm | State::Jog) {
             Some(Err(status::SYSTEM_GC_LOCK))
         } else {
-            self.gcode_line(line, now)
+            self.gcode_line(text, now)
         };
         if let Some(result) = result {
             self.emit_status(now, result);
@@ -597,10 +547,9 @@ impl Controller {
 
     /// A `$` command (without the `$`). `None`: the line waits for the machine.
     fn system_command(&mut self, rest: &[u8], now: f64) -> Option<Result<(), u8>> {
-        let first = rest.first().copied();
-        match first {
+        match rest.first().copied() {
             None => {
-                self.emit_line(now, HELP);
+                self.emit_line(now, text::HELP);
                 return Some(Ok(()));
             }
             Some(b'$' | b'G' | b'X' | b'C') => {
@@ -631,9 +580,9 @@ impl Controller {
                 None
             }
             b"I" => {
-                let version = format!("[VER:{VERSION}:{}]", self.build_info);
+                let version = format!("[VER:{}:{}]", text::VERSION, self.build_info);
                 self.emit_line(now, &version);
-                self.emit_line(now, OPTIONS);
+                self.emit_line(now, text::OPTIONS);
                 Some(Ok(()))
             }
             [b'I', b'=', info @ ..] => {
@@ -649,7 +598,10 @@ impl Controller {
                 if rest != b"RST=#" {
                     self.settings = self.factory_settings.clone();
                 }
-                self.emit_line(now, MSG_RESTORING_DEFAULTS);
+                if rest != b"RST=$" {
+                    self.coords = [[0.0; N_AXIS]; N_COORDINATE_SYSTEMS];
+                }
+                self.emit_line(now, text::RESTORING_DEFAULTS);
                 self.emit_status(now, Ok(()));
                 self.soft_reset(now);
                 None
@@ -669,8 +621,8 @@ impl Controller {
         if rest.get(1) != Some(&b'=') {
             return Some(Err(status::INVALID_STATEMENT));
         }
-        let (target, feed) = match gcode::Block::parse(&rest[2..]).and_then(|b| self.parser.jog(&b))
-        {
+        let jog = gcode::Block::parse(&rest[2..]).and_then(|b| self.parser.jog(&b, &self.coords));
+        let (target, feed) = match jog {
             Ok(jog) => jog,
             Err(code) => return Some(Err(code)),
         };
@@ -710,7 +662,7 @@ impl Controller {
             }
             b'X' => {
                 if self.state == State::Alarm {
-                    self.emit_line(now, MSG_UNLOCKED);
+                    self.emit_line(now, text::UNLOCKED);
                     self.state = State::Idle;
                 }
             }
@@ -731,26 +683,45 @@ impl Controller {
         if pos != rest.len() || !(0.0..=255.0).contains(&parameter) {
             return Err(status::INVALID_STATEMENT);
         }
-        self.settings.store(parameter as u8, value)
+        let parameter = parameter as u8;
+        self.settings.store(parameter, value)?;
+        if parameter == 13 {
+            // Positions change units: WCO on the next report.
+            self.counters.wco_changed();
+        }
+        Ok(())
     }
 
     fn report_parameters(&mut self, now: f64) {
-        let zero = self.format_axes([0.0; N_AXIS]);
-        for name in [
-            "G54", "G55", "G56", "G57", "G58", "G59", "G28", "G30", "G92",
-        ] {
+        let inches = self.settings.report_inches;
+        let coords = self.coords;
+        for (i, system) in coords.iter().enumerate() {
+            let line = format!("[G{}:{}]", 54 + i, report::axes(*system, inches));
+            self.emit_line(now, &line);
+        }
+        let zero = report::axes([0.0; N_AXIS], inches);
+        for name in ["G28", "G30"] {
             self.emit_line(now, &format!("[{name}:{zero}]"));
         }
-        self.emit_line(now, "[TLO:0.000]");
+        let g92 = report::axes(self.parser.coord_offset(), inches);
+        self.emit_line(now, &format!("[G92:{g92}]"));
+        self.emit_line(now, &format!("[TLO:{}]", report::fmt_fixed(0.0, 3)));
         self.emit_line(now, &format!("[PRB:{zero}:0]"));
     }
 
     fn gcode_line(&mut self, line: &[u8], now: f64) -> Option<Result<(), u8>> {
         let from = self.parser.position;
-        let execution = match gcode::Block::parse(line).and_then(|b| self.parser.execute(&b)) {
+        let parsed = gcode::Block::parse(line);
+        let execution = match parsed.and_then(|b| self.parser.execute(&b, &mut self.coords)) {
             Ok(execution) => execution,
             Err(code) => return Some(Err(code)),
         };
+        if execution.wco_changed {
+            self.counters.wco_changed();
+        }
+        if execution.accessories_changed {
+            self.counters.accessories_changed();
+        }
         let block = execution.motion.and_then(|(target, rate)| {
             let target = self.quantize(target);
             (target != self.quantize(from)).then_some(motion::Block { target, rate })
@@ -768,9 +739,9 @@ impl Controller {
                 return None;
             }
         }
-        if let Some(dwell_s) = execution.dwell_s {
+        if execution.sync {
             self.pending = Some(Pending::Sync {
-                dwell_s,
+                dwell_s: execution.dwell_s.unwrap_or(0.0),
                 then: block,
             });
             self.advance_pending(now);
@@ -823,398 +794,129 @@ impl Controller {
 
     // ---- homing -------------------------------------------------------------------
 
-    /// Seek the X switch (physically at θ = 0, the positive end) at the seek rate, then
-    /// pull off at the locate feed rate. The other axes have no hardware and home at once.
     fn start_homing(&mut self, now: f64) {
         self.state = State::Home;
         let (position, _) = self.motion.state(now);
-        let to_switch = (-(position[0] + self.offset_deg)).max(0.0);
-        let search = HOMING_SEARCH_SCALAR * self.settings.axes[0].max_travel;
-        let fails = to_switch > search;
-        let mut target = position;
-        target[0] += to_switch.min(search);
-        self.motion.push(motion::Block {
-            target,
-            rate: self.settings.homing_seek,
-        });
-        self.motion.update(now, &self.settings.axes);
-        self.pending = Some(Pending::Home(HomingPhase::Seek { fails }));
+        let next = homing::start(
+            &self.homing_cycles,
+            position,
+            &self.switches(),
+            &self.settings,
+        );
+        self.homing_next(next, now, now);
     }
 
-    fn homing_step(&mut self, phase: HomingPhase, now: f64) {
-        let pulloff = self.settings.homing_pulloff;
-        match phase {
-            HomingPhase::Seek { fails: true } => {
-                self.pending = None;
-                self.raise_alarm(alarm::HOMING_FAIL_APPROACH, now);
-            }
-            HomingPhase::Seek { fails: false } if pulloff > 0.0 => {
-                let (mut target, _) = self.motion.state(now);
-                target[0] -= pulloff;
-                self.motion.push(motion::Block {
-                    target,
-                    rate: self.settings.homing_feed,
+    /// After a phase's move: fail with its alarm, or wait out the debounce delay and go
+    /// on with the next phase, in machine time (however far `now` has run ahead).
+    fn homing_step(&mut self, mut phase: homing::Phase, mut resume_at: Option<f64>, now: f64) {
+        while self.motion.is_idle() {
+            let at = match resume_at {
+                Some(at) => at,
+                None => {
+                    let end = self.motion.idle_since().max(phase.started_at);
+                    if let Some(code) = phase.fails {
+                        // The alarm, then the `$H` line's `ok`, then the reset's banner.
+                        self.raise_alarm(code, end);
+                        return;
+                    }
+                    end + f64::from(self.settings.homing_debounce_ms) / 1000.0
+                }
+            };
+            if now < at {
+                self.pending = Some(Pending::Home {
+                    phase,
+                    resume_at: Some(at),
                 });
-                self.motion.update(now, &self.settings.axes);
-                self.pending = Some(Pending::Home(HomingPhase::PullOff));
+                return;
             }
-            HomingPhase::Seek { fails: false } | HomingPhase::PullOff => {
-                let (position, _) = self.motion.state(now);
-                let physical = position[0] + self.offset_deg;
-                let home = self.quantize([-pulloff; N_AXIS]);
+            let (position, _) = self.motion.state(at);
+            let next = homing::after(
+                &self.homing_cycles,
+                phase,
+                position,
+                &self.switches(),
+                &self.settings,
+            );
+            match self.homing_next(next, at, now) {
+                Some(started) => (phase, resume_at) = (started, None),
+                None => return,
+            }
+        }
+        self.pending = Some(Pending::Home { phase, resume_at });
+    }
+
+    /// Start the next phase at machine time `at`, or finish the cycle. Returns the phase
+    /// started.
+    fn homing_next(&mut self, next: homing::Next, at: f64, now: f64) -> Option<homing::Phase> {
+        match next {
+            homing::Next::Run(mut phase, block) => {
+                phase.started_at = at;
+                if let Some(block) = block {
+                    self.motion.start_at(block, at, &self.settings.axes);
+                    self.motion.update(now, &self.settings.axes);
+                }
+                self.pending = Some(Pending::Home {
+                    phase,
+                    resume_at: None,
+                });
+                Some(phase)
+            }
+            homing::Next::Homed { mask, position } => {
+                let (before, _) = self.motion.state(at);
+                let home = self.quantize(position);
+                for i in (0..N_AXIS).filter(|i| mask & (1 << i) != 0) {
+                    self.offset[i] += before[i] - home[i];
+                }
                 self.motion.set_position(home);
                 self.parser.position = home;
-                self.offset_deg = physical - home[0];
+                self.sync_world(now);
+                self.pins = self.limit_pins(now);
+                // A `?` received during the cycle is answered now, still in Home.
+                if std::mem::take(&mut self.input.realtime.status) {
+                    self.emit_status_report(at);
+                }
+                // Holds and cycle starts received during the cycle come to nothing.
+                self.input.realtime.hold = false;
+                self.input.realtime.resume = false;
                 self.state = State::Idle;
                 self.pending = None;
-                self.emit_status(now, Ok(()));
+                self.emit_status(at, Ok(()));
+                None
             }
         }
     }
 
     // ---- reports ------------------------------------------------------------------
 
-    fn format_axes(&self, values: [f64; N_AXIS]) -> String {
-        let (scale, decimals) = if self.settings.report_inches {
-            (1.0 / MM_PER_INCH, 4)
-        } else {
-            (1.0, 3)
-        };
-        values
-            .iter()
-            .map(|v| fmt_fixed(v * scale, decimals))
-            .collect::<Vec<_>>()
-            .join(",")
-    }
-
-    /// The `?` report: `<State|MPos:x,y,z|FS:feed,spindle>` (`WPos` and `Bf` per `$10`).
-    fn status_report(&mut self, now: f64) -> String {
+    fn emit_status_report(&mut self, now: f64) {
         let (position, speed) = self.motion.state(now);
         let state = match self.state {
-            State::Idle => "Idle",
-            State::Run => "Run",
-            State::Hold if self.motion.hold_complete(now) => "Hold:0",
-            State::Hold => "Hold:1",
-            State::Alarm => "Alarm",
-            State::Home => "Home",
-            State::Jog => "Jog",
+            State::Idle => ReportState::Idle,
+            State::Run => ReportState::Run,
+            State::Hold => ReportState::Hold {
+                complete: self.motion.hold_complete(now),
+            },
+            State::Alarm => ReportState::Alarm,
+            State::Home => ReportState::Home,
+            State::Jog => ReportState::Jog,
         };
         let mask = self.settings.status_report_mask;
-        let label = if mask & 1 != 0 { "MPos" } else { "WPos" };
-        let mut report = format!(
-            "<{state}|{label}:{}",
-            self.format_axes(self.quantize(position))
-        );
-        if mask & 2 != 0 {
-            report.push_str(&format!(
-                "|Bf:{},{}",
-                self.motion.available(),
-                RX_BUFFER_SIZE - self.rx.len()
-            ));
-        }
-        let feed = if self.settings.report_inches {
-            fmt_fixed(speed * 60.0 / MM_PER_INCH, 1)
-        } else {
-            fmt_fixed(speed * 60.0, 0)
+        let snapshot = StatusSnapshot {
+            state,
+            mpos: self.quantize(position),
+            wco: self.parser.wco(&self.coords),
+            report_mpos: mask & 1 != 0,
+            buffer: (mask & 2 != 0).then(|| (self.motion.available(), self.input.available())),
+            feed: speed * 60.0,
+            spindle_rpm: self.parser.spindle_rpm(),
+            inches: self.settings.report_inches,
+            limit_pins: self.limit_pins(now),
+            accessories: self.parser.accessories(),
         };
-        report.push_str(&format!(
-            "|FS:{feed},{}",
-            fmt_fixed(self.parser.spindle_rpm(), 0)
-        ));
-        if self.status_extras {
-            self.push_status_extras(&mut report, position[0]);
-        }
-        report.push('>');
-        report
-    }
-
-    /// `Pn:X` while the arm presses the home switch (physically θ ≥ 0); `WCO` and then
-    /// `Ov` (with `A`) on the firmware's refresh counters: every 10th report when idle,
-    /// every 30th / 20th while busy.
-    fn push_status_extras(&mut self, report: &mut String, x: f64) {
-        if x + self.offset_deg >= 0.0 {
-            report.push_str("|Pn:X");
-        }
-        let busy = matches!(
-            self.state,
-            State::Run | State::Hold | State::Home | State::Jog
-        );
-        if self.wco_counter > 0 {
-            self.wco_counter -= 1;
-        } else {
-            self.wco_counter = if busy { 29 } else { 9 };
-            if self.ovr_counter == 0 {
-                self.ovr_counter = 1;
-            }
-            let zero = self.format_axes([0.0; N_AXIS]);
-            report.push_str(&format!("|WCO:{zero}"));
-        }
-        if self.ovr_counter > 0 {
-            self.ovr_counter -= 1;
-        } else {
-            self.ovr_counter = if busy { 19 } else { 9 };
-            report.push_str("|Ov:100,100,100");
-            let accessories = self.parser.accessories();
-            if !accessories.is_empty() {
-                report.push_str(&format!("|A:{accessories}"));
-            }
-        }
+        let report = self.counters.status_report(&snapshot);
+        self.emit_line(now, &report);
     }
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// A booted controller (homing enabled, arm physically at −30°) at machine time 0.5.
-    fn booted() -> (Controller, World) {
-        let world = World::new(-30.0);
-        let mut c = Controller::new(&GrblConfig::default(), world.clone(), 0.0);
-        c.tick(0.5);
-        assert_eq!(
-            take(&mut c, 0.5),
-            "\r\nGrbl 1.1h ['$' for help]\r\n[MSG:'$H'|'$X' to unlock]\r\n"
-        );
-        (c, world)
-    }
-
-    /// Bytes arrive one by one, each a checkpoint, as on the serial line.
-    fn send(c: &mut Controller, text: &str, now: f64) -> String {
-        for b in text.bytes() {
-            c.receive(b);
-            c.tick(now);
-        }
-        c.tick(now);
-        take(c, now)
-    }
-
-    fn take(c: &mut Controller, now: f64) -> String {
-        let bytes: Vec<u8> = c.take_output(now).concat();
-        String::from_utf8(bytes).unwrap()
-    }
-
-    #[test]
-    fn locked_until_unlocked_then_moves_in_time() {
-        let (mut c, world) = booted();
-        assert_eq!(send(&mut c, "G0X-10\n", 1.0), "error:9\r\n");
-        assert_eq!(
-            send(&mut c, "$X\n", 1.0),
-            "[MSG:Caution: Unlocked]\r\nok\r\n"
-        );
-        // Not homed: MPos counts from power-up, the arm is physically at −30°.
-        assert_eq!(send(&mut c, "G0X-10\n", 1.0), "ok\r\n");
-        // 10° with 40°/s²: a triangle peaking at √(40·10) = 20°/s (the max rate), 1 s.
-        assert_eq!(
-            send(&mut c, "?", 1.5),
-            "<Run|MPos:-5.000,0.000,0.000|FS:1200,0>\r\n"
-        );
-        assert!((world.arm_deg() + 35.0).abs() < 1e-9);
-        assert_eq!(
-            send(&mut c, "?", 2.0),
-            "<Idle|MPos:-10.000,0.000,0.000|FS:0,0>\r\n"
-        );
-        assert!((world.arm_deg() + 40.0).abs() < 1e-9);
-    }
-
-    #[test]
-    fn homing_finds_the_switch_at_the_positive_end() {
-        let (mut c, world) = booted();
-        assert_eq!(send(&mut c, "$H\n", 1.0), "");
-        assert_eq!(
-            send(&mut c, "?", 1.1),
-            "<Home|MPos:0.200,0.000,0.000|FS:240,0>\r\n"
-        );
-        // 30° at 10°/s with 40°/s² ramps: 3.25 s.
-        assert_eq!(send(&mut c, "", 4.2), "");
-        assert_eq!(send(&mut c, "", 4.3), "ok\r\n");
-        assert_eq!(world.arm_deg(), 0.0);
-        assert_eq!(
-            send(&mut c, "?", 4.3),
-            "<Idle|MPos:0.000,0.000,0.000|FS:0,0>\r\n"
-        );
-        // A target past the soft limits raises ALARM:2 and locks until reset.
-        assert_eq!(send(&mut c, "G0X-181\n", 5.0), "ALARM:2\r\n");
-        assert_eq!(
-            send(&mut c, "$X\n?", 5.6),
-            "[MSG:Reset to continue]\r\n<Alarm|MPos:0.000,0.000,0.000|FS:0,0>\r\n"
-        );
-        assert_eq!(
-            send(&mut c, "\x18", 6.0),
-            "ok\r\n\r\nGrbl 1.1h ['$' for help]\r\n[MSG:'$H'|'$X' to unlock]\r\n"
-        );
-    }
-
-    #[test]
-    fn dwell_waits_for_motion_and_reset_mid_move_alarms() {
-        let (mut c, world) = booted();
-        send(&mut c, "$X\n", 1.0);
-        assert_eq!(send(&mut c, "G1X-20F600\nG4P0\n", 1.0), "ok\r\n");
-        // 20° at 10°/s, ramps 0.25 s: 2.25 s.
-        assert_eq!(send(&mut c, "", 3.2), "");
-        assert_eq!(send(&mut c, "", 3.26), "ok\r\n");
-        assert_eq!(send(&mut c, "G1X-40\n", 4.0), "ok\r\n");
-        // 1 s into the 20° move (0.25 s ramp to 10°/s): 8.75° done; hold takes 0.25 s.
-        assert_eq!(send(&mut c, "!", 5.0), "");
-        assert_eq!(
-            send(&mut c, "?", 5.1),
-            "<Hold:1|MPos:-29.550,0.000,0.000|FS:360,0>\r\n"
-        );
-        assert_eq!(
-            send(&mut c, "?", 5.5),
-            "<Hold:0|MPos:-30.000,0.000,0.000|FS:0,0>\r\n"
-        );
-        let held = world.arm_deg();
-        assert_eq!(send(&mut c, "$$\n", 5.5), "error:8\r\n");
-        assert_eq!(
-            send(&mut c, "?", 5.5),
-            "<Hold:0|MPos:-30.000,0.000,0.000|FS:0,0>\r\n"
-        );
-        assert_eq!(world.arm_deg(), held);
-        assert_eq!(send(&mut c, "~", 5.5), "");
-        assert_eq!(
-            send(&mut c, "?", 6.0),
-            "<Run|MPos:-33.750,0.000,0.000|FS:600,0>\r\n"
-        );
-        assert_eq!(send(&mut c, "\x18", 6.0), "ALARM:3\r\n");
-        // Stopped dead at 10°/s: the arm (30° below MPos since power-up) coasts on
-        // 10²/(2·4·40) = 0.3125° while the motor slips.
-        assert!((world.arm_deg() - (-30.0 - 33.75 - 0.3125)).abs() < 1e-9);
-        assert_eq!(
-            send(&mut c, "?", 6.5),
-            "\r\nGrbl 1.1h ['$' for help]\r\n[MSG:'$H'|'$X' to unlock]\r\n<Alarm|MPos:-33.750,0.000,0.000|FS:0,0>\r\n"
-        );
-    }
-
-    #[test]
-    fn jogging_and_jog_cancel() {
-        let (mut c, _) = booted();
-        assert_eq!(send(&mut c, "$J=G91X-10F600\n", 1.0), "error:8\r\n");
-        send(&mut c, "$X\n", 1.0);
-        assert_eq!(send(&mut c, "$J=G91X-10\n", 1.0), "error:22\r\n");
-        assert_eq!(send(&mut c, "$J=G1X-10F600\n", 1.0), "error:16\r\n");
-        assert_eq!(send(&mut c, "$J=G91F600\n", 1.0), "error:16\r\n");
-        assert_eq!(send(&mut c, "$J=X-10F600S1\n", 1.0), "error:36\r\n");
-        assert_eq!(send(&mut c, "$J=X-200F600\n", 1.0), "error:15\r\n");
-        assert_eq!(send(&mut c, "$JX-1F600\n", 1.0), "error:3\r\n");
-        // 20° at 10°/s with 0.25 s ramps: 2.25 s.
-        assert_eq!(
-            send(&mut c, "$J=G91X-20F600\n?", 1.0),
-            "ok\r\n<Jog|MPos:0.000,0.000,0.000|FS:0,0>\r\n"
-        );
-        assert_eq!(send(&mut c, "G0X-5\n", 1.5), "error:9\r\n");
-        assert_eq!(
-            send(&mut c, "?", 3.3),
-            "<Idle|MPos:-20.000,0.000,0.000|FS:0,0>\r\n"
-        );
-        // The jog kept the parser in G90: this is absolute.
-        assert_eq!(
-            send(&mut c, "$J=X-40F600\n$J=X-60F600\n", 4.0),
-            "ok\r\nok\r\n"
-        );
-        assert_eq!(send(&mut c, "\u{85}", 5.0), "");
-        // Cancelled at 10°/s after 8.75°: 0.25 s and 1.25° to stop, the rest dropped.
-        assert_eq!(
-            send(&mut c, "?", 5.1),
-            "<Jog|MPos:-29.550,0.000,0.000|FS:360,0>\r\n"
-        );
-        assert_eq!(
-            send(&mut c, "?", 5.3),
-            "<Idle|MPos:-30.000,0.000,0.000|FS:0,0>\r\n"
-        );
-        assert_eq!(
-            send(&mut c, "G91G0X1\nG4P0\n?", 5.3),
-            "ok\r\n<Run|MPos:-30.000,0.000,0.000|FS:0,0>\r\n"
-        );
-        assert_eq!(send(&mut c, "", 9.0), "ok\r\n");
-        assert_eq!(
-            send(&mut c, "?", 9.0),
-            "<Idle|MPos:-29.000,0.000,0.000|FS:0,0>\r\n"
-        );
-    }
-
-    #[test]
-    fn full_receive_buffer_drops_bytes_and_full_planner_delays_ok() {
-        let (mut c, _) = booted();
-        send(&mut c, "$X\n$10=3\n", 1.0);
-        // While the dwell waits, the 128-byte ring keeps 127 bytes: 25 lines and "G4".
-        let flood = "G4P0\n".repeat(30);
-        assert_eq!(
-            send(&mut c, &format!("G4P10\n{flood}?"), 1.0),
-            "<Idle|MPos:0.000,0.000,0.000|Bf:15,1|FS:0,0>\r\n"
-        );
-        assert_eq!(send(&mut c, "", 11.0), "ok\r\n".repeat(26));
-        assert_eq!(send(&mut c, "\n", 11.0), "error:28\r\n");
-        // 15 planner blocks; the 16th move is answered when the first one is done.
-        let moves = "G91G1X-1F60\n".repeat(16);
-        assert_eq!(send(&mut c, &moves, 12.0), "ok\r\n".repeat(15));
-        assert_eq!(
-            send(&mut c, "?", 12.5125),
-            "<Run|MPos:-0.500,0.000,0.000|Bf:0,128|FS:60,0>\r\n"
-        );
-        assert_eq!(send(&mut c, "", 13.1), "ok\r\n");
-    }
-
-    #[test]
-    fn stock_status_fields_on_their_refresh_counters() {
-        let config = GrblConfig {
-            status_extras: true,
-            homing_enabled: false,
-            ..GrblConfig::default()
-        };
-        let mut c = Controller::new(&config, World::new(0.0), 0.0);
-        c.tick(1.0);
-        assert_eq!(take(&mut c, 1.0), "\r\nGrbl 1.1h ['$' for help]\r\n");
-        let idle = "<Idle|MPos:0.000,0.000,0.000|FS:0,0|Pn:X";
-        assert_eq!(
-            send(&mut c, "?", 1.0),
-            format!("{idle}|WCO:0.000,0.000,0.000>\r\n")
-        );
-        assert_eq!(
-            send(&mut c, "M3S500M8\n?", 1.0),
-            format!("ok\r\n<Idle|MPos:0.000,0.000,0.000|FS:0,500|Pn:X|Ov:100,100,100|A:SF>\r\n")
-        );
-        for _ in 0..8 {
-            assert_eq!(
-                send(&mut c, "?", 1.0),
-                "<Idle|MPos:0.000,0.000,0.000|FS:0,500|Pn:X>\r\n"
-            );
-        }
-        assert_eq!(
-            send(&mut c, "M5M9G0X-1\n?", 1.0),
-            "ok\r\n<Run|MPos:0.000,0.000,0.000|FS:0,0|Pn:X|WCO:0.000,0.000,0.000>\r\n"
-        );
-        assert_eq!(
-            send(&mut c, "?", 2.0),
-            "<Idle|MPos:-1.000,0.000,0.000|FS:0,0|Ov:100,100,100>\r\n"
-        );
-    }
-
-    #[test]
-    fn line_endings_settings_and_errors() {
-        let (mut c, _) = booted();
-        // The firmware ends a line at \r and at \n: CRLF answers twice.
-        assert_eq!(
-            send(&mut c, "$X\r\n", 1.0),
-            "[MSG:Caution: Unlocked]\r\nok\r\nok\r\n"
-        );
-        assert_eq!(
-            send(&mut c, "$110=600\n$0=1\n$130=-1\n$99=1\n", 1.0),
-            "ok\r\nerror:6\r\nerror:4\r\nerror:3\r\n"
-        );
-        assert_eq!(
-            send(&mut c, "$100=x\n$100\n$H1\n", 1.0),
-            "error:2\r\nerror:3\r\nerror:3\r\n"
-        );
-        let settings = send(&mut c, "$$\n", 1.0);
-        assert!(settings.starts_with("$0=10\r\n$1=25\r\n"));
-        assert!(settings.contains("\r\n$22=1\r\n") && settings.contains("\r\n$110=600.000\r\n"));
-        assert!(settings.ends_with("$132=200.000\r\nok\r\n"));
-        assert_eq!(
-            send(&mut c, "$I\n", 1.0),
-            "[VER:1.1h.20190830:]\r\n[OPT:V,15,128]\r\nok\r\n"
-        );
-        assert_eq!(send(&mut c, "g0 x-1 (comment) ; rest\n", 1.0), "ok\r\n");
-        let long = format!("G0X{}\n", "1".repeat(90));
-        assert_eq!(send(&mut c, &long, 1.0), "error:11\r\n");
-    }
-}
+mod tests;

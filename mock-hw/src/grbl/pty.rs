@@ -1,5 +1,7 @@
 //! The pseudo-terminal the emulated controller serves, and the stable device path (a
-//! symlink, like `/dev/serial/by-id/...`) that points at its current slave.
+//! symlink, like `/dev/serial/by-id/...`) that points at its current slave. Whether a
+//! driver has the slave open is what an Arduino-based board sees as DTR: opening the
+//! port resets the board.
 
 use std::io::{self, Read, Write};
 use std::path::Path;
@@ -14,12 +16,20 @@ pub(crate) const BAUD_RATE: u32 = 115_200;
 /// dropped (as on a real serial line nobody listens to).
 const WRITE_TIMEOUT: Duration = Duration::from_millis(20);
 
-/// One plugged-in connection: the master end the emulator drives, and the slave kept
-/// open so that the line stays up while no driver has it open.
+/// One plugged-in connection: the master end the emulator drives. The emulator does
+/// not keep the slave open, so it sees when a driver opens and closes it.
 #[derive(Debug)]
 pub(crate) struct Pty {
     master: TTYPort,
-    _slave: TTYPort,
+}
+
+/// What a read from the line found.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Received {
+    /// This many bytes (0 when nothing came in time).
+    Bytes(usize),
+    /// Nobody has the port open (DTR low).
+    Closed,
 }
 
 impl Pty {
@@ -35,18 +45,21 @@ impl Pty {
             .name()
             .ok_or_else(|| io::Error::other("pseudo-terminal slave has no name"))?;
         point_link(link, Path::new(&name))?;
-        Ok(Pty {
-            master,
-            _slave: slave,
-        })
+        // The settings stay with the pty; the slave closes here (DTR low).
+        drop(slave);
+        Ok(Pty { master })
     }
 
-    /// Read what the driver sent, waiting at most `timeout`. Returns 0 bytes on timeout.
-    pub fn read(&mut self, buf: &mut [u8], timeout: Duration) -> io::Result<usize> {
+    /// Read what the driver sent, waiting at most `timeout` while the port is open
+    /// (a closed port answers at once).
+    pub fn read(&mut self, buf: &mut [u8], timeout: Duration) -> io::Result<Received> {
         self.master.set_timeout(timeout)?;
         match self.master.read(buf) {
-            Err(e) if e.kind() == io::ErrorKind::TimedOut => Ok(0),
-            other => other,
+            Ok(n) => Ok(Received::Bytes(n)),
+            Err(e) if e.kind() == io::ErrorKind::TimedOut => Ok(Received::Bytes(0)),
+            // While no slave is open the master hangs up (poll reports POLLHUP, reads
+            // fail with EIO).
+            Err(_) => Ok(Received::Closed),
         }
     }
 

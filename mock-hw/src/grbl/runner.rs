@@ -1,14 +1,16 @@
-//! The emulator thread: serves the pty with blocking I/O, drives the controller in
-//! machine time and applies injected faults.
+//! The emulator thread: serves the pty with blocking I/O, resets the board whenever a
+//! driver opens the port (DTR), drives the controller in machine time and applies
+//! injected and scheduled faults.
 
 use std::io;
 use std::path::PathBuf;
 use std::sync::mpsc::{Receiver, SyncSender, TryRecvError};
 use std::time::{Duration, Instant};
 
+use super::config::ScheduledFault;
 use super::faults::{Fault, LineFaults};
 use super::protocol::Controller;
-use super::pty::{self, Pty};
+use super::pty::{self, Pty, Received};
 
 /// Poll interval while something changes with time (motion, dwell, queued output).
 const BUSY_POLL: Duration = Duration::from_millis(1);
@@ -39,16 +41,25 @@ impl Clock {
 
     /// Machine seconds since start.
     pub fn now(&self) -> f64 {
-        self.origin.elapsed().as_secs_f64() / self.time_scale
+        self.real_s() / self.time_scale
+    }
+
+    /// Real seconds since start.
+    pub fn real_s(&self) -> f64 {
+        self.origin.elapsed().as_secs_f64()
     }
 }
 
 pub(crate) struct Runner {
     pub controller: Controller,
     pub pty: Option<Pty>,
+    /// A driver has the port open (DTR high).
+    pub port_open: bool,
     pub link: PathBuf,
     pub clock: Clock,
     pub faults: LineFaults,
+    /// Faults still to come, earliest first.
+    pub schedule: Vec<ScheduledFault>,
     pub commands: Receiver<Command>,
 }
 
@@ -63,21 +74,31 @@ impl Runner {
                     Err(TryRecvError::Empty) => break,
                 }
             }
+            self.apply_schedule();
             let wait = if self.controller.busy() {
                 BUSY_POLL
             } else {
                 IDLE_POLL
             };
-            let received = match &mut self.pty {
-                Some(pty) => match pty.read(&mut buf, wait) {
-                    Ok(n) => n,
-                    Err(_) => {
-                        // The line is in a bad state; keep the loop from spinning.
-                        std::thread::sleep(wait);
+            let read = match &mut self.pty {
+                Some(pty) => pty.read(&mut buf, wait).unwrap_or(Received::Closed),
+                None => Received::Closed,
+            };
+            let received = match read {
+                Received::Bytes(n) => {
+                    if !self.port_open {
+                        // Opening the port pulls DTR: the board resets, and what came
+                        // with the open is lost in the boot loader.
+                        self.port_open = true;
+                        self.controller.hard_reset(self.clock.now());
                         0
+                    } else {
+                        n
                     }
-                },
-                None => {
+                }
+                Received::Closed => {
+                    self.port_open = false;
+                    // A closed port answers at once: keep the loop from spinning.
                     std::thread::sleep(wait);
                     0
                 }
@@ -98,9 +119,19 @@ impl Runner {
 
     fn send_output(&mut self, now: f64) {
         for line in self.controller.take_output(now) {
-            if let (Some(bytes), Some(pty)) = (self.faults.apply(line), &mut self.pty) {
+            let bytes = self.faults.apply(line);
+            // With the port closed the bytes go nowhere, as from a real board.
+            if let (Some(bytes), Some(pty), true) = (bytes, &mut self.pty, self.port_open) {
                 pty.write(&bytes);
             }
+        }
+    }
+
+    fn apply_schedule(&mut self) {
+        let elapsed = self.clock.real_s();
+        while self.schedule.first().is_some_and(|f| f.at_s <= elapsed) {
+            let fault = self.schedule.remove(0).fault;
+            self.inject(fault, self.clock.now());
         }
     }
 
@@ -121,6 +152,10 @@ impl Runner {
     fn inject(&mut self, fault: Fault, now: f64) {
         match fault {
             Fault::Unplug => self.unplug(now),
+            // A failed replug leaves the board unplugged, which is what the caller sees.
+            Fault::Replug => {
+                let _ = self.reconnect(now);
+            }
             Fault::Silent => self.faults.silent = true,
             Fault::Responsive => self.faults.silent = false,
             Fault::Garble => self.faults.garble_next = true,
@@ -136,6 +171,7 @@ impl Runner {
 
     fn unplug(&mut self, now: f64) {
         self.pty = None;
+        self.port_open = false;
         // Losing power also ends a hang.
         self.faults.silent = false;
         pty::remove_link(&self.link);

@@ -1,11 +1,8 @@
 //! GRBL's `$` settings: storage with the firmware's range checks and error codes, and the
 //! `$$` listing in GRBL 1.1h's exact format.
 
-use super::protocol::{fmt_fixed, status};
-use super::GrblConfig;
-
-/// Number of axes the firmware drives (X, Y, Z). Only X has the arm attached.
-pub(crate) const N_AXIS: usize = 3;
+use super::config::GrblConfig;
+use super::report::{fmt_fixed, status, N_AXIS};
 
 /// Per-axis settings `$100+i`, `$110+i`, `$120+i`, `$130+i`. Units are the machine unit
 /// (degrees for the arm axis): steps/unit, units/min, units/s², units.
@@ -49,6 +46,7 @@ pub(crate) struct Settings {
     /// `$24` locate feed and `$25` seek rate, units/min.
     pub homing_feed: f64,
     pub homing_seek: f64,
+    /// `$26`, ms.
     pub homing_debounce_ms: u8,
     /// `$27` pull-off distance after homing, units.
     pub homing_pulloff: f64,
@@ -59,11 +57,11 @@ pub(crate) struct Settings {
 }
 
 impl Settings {
-    /// Factory settings of the emulated controller: GRBL's defaults, with the arm axis
-    /// (X) and the homing/soft-limit switches taken from `config`.
+    /// Factory settings of the emulated controller: GRBL's defaults, with the arm's
+    /// axis and the other settings `config` names.
     pub fn from_config(config: &GrblConfig) -> Self {
         let mut axes = [AxisSettings::GRBL_DEFAULT; N_AXIS];
-        axes[0] = AxisSettings {
+        axes[config.arm_axis.index()] = AxisSettings {
             steps_per_unit: config.steps_per_deg,
             max_rate: config.max_rate_deg_per_min,
             accel: config.accel_deg_per_s2,
@@ -77,17 +75,17 @@ impl Settings {
             step_enable_invert: false,
             limit_pins_invert: false,
             probe_pin_invert: false,
-            status_report_mask: 1,
+            status_report_mask: config.status_report_mask,
             junction_deviation: 0.010,
             arc_tolerance: 0.002,
             report_inches: false,
             soft_limits: config.soft_limits && config.homing_enabled,
-            hard_limits: false,
+            hard_limits: config.hard_limits,
             homing: config.homing_enabled,
             homing_dir_mask: 0,
             homing_feed: config.homing_feed_deg_per_min,
             homing_seek: config.homing_seek_deg_per_min,
-            homing_debounce_ms: 250,
+            homing_debounce_ms: config.homing_debounce_ms,
             homing_pulloff: config.homing_pulloff_deg,
             rpm_max: 1000.0,
             rpm_min: 0.0,

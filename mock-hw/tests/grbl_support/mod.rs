@@ -14,11 +14,12 @@ use serialport::SerialPort;
 /// How long any expected reply may take in real time.
 pub const REPLY_TIMEOUT: Duration = Duration::from_secs(5);
 
-/// Emulator settings for fast tests: 100× faster than real time.
+/// The arm board 100× faster than real time, reports without the optional fields.
 pub fn fast_config() -> GrblConfig {
     GrblConfig {
         time_scale: 0.01,
-        ..GrblConfig::default()
+        status_extras: false,
+        ..GrblConfig::arm_board()
     }
 }
 

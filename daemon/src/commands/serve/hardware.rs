@@ -101,7 +101,7 @@ pub fn open(config: &Config) -> anyhow::Result<Devices> {
         ArmConfig::Emulator { time_scale } => {
             let grbl_config = GrblConfig {
                 time_scale: *time_scale,
-                ..GrblConfig::default()
+                ..GrblConfig::arm_board()
             };
             let emulator = GrblEmulator::start(grbl_config.clone(), world.clone())
                 .context("starting the GRBL emulator")?;

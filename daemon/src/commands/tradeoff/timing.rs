@@ -16,10 +16,10 @@ pub struct HardwareTiming {
 }
 
 impl Default for HardwareTiming {
-    /// The emulated controller's and camera's defaults in real time; the scan starts at
+    /// The emulated arm board's and camera's defaults in real time; the scan starts at
     /// the home position θL = 0.
     fn default() -> Self {
-        let grbl = GrblConfig::default();
+        let grbl = GrblConfig::arm_board();
         HardwareTiming {
             max_rate_deg_per_min: grbl.max_rate_deg_per_min,
             accel_deg_per_s2: grbl.accel_deg_per_s2,
