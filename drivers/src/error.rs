@@ -16,6 +16,20 @@ pub enum DeviceError {
     Alarm { code: u32, meaning: String },
     #[error("controller reset: position unknown, home before moving")]
     Reset,
+    /// The arm has no known position since the controller powered up or reset: home
+    /// it, or declare where it is (the message says which).
+    #[error("arm position unknown: {0}")]
+    PositionUnknown(String),
+    /// The homing cycle failed (GRBL's ALARM:6–9): what GRBL means, and what to check.
+    #[error("homing failed, alarm {code} ({meaning}); {advice}")]
+    HomingFailed {
+        code: u32,
+        meaning: String,
+        advice: String,
+    },
+    /// The controller (or the configuration) refuses the request; one line per reason.
+    #[error("refused: {0}")]
+    Refused(String),
     #[error("disconnected: {0}")]
     Disconnected(String),
     #[error("{what} {value} out of range [{min}, {max}]")]

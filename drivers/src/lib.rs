@@ -39,10 +39,13 @@ pub enum ArmState {
     Alarm,
     /// Position unknown (after a reset or reconnect): home before the next move.
     NeedsHoming,
+    /// Position unknown and the controller does not home: declare where the arm is.
+    NeedsPosition,
     Disconnected,
 }
 
-/// A snapshot of the arm: state and angle (degrees, machine position).
+/// A snapshot of the arm: state and angle θL (degrees; for a GRBL arm its work
+/// position, the machine position once homed).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct ArmStatus {
     pub state: ArmState,
@@ -57,8 +60,13 @@ pub trait EmergencyStop: Send + Sync {
 
 /// The rotating light-source arm.
 pub trait Arm: Send {
-    /// Run the homing cycle; afterwards the position is known.
+    /// Reference the arm: run the homing cycle, or, on a controller that does not home,
+    /// accept the position declared with [`Arm::declare_position`] (an error when none
+    /// was). Afterwards the position is known.
     fn home(&mut self) -> Result<(), DeviceError>;
+    /// Declare where the arm is (degrees), for controllers without homing; refused
+    /// where the arm is referenced by homing.
+    fn declare_position(&mut self, angle_deg: f64) -> Result<(), DeviceError>;
     /// Move to `angle_deg` and return once the arm is idle there.
     fn move_to(&mut self, angle_deg: f64) -> Result<(), DeviceError>;
     /// Query state and position.

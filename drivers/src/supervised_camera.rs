@@ -123,6 +123,12 @@ impl From<&DeviceError> for WireError {
             DeviceError::Protocol(message) => WireError::Protocol {
                 message: message.clone(),
             },
+            // Arm faults never come from a camera; should one, its message travels.
+            DeviceError::PositionUnknown(_)
+            | DeviceError::HomingFailed { .. }
+            | DeviceError::Refused(_) => WireError::Protocol {
+                message: error.to_string(),
+            },
         }
     }
 }

@@ -20,7 +20,8 @@
 //!
 //! The modules form a line, each using only those before it: `faults`, `config`,
 //! `report` (what the firmware prints), `settings`, `gcode`, `motion`, `homing`,
-//! `serial` (input), `protocol` (the state machine), `pty`, `runner` (the thread).
+//! `serial` (input), `transcript`, `protocol` (the state machine), `pty`, `runner`
+//! (the thread).
 //!
 //! What the firmware does and this emulator does not: arcs, probing and G-codes outside
 //! G0 G1 G4 G10 G17 G20 G21 G53 G54–G59 G90 G91 G92 G92.1 G94 M3 M4 M5 M8 M9
@@ -40,6 +41,7 @@ mod report;
 mod runner;
 mod serial;
 mod settings;
+mod transcript;
 
 pub use config::{Axis, AxisSet, GrblConfig, ScheduledFault};
 pub use faults::Fault;
@@ -53,6 +55,7 @@ use crate::world::World;
 use faults::LineFaults;
 use protocol::Controller;
 use runner::{Clock, Command, Runner};
+use transcript::Transcript;
 
 /// Duration in real seconds of a move of `distance_deg` from rest to rest under a
 /// trapezoidal velocity profile (triangular when the cruise rate is not reached).
@@ -72,15 +75,44 @@ pub fn move_duration_s(distance_deg: f64, max_rate_deg_per_min: f64, accel_deg_p
 pub struct GrblEmulator {
     link: PathBuf,
     commands: Sender<Command>,
+    transcript: Transcript,
     thread: Option<JoinHandle<()>>,
     // Declared last: the directory goes after the thread has stopped using it.
-    _link_dir: tempfile::TempDir,
+    link_dir: Option<tempfile::TempDir>,
 }
 
 impl GrblEmulator {
-    /// Power up a controller on a new pty. The arm starts at `world`'s angle, which the
-    /// emulator updates continuously as the arm moves.
+    /// Power up a controller on a new pty, linked from a new temporary directory. The
+    /// arm starts at `world`'s angle, which the emulator updates continuously as the
+    /// arm moves.
     pub fn start(config: GrblConfig, world: World) -> io::Result<GrblEmulator> {
+        let link_dir = tempfile::Builder::new().prefix("gonio-grbl-").tempdir()?;
+        let link = link_dir.path().join("ttyGRBL");
+        Self::spawn(config, world, link, Some(link_dir))
+    }
+
+    /// Like [`GrblEmulator::start`], with the device link at `link` (its directory must
+    /// exist; an existing symlink there is replaced, any other file is left alone and
+    /// refused). The link is removed when the emulator is dropped.
+    pub fn start_at(config: GrblConfig, world: World, link: &Path) -> io::Result<GrblEmulator> {
+        match std::fs::symlink_metadata(link) {
+            Ok(meta) if !meta.file_type().is_symlink() => {
+                return Err(io::Error::new(
+                    io::ErrorKind::AlreadyExists,
+                    format!("{} exists and is not a symlink", link.display()),
+                ))
+            }
+            _ => {}
+        }
+        Self::spawn(config, world, link.to_owned(), None)
+    }
+
+    fn spawn(
+        config: GrblConfig,
+        world: World,
+        link: PathBuf,
+        link_dir: Option<tempfile::TempDir>,
+    ) -> io::Result<GrblEmulator> {
         let problems = config.problems();
         if !problems.is_empty() {
             return Err(io::Error::new(
@@ -88,11 +120,10 @@ impl GrblEmulator {
                 problems.join("; "),
             ));
         }
-        let link_dir = tempfile::Builder::new().prefix("gonio-grbl-").tempdir()?;
-        let link = link_dir.path().join("ttyGRBL");
         let pty = pty::Pty::open(&link)?;
         let clock = Clock::new(config.time_scale);
-        let controller = Controller::new(&config, world, clock.now());
+        let transcript = Transcript::default();
+        let controller = Controller::new(&config, world, transcript.clone(), clock.now());
         let (commands, receiver) = mpsc::channel();
         let mut schedule = config.faults.clone();
         schedule.sort_by(|a, b| a.at_s.total_cmp(&b.at_s));
@@ -104,6 +135,7 @@ impl GrblEmulator {
             clock,
             faults: LineFaults::default(),
             schedule,
+            transcript: transcript.clone(),
             commands: receiver,
         };
         let thread = std::thread::Builder::new()
@@ -112,14 +144,22 @@ impl GrblEmulator {
         Ok(GrblEmulator {
             link,
             commands,
+            transcript,
             thread: Some(thread),
-            _link_dir: link_dir,
+            link_dir,
         })
     }
 
     /// The stable device path a driver opens (a symlink to the current pty slave).
     pub fn device_path(&self) -> &Path {
         &self.link
+    }
+
+    /// What the firmware was asked so far, oldest first: each line its main loop
+    /// executed (upper-cased, spaces and comments stripped), `^X` for a soft reset,
+    /// `DTR` for the reset of opening the port.
+    pub fn transcript(&self) -> Vec<String> {
+        self.transcript.entries()
     }
 
     /// Inject a fault; it has taken effect when this returns.
@@ -148,6 +188,10 @@ impl Drop for GrblEmulator {
         let _ = self.commands.send(Command::Stop);
         if let Some(thread) = self.thread.take() {
             let _ = thread.join();
+        }
+        if self.link_dir.is_none() {
+            // A link the caller placed: the device is gone.
+            pty::remove_link(&self.link);
         }
     }
 }

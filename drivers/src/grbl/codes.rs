@@ -60,6 +60,30 @@ pub fn alarm_meaning(code: u32) -> &'static str {
     }
 }
 
+/// Whether `ALARM:code` is a homing failure (ALARM:6–10).
+pub fn is_homing_alarm(code: u32) -> bool {
+    (6..=10).contains(&code)
+}
+
+/// What to check after a homing failure (`ALARM:code`).
+pub fn homing_advice(code: u32) -> &'static str {
+    match code {
+        6 => "the cycle was interrupted by a reset; home again",
+        7 => "close the safety door and home again",
+        8 => {
+            "the switch stayed pressed after the pull-off: set $27 (pull-off, factory 1.000) \
+              to a distance that clears the switch, and check the switch is not stuck"
+        }
+        9 => {
+            "no switch was found within 1.5 × max travel: check the switch wiring, \
+              $23 (homing direction), $130 (max travel), and that the firmware's homing \
+              cycles include only wired axes (stock GRBL homes Z first)"
+        }
+        10 => "the second switch of a dual axis was not found: check its wiring",
+        _ => "check the limit switches and the homing settings ($22–$27)",
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -71,6 +95,9 @@ mod tests {
         assert!(alarm_meaning(1).contains("hard limit"));
         assert!(alarm_meaning(3).contains("reset while in motion"));
         assert!(alarm_meaning(9).contains("limit switch not found"));
+        assert!(is_homing_alarm(8) && !is_homing_alarm(3));
+        assert!(homing_advice(8).contains("$27"));
+        assert!(homing_advice(9).contains("Z first"));
         let errors: std::collections::HashSet<_> = (1..=38)
             .filter(|c| !(18..=19).contains(c))
             .map(error_meaning)

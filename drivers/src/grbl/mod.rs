@@ -1,28 +1,41 @@
 //! The light arm on a GRBL 1.1 controller over a serial port (115200 8N1).
 //!
-//! The arm is the controller's X axis, configured in degrees: GRBL's "mm" are degrees,
-//! `$100` is steps per degree, `$110` the max rate in degrees/minute, `$120` the
-//! acceleration in degrees/s², `$130` the max travel in degrees. Homing puts the arm at
-//! machine X = 0 (the positive end); the work offset must be zero, so the commanded
-//! `G90 G0 X…` angle is the machine position θL.
+//! The arm is one controller axis (X by default), configured in degrees: GRBL's "mm" are
+//! degrees, `$100` is steps per degree, `$110` the max rate in degrees/minute, `$120` the
+//! acceleration in degrees/s², `$130` the max travel. The angle θL is the axis' work
+//! position, and `G90 G0 X…` moves there. The driver sets the work offset itself, with
+//! `G92` (which GRBL forgets at every reset): after the homing cycle so that θL is the
+//! machine position (the switch at 0, the arm at −`$27` after it), or to the angle an
+//! operator declares where the controller does not home (`$22=0`).
 //!
 //! Open the controller by a stable path such as `/dev/serial/by-id/usb-…-if00-port0`
 //! (not `/dev/ttyUSB0`, whose number changes between plug-ins); reconnects reopen the
-//! same path.
+//! same path. Opening resets an Arduino-based board (DTR): every open starts unreferenced.
+//!
+//! On connecting, the settings that differ from [`GrblArmConfig`] are listed one line
+//! each and the controller is refused ([`DeviceError::Refused`]), unless
+//! `apply_settings` writes them (`$N=`) and `$$` reads them back.
 //!
 //! Fault handling, all blocking with bounded waits:
-//! - `error:N` → [`DeviceError::Rejected`], `ALARM:N` → [`DeviceError::Alarm`] with
-//!   GRBL's meaning. An alarm stays latched: [`Arm::clear_fault`] (soft reset) and then
-//!   [`Arm::home`] are needed before the next move.
-//! - A start-up banner after connecting means the controller reset: the position is
-//!   unknown, a command in flight fails with [`DeviceError::Reset`], and moves are
-//!   refused with `Reset` until the arm is homed again.
-//! - A read or write failure drops the port and fails with
-//!   [`DeviceError::Disconnected`]; the next call reopens the same path with bounded
-//!   exponential backoff, after which the arm must be homed again.
-//! - A silent controller gives [`DeviceError::Timeout`]; a garbled or truncated reply
-//!   to an idempotent command (queries, `G90 G0`, `G4 P0`, `$H`) is retried a bounded
-//!   number of times, then reported as [`DeviceError::Protocol`].
+//! - One line in flight: every `ok`/`error:N` is paired with the line it answers. When
+//!   an answer does not come in time the driver resynchronises before anything else:
+//!   feed hold, soft reset, banner (late answers are read and paired, never taken for a
+//!   newer line), then `$X` or re-homing as the configuration says and the position
+//!   read back; the work offset is restored when the reset did not lose the position.
+//!   It never re-sends a line blindly.
+//! - A move is given its trapezoid time × `motion_time_factor` + `motion_margin`;
+//!   past that it stays alive while `?` shows it progressing, up to `motion_patience`
+//!   times that, so a slow controller completes its move.
+//! - `error:N` → [`DeviceError::Rejected`]; `ALARM:N` → [`DeviceError::Alarm`] with
+//!   GRBL's meaning, or [`DeviceError::HomingFailed`] (ALARM:6–10) with its advice. During
+//!   a hard or soft limit alarm GRBL answers nothing, not even `?`: the driver resets it
+//!   at once instead of waiting. An alarm stays latched until [`Arm::clear_fault`].
+//! - A banner means the controller reset: the position is unknown until the arm is
+//!   homed or declared again ([`DeviceError::PositionUnknown`]).
+//! - A read or write failure drops the port ([`DeviceError::Disconnected`]); the next
+//!   call reopens the same path with bounded exponential backoff.
+//! - A garbled or truncated answer to an idempotent line (queries, `G90 G0`, `G4 P0`)
+//!   is retried a bounded number of times, then reported as [`DeviceError::Protocol`].
 //!
 //! ```no_run
 //! use gonio_drivers::grbl::{GrblArm, GrblArmConfig};
@@ -39,94 +52,31 @@
 //! ```
 
 mod codes;
+mod config;
+mod expected;
+mod link;
 mod protocol;
+mod session;
 
-pub use codes::{alarm_meaning, error_meaning};
+pub use codes::{alarm_meaning, error_meaning, homing_advice};
+pub use config::{ArmAxis, GrblArmConfig, Homing};
+pub use expected::{Mismatch, Want};
+pub use link::BAUD_RATE;
 pub use protocol::{move_time_s, parse_line, Line, MachineState, Settings, StatusReport};
 
-use std::io::{self, Read, Write};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::thread;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use serialport::SerialPort;
 
 use crate::{Arm, ArmState, ArmStatus, DeviceError, EmergencyStop};
+use link::{Link, POLL_INTERVAL};
+use session::{Patience, Session, FEED_HOLD, SOFT_RESET};
 
-/// Serial speed of GRBL 1.1.
-pub const BAUD_RATE: u32 = 115_200;
-/// Port read timeout: how often a blocked read checks its deadline.
-const POLL_INTERVAL: Duration = Duration::from_millis(20);
-/// After a garbled line, how long to wait for a proper reply before giving up on it;
-/// also how long a partial line may sit without more bytes before it counts as a
-/// truncated line (GRBL sends a whole line within milliseconds).
-const GARBLE_GRACE: Duration = Duration::from_millis(200);
-/// GRBL's soft-reset real-time byte (Ctrl-X).
-const SOFT_RESET: u8 = 0x18;
-/// GRBL's feed-hold real-time byte.
-const FEED_HOLD: u8 = b'!';
-
-/// What the driver expects of the controller and how patiently it talks to it.
-#[derive(Debug, Clone, PartialEq)]
-pub struct GrblArmConfig {
-    /// Soft limits of the arm angle θL in degrees; targets outside are refused unsent.
-    pub min_deg: f64,
-    pub max_deg: f64,
-    /// Expected `$100` (steps per degree).
-    pub steps_per_deg: f64,
-    /// Expected `$130` (max travel, degrees).
-    pub max_travel_deg: f64,
-    /// Expected `$22` (homing cycle enabled).
-    pub homing_enabled: bool,
-    /// How far the confirmed position may be from the target, degrees.
-    pub position_tolerance_deg: f64,
-    /// Wait for the start-up banner after opening (and again after a soft reset).
-    pub banner_timeout: Duration,
-    /// Wait for the reply to a command that does not wait for motion.
-    pub reply_timeout: Duration,
-    /// Wait for the homing cycle to finish.
-    pub homing_timeout: Duration,
-    /// A move may take `move_time_factor` × its trapezoid time + `move_margin`.
-    pub move_time_factor: f64,
-    pub move_margin: Duration,
-    /// Retries of an idempotent command after a garbled reply.
-    pub garbled_retries: u32,
-    /// Reconnect attempts after a disconnect, and the first backoff (doubling each
-    /// attempt, capped at 16×).
-    pub reconnect_attempts: u32,
-    pub reconnect_backoff: Duration,
-}
-
-impl Default for GrblArmConfig {
-    fn default() -> Self {
-        Self {
-            min_deg: -90.0,
-            max_deg: 0.0,
-            steps_per_deg: 80.0,
-            max_travel_deg: 180.0,
-            homing_enabled: true,
-            position_tolerance_deg: 0.01,
-            banner_timeout: Duration::from_secs(3),
-            reply_timeout: Duration::from_secs(2),
-            homing_timeout: Duration::from_secs(90),
-            move_time_factor: 1.5,
-            move_margin: Duration::from_secs(2),
-            garbled_retries: 3,
-            reconnect_attempts: 5,
-            reconnect_backoff: Duration::from_millis(200),
-        }
-    }
-}
-
-/// What a command's reply ends with.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Until {
-    /// `ok` (or `error:N`).
-    Ok,
-    /// A `<...>` status report (the reply to `?`, which sends no `ok`).
-    Status,
-}
+/// The largest angle an operator may declare, degrees.
+const MAX_DECLARED_DEG: f64 = 360.0;
 
 /// The stop handle: a clone of the port handle, replaced on every reconnect.
 struct GrblStop {
@@ -140,7 +90,7 @@ impl GrblStop {
 }
 
 impl EmergencyStop for GrblStop {
-    /// Feed hold, then soft reset. The position is unknown afterwards: home again.
+    /// Feed hold, then soft reset. The position is unknown afterwards.
     fn stop(&self) -> Result<(), DeviceError> {
         let mut guard = self.port.lock().unwrap_or_else(PoisonError::into_inner);
         let port = guard
@@ -153,51 +103,58 @@ impl EmergencyStop for GrblStop {
     }
 }
 
+/// How the arm's position is known.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Reference {
+    Homed { wco: f64 },
+    Declared { wco: f64 },
+}
+
+impl Reference {
+    /// The work offset the driver set on the arm's axis (MPos − θL), degrees.
+    fn wco(self) -> f64 {
+        match self {
+            Reference::Homed { wco } | Reference::Declared { wco } => wco,
+        }
+    }
+}
+
 /// The light arm on a GRBL controller. Blocking: call it from a dedicated thread.
 pub struct GrblArm {
     path: PathBuf,
     config: GrblArmConfig,
-    /// `None` while disconnected.
-    port: Option<Box<dyn SerialPort>>,
-    /// Received bytes not yet forming a full line, and when the last byte came.
-    pending: Vec<u8>,
-    last_rx: Instant,
+    session: Session,
     settings: Settings,
     firmware: String,
-    /// Whether the machine position is known (homed since the last reset/reconnect).
-    homed: bool,
+    /// Since the last power-up, reset or reconnect, if the position is known.
+    reference: Option<Reference>,
     /// A latched `ALARM:N` until [`Arm::clear_fault`].
     alarm: Option<u32>,
     last_angle_deg: f64,
+    /// A resynchronisation is running (its own timeouts do not start another).
+    resyncing: bool,
     stop: Arc<GrblStop>,
 }
 
 impl GrblArm {
     /// Open the controller at `path`, wait for its banner (soft-resetting it if none
-    /// comes), read `$I` and `$$`, and check the settings against `config`.
-    /// The arm then needs homing.
+    /// comes), read `$I` and `$$`, and check (or, with `apply_settings`, write) the
+    /// settings. The arm then needs homing or a declared position.
     pub fn open(path: &Path, config: GrblArmConfig) -> Result<GrblArm, DeviceError> {
-        if !(config.min_deg.is_finite() && config.max_deg.is_finite())
-            || config.min_deg >= config.max_deg
-        {
-            return Err(DeviceError::OutOfRange {
-                what: "soft limit min_deg".into(),
-                value: config.min_deg,
-                min: f64::NEG_INFINITY,
-                max: config.max_deg,
-            });
+        let problems = config.problems();
+        if !problems.is_empty() {
+            return Err(DeviceError::Refused(problems.join("\n")));
         }
         let mut arm = GrblArm {
             path: path.to_owned(),
+            session: Session::new(config.banner_timeout),
             config,
-            port: None,
-            pending: Vec::new(),
-            last_rx: Instant::now(),
             settings: Settings::default(),
             firmware: String::new(),
-            homed: false,
+            reference: None,
             alarm: None,
             last_angle_deg: 0.0,
+            resyncing: false,
             stop: Arc::new(GrblStop {
                 port: Mutex::new(None),
             }),
@@ -206,7 +163,7 @@ impl GrblArm {
         Ok(arm)
     }
 
-    /// The `[VER:…]` line of `$I`, e.g. `1.1h.20190825:`.
+    /// The `[VER:…]` line of `$I`, e.g. `1.1h.20190830:`.
     pub fn firmware(&self) -> &str {
         &self.firmware
     }
@@ -216,9 +173,9 @@ impl GrblArm {
         &self.settings
     }
 
-    /// Whether the arm must be homed before it can move.
-    pub fn needs_homing(&self) -> bool {
-        !self.homed
+    /// Whether the arm's position is known (homed or declared since the last reset).
+    pub fn referenced(&self) -> bool {
+        self.reference.is_some()
     }
 
     /// The device path this arm was opened with.
@@ -226,149 +183,174 @@ impl GrblArm {
         &self.path
     }
 
-    /// Time allowed for a move of `distance_deg` with the controller's rate and
-    /// acceleration.
+    fn axis(&self) -> usize {
+        self.config.axis.index()
+    }
+
+    fn setting(&self, base: u32) -> f64 {
+        self.settings.get(base + self.axis() as u32).unwrap_or(0.0)
+    }
+
+    /// Whether the controller runs the homing cycle (`$22`) as this arm uses it.
+    fn homes(&self) -> bool {
+        match self.config.homing {
+            Homing::Required => true,
+            Homing::Off => false,
+            Homing::Optional => self.settings.get(Settings::HOMING_ENABLE) == Some(1.0),
+        }
+    }
+
+    /// Expected time of a move of `distance_deg` (trapezoid time × factor + margin).
     pub fn move_timeout(&self, distance_deg: f64) -> Duration {
-        let rate = self.settings.get(Settings::MAX_RATE_X).unwrap_or(0.0);
-        let accel = self.settings.get(Settings::ACCEL_X).unwrap_or(0.0);
-        let t = move_time_s(distance_deg, rate, accel) * self.config.move_time_factor;
-        Duration::try_from_secs_f64(t).unwrap_or(Duration::from_secs(3600))
-            + self.config.move_margin
+        let t = move_time_s(
+            distance_deg,
+            self.setting(Settings::MAX_RATE),
+            self.setting(Settings::ACCEL),
+        );
+        self.motion_time(t)
+    }
+
+    fn motion_time(&self, seconds: f64) -> Duration {
+        Duration::try_from_secs_f64(seconds * self.config.motion_time_factor)
+            .unwrap_or(Duration::from_secs(3600))
+            + self.config.motion_margin
+    }
+
+    /// Worst-case time of the homing cycle with the controller's settings: up to three
+    /// cycles, each seeking 1.5 × the largest travel, locating 5 × the pull-off, pulling
+    /// off twice and debouncing four times, plus the ramps.
+    pub fn homing_timeout(&self) -> Duration {
+        let get = |key: u32| self.settings.get(key).unwrap_or(0.0);
+        let travel = (0..3)
+            .map(|i| get(Settings::MAX_TRAVEL + i))
+            .fold(0.0, f64::max);
+        let accel = (0..3)
+            .map(|i| get(Settings::ACCEL + i))
+            .fold(f64::INFINITY, f64::min);
+        let seek = get(Settings::HOMING_SEEK).max(1e-3) / 60.0;
+        let feed = get(Settings::HOMING_FEED).max(1e-3) / 60.0;
+        let pulloff = get(Settings::HOMING_PULLOFF);
+        let debounce = get(Settings::HOMING_DEBOUNCE_MS) / 1000.0;
+        let ramps = 8.0 * seek / accel.max(1e-3);
+        let cycle = 1.5 * travel / seek
+            + 5.0 * pulloff / feed
+            + 2.0 * pulloff / seek
+            + 4.0 * debounce
+            + ramps;
+        self.motion_time(3.0 * cycle)
+    }
+
+    fn motion_patience(&self, expected: Duration) -> Patience {
+        Patience::Motion {
+            expected,
+            cap: expected.mul_f64(self.config.motion_patience),
+            poll: self.config.status_interval,
+            stall: self.config.stall_timeout,
+        }
     }
 
     // ---- connection -------------------------------------------------------------
 
-    fn disconnected(&self, why: impl std::fmt::Display) -> DeviceError {
-        DeviceError::Disconnected(format!("{}: {why}", self.path.display()))
-    }
-
-    /// Forget the port after an I/O failure.
-    fn drop_port(&mut self, error: &io::Error) -> DeviceError {
-        self.port = None;
-        self.pending.clear();
-        self.homed = false;
-        self.stop.replace(None);
-        self.disconnected(error)
-    }
-
     fn connect(&mut self) -> Result<(), DeviceError> {
-        let port = serialport::new(self.path.to_string_lossy(), BAUD_RATE)
-            .data_bits(serialport::DataBits::Eight)
-            .parity(serialport::Parity::None)
-            .stop_bits(serialport::StopBits::One)
-            .flow_control(serialport::FlowControl::None)
-            .timeout(POLL_INTERVAL)
-            .open()
-            .map_err(|e| match e.kind() {
-                serialport::ErrorKind::NoDevice => DeviceError::NotFound(format!(
-                    "no serial device at {}: {e}",
-                    self.path.display()
-                )),
-                _ => self.disconnected(e),
-            })?;
-        let clone = port.try_clone().map_err(|e| self.disconnected(e))?;
-        self.port = Some(port);
-        self.pending.clear();
+        let (link, clone) = Link::open(&self.path)?;
+        self.session.attach(link);
         self.stop.replace(Some(clone));
-        self.homed = false;
+        self.reference = None;
         self.alarm = None;
         let result = self.handshake();
         if result.is_err() {
-            self.port = None;
-            self.stop.replace(None);
+            self.disconnect();
         }
         result
     }
 
+    fn disconnect(&mut self) {
+        self.session.detach();
+        self.stop.replace(None);
+        self.reference = None;
+    }
+
     fn handshake(&mut self) -> Result<(), DeviceError> {
-        if !self.wait_banner()? {
-            self.write(&[SOFT_RESET])?;
-            if !self.wait_banner()? {
+        // Opening resets an Arduino-based board; anything else gets a soft reset.
+        if !self.session.await_banner(self.config.banner_timeout)? {
+            self.session.realtime(SOFT_RESET)?;
+            if !self.session.await_banner(self.config.banner_timeout)? {
                 return Err(DeviceError::Timeout {
                     what: format!("GRBL banner from {}", self.path.display()),
                     seconds: 2.0 * self.config.banner_timeout.as_secs_f64(),
                 });
             }
         }
-        let info = self.retrying(|arm| arm.transact("$I", Until::Ok, arm.config.reply_timeout))?;
-        self.firmware = info
-            .iter()
-            .find_map(|l| match l {
-                Line::Feedback(f) => f.strip_prefix("VER:").map(str::to_owned),
-                _ => None,
-            })
-            .unwrap_or_default();
-        let lines = self.retrying(|arm| {
-            let lines = arm.transact("$$", Until::Ok, arm.config.reply_timeout)?;
-            match Settings::from_lines(&lines) {
-                s if s.0.is_empty() => Err(DeviceError::Protocol("empty reply to $$".into())),
-                s => Ok(s),
-            }
+        self.session.take_seen();
+        let reply = self.config.reply_timeout;
+        self.firmware = self.retrying(|arm| {
+            let lines = arm.session.command("$I", Patience::Reply(reply))?;
+            lines
+                .iter()
+                .find_map(|l| match l {
+                    Line::Feedback(f) => f.strip_prefix("VER:").map(str::to_owned),
+                    _ => None,
+                })
+                .ok_or_else(|| DeviceError::Protocol("no [VER:…] in the reply to $I".into()))
         })?;
-        self.settings = lines;
-        self.check_settings()
+        self.read_settings()?;
+        let mismatches = expected::mismatches(&self.settings, &self.config);
+        if mismatches.is_empty() {
+            return Ok(());
+        }
+        let fixes: Option<Vec<String>> = mismatches.iter().map(Mismatch::fix).collect();
+        match fixes {
+            Some(fixes) if self.config.apply_settings => self.apply(&fixes),
+            _ => Err(refusal(&mismatches)),
+        }
     }
 
-    /// Compare the controller's settings with the configuration.
-    fn check_settings(&self) -> Result<(), DeviceError> {
-        let get = |key: u32, what: &str| {
-            self.settings.get(key).ok_or_else(|| {
-                DeviceError::Protocol(format!("controller did not report ${key} ({what})"))
-            })
-        };
-        let mismatch = |key: u32, what: &str, found: String, expected: String| {
-            DeviceError::Protocol(format!(
-                "controller setting ${key} ({what}) is {found}, configuration expects {expected}"
-            ))
-        };
-        let steps = get(Settings::STEPS_PER_UNIT_X, "X steps per degree")?;
-        if (steps - self.config.steps_per_deg).abs() > 1e-3 {
-            return Err(mismatch(
-                Settings::STEPS_PER_UNIT_X,
-                "X steps per degree",
-                steps.to_string(),
-                self.config.steps_per_deg.to_string(),
-            ));
-        }
-        let travel = get(Settings::MAX_TRAVEL_X, "X max travel, degrees")?;
-        if (travel - self.config.max_travel_deg).abs() > 1e-3 {
-            return Err(mismatch(
-                Settings::MAX_TRAVEL_X,
-                "X max travel, degrees",
-                travel.to_string(),
-                self.config.max_travel_deg.to_string(),
-            ));
-        }
-        let homing = get(Settings::HOMING_ENABLE, "homing cycle enable")? != 0.0;
-        if homing != self.config.homing_enabled {
-            return Err(mismatch(
+    /// `$$`, read again while settings the checks need are missing (a garbled line).
+    fn read_settings(&mut self) -> Result<(), DeviceError> {
+        let reply = self.config.reply_timeout;
+        let axis = self.axis() as u32;
+        self.settings = self.retrying(|arm| {
+            let lines = arm.session.command("$$", Patience::Reply(reply))?;
+            let settings = Settings::from_lines(&lines);
+            let needed = [
                 Settings::HOMING_ENABLE,
-                "homing cycle enable",
-                homing.to_string(),
-                self.config.homing_enabled.to_string(),
-            ));
-        }
-        for (key, what) in [
-            (Settings::MAX_RATE_X, "X max rate, degrees/min"),
-            (Settings::ACCEL_X, "X acceleration, degrees/s²"),
-        ] {
-            if get(key, what)? <= 0.0 {
-                return Err(DeviceError::Protocol(format!(
-                    "controller setting ${key} ({what}) must be positive"
-                )));
+                Settings::STEPS_PER_UNIT + axis,
+                Settings::MAX_RATE + axis,
+                Settings::ACCEL + axis,
+                Settings::MAX_TRAVEL + axis,
+            ];
+            match needed.iter().find(|&&k| settings.get(k).is_none()) {
+                Some(key) => Err(DeviceError::Protocol(format!("${key} missing from $$"))),
+                None => Ok(settings),
             }
-        }
+        })?;
         Ok(())
+    }
+
+    /// Write `$N=value` lines, then verify with `$$`.
+    fn apply(&mut self, fixes: &[String]) -> Result<(), DeviceError> {
+        for fix in fixes {
+            self.session
+                .command(fix, Patience::Reply(self.config.reply_timeout))?;
+        }
+        self.read_settings()?;
+        let left = expected::mismatches(&self.settings, &self.config);
+        if left.is_empty() {
+            Ok(())
+        } else {
+            Err(refusal(&left))
+        }
     }
 
     /// Reopen the port if it was lost, with bounded exponential backoff.
     fn ensure_connected(&mut self) -> Result<(), DeviceError> {
-        if self.port.is_some() {
+        if self.session.connected() {
             return Ok(());
         }
+        self.disconnect();
         let mut backoff = self.config.reconnect_backoff;
         let attempts = self.config.reconnect_attempts.max(1);
-        let mut last = self.disconnected("not connected");
+        let mut last = DeviceError::Disconnected("not connected".into());
         for attempt in 0..attempts {
             if attempt > 0 {
                 thread::sleep(backoff);
@@ -376,165 +358,18 @@ impl GrblArm {
             }
             match self.connect() {
                 Ok(()) => return Ok(()),
-                // A controller that answers but is misconfigured will not get better.
-                Err(e @ DeviceError::Protocol(_)) => return Err(e),
+                // A controller that answers but is refused will not get better.
+                Err(e @ (DeviceError::Refused(_) | DeviceError::Protocol(_))) => return Err(e),
                 Err(e) => last = e,
             }
         }
-        Err(self.disconnected(format_args!(
-            "reconnect failed after {attempts} attempts: {last}"
+        Err(DeviceError::Disconnected(format!(
+            "{}: reconnect failed after {attempts} attempts: {last}",
+            self.path.display()
         )))
     }
 
-    // ---- line I/O ----------------------------------------------------------------
-
-    fn write(&mut self, bytes: &[u8]) -> Result<(), DeviceError> {
-        let port = self
-            .port
-            .as_mut()
-            .ok_or_else(|| DeviceError::Disconnected("arm controller not connected".into()))?;
-        match port.write_all(bytes).and_then(|()| port.flush()) {
-            Ok(()) => Ok(()),
-            Err(e) => Err(self.drop_port(&e)),
-        }
-    }
-
-    /// The next complete line, or `None` once `deadline` passes.
-    fn read_line(&mut self, deadline: Instant) -> Result<Option<String>, DeviceError> {
-        loop {
-            if let Some(end) = self.pending.iter().position(|&b| b == b'\n') {
-                let raw: Vec<u8> = self.pending.drain(..=end).collect();
-                let line = String::from_utf8_lossy(&raw).trim().to_owned();
-                if line.is_empty() {
-                    continue;
-                }
-                return Ok(Some(line));
-            }
-            if !self.pending.is_empty() && self.last_rx.elapsed() >= GARBLE_GRACE {
-                let line = String::from_utf8_lossy(&self.pending).trim().to_owned();
-                self.pending.clear();
-                if !line.is_empty() {
-                    return Ok(Some(line));
-                }
-            }
-            if Instant::now() >= deadline {
-                return Ok(None);
-            }
-            let port = self
-                .port
-                .as_mut()
-                .ok_or_else(|| DeviceError::Disconnected("arm controller not connected".into()))?;
-            let mut buf = [0u8; 256];
-            match port.read(&mut buf) {
-                Ok(0) => {
-                    let eof = io::Error::new(io::ErrorKind::UnexpectedEof, "port closed");
-                    return Err(self.drop_port(&eof));
-                }
-                Ok(n) => {
-                    self.pending.extend_from_slice(&buf[..n]);
-                    self.last_rx = Instant::now();
-                }
-                Err(e)
-                    if matches!(
-                        e.kind(),
-                        io::ErrorKind::TimedOut | io::ErrorKind::Interrupted
-                    ) => {}
-                Err(e) => return Err(self.drop_port(&e)),
-            }
-        }
-    }
-
-    /// Note what an unsolicited line says about the controller.
-    fn note(&mut self, line: &Line) {
-        match line {
-            Line::Banner(_) => self.homed = false,
-            Line::Alarm(code) => {
-                self.alarm = Some(*code);
-                self.homed = false;
-            }
-            _ => {}
-        }
-    }
-
-    /// Read what arrived unasked (late replies, banners, alarms) before a command.
-    fn drain(&mut self) -> Result<(), DeviceError> {
-        let now = Instant::now();
-        while let Some(line) = self.read_line(now)? {
-            let line = parse_line(&line);
-            self.note(&line);
-        }
-        Ok(())
-    }
-
-    /// Wait up to the banner timeout for the start-up banner, then until the line has
-    /// been quiet for [`GARBLE_GRACE`] (a reset can leave a second banner in flight,
-    /// e.g. after a stop's own reset).
-    fn wait_banner(&mut self) -> Result<bool, DeviceError> {
-        let deadline = Instant::now() + self.config.banner_timeout;
-        while let Some(line) = self.read_line(deadline)? {
-            if matches!(parse_line(&line), Line::Banner(_)) {
-                while let Some(line) = self.read_line(Instant::now() + GARBLE_GRACE)? {
-                    let line = parse_line(&line);
-                    self.note(&line);
-                }
-                return Ok(true);
-            }
-        }
-        Ok(false)
-    }
-
-    /// Send `command` and collect the reply lines up to its terminator.
-    fn transact(
-        &mut self,
-        command: &str,
-        until: Until,
-        timeout: Duration,
-    ) -> Result<Vec<Line>, DeviceError> {
-        self.drain()?;
-        match until {
-            Until::Ok => self.write(format!("{command}\n").as_bytes())?,
-            Until::Status => self.write(command.as_bytes())?,
-        }
-        let mut deadline = Instant::now() + timeout;
-        let mut lines = Vec::new();
-        let mut garbled = Vec::new();
-        loop {
-            let Some(text) = self.read_line(deadline)? else {
-                return Err(if garbled.is_empty() {
-                    DeviceError::Timeout {
-                        what: format!("reply to {command:?} from {}", self.path.display()),
-                        seconds: timeout.as_secs_f64(),
-                    }
-                } else {
-                    DeviceError::Protocol(format!("garbled reply to {command:?}: {garbled:?}"))
-                });
-            };
-            let line = parse_line(&text);
-            self.note(&line);
-            match line {
-                Line::Ok if until == Until::Ok => return Ok(lines),
-                Line::Status(_) if until == Until::Status => return Ok(vec![line]),
-                Line::Error(code) => {
-                    return Err(DeviceError::Rejected {
-                        code,
-                        meaning: error_meaning(code).into(),
-                    })
-                }
-                Line::Alarm(code) => {
-                    return Err(DeviceError::Alarm {
-                        code,
-                        meaning: alarm_meaning(code).into(),
-                    })
-                }
-                Line::Banner(_) => return Err(DeviceError::Reset),
-                Line::Garbled(text) => {
-                    garbled.push(text);
-                    deadline = deadline.min(Instant::now() + GARBLE_GRACE);
-                }
-                other => lines.push(other),
-            }
-        }
-    }
+    // ---- exchanges ----------------------------------------------------------------
 
     /// Run an idempotent exchange again after a garbled reply, a bounded number of times.
     fn retrying<T>(
@@ -553,50 +388,153 @@ impl GrblArm {
         }
     }
 
-    fn query_status(&mut self) -> Result<StatusReport, DeviceError> {
-        self.retrying(|arm| {
-            match arm
-                .transact("?", Until::Status, arm.config.reply_timeout)?
-                .pop()
-            {
-                Some(Line::Status(report)) => Ok(report),
-                _ => Err(DeviceError::Protocol("no status report".into())),
-            }
-        })
-        .inspect(|report| {
-            if let Some(x) = report.machine_x() {
-                self.last_angle_deg = x;
-            }
-        })
+    /// Take note of resets and alarms the session saw: either loses the position; an
+    /// alarm stays latched.
+    fn absorb(&mut self) {
+        let seen = self.session.take_seen();
+        if seen.reset || seen.alarm.is_some() {
+            self.reference = None;
+        }
+        if let Some(code) = seen.alarm {
+            self.alarm = Some(code);
+        }
     }
 
-    /// Refuse to move while an alarm is latched or the position is unknown.
-    fn check_ready(&self) -> Result<(), DeviceError> {
-        if let Some(code) = self.alarm {
-            return Err(DeviceError::Alarm {
-                code,
-                meaning: alarm_meaning(code).into(),
-            });
-        }
-        if !self.homed {
-            return Err(DeviceError::Reset);
+    /// Before an operation: reconnect, read what came unasked, and resynchronise if a
+    /// line is still unanswered.
+    fn prepare(&mut self) -> Result<(), DeviceError> {
+        self.ensure_connected()?;
+        let drained = self.session.drain();
+        self.absorb();
+        drained?;
+        if self.session.in_flight().is_some() {
+            self.resyncing = true;
+            let resynced = self.resync();
+            self.resyncing = false;
+            self.absorb();
+            resynced?;
         }
         Ok(())
     }
-}
 
-impl Arm for GrblArm {
-    /// `$H`; refused while an alarm is latched (clear it first).
-    fn home(&mut self) -> Result<(), DeviceError> {
-        self.ensure_connected()?;
-        self.drain()?;
-        if let Some(code) = self.alarm {
-            return Err(DeviceError::Alarm {
-                code,
-                meaning: alarm_meaning(code).into(),
+    /// A line with its answer. After a timeout (the answer may still come, and must not
+    /// be taken for a newer line's) stop and resynchronise at once, unless this is
+    /// already part of a resynchronisation (the next operation then starts with one).
+    fn command(&mut self, line: &str, patience: Patience) -> Result<Vec<Line>, DeviceError> {
+        let result = self.session.command(line, patience);
+        self.absorb();
+        if let (Err(DeviceError::Timeout { what, seconds }), false) = (&result, self.resyncing) {
+            self.resyncing = true;
+            let resynced = self.resync();
+            self.resyncing = false;
+            self.absorb();
+            let note = match resynced {
+                Ok(()) => "controller stopped and resynchronised".to_owned(),
+                Err(e) => format!("resynchronising failed: {e}"),
+            };
+            return Err(DeviceError::Timeout {
+                what: format!("{what} ({note})"),
+                seconds: *seconds,
             });
         }
-        self.retrying(|arm| arm.transact("$H", Until::Ok, arm.config.homing_timeout))?;
+        result
+    }
+
+    /// `?`. A banner met meanwhile means the controller reset: the position is unknown.
+    fn query_status(&mut self) -> Result<StatusReport, DeviceError> {
+        let reply = self.config.reply_timeout;
+        let result = self.retrying(|arm| arm.session.status(reply));
+        self.absorb();
+        let report = match result {
+            Err(DeviceError::Reset) => return Err(self.position_unknown()),
+            other => other?,
+        };
+        if let Some(angle) = report.work(self.axis(), self.known_wco()) {
+            self.last_angle_deg = angle;
+        }
+        Ok(report)
+    }
+
+    /// The work offset in force: the session's last reported one, else the driver's own.
+    fn known_wco(&self) -> Option<[f64; 3]> {
+        self.session.wco().or_else(|| {
+            let wco = self.reference?.wco();
+            let mut triple = [0.0; 3];
+            triple[self.axis()] = wco;
+            Some(triple)
+        })
+    }
+
+    /// Feed hold, soft reset, banner; then unlock or re-home as configured and restore
+    /// the work offset if the position survived; finally read the position back.
+    fn resync(&mut self) -> Result<(), DeviceError> {
+        let kept = self.reference.filter(|_| self.alarm.is_none());
+        self.session.realtime(FEED_HOLD)?;
+        // Let a move decelerate so the reset does not lose the position; a locked or
+        // silent controller answers nothing, and is reset all the same.
+        let rate = self.setting(Settings::MAX_RATE) / 60.0;
+        let accel = self.setting(Settings::ACCEL).max(1e-3);
+        let settle = Duration::try_from_secs_f64(rate / accel).unwrap_or(Duration::ZERO);
+        let deadline = std::time::Instant::now() + settle + self.config.reply_timeout;
+        while std::time::Instant::now() < deadline {
+            match self.session.status(self.config.reply_timeout) {
+                Ok(report) if report.at_rest() => break,
+                Ok(_) => thread::sleep(POLL_INTERVAL),
+                Err(DeviceError::Disconnected(e)) => return Err(DeviceError::Disconnected(e)),
+                Err(_) => break,
+            }
+        }
+        let settling = self.session.take_seen();
+        self.session.realtime(SOFT_RESET)?;
+        if !self.session.await_banner(self.config.banner_timeout)? {
+            return Err(DeviceError::Timeout {
+                what: format!("GRBL banner after a soft reset on {}", self.path.display()),
+                seconds: self.config.banner_timeout.as_secs_f64(),
+            });
+        }
+        let lost = settling.alarm.or(self.session.take_seen().alarm).is_some();
+        self.alarm = None;
+        self.reference = None;
+        let reply = self.config.reply_timeout;
+        let report = self.retrying(|arm| arm.session.status(reply))?;
+        match kept.filter(|_| !lost) {
+            Some(reference) => {
+                if report.state == MachineState::Alarm {
+                    self.command("$X", Patience::Reply(reply))?;
+                }
+                let mpos = report
+                    .machine(self.axis(), self.session.wco())
+                    .ok_or_else(|| DeviceError::Protocol("no position after a reset".into()))?;
+                self.set_work_position(mpos - reference.wco())?;
+                self.reference = Some(reference);
+            }
+            None if self.homes() => self.run_homing()?,
+            None => {
+                if report.state == MachineState::Alarm {
+                    self.command("$X", Patience::Reply(reply))?;
+                }
+            }
+        }
+        self.query_status().map(drop)
+    }
+
+    /// `G92`: make the arm's work position `angle`; returns the work offset set.
+    fn set_work_position(&mut self, angle: f64) -> Result<f64, DeviceError> {
+        let reply = self.config.reply_timeout;
+        let line = format!("G92 {}{angle:.3}", self.config.axis.letter());
+        self.command(&line, Patience::Reply(reply))?;
+        let report = self.query_status()?;
+        let mpos = report
+            .machine(self.axis(), self.session.wco())
+            .ok_or_else(|| DeviceError::Protocol("no position in the status report".into()))?;
+        self.last_angle_deg = angle;
+        Ok(mpos - angle)
+    }
+
+    /// `$H`, then θL = machine position.
+    fn run_homing(&mut self) -> Result<(), DeviceError> {
+        let timeout = self.homing_timeout();
+        self.retrying(|arm| arm.command("$H", Patience::Reply(timeout)))?;
         let report = self.query_status()?;
         if report.state != MachineState::Idle {
             return Err(DeviceError::Protocol(format!(
@@ -604,8 +542,65 @@ impl Arm for GrblArm {
                 report.state
             )));
         }
-        self.homed = true;
+        let mpos = report
+            .machine(self.axis(), self.session.wco())
+            .ok_or_else(|| DeviceError::Protocol("no position after homing".into()))?;
+        let wco = self.set_work_position(mpos)?;
+        self.reference = Some(Reference::Homed { wco });
         Ok(())
+    }
+
+    fn latched_alarm(&self) -> Result<(), DeviceError> {
+        match self.alarm {
+            Some(code) => Err(DeviceError::Alarm {
+                code,
+                meaning: alarm_meaning(code).into(),
+            }),
+            None => Ok(()),
+        }
+    }
+
+    /// Why the arm cannot move yet, if it cannot.
+    fn check_ready(&self) -> Result<(), DeviceError> {
+        self.latched_alarm()?;
+        if self.reference.is_none() {
+            return Err(self.position_unknown());
+        }
+        Ok(())
+    }
+
+    fn position_unknown(&self) -> DeviceError {
+        DeviceError::PositionUnknown(if self.homes() {
+            "the controller reset or reconnected: home the arm".into()
+        } else {
+            "the controller does not home ($22=0) and reset or reconnected: declare where \
+             the arm is"
+                .into()
+        })
+    }
+}
+
+/// The refusal listing each differing setting on its own line.
+fn refusal(mismatches: &[Mismatch]) -> DeviceError {
+    let lines: Vec<String> = mismatches.iter().map(ToString::to_string).collect();
+    DeviceError::Refused(format!(
+        "controller settings differ from the configuration (set them, or let the driver \
+         write them with apply_settings):\n{}",
+        lines.join("\n")
+    ))
+}
+
+impl Arm for GrblArm {
+    /// Reference the arm: the homing cycle (`$H`) where the controller homes, refused
+    /// while an alarm is latched (clear it first); where it does not, the position an
+    /// operator declared, else [`DeviceError::PositionUnknown`].
+    fn home(&mut self) -> Result<(), DeviceError> {
+        self.prepare()?;
+        self.latched_alarm()?;
+        if !self.homes() {
+            return self.check_ready();
+        }
+        self.run_homing()
     }
 
     fn move_to(&mut self, angle_deg: f64) -> Result<(), DeviceError> {
@@ -618,19 +613,24 @@ impl Arm for GrblArm {
                 max,
             });
         }
-        self.ensure_connected()?;
-        self.drain()?;
+        self.prepare()?;
         self.check_ready()?;
         let start = self.query_status()?;
         self.check_ready()?;
-        let from = start.machine_x().unwrap_or(self.last_angle_deg);
-        let timeout = self.move_timeout(angle_deg - from);
-        let command = format!("G90 G0 X{angle_deg:.3}");
-        self.retrying(|arm| arm.transact(&command, Until::Ok, arm.config.reply_timeout))?;
-        // `G4 P0` is acknowledged only once the planner has finished the move.
-        self.retrying(|arm| arm.transact("G4 P0", Until::Ok, timeout))?;
+        let from = start
+            .work(self.axis(), self.known_wco())
+            .unwrap_or(self.last_angle_deg);
+        let expected = self.move_timeout(angle_deg - from);
+        let reply = self.config.reply_timeout;
+        let line = format!("G90 G0 {}{angle_deg:.3}", self.config.axis.letter());
+        self.retrying(|arm| arm.command(&line, Patience::Reply(reply)))?;
+        // `G4 P0` is answered once the planner has finished the move.
+        let patience = self.motion_patience(expected);
+        self.retrying(|arm| arm.command("G4 P0", patience))?;
         let report = self.query_status()?;
-        let at = report.machine_x().unwrap_or(f64::NAN);
+        let at = report
+            .work(self.axis(), self.known_wco())
+            .unwrap_or(f64::NAN);
         let on_target = (at - angle_deg).abs() <= self.config.position_tolerance_deg;
         if report.state != MachineState::Idle || !on_target {
             return Err(DeviceError::Protocol(format!(
@@ -642,14 +642,15 @@ impl Arm for GrblArm {
     }
 
     fn status(&mut self) -> Result<ArmStatus, DeviceError> {
-        self.ensure_connected()?;
+        self.prepare()?;
         let report = self.query_status()?;
         let state = match report.state {
             _ if self.alarm.is_some() => ArmState::Alarm,
             MachineState::Home => ArmState::Homing,
             MachineState::Run | MachineState::Jog => ArmState::Moving,
             MachineState::Hold | MachineState::Door => ArmState::Hold,
-            _ if !self.homed => ArmState::NeedsHoming,
+            _ if self.reference.is_none() && self.homes() => ArmState::NeedsHoming,
+            _ if self.reference.is_none() => ArmState::NeedsPosition,
             MachineState::Alarm => ArmState::Alarm,
             MachineState::Idle | MachineState::Check | MachineState::Sleep => ArmState::Idle,
         };
@@ -659,19 +660,60 @@ impl Arm for GrblArm {
         })
     }
 
-    /// Soft reset, wait for the banner, forget the alarm; home before the next move.
+    /// Soft reset, wait for the banner, forget the alarm; the arm must then be homed or
+    /// declared again.
     fn clear_fault(&mut self) -> Result<(), DeviceError> {
-        self.ensure_connected()?;
-        self.drain()?;
-        self.write(&[SOFT_RESET])?;
-        if !self.wait_banner()? {
+        self.prepare()?;
+        self.session.realtime(SOFT_RESET)?;
+        let greeted = self.session.await_banner(self.config.banner_timeout)?;
+        self.session.take_seen();
+        if !greeted {
             return Err(DeviceError::Timeout {
                 what: format!("GRBL banner after soft reset on {}", self.path.display()),
                 seconds: self.config.banner_timeout.as_secs_f64(),
             });
         }
         self.alarm = None;
-        self.homed = false;
+        self.reference = None;
+        Ok(())
+    }
+
+    /// `$X` if locked, then `G92` so the arm's angle is `angle_deg`; refused where the
+    /// arm is homed ([`Homing::Required`]) or while it moves.
+    fn declare_position(&mut self, angle_deg: f64) -> Result<(), DeviceError> {
+        if self.config.homing == Homing::Required {
+            return Err(DeviceError::Refused(
+                "homing is required: the homing cycle references the arm, a declared \
+                 position is not accepted"
+                    .into(),
+            ));
+        }
+        if !(angle_deg.is_finite() && angle_deg.abs() <= MAX_DECLARED_DEG) {
+            return Err(DeviceError::OutOfRange {
+                what: "declared arm angle (degrees)".into(),
+                value: angle_deg,
+                min: -MAX_DECLARED_DEG,
+                max: MAX_DECLARED_DEG,
+            });
+        }
+        self.prepare()?;
+        if self.alarm.is_some() {
+            self.clear_fault()?;
+        }
+        let report = self.query_status()?;
+        match report.state {
+            MachineState::Alarm => {
+                self.command("$X", Patience::Reply(self.config.reply_timeout))?;
+            }
+            MachineState::Idle => {}
+            state => {
+                return Err(DeviceError::Refused(format!(
+                    "the controller is {state:?}: declare the position at rest"
+                )))
+            }
+        }
+        let wco = self.set_work_position(angle_deg)?;
+        self.reference = Some(Reference::Declared { wco });
         Ok(())
     }
 

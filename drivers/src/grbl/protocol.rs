@@ -17,23 +17,52 @@ pub enum MachineState {
     Sleep,
 }
 
-/// A parsed `?` status report. Positions are in degrees (GRBL's "mm" on the X axis).
+/// A parsed `?` status report. Positions are machine units (degrees on the arm's axis).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StatusReport {
     pub state: MachineState,
-    /// Machine position X, if reported (`MPos`).
-    pub mpos_x: Option<f64>,
-    /// Work position X, if reported (`WPos`).
-    pub wpos_x: Option<f64>,
-    /// Work coordinate offset X, if reported (`WCO`).
-    pub wco_x: Option<f64>,
+    /// The number after the state word (`Hold:0` = hold complete, `Hold:1` = holding).
+    pub substate: Option<u8>,
+    /// Machine position, if reported (`MPos`, `$10` bit 0 set).
+    pub mpos: Option<[f64; 3]>,
+    /// Work position, if reported (`WPos`).
+    pub wpos: Option<[f64; 3]>,
+    /// Work coordinate offset, on the reports that carry it (`WCO`).
+    pub wco: Option<[f64; 3]>,
+    /// Current feed rate (`FS` or `F`), units/min.
+    pub feed: Option<f64>,
+    /// Limit switches pressed (`Pn:` letters X, Y, Z).
+    pub limit_pins: [bool; 3],
 }
 
 impl StatusReport {
-    /// Machine X position: `MPos`, else `WPos + WCO` (WCO taken as 0 when absent).
-    pub fn machine_x(&self) -> Option<f64> {
-        self.mpos_x
-            .or_else(|| self.wpos_x.map(|w| w + self.wco_x.unwrap_or(0.0)))
+    /// Machine position of axis `i`: `MPos`, else `WPos + wco` (the report's own WCO,
+    /// else the `known_wco` from an earlier report).
+    pub fn machine(&self, i: usize, known_wco: Option<[f64; 3]>) -> Option<f64> {
+        let wco = self.wco.or(known_wco);
+        self.mpos
+            .map(|m| m[i])
+            .or_else(|| Some(self.wpos?[i] + wco?[i]))
+    }
+
+    /// Work position of axis `i`: `WPos`, else `MPos − wco`.
+    pub fn work(&self, i: usize, known_wco: Option<[f64; 3]>) -> Option<f64> {
+        let wco = self.wco.or(known_wco);
+        self.wpos
+            .map(|w| w[i])
+            .or_else(|| Some(self.mpos?[i] - wco?[i]))
+    }
+
+    /// Whether the machine is at rest (idle, alarm, or a completed hold).
+    pub fn at_rest(&self) -> bool {
+        match self.state {
+            MachineState::Idle
+            | MachineState::Alarm
+            | MachineState::Check
+            | MachineState::Sleep => true,
+            MachineState::Hold => self.substate == Some(0),
+            _ => false,
+        }
     }
 }
 
@@ -89,11 +118,12 @@ pub fn parse_line(line: &str) -> Line {
     Line::Garbled(line.to_owned())
 }
 
-/// Parse the inside of `<...>`; `None` when any part is malformed.
+/// Parse the inside of `<...>`; `None` when any part is malformed. Fields the driver
+/// does not use (`Bf`, `Ov`, `A`, `Ln`, …) are skipped.
 fn parse_status(body: &str) -> Option<StatusReport> {
     let mut fields = body.split('|');
-    let state_word = fields.next()?;
-    let state = match state_word.split(':').next()? {
+    let mut state_word = fields.next()?.split(':');
+    let state = match state_word.next()? {
         "Idle" => MachineState::Idle,
         "Run" => MachineState::Run,
         "Jog" => MachineState::Jog,
@@ -105,33 +135,51 @@ fn parse_status(body: &str) -> Option<StatusReport> {
         "Sleep" => MachineState::Sleep,
         _ => return None,
     };
+    let substate = match state_word.next() {
+        Some(code) => Some(code.parse().ok()?),
+        None => None,
+    };
     let mut report = StatusReport {
         state,
-        mpos_x: None,
-        wpos_x: None,
-        wco_x: None,
+        substate,
+        mpos: None,
+        wpos: None,
+        wco: None,
+        feed: None,
+        limit_pins: [false; 3],
     };
     for field in fields {
         let (name, value) = field.split_once(':')?;
-        let slot = match name {
-            "MPos" => &mut report.mpos_x,
-            "WPos" => &mut report.wpos_x,
-            "WCO" => &mut report.wco_x,
-            _ => continue,
-        };
-        *slot = Some(first_axis(value)?);
+        match name {
+            "MPos" => report.mpos = Some(triple(value)?),
+            "WPos" => report.wpos = Some(triple(value)?),
+            "WCO" => report.wco = Some(triple(value)?),
+            "FS" | "F" => {
+                let feed = value.split(',').next()?.parse::<f64>().ok()?;
+                report.feed = Some(feed).filter(|f| f.is_finite());
+                report.feed?;
+            }
+            "Pn" => {
+                for (pin, letter) in report.limit_pins.iter_mut().zip(['X', 'Y', 'Z']) {
+                    *pin = value.contains(letter);
+                }
+            }
+            _ => {}
+        }
     }
-    report.machine_x()?;
+    if report.mpos.is_none() && report.wpos.is_none() {
+        return None;
+    }
     Some(report)
 }
 
-/// X of an `x,y,z` triple; every component must be a finite number.
-fn first_axis(triple: &str) -> Option<f64> {
-    let values: Vec<f64> = triple
+/// An `x,y,z` triple; every component must be a finite number.
+fn triple(text: &str) -> Option<[f64; 3]> {
+    let values: Vec<f64> = text
         .split(',')
         .map(|v| v.parse::<f64>().ok().filter(|v| v.is_finite()))
         .collect::<Option<_>>()?;
-    (values.len() >= 3).then(|| values[0])
+    (values.len() == 3).then(|| [values[0], values[1], values[2]])
 }
 
 /// The controller's `$$` settings, by number.
@@ -139,11 +187,18 @@ fn first_axis(triple: &str) -> Option<f64> {
 pub struct Settings(pub BTreeMap<u32, f64>);
 
 impl Settings {
+    pub const STATUS_MASK: u32 = 10;
+    pub const REPORT_INCHES: u32 = 13;
     pub const HOMING_ENABLE: u32 = 22;
-    pub const STEPS_PER_UNIT_X: u32 = 100;
-    pub const MAX_RATE_X: u32 = 110;
-    pub const ACCEL_X: u32 = 120;
-    pub const MAX_TRAVEL_X: u32 = 130;
+    pub const HOMING_FEED: u32 = 24;
+    pub const HOMING_SEEK: u32 = 25;
+    pub const HOMING_DEBOUNCE_MS: u32 = 26;
+    pub const HOMING_PULLOFF: u32 = 27;
+    /// Per-axis settings: add the axis index (X = 0).
+    pub const STEPS_PER_UNIT: u32 = 100;
+    pub const MAX_RATE: u32 = 110;
+    pub const ACCEL: u32 = 120;
+    pub const MAX_TRAVEL: u32 = 130;
 
     /// Collect the `$N=value` lines of a `$$` reply.
     pub fn from_lines<'a>(lines: impl IntoIterator<Item = &'a Line>) -> Self {
@@ -215,6 +270,9 @@ mod tests {
             "<Idle|MPos:NaN,0.000,0.000>",
             "<Walk|MPos:0.000,0.000,0.000>",
             "<Idle|FS:0,0>",
+            "<Hold:x|MPos:0.000,0.000,0.000>",
+            "<Idle|MPos:0.000,0.000,0.000,0.000>",
+            "<Idle|MPos:0.000,0.000,0.000|FS:x,0>",
             "$100=abc",
             "\u{fffd}\u{fffd}k",
             "Grbl",
@@ -235,21 +293,32 @@ mod tests {
             panic!("not a status")
         };
         assert_eq!(s.state, MachineState::Idle);
-        assert_eq!(s.machine_x(), Some(-20.0));
+        assert_eq!(s.machine(0, None), Some(-20.0));
+        assert_eq!(s.work(0, None), Some(-20.0));
 
         let Line::Status(s) = parse_line("<Hold:1|WPos:-5.500,0.000,0.000|WCO:-1.000,0.000,0.000>")
         else {
             panic!("not a status")
         };
-        assert_eq!(s.state, MachineState::Hold);
-        assert_eq!(s.machine_x(), Some(-6.5));
+        assert_eq!((s.state, s.substate), (MachineState::Hold, Some(1)));
+        assert!(!s.at_rest());
+        assert_eq!(s.machine(0, None), Some(-6.5));
 
-        let Line::Status(s) = parse_line("<Run|MPos:-33.125,0.000,0.000|Bf:15,128|FS:500,0>")
-        else {
+        // The stock build's optional fields: pins, overrides, accessories.
+        let Line::Status(s) = parse_line(
+            "<Run|MPos:-33.125,0.000,0.000|Bf:15,128|FS:500,0|Pn:XZ|Ov:100,100,100|A:SF>",
+        ) else {
             panic!("not a status")
         };
-        assert_eq!(s.state, MachineState::Run);
-        assert_eq!(s.mpos_x, Some(-33.125));
+        assert_eq!((s.state, s.feed), (MachineState::Run, Some(500.0)));
+        assert_eq!(s.limit_pins, [true, false, true]);
+        // Without a WCO of its own, the work position needs one seen earlier.
+        assert_eq!(s.work(0, None), None);
+        assert_eq!(s.work(0, Some([12.0, 0.0, 0.0])), Some(-45.125));
+        let Line::Status(s) = parse_line("<Hold:0|MPos:1.000,2.000,3.000|F:0>") else {
+            panic!("not a status")
+        };
+        assert!(s.at_rest() && s.machine(2, None) == Some(3.0));
     }
 
     #[test]
@@ -260,9 +329,9 @@ mod tests {
             .collect();
         let s = Settings::from_lines(&lines);
         assert_eq!(s.get(Settings::HOMING_ENABLE), Some(1.0));
-        assert_eq!(s.get(Settings::STEPS_PER_UNIT_X), Some(80.0));
-        assert_eq!(s.get(Settings::MAX_TRAVEL_X), Some(95.5));
-        assert_eq!(s.get(Settings::ACCEL_X), None);
+        assert_eq!(s.get(Settings::STEPS_PER_UNIT), Some(80.0));
+        assert_eq!(s.get(Settings::MAX_TRAVEL), Some(95.5));
+        assert_eq!(s.get(Settings::ACCEL), None);
     }
 
     #[test]

@@ -1,17 +1,22 @@
 //! The driver against a scripted controller on a pseudo-terminal.
 
+use std::collections::BTreeMap;
+use std::io::{Read, Write};
+use std::time::Instant;
+
 use super::*;
 use serialport::TTYPort;
 
-/// How the scripted controller misbehaves.
-#[derive(Default)]
+/// How the scripted controller behaves.
 struct Script {
     silent: bool,
     /// Reply `ALARM:N` instead of finishing the next move.
     alarm_on_move: Option<u32>,
     /// Garble this many upcoming replies.
     garble: u32,
-    steps_per_deg: f64,
+    /// Answer `G4 P0` only when reset (the move never ends by itself).
+    stuck: bool,
+    settings: BTreeMap<u32, f64>,
     /// Every line received, in order.
     received: Vec<String>,
 }
@@ -21,24 +26,124 @@ struct Fake {
     path: PathBuf,
 }
 
+/// The controller's state as the fake keeps it.
+#[derive(Default)]
+struct Machine {
+    x: f64,
+    target: f64,
+    /// G92 work offset.
+    wco: f64,
+    /// A `G4 P0` waiting for the stuck move.
+    waiting: bool,
+    line: Vec<u8>,
+}
+
+impl Machine {
+    /// The reply to one received byte, if it completes something.
+    fn byte(&mut self, b: u8, s: &mut Script) -> Option<String> {
+        let banner = "\r\nGrbl 1.1h ['$' for help]\r\n";
+        match b {
+            SOFT_RESET => {
+                self.wco = 0.0;
+                // The executing line is answered before the banner.
+                let ok = if std::mem::take(&mut self.waiting) {
+                    "ok\r\n"
+                } else {
+                    ""
+                };
+                Some(format!("{ok}{banner}"))
+            }
+            b'?' => Some(format!("<Idle|MPos:{:.3},0.000,0.000|FS:0,0>\r\n", self.x)),
+            b'!' => None,
+            b'\n' => {
+                let text = String::from_utf8_lossy(&self.line).trim().to_string();
+                self.line.clear();
+                s.received.push(text.clone());
+                Some(self.execute(&text, s))
+            }
+            _ => {
+                self.line.push(b);
+                None
+            }
+        }
+    }
+
+    fn execute(&mut self, text: &str, s: &mut Script) -> String {
+        if let Some((key, value)) = text.strip_prefix('$').and_then(|t| t.split_once('=')) {
+            if let (Ok(key), Ok(value)) = (key.parse(), value.parse()) {
+                s.settings.insert(key, value);
+                return "ok\r\n".into();
+            }
+        }
+        match text {
+            "$I" => "[VER:1.1h.fake:]\r\nok\r\n".into(),
+            "$$" => {
+                let mut reply = String::new();
+                for (key, value) in &s.settings {
+                    reply.push_str(&format!("${key}={value:.3}\r\n"));
+                }
+                reply + "ok\r\n"
+            }
+            "$H" => {
+                self.x = -1.0;
+                "ok\r\n".into()
+            }
+            "$X" => "ok\r\n".into(),
+            "G4 P0" => match s.alarm_on_move.take() {
+                Some(code) => format!("ALARM:{code}\r\n"),
+                None if s.stuck => {
+                    self.waiting = true;
+                    String::new()
+                }
+                None => {
+                    self.x = self.target;
+                    "ok\r\n".into()
+                }
+            },
+            t => {
+                let value = |prefix: &str| t.strip_prefix(prefix).map(str::parse::<f64>);
+                if let Some(Ok(v)) = value("G90 G0 X") {
+                    self.target = v + self.wco;
+                    "ok\r\n".into()
+                } else if let Some(Ok(v)) = value("G92 X") {
+                    self.wco = self.x - v;
+                    "ok\r\n".into()
+                } else {
+                    "error:20\r\n".into()
+                }
+            }
+        }
+    }
+}
+
 fn fake() -> Fake {
     let (mut master, slave) = TTYPort::pair().unwrap();
     let path = PathBuf::from(slave.name().unwrap());
     drop(slave);
+    let settings = [
+        (13, 0.0),
+        (22, 1.0),
+        (100, 80.0),
+        (110, 6000.0),
+        (120, 500.0),
+        (130, 180.0),
+    ];
     let script = Arc::new(Mutex::new(Script {
-        steps_per_deg: 80.0,
-        ..Script::default()
+        silent: false,
+        alarm_on_move: None,
+        garble: 0,
+        stuck: false,
+        settings: settings.into_iter().collect(),
+        received: Vec::new(),
     }));
     let shared = script.clone();
     thread::spawn(move || {
-        let mut x = 0.0f64;
-        let mut target = 0.0f64;
-        let mut line = Vec::new();
+        let mut machine = Machine::default();
         let mut buf = [0u8; 64];
         loop {
             let n = match master.read(&mut buf) {
                 Ok(n) => n,
-                Err(e) if e.kind() == io::ErrorKind::TimedOut => continue,
+                Err(e) if e.kind() == std::io::ErrorKind::TimedOut => continue,
                 // No slave open (yet): wait for the driver.
                 Err(_) => {
                     thread::sleep(Duration::from_millis(5));
@@ -47,46 +152,13 @@ fn fake() -> Fake {
             };
             for &b in &buf[..n] {
                 let mut s = shared.lock().unwrap();
-                let reply = match b {
-                    _ if s.silent => continue,
-                    SOFT_RESET => "\r\nGrbl 1.1h ['$' for help]\r\n".to_string(),
-                    b'?' => format!("<Idle|MPos:{x:.3},0.000,0.000|FS:0,0>\r\n"),
-                    b'\n' => {
-                        let text = String::from_utf8_lossy(&line).trim().to_string();
-                        line.clear();
-                        s.received.push(text.clone());
-                        match text.as_str() {
-                            "$I" => "[VER:1.1h.fake:]\r\nok\r\n".into(),
-                            "$$" => format!(
-                                "$22=1\r\n$100={:.3}\r\n$110=6000.000\r\n$120=500.000\r\n$130=180.000\r\nok\r\n",
-                                s.steps_per_deg
-                            ),
-                            "$H" => {
-                                x = 0.0;
-                                "ok\r\n".into()
-                            }
-                            "G4 P0" => match s.alarm_on_move.take() {
-                                Some(code) => format!("ALARM:{code}\r\n"),
-                                None => {
-                                    x = target;
-                                    "ok\r\n".into()
-                                }
-                            },
-                            t => match t.strip_prefix("G90 G0 X").map(str::parse::<f64>) {
-                                Some(Ok(v)) => {
-                                    target = v;
-                                    "ok\r\n".into()
-                                }
-                                _ => "error:20\r\n".into(),
-                            },
-                        }
-                    }
-                    _ => {
-                        line.push(b);
-                        continue;
-                    }
+                if s.silent {
+                    continue;
+                }
+                let Some(reply) = machine.byte(b, &mut s) else {
+                    continue;
                 };
-                let reply = if s.garble > 0 {
+                let reply = if s.garble > 0 && !reply.is_empty() {
                     s.garble -= 1;
                     format!("{}\r\n", &reply.trim()[..reply.trim().len() / 2])
                 } else {
@@ -100,12 +172,18 @@ fn fake() -> Fake {
     Fake { script, path }
 }
 
+impl Fake {
+    fn received(&self) -> Vec<String> {
+        self.script.lock().unwrap().received.clone()
+    }
+}
+
 fn config() -> GrblArmConfig {
     GrblArmConfig {
         banner_timeout: Duration::from_millis(100),
         reply_timeout: Duration::from_millis(300),
-        homing_timeout: Duration::from_secs(2),
-        move_margin: Duration::from_millis(500),
+        motion_margin: Duration::from_millis(500),
+        stall_timeout: Duration::from_millis(300),
         reconnect_attempts: 2,
         reconnect_backoff: Duration::from_millis(10),
         ..GrblArmConfig::default()
@@ -117,9 +195,12 @@ fn connects_homes_and_moves() {
     let fake = fake();
     let mut arm = GrblArm::open(&fake.path, config()).unwrap();
     assert_eq!(arm.firmware(), "1.1h.fake:");
-    assert!(arm.needs_homing());
+    assert!(!arm.referenced());
     assert_eq!(arm.status().unwrap().state, ArmState::NeedsHoming);
-    assert!(matches!(arm.move_to(-20.0), Err(DeviceError::Reset)));
+    assert!(matches!(
+        arm.move_to(-20.0),
+        Err(DeviceError::PositionUnknown(_))
+    ));
     arm.home().unwrap();
     for deg in [-20.0, -32.5, -45.0] {
         arm.move_to(deg).unwrap();
@@ -127,13 +208,13 @@ fn connects_homes_and_moves() {
         assert_eq!(status.state, ArmState::Idle);
         assert!((status.angle_deg - deg).abs() < 1e-9);
     }
-    let received = fake.script.lock().unwrap().received.clone();
     assert_eq!(
-        received,
+        fake.received(),
         [
             "$I",
             "$$",
             "$H",
+            "G92 X-1.000",
             "G90 G0 X-20.000",
             "G4 P0",
             "G90 G0 X-32.500",
@@ -149,27 +230,97 @@ fn refuses_out_of_range_targets_without_sending() {
     let fake = fake();
     let mut arm = GrblArm::open(&fake.path, config()).unwrap();
     arm.home().unwrap();
-    let before = fake.script.lock().unwrap().received.len();
-    for deg in [0.5, -90.01, f64::NAN, f64::NEG_INFINITY] {
+    let before = fake.received().len();
+    for deg in [-0.5, -90.01, f64::NAN, f64::NEG_INFINITY] {
         assert!(
             matches!(arm.move_to(deg), Err(DeviceError::OutOfRange { .. })),
             "{deg}"
         );
     }
-    assert_eq!(fake.script.lock().unwrap().received.len(), before);
+    assert_eq!(fake.received().len(), before);
 }
 
 #[test]
-fn reports_a_settings_mismatch() {
+fn settings_mismatches_are_listed_or_applied() {
     let fake = fake();
-    fake.script.lock().unwrap().steps_per_deg = 100.0;
-    let Err(DeviceError::Protocol(message)) = GrblArm::open(&fake.path, config()) else {
+    fake.script.lock().unwrap().settings.insert(100, 250.0);
+    fake.script.lock().unwrap().settings.insert(22, 0.0);
+    let Err(DeviceError::Refused(message)) = GrblArm::open(&fake.path, config()) else {
         panic!("mismatch not reported")
     };
-    assert!(
-        message.contains("$100") && message.contains("100") && message.contains("80"),
-        "{message}"
+    let lines: Vec<&str> = message.lines().skip(1).collect();
+    assert_eq!(
+        lines,
+        [
+            "$22 (homing cycle enable) is 0, configuration expects 1",
+            "$100 (X steps per degree) is 250, configuration expects 80",
+        ]
     );
+    let apply = GrblArmConfig {
+        apply_settings: true,
+        ..config()
+    };
+    GrblArm::open(&fake.path, apply).unwrap();
+    let received = fake.received();
+    assert_eq!(received[received.len() - 3..], ["$22=1", "$100=80", "$$"]);
+}
+
+#[test]
+fn declared_position_where_the_controller_does_not_home() {
+    let fake = fake();
+    fake.script.lock().unwrap().settings.insert(22, 0.0);
+    let off = GrblArmConfig {
+        homing: Homing::Off,
+        ..config()
+    };
+    let mut arm = GrblArm::open(&fake.path, off).unwrap();
+    assert_eq!(arm.status().unwrap().state, ArmState::NeedsPosition);
+    assert!(matches!(arm.home(), Err(DeviceError::PositionUnknown(_))));
+    arm.declare_position(-12.0).unwrap();
+    arm.home().unwrap();
+    arm.move_to(-20.0).unwrap();
+    assert!((arm.status().unwrap().angle_deg + 20.0).abs() < 1e-9);
+    assert!(fake.received().ends_with(&[
+        "G92 X-12.000".to_owned(),
+        "G90 G0 X-20.000".to_owned(),
+        "G4 P0".to_owned()
+    ]));
+    // Where homing is required, declaring is refused.
+    let homing = self::fake();
+    let mut arm = GrblArm::open(&homing.path, config()).unwrap();
+    assert!(matches!(
+        arm.declare_position(-12.0),
+        Err(DeviceError::Refused(_))
+    ));
+}
+
+#[test]
+fn an_unanswered_line_is_never_followed_by_another_before_a_reset() {
+    let fake = fake();
+    let mut arm = GrblArm::open(&fake.path, config()).unwrap();
+    arm.home().unwrap();
+    arm.move_to(-20.0).unwrap();
+    // The move never ends by itself: `G4 P0` goes unanswered, the position stays.
+    fake.script.lock().unwrap().stuck = true;
+    let started = Instant::now();
+    let Err(DeviceError::Timeout { what, .. }) = arm.move_to(-30.0) else {
+        panic!("no timeout")
+    };
+    assert!(what.contains("resynchronised"), "{what}");
+    assert!(started.elapsed() < Duration::from_secs(5));
+    // Feed hold and reset answered the old `G4 P0` (paired, not taken for a newer
+    // line); the work offset was restored; nothing was sent twice.
+    let received = fake.received();
+    let tail: Vec<&str> = received
+        .iter()
+        .rev()
+        .take(3)
+        .rev()
+        .map(String::as_str)
+        .collect();
+    assert_eq!(tail, ["G90 G0 X-30.000", "G4 P0", "G92 X-20.000"]);
+    fake.script.lock().unwrap().stuck = false;
+    arm.move_to(-30.0).unwrap();
 }
 
 #[test]
@@ -209,6 +360,8 @@ fn alarm_latches_until_cleared_and_rehomed() {
         panic!("alarm not reported")
     };
     assert!(meaning.contains("hard limit"));
+    // GRBL answers nothing during a hard-limit lock: the driver reset it at once.
+    assert!(fake.received().ends_with(&["G4 P0".to_owned()]));
     assert_eq!(arm.status().unwrap().state, ArmState::Alarm);
     assert!(matches!(
         arm.move_to(-30.0),
@@ -219,7 +372,10 @@ fn alarm_latches_until_cleared_and_rehomed() {
         Err(DeviceError::Alarm { code: 1, .. })
     ));
     arm.clear_fault().unwrap();
-    assert!(matches!(arm.move_to(-30.0), Err(DeviceError::Reset)));
+    assert!(matches!(
+        arm.move_to(-30.0),
+        Err(DeviceError::PositionUnknown(_))
+    ));
     arm.home().unwrap();
     arm.move_to(-30.0).unwrap();
 }
@@ -232,7 +388,10 @@ fn emergency_stop_resets_the_controller() {
     arm.move_to(-20.0).unwrap();
     let stop = arm.emergency_stop();
     thread::spawn(move || stop.stop()).join().unwrap().unwrap();
-    assert!(matches!(arm.move_to(-25.0), Err(DeviceError::Reset)));
+    assert!(matches!(
+        arm.move_to(-25.0),
+        Err(DeviceError::PositionUnknown(_))
+    ));
     assert_eq!(arm.status().unwrap().state, ArmState::NeedsHoming);
 }
 

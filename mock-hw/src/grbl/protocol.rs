@@ -14,6 +14,7 @@ use super::report::{
 };
 use super::serial::{Line, SerialInput};
 use super::settings::Settings;
+use super::transcript::Transcript;
 use crate::world::World;
 
 /// The firmware pauses this long after printing an alarm, s.
@@ -101,12 +102,13 @@ pub(crate) struct Controller {
     /// Limit switches as last seen (hard limits trigger on a change).
     pins: [bool; N_AXIS],
     counters: ReportCounters,
+    transcript: Transcript,
     out: VecDeque<(f64, Vec<u8>)>,
 }
 
 impl Controller {
     /// A controller that powers up at machine time `now` (banner after the boot delay).
-    pub fn new(config: &GrblConfig, world: World, now: f64) -> Self {
+    pub fn new(config: &GrblConfig, world: World, transcript: Transcript, now: f64) -> Self {
         let settings = Settings::from_config(config);
         let arm_axis = config.arm_axis.index();
         let idle = config.idle_axis_switch;
@@ -138,6 +140,7 @@ impl Controller {
             armed_alarm: None,
             pins: [false; N_AXIS],
             counters: ReportCounters::new(config.status_extras),
+            transcript,
             out: VecDeque::new(),
         };
         controller.power_on(now);
@@ -219,6 +222,7 @@ impl Controller {
             self.input.clear();
         }
         if std::mem::take(&mut self.input.realtime.reset) {
+            self.transcript.record("^X");
             self.soft_reset(now);
         }
         // During a critical alarm the firmware spins waiting for a reset and answers
@@ -529,6 +533,7 @@ impl Controller {
 
     fn execute_line(&mut self, line: &Line, now: f64) {
         let text = &line.text;
+        self.transcript.record(String::from_utf8_lossy(text));
         let result = if line.overflow {
             Some(Err(status::OVERFLOW))
         } else if text.is_empty() {

@@ -11,6 +11,7 @@ use super::config::ScheduledFault;
 use super::faults::{Fault, LineFaults};
 use super::protocol::Controller;
 use super::pty::{self, Pty, Received};
+use super::transcript::Transcript;
 
 /// Poll interval while something changes with time (motion, dwell, queued output).
 const BUSY_POLL: Duration = Duration::from_millis(1);
@@ -60,6 +61,7 @@ pub(crate) struct Runner {
     pub faults: LineFaults,
     /// Faults still to come, earliest first.
     pub schedule: Vec<ScheduledFault>,
+    pub transcript: Transcript,
     pub commands: Receiver<Command>,
 }
 
@@ -90,6 +92,7 @@ impl Runner {
                         // Opening the port pulls DTR: the board resets, and what came
                         // with the open is lost in the boot loader.
                         self.port_open = true;
+                        self.transcript.record("DTR");
                         self.controller.hard_reset(self.clock.now());
                         0
                     } else {

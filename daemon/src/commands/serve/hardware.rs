@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use anyhow::Context;
-use gonio_drivers::grbl::{GrblArm, GrblArmConfig};
+use gonio_drivers::grbl::{GrblArm, GrblArmConfig, Homing};
 use gonio_drivers::supervised_camera::{SupervisedCamera, SupervisorConfig, WorkerSpec};
 use gonio_drivers::{Arm, Camera, DeviceError};
 use gonio_mock_hw::camera::{CameraFault, CaptureTiming, EmulatedCamera, FaultInjector};
@@ -84,7 +84,11 @@ fn emulated_arm_config(limits: Limits, emulator: &GrblConfig) -> GrblArmConfig {
     GrblArmConfig {
         steps_per_deg: emulator.steps_per_deg,
         max_travel_deg: emulator.max_travel_deg,
-        homing_enabled: emulator.homing_enabled,
+        homing: if emulator.homing_enabled {
+            Homing::Required
+        } else {
+            Homing::Off
+        },
         ..grbl_arm_config(limits)
     }
 }

@@ -479,7 +479,12 @@ impl Runner {
                             "{what}: {err}; waiting for the arm to come back"
                         )));
                     }
-                    let recoverable = matches!(err, DeviceError::Reset | DeviceError::Alarm { .. });
+                    let recoverable = matches!(
+                        err,
+                        DeviceError::Reset
+                            | DeviceError::Alarm { .. }
+                            | DeviceError::PositionUnknown(_)
+                    );
                     if recoverable {
                         self.homed = false;
                         self.at_deg = None;

@@ -15,7 +15,7 @@ const LOCKED_BANNER: &str = "\r\nGrbl 1.1h ['$' for help]\r\n[MSG:'$H'|'$X' to u
 /// A booted controller with the arm physically at −30°, at machine time 0.5.
 fn booted_with(config: &GrblConfig) -> (Controller, World) {
     let world = World::new(-30.0);
-    let mut c = Controller::new(config, world.clone(), 0.0);
+    let mut c = Controller::new(config, world.clone(), Transcript::default(), 0.0);
     c.tick(0.5);
     (c, world)
 }
@@ -279,7 +279,7 @@ fn stock_status_fields_on_their_refresh_counters() {
         soft_limits: false,
         ..arm_board()
     };
-    let mut c = Controller::new(&config, World::new(0.0), 0.0);
+    let mut c = Controller::new(&config, World::new(0.0), Transcript::default(), 0.0);
     c.tick(1.0);
     assert_eq!(take(&mut c, 1.0), "\r\nGrbl 1.1h ['$' for help]\r\n");
     // The arm rests on its switch at θ = 0.
@@ -348,7 +348,7 @@ fn hard_limits_alarm_on_a_switch_change_and_at_start_up() {
         ..arm_board()
     };
     let world = World::new(-5.0);
-    let mut c = Controller::new(&config, world.clone(), 0.0);
+    let mut c = Controller::new(&config, world.clone(), Transcript::default(), 0.0);
     c.tick(0.5);
     assert_eq!(take(&mut c, 0.5), "\r\nGrbl 1.1h ['$' for help]\r\n");
     // Driven into its switch at θ = 0.
