@@ -30,6 +30,8 @@ enum Command {
     Study(commands::study::Args),
     /// Measure what accuracy costs in acquisition and processing time for a scene.
     Tradeoff(commands::tradeoff::Args),
+    /// Serve the GRBL 1.1h emulator alone on a pseudo-terminal, until interrupted.
+    EmulateArm(commands::emulate_arm::Args),
 }
 
 fn main() {
@@ -47,6 +49,7 @@ fn main() {
         Command::Fit(args) => commands::fit::run(args),
         Command::Study(args) => commands::study::run(args),
         Command::Tradeoff(args) => commands::tradeoff::run(args),
+        Command::EmulateArm(args) => commands::emulate_arm::run(args),
     };
     if let Err(err) = result {
         eprintln!("error: {err:#}");
