@@ -43,7 +43,7 @@ mod serial;
 mod settings;
 mod transcript;
 
-pub use config::{Axis, AxisSet, GrblConfig, ScheduledFault};
+pub use config::{Axis, AxisSet, ConfigError, GrblConfig, ScheduledFault};
 pub use faults::Fault;
 
 use std::io;

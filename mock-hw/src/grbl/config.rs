@@ -140,7 +140,27 @@ impl Default for GrblConfig {
     }
 }
 
+/// Why a configuration text was refused.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    #[error(transparent)]
+    Toml(#[from] toml::de::Error),
+    #[error("{0}")]
+    Problems(String),
+}
+
 impl GrblConfig {
+    /// Parse a TOML configuration and check it.
+    pub fn from_toml_str(text: &str) -> Result<GrblConfig, ConfigError> {
+        let config: GrblConfig = toml::from_str(text)?;
+        let problems = config.problems();
+        if problems.is_empty() {
+            Ok(config)
+        } else {
+            Err(ConfigError::Problems(problems.join("; ")))
+        }
+    }
+
     /// A board set up for gonio's arm: 80 steps/°, 1200 °/min, 40 °/s², 180° of travel,
     /// homing enabled with the soft limits, X homed alone (built with
     /// `HOMING_CYCLE_0 (1<<X_AXIS)`), seek 600 °/min, locate 100 °/min, the stock

@@ -23,7 +23,7 @@ use super::files::{is_partial, safe_join};
 use super::hardware::InjectedFault;
 use super::plan::{theta_dir_name, Step, FIT_MODELS};
 use super::preview;
-use super::shared::{lock, Shared, EMERGENCY_STOP};
+use super::shared::{lock, PositionRequest, Shared, EMERGENCY_STOP};
 use super::store::{NewScan, ScanRecord, ScanState, StepState, Store, StoreError};
 use super::validate::{self, Bounds, FieldError};
 
@@ -106,6 +106,7 @@ pub fn router(shared: Arc<Shared>) -> Router {
         .route("/api/scans/{id}/cancel", post(cancel_scan))
         .route("/api/sweeps", post(create_sweep))
         .route("/api/arm/stop", post(stop_arm))
+        .route("/api/arm/position", post(declare_arm_position))
         .route("/api/emulator/fault", post(inject_fault))
         .route_layer(middleware::from_fn_with_state(
             shared.clone(),
@@ -220,6 +221,7 @@ pub fn scan_view(shared: &Shared, scan: &ScanRecord) -> Value {
         "sample": scan.plan.sample,
         "state": scan.state,
         "error": scan.error,
+        "reason": (scan.state == ScanState::Waiting).then_some(&scan.error),
         "sweep_id": scan.sweep_id,
         "theta_l": scan.plan.theta_l,
         "bracket": { "shutter_s": scan.plan.shutter_s, "auto": scan.plan.auto_bracket },
@@ -332,10 +334,15 @@ const CONTROLS: [(&str, &[ScanState]); 3] = [
             ScanState::Queued,
             ScanState::Running,
             ScanState::Interrupted,
+            ScanState::Waiting,
         ],
     ),
-    // Re-queues a paused scan, or retries a failed one from its first step not done.
-    ("resume", &[ScanState::Paused, ScanState::Failed]),
+    // Re-queues a paused or waiting scan, or retries a failed one from its first step
+    // not done.
+    (
+        "resume",
+        &[ScanState::Paused, ScanState::Failed, ScanState::Waiting],
+    ),
     (
         "cancel",
         &[
@@ -343,6 +350,7 @@ const CONTROLS: [(&str, &[ScanState]); 3] = [
             ScanState::Running,
             ScanState::Paused,
             ScanState::Interrupted,
+            ScanState::Waiting,
         ],
     ),
 ];
@@ -409,6 +417,61 @@ async fn stop_arm(State(shared): AppState) -> ApiResult<Json<Value>> {
     Ok(Json(json!({ "stopped": true, "paused": paused })))
 }
 
+/// How long a declared position may wait for the hardware owner (busy with a step).
+const DECLARE_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(30);
+
+/// Declares where the arm is, for controllers without homing (`{"angle": degrees}`);
+/// the hardware owner applies it (`G92`), records it in the hardware log and queues the
+/// waiting scans again.
+async fn declare_arm_position(State(shared): AppState, body: Bytes) -> ApiResult<Json<Value>> {
+    let angle = validate::arm_position(&parse_json(&body)?)?;
+    let (reply, answer) = std::sync::mpsc::sync_channel(1);
+    {
+        let mut pending = lock(&shared.arm_position);
+        if pending.is_some() {
+            return Err(ApiError::new(
+                StatusCode::CONFLICT,
+                "another arm position is being declared",
+            ));
+        }
+        *pending = Some(PositionRequest {
+            angle_deg: angle,
+            reply,
+        });
+    }
+    shared.wake();
+    let answered = tokio::task::spawn_blocking(move || answer.recv_timeout(DECLARE_TIMEOUT))
+        .await
+        .map_err(internal)?;
+    let refused = |status, err: gonio_drivers::DeviceError| {
+        ApiError::new(status, format!("arm position not declared: {err}"))
+    };
+    match answered {
+        Ok(Ok(())) => {
+            tracing::info!("arm position declared: {angle}°");
+            Ok(Json(json!({ "angle": angle, "declared": true })))
+        }
+        Ok(Err(err @ gonio_drivers::DeviceError::OutOfRange { .. })) => Err(ApiError {
+            field: Some("angle".into()),
+            ..refused(StatusCode::UNPROCESSABLE_ENTITY, err)
+        }),
+        Ok(Err(err))
+            if err.is_transient() || matches!(err, gonio_drivers::DeviceError::NotFound(_)) =>
+        {
+            Err(refused(StatusCode::SERVICE_UNAVAILABLE, err))
+        }
+        Ok(Err(err)) => Err(refused(StatusCode::CONFLICT, err)),
+        Err(_) => {
+            // Still pending: withdraw it, so it is not applied behind the caller's back.
+            lock(&shared.arm_position).take();
+            Err(ApiError::new(
+                StatusCode::SERVICE_UNAVAILABLE,
+                "arm position not declared: the hardware is busy, try again",
+            ))
+        }
+    }
+}
+
 async fn create_sweep(State(shared): AppState, body: Bytes) -> ApiResult<impl IntoResponse> {
     let value = parse_json(&body)?;
     let sweep = validate::sweep_request(&value, &bounds(&shared))?;
@@ -452,6 +515,7 @@ fn sweep_view(shared: &Shared, store: &Store, id: i64) -> Result<Option<Value>, 
         ScanState::Failed,
         ScanState::Cancelled,
         ScanState::Interrupted,
+        ScanState::Waiting,
     ]
     .into_iter()
     .map(|s| (s.as_str().to_owned(), json!(count(s))))

@@ -9,9 +9,17 @@
 //! white_reflectance = 1.0      # of the white strip; emulated scans use the scene's
 //! # [setup] = processing's Setup fields, for real hardware (setup.json of each scan)
 //!
-//! [arm]                        # or: kind = "grbl", path = "/dev/ttyUSB0"
+//! [arm]                        # or: kind = "grbl", path = "/dev/serial/by-id/..."
 //! kind = "emulator"
 //! time_scale = 0.1             # emulated motion 10× faster than real time
+//! # board = "board.toml"       # the emulated board (as `gonio emulate-arm` reads it)
+//! axis = "X"                   # what the GRBL board is expected to be:
+//! steps_per_deg = 80.0         #   $100
+//! max_travel_deg = 180.0       #   $130
+//! # max_rate_deg_per_min = 1200.0   $110 (default: any)
+//! # accel_deg_per_s2 = 40.0         $120 (default: any)
+//! homing = "required"          # $22=1; "off": $22=0, declare the position; "optional"
+//! apply_settings = false       # write differing settings instead of refusing the board
 //!
 //! [camera]                     # or: kind = "gphoto2"
 //! kind = "emulator"
@@ -20,7 +28,7 @@
 //!
 //! [limits]                     # soft limits of θL, degrees
 //! min_deg = -90.0
-//! max_deg = 0.0
+//! max_deg = -1.0
 //!
 //! [retry]                      # device faults: attempts and first backoff (doubles)
 //! attempts = 4
@@ -34,6 +42,7 @@ use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
+use gonio_drivers::grbl::ArmAxis;
 use gonio_processing::geometry::Setup;
 use serde::Deserialize;
 
@@ -81,25 +90,68 @@ impl Default for Config {
     }
 }
 
-/// The light arm: a GRBL controller on a serial port, or the emulator.
+/// Where the light arm's GRBL controller is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ArmKind {
+    /// A board on the serial port at `path`.
+    Grbl,
+    /// The GRBL emulator, in this process.
+    Emulator,
+}
+
+/// How the arm gets a known position (docs/ARCHITECTURE.md, "GRBL arm").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum HomingMode {
+    /// `$22=1`: the homing cycle references the arm.
+    Required,
+    /// Homing if the board has it, else a declared position.
+    Optional,
+    /// `$22=0`: the operator declares the position (`POST /api/arm/position`).
+    Off,
+}
+
+/// The light arm: the GRBL controller, real or emulated, and what the driver expects of
+/// it. The emulated board is set up as these keys expect unless `board` names a file.
 #[derive(Debug, Clone, Deserialize)]
-#[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
-pub enum ArmConfig {
-    Grbl {
-        /// Serial device, e.g. `/dev/ttyUSB0`.
-        path: PathBuf,
-    },
-    Emulator {
-        /// Real seconds per emulated second (1.0 = real time, 0.1 = 10× faster).
-        #[serde(default = "default_time_scale")]
-        time_scale: f64,
-    },
+#[serde(default, deny_unknown_fields)]
+pub struct ArmConfig {
+    pub kind: ArmKind,
+    /// Serial device of a real board, e.g. `/dev/serial/by-id/usb-…-if00-port0`.
+    pub path: Option<PathBuf>,
+    /// Emulator: real seconds per emulated second (1.0 = real time, 0.1 = 10× faster).
+    pub time_scale: f64,
+    /// Emulator: the board's own configuration (the file `gonio emulate-arm --config`
+    /// reads), e.g. a stock board; its `time_scale` is replaced by the one above.
+    pub board: Option<PathBuf>,
+    /// The controller axis the arm is on: `X`, `Y` or `Z`.
+    pub axis: String,
+    /// Expected `$100` (steps per degree) and `$130` (travel, degrees).
+    pub steps_per_deg: f64,
+    pub max_travel_deg: f64,
+    /// Expected `$110` (degrees/min) and `$120` (degrees/s²); unset: any positive.
+    pub max_rate_deg_per_min: Option<f64>,
+    pub accel_deg_per_s2: Option<f64>,
+    pub homing: HomingMode,
+    /// Write the settings that differ (`$N=`) and read them back, instead of refusing.
+    pub apply_settings: bool,
 }
 
 impl Default for ArmConfig {
     fn default() -> Self {
-        ArmConfig::Emulator {
+        ArmConfig {
+            kind: ArmKind::Emulator,
+            path: None,
             time_scale: default_time_scale(),
+            board: None,
+            axis: "X".to_owned(),
+            steps_per_deg: 80.0,
+            max_travel_deg: 180.0,
+            max_rate_deg_per_min: None,
+            accel_deg_per_s2: None,
+            homing: HomingMode::Required,
+            apply_settings: false,
         }
     }
 }
@@ -145,10 +197,11 @@ pub struct Limits {
 }
 
 impl Default for Limits {
+    /// A margin inside the arm's travel: off the home switch at 0.
     fn default() -> Self {
         Self {
             min_deg: -90.0,
-            max_deg: 0.0,
+            max_deg: -1.0,
         }
     }
 }
@@ -226,6 +279,7 @@ impl Config {
             self.max_body_bytes >= 1024,
             "max_body_bytes must be at least 1024"
         );
+        self.arm.check()?;
         for (what, scale) in [
             ("arm.time_scale", self.arm_time_scale()),
             ("camera.time_scale", self.camera_time_scale()),
@@ -241,10 +295,7 @@ impl Config {
     }
 
     fn arm_time_scale(&self) -> Option<f64> {
-        match self.arm {
-            ArmConfig::Emulator { time_scale } => Some(time_scale),
-            ArmConfig::Grbl { .. } => None,
-        }
+        (self.arm.kind == ArmKind::Emulator).then_some(self.arm.time_scale)
     }
 
     fn camera_time_scale(&self) -> Option<f64> {
@@ -255,6 +306,42 @@ impl Config {
     }
 }
 
+impl ArmConfig {
+    fn check(&self) -> anyhow::Result<()> {
+        match (self.kind, &self.path, &self.board) {
+            (ArmKind::Grbl, None, _) => anyhow::bail!("arm: kind \"grbl\" needs path"),
+            (ArmKind::Grbl, _, Some(_)) => {
+                anyhow::bail!("arm: board is for kind \"emulator\", not \"grbl\"")
+            }
+            _ => {}
+        }
+        anyhow::ensure!(
+            ArmAxis::from_letter(&self.axis).is_some(),
+            "arm.axis must be X, Y or Z, got {:?}",
+            self.axis
+        );
+        for (what, value) in [
+            ("arm.steps_per_deg", Some(self.steps_per_deg)),
+            ("arm.max_travel_deg", Some(self.max_travel_deg)),
+            ("arm.max_rate_deg_per_min", self.max_rate_deg_per_min),
+            ("arm.accel_deg_per_s2", self.accel_deg_per_s2),
+        ] {
+            if let Some(value) = value {
+                anyhow::ensure!(
+                    value.is_finite() && value > 0.0,
+                    "{what} must be positive, got {value}"
+                );
+            }
+        }
+        Ok(())
+    }
+
+    /// The axis as the driver names it.
+    pub fn axis(&self) -> ArmAxis {
+        ArmAxis::from_letter(&self.axis).unwrap_or(ArmAxis::X)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -262,7 +349,8 @@ mod tests {
     #[test]
     fn empty_config_runs_on_emulators() {
         let config = Config::from_toml_str("").unwrap();
-        assert!(matches!(config.arm, ArmConfig::Emulator { .. }));
+        assert_eq!(config.arm.kind, ArmKind::Emulator);
+        assert_eq!(config.arm.homing, HomingMode::Required);
         assert!(
             matches!(config.camera, CameraConfig::Emulator { ref scene, .. } if scene == "gold")
         );
@@ -277,19 +365,39 @@ mod tests {
         assert_eq!(example.bind, default.bind);
         assert_eq!(example.data_dir, default.data_dir);
         assert_eq!(example.retry.attempts, default.retry.attempts);
-        assert!(matches!(
-            (example.arm, default.arm),
-            (ArmConfig::Emulator { time_scale: a }, ArmConfig::Emulator { time_scale: b }) if a == b
-        ));
+        assert_eq!(example.arm.kind, default.arm.kind);
+        assert_eq!(example.arm.time_scale, default.arm.time_scale);
+        assert_eq!(example.arm.steps_per_deg, default.arm.steps_per_deg);
+        assert_eq!(example.arm.max_travel_deg, default.arm.max_travel_deg);
+        assert_eq!(example.arm.homing, default.arm.homing);
+        assert_eq!(example.arm.axis, default.arm.axis);
+        assert_eq!(example.arm.apply_settings, default.arm.apply_settings);
+        assert_eq!(example.limits.max_deg, default.limits.max_deg);
     }
 
     #[test]
     fn grbl_arm_needs_a_path() {
         let err = Config::from_toml_str("[arm]\nkind = \"grbl\"\n").unwrap_err();
         assert!(format!("{err:#}").contains("path"), "{err:#}");
-        let config =
-            Config::from_toml_str("[arm]\nkind = \"grbl\"\npath = \"/dev/ttyUSB0\"\n").unwrap();
-        assert!(matches!(config.arm, ArmConfig::Grbl { .. }));
+        let config = Config::from_toml_str(
+            "[arm]\nkind = \"grbl\"\npath = \"/dev/ttyUSB0\"\nhoming = \"off\"\naxis = \"y\"\n",
+        )
+        .unwrap();
+        assert_eq!(config.arm.kind, ArmKind::Grbl);
+        assert_eq!(config.arm.homing, HomingMode::Off);
+        assert_eq!(config.arm.axis(), ArmAxis::Y);
+        for (text, named) in [
+            ("[arm]\nhoming = \"sometimes\"\n", "homing"),
+            ("[arm]\naxis = \"A\"\n", "arm.axis"),
+            ("[arm]\nsteps_per_deg = 0\n", "arm.steps_per_deg"),
+            (
+                "[arm]\nkind = \"grbl\"\npath = \"/x\"\nboard = \"b.toml\"\n",
+                "board",
+            ),
+        ] {
+            let err = Config::from_toml_str(text).unwrap_err();
+            assert!(format!("{err:#}").contains(named), "{text}: {err:#}");
+        }
     }
 
     #[test]

@@ -6,18 +6,18 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use anyhow::Context;
-use gonio_drivers::grbl::{GrblArm, GrblArmConfig, Homing};
+use gonio_drivers::grbl::{ArmAxis, GrblArm, GrblArmConfig, Homing};
 use gonio_drivers::supervised_camera::{SupervisedCamera, SupervisorConfig, WorkerSpec};
 use gonio_drivers::{Arm, Camera, DeviceError};
 use gonio_mock_hw::camera::{CameraFault, CaptureTiming, EmulatedCamera, FaultInjector};
-use gonio_mock_hw::grbl::{Fault, GrblConfig, GrblEmulator};
+use gonio_mock_hw::grbl::{Axis, AxisSet, Fault, GrblConfig, GrblEmulator};
 use gonio_mock_hw::scene::Scene;
 use gonio_mock_hw::world::World;
 use gonio_processing::capture::Response;
 use gonio_processing::geometry::Setup;
 use serde_json::Value;
 
-use super::config::{ArmConfig, CameraConfig, Config, Limits};
+use super::config::{ArmConfig, ArmKind, CameraConfig, Config, HomingMode, Limits};
 use super::shared::lock;
 
 /// What every capture sidecar says besides the exposure (`None`: the camera's own).
@@ -71,26 +71,65 @@ pub struct Devices {
     pub emulators: Option<Arc<Emulators>>,
 }
 
-fn grbl_arm_config(limits: Limits) -> GrblArmConfig {
+/// The driver's expectations: the `[arm]` keys and the θL limits.
+fn grbl_arm_config(arm: &ArmConfig, limits: Limits) -> GrblArmConfig {
     GrblArmConfig {
+        axis: arm.axis(),
         min_deg: limits.min_deg,
         max_deg: limits.max_deg,
+        steps_per_deg: arm.steps_per_deg,
+        max_travel_deg: arm.max_travel_deg,
+        max_rate_deg_per_min: arm.max_rate_deg_per_min,
+        accel_deg_per_s2: arm.accel_deg_per_s2,
+        homing: match arm.homing {
+            HomingMode::Required => Homing::Required,
+            HomingMode::Optional => Homing::Optional,
+            HomingMode::Off => Homing::Off,
+        },
+        apply_settings: arm.apply_settings,
         ..GrblArmConfig::default()
     }
 }
 
-/// The driver settings that match the emulator's firmware settings.
-fn emulated_arm_config(limits: Limits, emulator: &GrblConfig) -> GrblArmConfig {
-    GrblArmConfig {
-        steps_per_deg: emulator.steps_per_deg,
-        max_travel_deg: emulator.max_travel_deg,
-        homing: if emulator.homing_enabled {
-            Homing::Required
-        } else {
-            Homing::Off
-        },
-        ..grbl_arm_config(limits)
-    }
+/// The emulated board: the `board` file if given, else a board set up as the `[arm]`
+/// keys expect (homing the arm's axis alone); at `time_scale` either way.
+fn emulated_board(arm: &ArmConfig) -> anyhow::Result<GrblConfig> {
+    let board = match &arm.board {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("reading arm.board {}", path.display()))?;
+            GrblConfig::from_toml_str(&text)
+                .with_context(|| format!("arm.board {}", path.display()))?
+        }
+        None => {
+            let preset = GrblConfig::arm_board();
+            let axis = arm.axis();
+            let homes = arm.homing != HomingMode::Off;
+            GrblConfig {
+                arm_axis: match axis {
+                    ArmAxis::X => Axis::X,
+                    ArmAxis::Y => Axis::Y,
+                    ArmAxis::Z => Axis::Z,
+                },
+                steps_per_deg: arm.steps_per_deg,
+                max_travel_deg: arm.max_travel_deg,
+                max_rate_deg_per_min: arm
+                    .max_rate_deg_per_min
+                    .unwrap_or(preset.max_rate_deg_per_min),
+                accel_deg_per_s2: arm.accel_deg_per_s2.unwrap_or(preset.accel_deg_per_s2),
+                homing_enabled: homes,
+                soft_limits: homes,
+                homing_cycles: vec![AxisSet {
+                    mask: 1 << axis.index(),
+                }],
+                ..preset
+            }
+        }
+    };
+    Ok(GrblConfig {
+        time_scale: arm.time_scale,
+        ..board
+    })
 }
 
 /// Loads a scene by builtin name or file path.
@@ -101,25 +140,21 @@ fn load_scene(name_or_path: &str) -> anyhow::Result<Scene> {
 /// Opens the devices of `config`.
 pub fn open(config: &Config) -> anyhow::Result<Devices> {
     let world = World::new(0.0);
-    let (grbl, arm) = match &config.arm {
-        ArmConfig::Emulator { time_scale } => {
-            let grbl_config = GrblConfig {
-                time_scale: *time_scale,
-                ..GrblConfig::arm_board()
-            };
-            let emulator = GrblEmulator::start(grbl_config.clone(), world.clone())
+    let (grbl, arm) = match config.arm.kind {
+        ArmKind::Emulator => {
+            let emulator = GrblEmulator::start(emulated_board(&config.arm)?, world.clone())
                 .context("starting the GRBL emulator")?;
             let arm = ArmOpener {
                 path: emulator.device_path().to_path_buf(),
-                config: emulated_arm_config(config.limits, &grbl_config),
+                config: grbl_arm_config(&config.arm, config.limits),
             };
             (Some(emulator), arm)
         }
-        ArmConfig::Grbl { path } => (
+        ArmKind::Grbl => (
             None,
             ArmOpener {
-                path: path.clone(),
-                config: grbl_arm_config(config.limits),
+                path: config.arm.path.clone().context("arm.path is not set")?,
+                config: grbl_arm_config(&config.arm, config.limits),
             },
         ),
     };

@@ -117,6 +117,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }),
         estop: Mutex::new(None),
         stops: AtomicU64::new(0),
+        arm_position: Mutex::new(None),
         emulators: devices.emulators.clone(),
         config,
     });

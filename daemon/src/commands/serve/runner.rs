@@ -27,6 +27,9 @@ enum StepError {
     Halted,
     /// The arm went away: the scan waits until it is back.
     Interrupted(String),
+    /// The arm is refused, unhomed or its position undeclared: the scan waits for that
+    /// to change (no retries meanwhile).
+    Waiting(String),
     /// The scan cannot complete.
     Failed(String),
     Store(StoreError),
@@ -40,6 +43,10 @@ impl From<StoreError> for StepError {
 
 /// How often the owner looks at the queue and the devices when nothing wakes it.
 const IDLE_POLL: Duration = Duration::from_millis(500);
+/// Reopening the arm after a failure waits this long, doubling up to the cap: opening
+/// resets an Arduino-based board, so failed opens must not come in a storm.
+const RECONNECT_BACKOFF: Duration = Duration::from_secs(1);
+const RECONNECT_BACKOFF_MAX: Duration = Duration::from_secs(60);
 
 /// The hardware owner thread's state.
 pub struct Runner {
@@ -55,6 +62,10 @@ pub struct Runner {
     homed: bool,
     /// Where the arm was last sent (degrees), if it got there.
     at_deg: Option<f64>,
+    /// Why the arm could not be opened, when it could not; and when to try again.
+    arm_error: Option<String>,
+    reconnect_backoff: Duration,
+    next_connect: std::time::Instant,
     setup: Option<Setup>,
     truth: Option<Value>,
     sidecar: SidecarDefaults,
@@ -80,6 +91,9 @@ impl Runner {
             allowed_s: Vec::new(),
             homed: false,
             at_deg: None,
+            arm_error: None,
+            reconnect_backoff: RECONNECT_BACKOFF,
+            next_connect: std::time::Instant::now(),
             setup: devices.setup,
             truth: devices.truth,
             sidecar: devices.sidecar,
@@ -124,12 +138,16 @@ impl Runner {
         }
     }
 
-    /// One pass: (re)connect the arm if needed, then run the next scan or wait.
+    /// One pass: (re)connect the arm if needed, apply a declared position, then run
+    /// the next scan or wait.
     fn tick(&mut self) -> Result<(), StoreError> {
         if self.arm.is_none() && !self.connect_arm()? {
+            self.answer_position_request()?;
+            self.wait_for_arm()?;
             self.idle();
             return Ok(());
         }
+        self.answer_position_request()?;
         match self.store.next_runnable(now_unix())? {
             Some(scan) => {
                 if self.allowed_s.is_empty() {
@@ -151,19 +169,26 @@ impl Runner {
         let _ = self.wake.recv_timeout(IDLE_POLL);
     }
 
-    /// Opens the arm; on success, interrupted scans go back to running. Returns whether
-    /// the arm is connected.
+    /// Opens the arm, at most once per backoff period; on success, interrupted scans go
+    /// back to running and waiting ones to the queue. Returns whether the arm is
+    /// connected.
     fn connect_arm(&mut self) -> Result<bool, StoreError> {
+        if std::time::Instant::now() < self.next_connect {
+            return Ok(false);
+        }
         match self.opener.open() {
-            Ok(arm) => {
+            Ok(mut arm) => {
                 *lock(&self.shared.estop) = Some(arm.emergency_stop());
+                let state = arm.status().map_or(ArmState::NeedsHoming, |s| s.state);
                 self.arm = Some(arm);
                 self.homed = false;
                 self.at_deg = None;
+                self.arm_error = None;
+                self.reconnect_backoff = RECONNECT_BACKOFF;
                 self.log(None, "connect", &self.opener.path().display().to_string())?;
                 {
                     let mut status = lock(&self.shared.hardware);
-                    status.arm.state = ArmState::NeedsHoming;
+                    status.arm.state = state;
                     status.arm.homed = false;
                     status.arm.error = None;
                 }
@@ -174,18 +199,93 @@ impl Runner {
                     tracing::info!("scan {id}: arm back, resuming");
                     self.shared.publish(&self.store, id)?;
                 }
+                self.requeue_waiting("arm connected")?;
                 Ok(true)
             }
             Err(err) => {
-                let mut status = lock(&self.shared.hardware);
-                if status.arm.error.is_none() {
+                let reason = err.to_string();
+                if self.arm_error.as_deref() != Some(reason.as_str()) {
                     tracing::warn!("arm {}: {err}", self.opener.path().display());
                 }
+                self.log(None, "connect failed", &reason)?;
+                self.next_connect = std::time::Instant::now() + self.reconnect_backoff;
+                self.reconnect_backoff = (self.reconnect_backoff * 2).min(RECONNECT_BACKOFF_MAX);
+                let mut status = lock(&self.shared.hardware);
                 status.arm.state = ArmState::Disconnected;
-                status.arm.error = Some(err.to_string());
+                status.arm.error = Some(reason.clone());
+                self.arm_error = Some(reason);
                 Ok(false)
             }
         }
+    }
+
+    /// Without an arm, the scan next in line waits, with the reason.
+    fn wait_for_arm(&mut self) -> Result<(), StoreError> {
+        let Some(scan) = self.store.next_runnable(now_unix())? else {
+            return Ok(());
+        };
+        let reason = format!(
+            "arm not available: {}",
+            self.arm_error.as_deref().unwrap_or("not connected")
+        );
+        if scan.state == ScanState::Queued
+            && self.store.transition(
+                scan.id,
+                &[ScanState::Queued],
+                ScanState::Waiting,
+                Some(&reason),
+            )?
+        {
+            tracing::info!("scan {}: waiting: {reason}", scan.id);
+            self.shared.publish(&self.store, scan.id)?;
+        }
+        Ok(())
+    }
+
+    /// Waiting scans go back to the queue (what they waited for may have changed).
+    fn requeue_waiting(&mut self, why: &str) -> Result<(), StoreError> {
+        for id in self
+            .store
+            .transition_all(ScanState::Waiting, ScanState::Queued, None)?
+        {
+            tracing::info!("scan {id}: {why}, queued again");
+            self.shared.publish(&self.store, id)?;
+        }
+        Ok(())
+    }
+
+    /// Applies an operator's declared arm position, if one is pending, and answers it.
+    fn answer_position_request(&mut self) -> Result<(), StoreError> {
+        let Some(request) = lock(&self.shared.arm_position).take() else {
+            return Ok(());
+        };
+        let angle = request.angle_deg;
+        let result = match self.arm.as_mut() {
+            Some(arm) => arm.declare_position(angle),
+            None => Err(DeviceError::Disconnected(format!(
+                "arm not available: {}",
+                self.arm_error.as_deref().unwrap_or("not connected")
+            ))),
+        };
+        match &result {
+            Ok(()) => {
+                self.homed = true;
+                self.at_deg = None;
+                self.log(
+                    None,
+                    "declare",
+                    &format!("θL {angle:.3}° declared by the operator"),
+                )?;
+                self.note_arm(Some(angle));
+                self.requeue_waiting("arm position declared")?;
+            }
+            Err(err) => {
+                self.log(None, "declare refused", &format!("θL {angle:.3}°: {err}"))?;
+            }
+        }
+        // The handler may have given up waiting: nothing to tell then.
+        let _ = request.reply.send(result);
+        Ok(())
     }
 
     fn refresh_arm_status(&mut self) {
@@ -194,21 +294,22 @@ impl Runner {
         };
         match arm.status() {
             Ok(s) => {
+                if matches!(s.state, ArmState::NeedsHoming | ArmState::NeedsPosition) {
+                    self.homed = false;
+                }
                 let mut status = lock(&self.shared.hardware);
-                status.arm.state = if self.homed || s.state != ArmState::Idle {
-                    s.state
-                } else {
-                    ArmState::NeedsHoming
-                };
+                status.arm.state = s.state;
                 status.arm.angle_deg = Some(s.angle_deg);
                 status.arm.homed = self.homed;
             }
-            Err(DeviceError::Reset | DeviceError::Alarm { .. }) => {
-                self.homed = false;
-            }
-            Err(err) => {
+            Err(err @ (DeviceError::Disconnected(_) | DeviceError::NotFound(_))) => {
                 tracing::warn!("arm status: {err}; reconnecting");
                 self.disconnect_arm(&err.to_string());
+            }
+            Err(err) => {
+                // The driver resynchronises by itself; reopening would reset the board.
+                self.homed = false;
+                lock(&self.shared.hardware).arm.error = Some(err.to_string());
             }
         }
     }
@@ -270,6 +371,12 @@ impl Runner {
                     tracing::warn!("scan {id} interrupted: {reason}");
                     self.disconnect_arm(&reason);
                     return self.finish_with(id, ScanState::Interrupted, &reason);
+                }
+                Err(StepError::Waiting(reason)) => {
+                    tracing::warn!("scan {id} waiting: {reason}");
+                    self.log(Some(id), "wait", &reason)?;
+                    lock(&self.shared.hardware).arm.error = Some(reason.clone());
+                    return self.finish_with(id, ScanState::Waiting, &reason);
                 }
                 Err(StepError::Failed(reason)) => {
                     tracing::error!("scan {id} failed: {reason}");
@@ -478,6 +585,20 @@ impl Runner {
                         return Err(StepError::Interrupted(format!(
                             "{what}: {err}; waiting for the arm to come back"
                         )));
+                    }
+                    // What only the operator can change: wait for them, no retries. A
+                    // position still unknown after homing was tried means it must be
+                    // declared.
+                    let unreferenced =
+                        matches!(err, DeviceError::PositionUnknown(_)) && (rehomed || !home_first);
+                    if unreferenced
+                        || matches!(
+                            err,
+                            DeviceError::Refused(_) | DeviceError::HomingFailed { .. }
+                        )
+                    {
+                        self.homed = false;
+                        return Err(StepError::Waiting(format!("{what}: {err}")));
                     }
                     let recoverable = matches!(
                         err,

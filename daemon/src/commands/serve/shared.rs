@@ -4,7 +4,7 @@ use std::path::PathBuf;
 use std::sync::atomic::AtomicU64;
 use std::sync::{mpsc, Arc, Mutex, MutexGuard};
 
-use gonio_drivers::{ArmState, EmergencyStop};
+use gonio_drivers::{ArmState, DeviceError, EmergencyStop};
 use serde::Serialize;
 use tokio::sync::broadcast;
 
@@ -45,6 +45,13 @@ pub struct CameraView {
     pub error: Option<String>,
 }
 
+/// An operator's declaration of where the arm is, for the hardware owner to apply; the
+/// outcome goes back on `reply`.
+pub struct PositionRequest {
+    pub angle_deg: f64,
+    pub reply: mpsc::SyncSender<Result<(), DeviceError>>,
+}
+
 /// Everything the handlers and the hardware owner share.
 pub struct Shared {
     pub config: Config,
@@ -63,6 +70,8 @@ pub struct Shared {
     /// Emergency stops so far: an arm operation that fails after this changed does
     /// not retry.
     pub stops: AtomicU64,
+    /// A declared arm position waiting for the hardware owner (one at a time).
+    pub arm_position: Mutex<Option<PositionRequest>>,
     /// Present when the devices are emulated.
     pub emulators: Option<Arc<Emulators>>,
 }

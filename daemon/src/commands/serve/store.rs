@@ -52,6 +52,10 @@ pub enum ScanState {
     Cancelled,
     /// A device went away; resumes by itself once it is back.
     Interrupted,
+    /// The arm cannot serve it yet (refused, unhomed, position not declared): queued
+    /// again once that changes (the arm reconnects, its position is declared, or the
+    /// operator resumes it). The reason is stored with it.
+    Waiting,
 }
 
 impl ScanState {
@@ -64,6 +68,7 @@ impl ScanState {
             ScanState::Failed => "failed",
             ScanState::Cancelled => "cancelled",
             ScanState::Interrupted => "interrupted",
+            ScanState::Waiting => "waiting",
         }
     }
 
@@ -76,6 +81,7 @@ impl ScanState {
             "failed" => ScanState::Failed,
             "cancelled" => ScanState::Cancelled,
             "interrupted" => ScanState::Interrupted,
+            "waiting" => ScanState::Waiting,
             other => return Err(StoreError::State(other.to_owned())),
         })
     }

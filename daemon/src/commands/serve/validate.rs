@@ -245,6 +245,26 @@ pub fn sweep_request(body: &Value, bounds: &Bounds) -> Result<SweepPlan, FieldEr
     Ok(SweepPlan { scans, start_at })
 }
 
+/// Largest |angle| an operator may declare for the arm, degrees.
+const MAX_DECLARED_DEG: f64 = 360.0;
+
+/// `{"angle": degrees}` of `POST /api/arm/position`: where the arm is now.
+pub fn arm_position(value: &Value) -> Result<f64, FieldError> {
+    let map = object(value, &["angle"])?;
+    let angle = map
+        .get("angle")
+        .ok_or_else(|| invalid("angle", "required"))?
+        .as_f64()
+        .ok_or_else(|| invalid("angle", "must be a number of degrees"))?;
+    if !(angle.is_finite() && angle.abs() <= MAX_DECLARED_DEG) {
+        return Err(invalid(
+            "angle",
+            format!("must be within ±{MAX_DECLARED_DEG} degrees"),
+        ));
+    }
+    Ok(angle)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
