@@ -178,6 +178,13 @@ impl Fake {
     }
 }
 
+/// An arm on `fake`, homed.
+fn homed(fake: &Fake) -> GrblArm {
+    let mut arm = GrblArm::open(&fake.path, config()).unwrap();
+    arm.home().unwrap();
+    arm
+}
+
 fn config() -> GrblArmConfig {
     GrblArmConfig {
         banner_timeout: Duration::from_millis(100),
@@ -228,8 +235,7 @@ fn connects_homes_and_moves() {
 #[test]
 fn refuses_out_of_range_targets_without_sending() {
     let fake = fake();
-    let mut arm = GrblArm::open(&fake.path, config()).unwrap();
-    arm.home().unwrap();
+    let mut arm = homed(&fake);
     let before = fake.received().len();
     for deg in [-0.5, -90.01, f64::NAN, f64::NEG_INFINITY] {
         assert!(
@@ -297,8 +303,7 @@ fn declared_position_where_the_controller_does_not_home() {
 #[test]
 fn an_unanswered_line_is_never_followed_by_another_before_a_reset() {
     let fake = fake();
-    let mut arm = GrblArm::open(&fake.path, config()).unwrap();
-    arm.home().unwrap();
+    let mut arm = homed(&fake);
     arm.move_to(-20.0).unwrap();
     // The move never ends by itself: `G4 P0` goes unanswered, the position stays.
     fake.script.lock().unwrap().stuck = true;
@@ -326,8 +331,7 @@ fn an_unanswered_line_is_never_followed_by_another_before_a_reset() {
 #[test]
 fn silent_controller_times_out() {
     let fake = fake();
-    let mut arm = GrblArm::open(&fake.path, config()).unwrap();
-    arm.home().unwrap();
+    let mut arm = homed(&fake);
     fake.script.lock().unwrap().silent = true;
     assert!(matches!(
         arm.move_to(-20.0),
@@ -341,8 +345,7 @@ fn silent_controller_times_out() {
 #[test]
 fn garbled_replies_are_retried() {
     let fake = fake();
-    let mut arm = GrblArm::open(&fake.path, config()).unwrap();
-    arm.home().unwrap();
+    let mut arm = homed(&fake);
     fake.script.lock().unwrap().garble = 2;
     arm.move_to(-25.0).unwrap();
     assert!((arm.status().unwrap().angle_deg + 25.0).abs() < 1e-9);
@@ -353,8 +356,7 @@ fn garbled_replies_are_retried() {
 #[test]
 fn alarm_latches_until_cleared_and_rehomed() {
     let fake = fake();
-    let mut arm = GrblArm::open(&fake.path, config()).unwrap();
-    arm.home().unwrap();
+    let mut arm = homed(&fake);
     fake.script.lock().unwrap().alarm_on_move = Some(1);
     let Err(DeviceError::Alarm { code: 1, meaning }) = arm.move_to(-30.0) else {
         panic!("alarm not reported")
@@ -383,8 +385,7 @@ fn alarm_latches_until_cleared_and_rehomed() {
 #[test]
 fn emergency_stop_resets_the_controller() {
     let fake = fake();
-    let mut arm = GrblArm::open(&fake.path, config()).unwrap();
-    arm.home().unwrap();
+    let mut arm = homed(&fake);
     arm.move_to(-20.0).unwrap();
     let stop = arm.emergency_stop();
     thread::spawn(move || stop.stop()).join().unwrap().unwrap();

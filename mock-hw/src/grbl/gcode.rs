@@ -528,8 +528,16 @@ impl ParserState {
 mod tests {
     use super::*;
 
+    fn run_with(
+        state: &mut ParserState,
+        coords: &mut CoordSystems,
+        line: &str,
+    ) -> Result<Execution, u8> {
+        state.execute(&Block::parse(line.as_bytes())?, coords)
+    }
+
     fn run(state: &mut ParserState, line: &str) -> Result<Execution, u8> {
-        state.execute(&Block::parse(line.as_bytes())?, &mut [[0.0; N_AXIS]; 6])
+        run_with(state, &mut [[0.0; N_AXIS]; N_COORDINATE_SYSTEMS], line)
     }
 
     #[test]
@@ -573,49 +581,49 @@ mod tests {
     fn work_offsets_move_the_work_position() {
         let mut coords = [[0.0; N_AXIS]; N_COORDINATE_SYSTEMS];
         let mut state = ParserState::new([-3.0, 0.0, 0.0]);
-        let mut run = |state: &mut ParserState, line: &str| {
-            state.execute(&Block::parse(line.as_bytes())?, &mut coords)
-        };
         // G92 X-12 at MPos −3: WCO 9, so X-20 in work coordinates is MPos −11.
-        let e = run(&mut state, "G92X-12").unwrap();
+        let e = run_with(&mut state, &mut coords, "G92X-12").unwrap();
         assert!(e.sync && e.wco_changed && e.motion.is_none());
         assert_eq!(state.coord_offset(), [9.0, 0.0, 0.0]);
-        let e = run(&mut state, "G0X-20").unwrap();
+        let e = run_with(&mut state, &mut coords, "G0X-20").unwrap();
         assert_eq!(e.motion, Some(([-11.0, 0.0, 0.0], f64::INFINITY)));
-        let e = run(&mut state, "G53G0X-20").unwrap();
+        let e = run_with(&mut state, &mut coords, "G53G0X-20").unwrap();
         assert_eq!(e.motion, Some(([-20.0, 0.0, 0.0], f64::INFINITY)));
         assert_eq!(
-            run(&mut state, "G0G92X1"),
+            run_with(&mut state, &mut coords, "G0G92X1"),
             Err(status::GCODE_AXIS_COMMAND_CONFLICT)
         );
-        assert_eq!(run(&mut state, "G92"), Err(status::GCODE_NO_AXIS_WORDS));
         assert_eq!(
-            run(&mut state, "G92.2X1"),
+            run_with(&mut state, &mut coords, "G92"),
+            Err(status::GCODE_NO_AXIS_WORDS)
+        );
+        assert_eq!(
+            run_with(&mut state, &mut coords, "G92.2X1"),
             Err(status::GCODE_COMMAND_VALUE_NOT_INTEGER)
         );
         // G10 L20 P0 at MPos −20 with G92 9: G54 = −20 − 9 − (−30) = 1.
-        run(&mut state, "G10L20P0X-30").unwrap();
-        run(&mut state, "G92.1").unwrap();
+        run_with(&mut state, &mut coords, "G10L20P0X-30").unwrap();
+        run_with(&mut state, &mut coords, "G92.1").unwrap();
         assert_eq!(state.coord_offset(), [0.0; N_AXIS]);
         assert_eq!(coords[0], [1.0, 0.0, 0.0]);
-        let mut run = |state: &mut ParserState, line: &str| {
-            state.execute(&Block::parse(line.as_bytes())?, &mut coords)
-        };
         assert_eq!(
-            run(&mut state, "G10L2P7X0"),
+            run_with(&mut state, &mut coords, "G10L2P7X0"),
             Err(status::GCODE_UNSUPPORTED_COORD_SYS)
         );
         assert_eq!(
-            run(&mut state, "G10L3P1X0"),
+            run_with(&mut state, &mut coords, "G10L3P1X0"),
             Err(status::GCODE_UNSUPPORTED_COMMAND)
         );
         assert_eq!(
-            run(&mut state, "G10P1X0"),
+            run_with(&mut state, &mut coords, "G10P1X0"),
             Err(status::GCODE_VALUE_WORD_MISSING)
         );
-        assert_eq!(run(&mut state, "L2X0"), Err(status::GCODE_UNUSED_WORDS));
-        run(&mut state, "G10L2P2X5").unwrap();
-        let e = run(&mut state, "G55").unwrap();
+        assert_eq!(
+            run_with(&mut state, &mut coords, "L2X0"),
+            Err(status::GCODE_UNUSED_WORDS)
+        );
+        run_with(&mut state, &mut coords, "G10L2P2X5").unwrap();
+        let e = run_with(&mut state, &mut coords, "G55").unwrap();
         assert!(e.wco_changed);
         assert_eq!(state.wco(&coords), [5.0, 0.0, 0.0]);
         assert_eq!(state.report(), "[GC:G0 G55 G17 G21 G90 G94 M5 M9 T0 F0 S0]");
