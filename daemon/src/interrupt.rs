@@ -1,6 +1,7 @@
 //! Ctrl-C (SIGINT) and SIGTERM during an offline command: a word on stderr saying what
 //! was stopped, the command's registered temporary directories removed, exit status
-//! 130 (128 + SIGINT). `gonio serve` handles its signals itself (graceful shutdown).
+//! 130 (128 + SIGINT). `gonio serve` and `gonio emulate-arm` handle their signals
+//! themselves (an interrupt is how they end).
 
 use std::path::{Path, PathBuf};
 use std::sync::{Mutex, PoisonError};

@@ -38,7 +38,8 @@ fn main() {
     let matches = Cli::command().get_matches();
     let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|err| err.exit());
     match matches.subcommand_name() {
-        Some("serve") | None => {}
+        // Servers: an interrupt is how they end; they handle it themselves.
+        Some("serve" | "emulate-arm") | None => {}
         Some(name) => interrupt::install(name.to_owned()),
     }
     let result = match cli.command {

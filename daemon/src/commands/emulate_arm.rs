@@ -8,6 +8,8 @@ use anyhow::Context;
 use gonio_mock_hw::grbl::{GrblConfig, GrblEmulator};
 use gonio_mock_hw::world::World;
 
+use crate::interrupt;
+
 /// Where the emulated arm starts: 10° below its home switch (θ = 0).
 const START_DEG: f64 = -10.0;
 
@@ -47,24 +49,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "GRBL 1.1h emulator on {} ({pty}), 115200 8N1, time scale {time_scale}; Ctrl-C to stop",
         args.link.display()
     );
-    wait_for_interrupt()?;
-    drop(emulator);
-    Ok(())
-}
-
-/// Block until SIGINT or SIGTERM.
-fn wait_for_interrupt() -> anyhow::Result<()> {
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_io()
         .build()
         .context("starting the signal handler")?;
-    runtime.block_on(async {
-        let mut terminate =
-            tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
-        tokio::select! {
-            result = tokio::signal::ctrl_c() => result,
-            _ = terminate.recv() => Ok(()),
-        }
-    })?;
+    let signal = runtime.block_on(interrupt::wait_for_signal());
+    drop(emulator);
+    eprintln!(
+        "gonio emulate-arm: stopped by {signal}; {} removed",
+        args.link.display()
+    );
     Ok(())
 }
