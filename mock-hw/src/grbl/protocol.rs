@@ -204,6 +204,16 @@ impl Controller {
 
     /// Advance the machine to `now` and execute whatever is ready.
     pub fn tick(&mut self, now: f64) {
+        self.step(now);
+        // A stall that ended by `now` (an alarm raised for a moment this tick caught up
+        // with) has nothing left to flush: its input was cleared by the reset, and every
+        // byte from here on arrives after it, in answer to what it sent.
+        if now >= self.stall_until {
+            self.flush_after_stall = false;
+        }
+    }
+
+    fn step(&mut self, now: f64) {
         match self.power {
             Power::Off => return,
             Power::Booting { at } if now < at => return,
