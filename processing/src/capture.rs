@@ -6,13 +6,53 @@
 //! gives the normalised signal (count − black)/(white − black). Raw Bayer data are
 //! turned into RGB by 2×2 superpixels (half resolution): R and B as recorded, G the
 //! mean of the two greens.
+//!
+//! Hostile files are expected: before any decoder allocates, the image size a file
+//! claims is checked against [`max_pixels`] and against the file's own size (see
+//! docs/ARCHITECTURE.md, "Limits"), and a decoder that panics becomes a
+//! [`CaptureError::Image`].
+
+mod tiff_ifd;
 
 use std::fs;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
+
+use crate::guard;
+
+/// Pixels a capture may have unless [`set_max_pixels`] says otherwise (100 megapixels;
+/// a 16-bit RGB frame of that size takes 600 MB).
+pub const DEFAULT_MAX_PIXELS: u64 = 100_000_000;
+static MAX_PIXELS: AtomicU64 = AtomicU64::new(DEFAULT_MAX_PIXELS);
+/// Largest ratio of decoded to stored pixel bytes a compressed TIFF may claim
+/// (deflate's own limit is 1032:1).
+const MAX_COMPRESSION_RATIO: u64 = 1032;
+/// A camera raw file spends at least one bit per pixel of its largest image.
+const RAW_PIXELS_PER_BYTE: u64 = 8;
+/// Bytes a file may have beyond its pixel data (previews, metadata).
+const FILE_OVERHEAD_BYTES: u64 = 64 << 20;
+
+/// Sets the largest number of pixels (width × height as stored in the file) a capture
+/// may claim, for every later read in this process.
+pub fn set_max_pixels(pixels: u64) {
+    MAX_PIXELS.store(pixels.max(1), Ordering::Relaxed);
+}
+
+/// The largest number of pixels a capture may claim.
+pub fn max_pixels() -> u64 {
+    MAX_PIXELS.load(Ordering::Relaxed)
+}
+
+/// Largest capture file read at all: 8 bytes per allowed pixel plus overhead.
+fn max_file_bytes() -> u64 {
+    max_pixels()
+        .saturating_mul(8)
+        .saturating_add(FILE_OVERHEAD_BYTES)
+}
 
 /// How pixel counts relate to exposure.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -146,6 +186,8 @@ pub enum CaptureError {
     Image { path: PathBuf, reason: String },
     #[error("{path}: unsupported image layout: {reason}")]
     Layout { path: PathBuf, reason: String },
+    #[error("{path}: refused: {reason}")]
+    TooLarge { path: PathBuf, reason: String },
     #[error("{path}: unsupported file type (expected .tif, .tiff{raw})", raw = if cfg!(feature = "raw") { " or a camera raw file" } else { "; camera raw support is not built in" })]
     UnsupportedFormat { path: PathBuf },
 }
@@ -263,11 +305,24 @@ impl Frame {
         path: &Path,
         select: impl FnOnce(usize, usize) -> Result<Vec<Range<usize>>, E>,
     ) -> Result<Frame, E> {
-        if !path.is_file() {
-            return Err(CaptureError::Image {
-                path: path.to_path_buf(),
-                reason: "no such file".into(),
+        let file_len = match fs::metadata(path) {
+            Ok(meta) if meta.is_file() => meta.len(),
+            _ => {
+                return Err(CaptureError::Image {
+                    path: path.to_path_buf(),
+                    reason: "no such file".into(),
+                }
+                .into())
             }
+        };
+        if file_len > max_file_bytes() {
+            return Err(too_large(
+                path,
+                format!(
+                    "{file_len} bytes is more than a capture of at most {} pixels needs",
+                    max_pixels()
+                ),
+            )
             .into());
         }
         let sidecar = read_sidecar(path)?;
@@ -276,20 +331,29 @@ impl Frame {
             .and_then(|e| e.to_str())
             .map(|e| e.to_ascii_lowercase())
             .unwrap_or_default();
-        let decoded = if TIFF_EXTENSIONS.contains(&ext.as_str()) {
-            match decode_tiff_rows(path, select)? {
-                Ok(decoded) => decoded,
-                Err(select) => {
-                    let full = decode_tiff(path)?;
-                    let bands = select(full.width, full.height)?;
-                    full.rows(path, &bands)?
+        let decode = || -> Result<Decoded, E> {
+            if TIFF_EXTENSIONS.contains(&ext.as_str()) {
+                match decode_tiff_rows(path, file_len, select)? {
+                    Ok(decoded) => Ok(decoded),
+                    Err(select) => {
+                        let full = decode_tiff(path)?;
+                        let bands = select(full.width, full.height)?;
+                        Ok(full.rows(path, &bands)?)
+                    }
                 }
+            } else {
+                let full = decode_raw(path)?;
+                let bands = select(full.width, full.height)?;
+                Ok(full.rows(path, &bands)?)
             }
-        } else {
-            let full = decode_raw(path)?;
-            let bands = select(full.width, full.height)?;
-            full.rows(path, &bands)?
         };
+        let decoded = guard::catch(decode).unwrap_or_else(|panic| {
+            Err(CaptureError::Image {
+                path: path.to_path_buf(),
+                reason: format!("the decoder failed on malformed data ({panic})"),
+            }
+            .into())
+        })?;
         Ok(Self::assemble(path, sidecar, decoded)?)
     }
 
@@ -423,6 +487,74 @@ fn check_bands(path: &Path, bands: &[Range<usize>], height: usize) -> Result<(),
     }
 }
 
+/// The tiff crate's own buffer limits, sized for the largest allowed capture.
+fn tiff_limits() -> tiff::decoder::Limits {
+    let mut limits = tiff::decoder::Limits::default();
+    let frame_bytes = usize::try_from(max_pixels().saturating_mul(8)).unwrap_or(usize::MAX);
+    limits.decoding_buffer_size = frame_bytes;
+    limits.intermediate_buffer_size = frame_bytes;
+    limits
+}
+
+fn too_large(path: &Path, reason: String) -> CaptureError {
+    CaptureError::TooLarge {
+        path: path.to_path_buf(),
+        reason,
+    }
+}
+
+/// An image size as a file claims it.
+struct Stored {
+    width: u64,
+    height: u64,
+    /// Samples per pixel.
+    samples: u64,
+    /// Bits per sample.
+    bits: u64,
+}
+
+/// Checks a claimed image size against [`max_pixels`] and the file's length: its pixel
+/// bytes may exceed the file's at most `ratio` times (1 for uncompressed data).
+fn check_claim(path: &Path, file_len: u64, stored: Stored, ratio: u64) -> Result<(), CaptureError> {
+    let Stored {
+        width,
+        height,
+        samples,
+        bits,
+    } = stored;
+    if width == 0 || height == 0 {
+        return Err(CaptureError::Layout {
+            path: path.to_path_buf(),
+            reason: format!("{width}×{height} pixels: empty image"),
+        });
+    }
+    let pixels = width.saturating_mul(height);
+    if pixels > max_pixels() {
+        return Err(too_large(
+            path,
+            format!(
+                "{width}×{height} pixels is more than the {} allowed (max_frame_pixels)",
+                max_pixels()
+            ),
+        ));
+    }
+    let bytes = pixels
+        .saturating_mul(samples.max(1))
+        .saturating_mul(bits.max(1))
+        / 8;
+    if bytes > file_len.saturating_mul(ratio) {
+        return Err(too_large(
+            path,
+            format!(
+                "{width}×{height} pixels of {samples}×{bits} bits need {bytes} bytes, but the \
+                 file has only {file_len}{}",
+                if ratio > 1 { " (even compressed)" } else { "" }
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// Decodes only the strips holding the selected rows of a chunky, striped, 16-bit RGB
 /// TIFF. `Ok(Err(select))` hands the selector back when the file has another layout.
 fn decode_tiff_rows<
@@ -430,10 +562,11 @@ fn decode_tiff_rows<
     S: FnOnce(usize, usize) -> Result<Vec<Range<usize>>, E>,
 >(
     path: &Path,
+    file_len: u64,
     select: S,
 ) -> Result<Result<Decoded, S>, E> {
     use tiff::decoder::{ChunkType, Decoder, DecodingResult};
-    use tiff::tags::{PlanarConfiguration, Tag};
+    use tiff::tags::{CompressionMethod, PlanarConfiguration, Tag};
     use tiff::ColorType;
     let image_error = |e: tiff::TiffError| CaptureError::Image {
         path: path.to_path_buf(),
@@ -443,11 +576,35 @@ fn decode_tiff_rows<
         path: path.to_path_buf(),
         reason: e.to_string(),
     })?;
-    let Ok(mut decoder) = Decoder::new(std::io::BufReader::new(file)) else {
+    let Ok(decoder) = Decoder::new(std::io::BufReader::new(file)) else {
         // Let the full decoder report what is wrong with the file.
         return Ok(Err(select));
     };
+    let mut decoder = decoder.with_limits(tiff_limits());
     let (width, height) = decoder.dimensions().map_err(image_error)?;
+    // Check the claimed size before anything is allocated for it.
+    let (samples, bits) = match decoder.colortype() {
+        Ok(ColorType::Gray(b)) => (1, b),
+        Ok(ColorType::GrayA(b)) => (2, b),
+        Ok(ColorType::RGB(b)) => (3, b),
+        Ok(ColorType::RGBA(b) | ColorType::CMYK(b)) => (4, b),
+        _ => (4, 16),
+    };
+    let compressed = decoder
+        .find_tag_unsigned::<u16>(Tag::Compression)
+        .map_err(image_error)?
+        .is_some_and(|c| c != CompressionMethod::None.to_u16());
+    check_claim(
+        path,
+        file_len,
+        Stored {
+            width: u64::from(width),
+            height: u64::from(height),
+            samples,
+            bits: u64::from(bits),
+        },
+        if compressed { MAX_COMPRESSION_RATIO } else { 1 },
+    )?;
     let (width, height) = (width as usize, height as usize);
     let chunky = decoder
         .find_tag_unsigned::<u16>(Tag::PlanarConfiguration)
@@ -510,10 +667,14 @@ fn decode_tiff(path: &Path) -> Result<Decoded, CaptureError> {
         path: path.to_path_buf(),
         reason,
     };
-    let reader = image::ImageReader::open(path)
+    let mut reader = image::ImageReader::open(path)
         .map_err(|e| image_error(e.to_string()))?
         .with_guessed_format()
         .map_err(|e| image_error(e.to_string()))?;
+    let mut limits = image::Limits::default();
+    // Room for the decoded image (at most 4 channels of 16 bits) and its conversion.
+    limits.max_alloc = Some(max_pixels().saturating_mul(16));
+    reader.limits(limits);
     let image = reader.decode().map_err(|e| image_error(e.to_string()))?;
     let (width, height) = (image.width() as usize, image.height() as usize);
     let (data, max_count) = match image {
@@ -573,13 +734,46 @@ fn decode_raw(path: &Path) -> Result<Decoded, CaptureError> {
         path: path.to_path_buf(),
         reason,
     };
-    let raw = rawler::decode_file(path).map_err(|e| CaptureError::Image {
+    let bytes = fs::read(path).map_err(|e| CaptureError::Image {
         path: path.to_path_buf(),
         reason: e.to_string(),
     })?;
+    // The largest image the file's directories claim, checked before rawler allocates.
+    if let Some(claim) = tiff_ifd::largest_claim(&bytes) {
+        let file_len = bytes.len() as u64;
+        check_claim(
+            path,
+            file_len,
+            Stored {
+                width: claim.width.max(1),
+                height: claim.height.max(1),
+                samples: claim.samples,
+                bits: 1,
+            },
+            RAW_PIXELS_PER_BYTE,
+        )?;
+    }
+    let source = rawler::rawsource::RawSource::new_from_slice(&bytes);
+    let raw =
+        rawler::decode(&source, &rawler::decoders::RawDecodeParams::default()).map_err(|e| {
+            CaptureError::Image {
+                path: path.to_path_buf(),
+                reason: e.to_string(),
+            }
+        })?;
+    drop(bytes);
     let RawImageData::Integer(counts) = &raw.data else {
         return Err(layout("floating-point raw data".into()));
     };
+    if counts.len() < raw.width.saturating_mul(raw.height).saturating_mul(raw.cpp) {
+        return Err(layout(format!(
+            "{} values for {}×{}×{}",
+            counts.len(),
+            raw.width,
+            raw.height,
+            raw.cpp
+        )));
+    }
     let black = raw.blacklevel.as_bayer_array();
     let black_level = f64::from(black.iter().sum::<f32>() / 4.0);
     let white_level = raw
@@ -596,6 +790,13 @@ fn decode_raw(path: &Path) -> Result<Decoded, CaptureError> {
         .map_or((0, 0, raw.width, raw.height), |r| {
             (r.p.x, r.p.y, r.d.w, r.d.h)
         });
+    let (x0, y0, w, h) = area;
+    if x0.saturating_add(w) > raw.width || y0.saturating_add(h) > raw.height {
+        return Err(layout(format!(
+            "crop {w}×{h} at ({x0}, {y0}) leaves the {}×{} sensor",
+            raw.width, raw.height
+        )));
+    }
     let (data, width, height) = match (&raw.photometric, raw.cpp) {
         (RawPhotometricInterpretation::Cfa(config), 1) => {
             superpixels(counts, raw.width, area, |row, col| {
@@ -604,7 +805,6 @@ fn decode_raw(path: &Path) -> Result<Decoded, CaptureError> {
             .map_err(layout)?
         }
         (_, 3) => {
-            let (x0, y0, w, h) = area;
             let mut data = Vec::with_capacity(w * h * 3);
             for y in y0..y0 + h {
                 let start = 3 * (y * raw.width + x0);
@@ -638,7 +838,11 @@ fn superpixels(
 ) -> Result<(Vec<u16>, usize, usize), String> {
     let (x0, y0, w, h) = area;
     let (out_w, out_h) = (w / 2, h / 2);
-    if out_w == 0 || out_h == 0 || counts.len() < stride * (y0 + h) {
+    let inside = x0.saturating_add(w) <= stride
+        && stride
+            .checked_mul(y0.saturating_add(h))
+            .is_some_and(|n| n <= counts.len());
+    if out_w == 0 || out_h == 0 || !inside {
         return Err(format!("raw area {w}×{h} is too small or outside the data"));
     }
     // The colours of the four positions of a block and where each one goes.

@@ -202,6 +202,8 @@ pub enum FitError {
     InvalidOptions(String),
     #[error("optimiser failed: {0}")]
     Optimizer(String),
+    #[error("the fit's {0} is not finite: the β values are too large to fit")]
+    Overflow(&'static str),
     #[error(transparent)]
     Metric(#[from] metrics::MetricsError),
 }
@@ -294,6 +296,20 @@ pub fn fit(samples: &[Sample], options: &FitOptions) -> Result<FitResult, FitErr
         Roughness::PerChannel => FittedRoughness::PerChannel(params.m),
     };
     let err_p = metrics::err_p(&data.y, &data.estimates(&params))?;
+    let loss = data.loss(&params);
+    // JSON has no NaN or infinity: a fit that overflowed is an error, never `null`.
+    let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+    for (what, ok) in [
+        ("loss", loss.is_finite()),
+        ("kd", finite(&params.kd)),
+        ("ks", finite(&params.ks)),
+        ("m", finite(&params.m)),
+        ("err_p", finite(&err_p)),
+    ] {
+        if !ok {
+            return Err(FitError::Overflow(what));
+        }
+    }
     Ok(FitResult {
         model: options.model,
         roughness: options.roughness,
@@ -301,7 +317,7 @@ pub fn fit(samples: &[Sample], options: &FitOptions) -> Result<FitResult, FitErr
         ks: params.ks,
         m,
         rho_d: Some(options.model.diffuse_albedo(params.kd)),
-        loss: data.loss(&params),
+        loss,
         err_p,
         method: options.method,
         evaluations: found.evaluations,

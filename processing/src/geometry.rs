@@ -49,7 +49,18 @@ pub enum GeometryError {
         distance: f64,
         radius: f64,
     },
+    #[error("setup field `{field}` must be 1 to {MAX_IMAGE_SIDE} pixels, got {value}")]
+    ImageSize { field: &'static str, value: u32 },
+    #[error("setup field `{field}` = {value} is not a row of the {height}-row image")]
+    RowOutside {
+        field: &'static str,
+        value: u32,
+        height: u32,
+    },
 }
+
+/// Largest image side a setup may describe, pixels (per-column tables are sized from it).
+pub const MAX_IMAGE_SIDE: u32 = 100_000;
 
 impl Setup {
     /// Checks that the setup describes a real geometry: positive lengths, the camera and
@@ -65,6 +76,26 @@ impl Setup {
         for (field, value) in positive {
             if !(value.is_finite() && value > 0.0) {
                 return Err(GeometryError::NotPositive { field, value });
+            }
+        }
+        for (field, value) in [
+            ("image_width", self.image_width),
+            ("image_height", self.image_height),
+        ] {
+            if !(1..=MAX_IMAGE_SIDE).contains(&value) {
+                return Err(GeometryError::ImageSize { field, value });
+            }
+        }
+        for (field, value) in [
+            ("sample_row", self.sample_row),
+            ("white_row", self.white_row),
+        ] {
+            if value >= self.image_height {
+                return Err(GeometryError::RowOutside {
+                    field,
+                    value,
+                    height: self.image_height,
+                });
             }
         }
         if let Some(cx) = self.principal_point_x {

@@ -22,12 +22,13 @@
 
 mod response;
 
+use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
 use thiserror::Error;
 
-use crate::capture::{Frame, Response};
+use crate::capture::{self, Frame, Response};
 use response::{Observations, LEVELS};
 
 /// Mask bit: some channel of the pixel was clipped in every frame that saw it.
@@ -127,6 +128,8 @@ pub enum HdrError {
     Options(String),
     #[error("{path}: cannot write OpenEXR: {reason}")]
     Exr { path: PathBuf, reason: String },
+    #[error("{path}: cannot read OpenEXR: {reason}")]
+    ExrRead { path: PathBuf, reason: String },
 }
 
 /// What the merge was made from; written to the EXR attributes.
@@ -229,15 +232,84 @@ impl HdrImage {
                 (rgb[i], rgb[i + 1], rgb[i + 2])
             }),
         );
+        let exr_error = |reason: String| HdrError::Exr {
+            path: path.to_path_buf(),
+            reason,
+        };
+        // Written through our own handle: on failure the path is left as it is (the
+        // exr crate's `to_file` would remove it, whatever it was).
+        let file = std::fs::File::create(path).map_err(|e| exr_error(e.to_string()))?;
+        let mut out = std::io::BufWriter::new(file);
         Image::from_layer(layer)
             .write()
-            .to_file(path)
-            .map_err(|e| HdrError::Exr {
-                path: path.to_path_buf(),
-                reason: e.to_string(),
-            })
+            .to_buffered(&mut out)
+            .map_err(|e| exr_error(e.to_string()))?;
+        out.flush().map_err(|e| exr_error(e.to_string()))
     }
 }
+
+/// Reads the RGB channels of an OpenEXR radiance map (as [`HdrImage::write_exr`]
+/// writes it): width, height and `rgb[3 * (y * width + x) + c]`. The size every layer
+/// claims is checked against [`capture::max_pixels`] and the file's length before any
+/// pixel is read; a decoder panic on malformed data becomes an error.
+pub fn read_exr_rgb(path: &Path) -> Result<(usize, usize, Vec<f32>), HdrError> {
+    use exr::prelude::*;
+    let exr_error = |reason: String| HdrError::ExrRead {
+        path: path.to_path_buf(),
+        reason,
+    };
+    let file_len = std::fs::metadata(path)
+        .map_err(|e| exr_error(e.to_string()))?
+        .len();
+    let read = || -> std::result::Result<(usize, usize, Vec<f32>), HdrError> {
+        let file = std::fs::File::open(path).map_err(|e| exr_error(e.to_string()))?;
+        let meta = exr::meta::MetaData::read_from_buffered(std::io::BufReader::new(file), true)
+            .map_err(|e| exr_error(e.to_string()))?;
+        for header in &meta.headers {
+            let (w, h) = (header.layer_size.x() as u64, header.layer_size.y() as u64);
+            let pixels = w.saturating_mul(h);
+            if pixels > capture::max_pixels() {
+                return Err(exr_error(format!(
+                    "{w}×{h} pixels is more than the {} allowed (max_frame_pixels)",
+                    capture::max_pixels()
+                )));
+            }
+            let bytes = pixels.saturating_mul(header.channels.bytes_per_pixel as u64);
+            if bytes > file_len.saturating_mul(EXR_MAX_COMPRESSION_RATIO) {
+                return Err(exr_error(format!(
+                    "{w}×{h} pixels need {bytes} bytes, more than the {file_len}-byte file \
+                     can hold even compressed"
+                )));
+            }
+        }
+        let image = read()
+            .no_deep_data()
+            .largest_resolution_level()
+            .rgb_channels(
+                |size: Vec2<usize>, _: &RgbChannels| (size.x(), vec![0f32; 3 * size.area()]),
+                |(width, rgb): &mut (usize, Vec<f32>),
+                 at: Vec2<usize>,
+                 (r, g, b): (f32, f32, f32)| {
+                    let i = 3 * (at.y() * *width + at.x());
+                    if let Some(px) = rgb.get_mut(i..i + 3) {
+                        px.copy_from_slice(&[r, g, b]);
+                    }
+                },
+            )
+            .first_valid_layer()
+            .all_attributes()
+            .from_file(path)
+            .map_err(|e| exr_error(e.to_string()))?;
+        let size = image.layer_data.size;
+        let (_, rgb) = image.layer_data.channel_data.pixels;
+        Ok((size.x(), size.y(), rgb))
+    };
+    crate::guard::catch(read)
+        .unwrap_or_else(|panic| Err(exr_error(format!("malformed file ({panic})"))))
+}
+
+/// Largest ratio of decoded to stored bytes an OpenEXR file may claim.
+const EXR_MAX_COMPRESSION_RATIO: u64 = 1032;
 
 fn saturating_i32(n: usize) -> i32 {
     i32::try_from(n).unwrap_or(i32::MAX)

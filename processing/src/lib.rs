@@ -17,6 +17,7 @@ pub mod samples;
 pub mod capture;
 pub mod color;
 pub mod extract;
+pub mod guard;
 pub mod hdr;
 pub mod reference;
 

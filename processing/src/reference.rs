@@ -215,6 +215,13 @@ impl Reference {
                     name: name.to_string(),
                     error,
                 })?;
+            // The spline and the metrics square β: values that overflow are refused.
+            if rgb.iter().any(|v| !(v * v * 1e6).is_finite()) {
+                return Err(parse_err(
+                    line,
+                    "spectral values too large: their camera RGB overflows".into(),
+                ));
+            }
             points.push(ReferencePoint {
                 theta_i,
                 theta_r,

@@ -124,7 +124,8 @@ pub fn read_csv(path: &Path) -> Result<Vec<Sample>, SamplesError> {
     read_csv_from(file).map_err(|e| e.in_file(path))
 }
 
-/// Reads samples CSV text from any reader. Every value must be a finite number.
+/// Reads samples CSV text from any reader. Every value must be a finite number whose
+/// square is finite too.
 pub fn read_csv_from<R: Read>(reader: R) -> Result<Vec<Sample>, SamplesError> {
     let mut csv = csv::ReaderBuilder::new()
         .has_headers(true)
@@ -222,6 +223,14 @@ fn parse_field(text: &str, line: u64, column: &'static str) -> Result<f64, Sampl
             line,
             column,
             message: format!("`{text}` is not finite"),
+        });
+    }
+    // Fits and metrics square values: one whose square overflows cannot be fitted.
+    if !(parsed * parsed).is_finite() {
+        return Err(SamplesError::Field {
+            line,
+            column,
+            message: format!("`{text}` is too large (its square overflows)"),
         });
     }
     Ok(parsed)

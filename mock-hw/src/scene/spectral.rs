@@ -44,13 +44,27 @@ pub fn nikon_d5100() -> [Spectrum; 3] {
 
 /// Reads a table with a header line and rows `wavelength_nm,v1,..,vN` covering exactly
 /// 390–730 nm in 10 nm steps.
+/// At most [`MAX_TABLE_BYTES`] are read: a scene may name any path (even `/dev/zero`).
 pub fn read_table<const N: usize>(path: &Path) -> Result<[Spectrum; N], SceneError> {
-    let text = std::fs::read_to_string(path).map_err(|error| SceneError::Io {
+    use std::io::Read;
+    let io_error = |error| SceneError::Io {
         path: path.to_path_buf(),
         error,
-    })?;
+    };
+    let mut text = String::new();
+    std::fs::File::open(path)
+        .and_then(|file| file.take(MAX_TABLE_BYTES + 1).read_to_string(&mut text))
+        .map_err(io_error)?;
+    if text.len() as u64 > MAX_TABLE_BYTES {
+        return Err(io_error(std::io::Error::other(format!(
+            "more than {MAX_TABLE_BYTES} bytes: not a spectral table"
+        ))));
+    }
     parse_table::<N>(&text, &path.display().to_string())
 }
+
+/// Largest spectral table file read (35 rows of a few numbers need far less).
+const MAX_TABLE_BYTES: u64 = 1 << 20;
 
 fn parse_table<const N: usize>(text: &str, what: &str) -> Result<[Spectrum; N], SceneError> {
     let bad = |line: usize, reason: String| SceneError::Table {

@@ -1,0 +1,187 @@
+//! A bounded walk over the image file directories (IFDs) of a TIFF-structured file
+//! (TIFF, and the camera raw formats built on it: NEF, DNG, CR2, ARW, PEF, ORF, RW2),
+//! to learn the largest image any of them claims before a decoder allocates for it.
+//! Reads at most [`MAX_IFDS`] directories of at most [`MAX_ENTRIES`] entries each,
+//! follows the next-IFD chain, SubIFDs and the Exif IFD, and never loops.
+
+/// Most IFDs visited in one file.
+const MAX_IFDS: usize = 256;
+/// Most entries read from one IFD.
+const MAX_ENTRIES: usize = 4096;
+
+const IMAGE_WIDTH: u16 = 256;
+const IMAGE_LENGTH: u16 = 257;
+const SAMPLES_PER_PIXEL: u16 = 277;
+const SUB_IFDS: u16 = 330;
+const EXIF_IFD: u16 = 34665;
+/// Panasonic RW2 sensor size tags (IFD0 of a file with magic 0x55).
+const RW2_SENSOR_WIDTH: u16 = 2;
+const RW2_SENSOR_HEIGHT: u16 = 3;
+const RW2_MAGIC: u16 = 0x55;
+
+/// The largest image an IFD of the file claims.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Claim {
+    pub width: u64,
+    pub height: u64,
+    /// Samples per pixel (1 for a mosaic).
+    pub samples: u64,
+}
+
+impl Claim {
+    /// Pixels × samples, saturating.
+    pub fn values(&self) -> u64 {
+        self.width
+            .saturating_mul(self.height)
+            .saturating_mul(self.samples.max(1))
+    }
+}
+
+struct Reader<'a> {
+    bytes: &'a [u8],
+    little: bool,
+}
+
+impl Reader<'_> {
+    fn u16(&self, at: usize) -> Option<u16> {
+        let b: [u8; 2] = self.bytes.get(at..at.checked_add(2)?)?.try_into().ok()?;
+        Some(if self.little {
+            u16::from_le_bytes(b)
+        } else {
+            u16::from_be_bytes(b)
+        })
+    }
+
+    fn u32(&self, at: usize) -> Option<u32> {
+        let b: [u8; 4] = self.bytes.get(at..at.checked_add(4)?)?.try_into().ok()?;
+        Some(if self.little {
+            u32::from_le_bytes(b)
+        } else {
+            u32::from_be_bytes(b)
+        })
+    }
+
+    /// The first value of an entry of type SHORT (3) or LONG (4) at `entry`.
+    fn scalar(&self, entry: usize) -> Option<u64> {
+        match self.u16(entry + 2)? {
+            3 => self.u16(entry + 8).map(u64::from),
+            4 | 13 => self.u32(entry + 8).map(u64::from),
+            _ => None,
+        }
+    }
+
+    /// The offsets an IFD-pointer entry (LONG or IFD type) at `entry` lists.
+    fn offsets(&self, entry: usize) -> Vec<usize> {
+        let count = self.u32(entry + 4).unwrap_or(0) as usize;
+        let count = count.min(MAX_IFDS);
+        if count <= 1 {
+            return self
+                .u32(entry + 8)
+                .map(|o| o as usize)
+                .into_iter()
+                .collect();
+        }
+        let Some(base) = self.u32(entry + 8) else {
+            return Vec::new();
+        };
+        (0..count)
+            .filter_map(|k| self.u32(base as usize + 4 * k).map(|o| o as usize))
+            .collect()
+    }
+}
+
+/// The largest image claimed by any IFD, or `None` when `bytes` do not start like a
+/// TIFF-structured file (BigTIFF included in that: its directories are not walked).
+pub fn largest_claim(bytes: &[u8]) -> Option<Claim> {
+    let little = match bytes.get(..2)? {
+        b"II" => true,
+        b"MM" => false,
+        _ => return None,
+    };
+    let r = Reader { bytes, little };
+    let magic = r.u16(2)?;
+    if magic == 43 {
+        return None;
+    }
+    let mut queue = vec![r.u32(4)? as usize];
+    let mut visited = Vec::new();
+    let mut largest = Claim::default();
+    while let Some(offset) = queue.pop() {
+        if offset == 0 || visited.contains(&offset) || visited.len() >= MAX_IFDS {
+            continue;
+        }
+        visited.push(offset);
+        let Some(count) = r.u16(offset) else {
+            continue;
+        };
+        let mut claim = Claim {
+            samples: 1,
+            ..Claim::default()
+        };
+        for k in 0..usize::from(count).min(MAX_ENTRIES) {
+            let entry = offset + 2 + 12 * k;
+            let Some(tag) = r.u16(entry) else {
+                break;
+            };
+            match tag {
+                IMAGE_WIDTH => claim.width = r.scalar(entry).unwrap_or(0),
+                IMAGE_LENGTH => claim.height = r.scalar(entry).unwrap_or(0),
+                RW2_SENSOR_WIDTH if magic == RW2_MAGIC => {
+                    claim.width = r.scalar(entry).unwrap_or(0)
+                }
+                RW2_SENSOR_HEIGHT if magic == RW2_MAGIC => {
+                    claim.height = r.scalar(entry).unwrap_or(0)
+                }
+                SAMPLES_PER_PIXEL => claim.samples = r.scalar(entry).unwrap_or(1),
+                SUB_IFDS | EXIF_IFD => queue.extend(r.offsets(entry)),
+                _ => {}
+            }
+        }
+        if claim.values() > largest.values() {
+            largest = claim;
+        }
+        if let Some(next) = r.u32(offset + 2 + 12 * usize::from(count)) {
+            queue.push(next as usize);
+        }
+    }
+    Some(largest)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A little-endian TIFF whose IFD0 points to a SubIFD claiming `w`×`h`, and whose
+    /// next-IFD pointer loops back to IFD0.
+    fn nested(w: u32, h: u32) -> Vec<u8> {
+        let mut b = b"II*\0\x08\0\0\0".to_vec();
+        // IFD0 at 8: 2 entries (width 10, SubIFDs -> 38), next -> 8 (a loop).
+        b.extend(2u16.to_le_bytes());
+        b.extend([0, 1, 3, 0, 1, 0, 0, 0, 10, 0, 0, 0]);
+        b.extend([0x4a, 1, 4, 0, 1, 0, 0, 0, 38, 0, 0, 0]);
+        b.extend(8u32.to_le_bytes());
+        assert_eq!(b.len(), 38);
+        b.extend(2u16.to_le_bytes());
+        b.extend([0, 1, 4, 0, 1, 0, 0, 0]);
+        b.extend(w.to_le_bytes());
+        b.extend([1, 1, 4, 0, 1, 0, 0, 0]);
+        b.extend(h.to_le_bytes());
+        b.extend(0u32.to_le_bytes());
+        b
+    }
+
+    #[test]
+    fn finds_the_largest_claim_in_sub_ifds_and_survives_loops() {
+        let claim = largest_claim(&nested(70_000, 60_000)).unwrap();
+        assert_eq!(
+            (claim.width, claim.height, claim.samples),
+            (70_000, 60_000, 1)
+        );
+        assert_eq!(largest_claim(b"not a tiff"), None);
+        // Truncated anywhere: still an answer, never a panic.
+        let full = nested(5, 5);
+        for cut in 0..full.len() {
+            let _ = largest_claim(&full[..cut]);
+        }
+    }
+}
