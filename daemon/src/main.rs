@@ -5,6 +5,7 @@ mod interrupt;
 mod progress;
 
 use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
+use gonio_processing::guard;
 
 /// Image-based BRDF measurement: acquire, process, emulate.
 #[derive(Parser)]
@@ -35,6 +36,9 @@ enum Command {
 }
 
 fn main() {
+    // A panic that a decoder catches itself, or that the guard below turns into an
+    // error, prints nothing: the one-line error says it.
+    guard::install_quiet_panic_hook();
     let matches = Cli::command().get_matches();
     let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|err| err.exit());
     match matches.subcommand_name() {
@@ -42,7 +46,7 @@ fn main() {
         Some("serve" | "emulate-arm") | None => {}
         Some(name) => interrupt::install(name.to_owned()),
     }
-    let result = match cli.command {
+    let result = guard::catch(|| match cli.command {
         Command::Serve(args) => commands::serve::run(args),
         Command::Simulate(args) => commands::simulate::run(args),
         Command::Hdr(args) => commands::hdr::run(args),
@@ -51,7 +55,12 @@ fn main() {
         Command::Study(args) => commands::study::run(args),
         Command::Tradeoff(args) => commands::tradeoff::run(args),
         Command::EmulateArm(args) => commands::emulate_arm::run(args),
-    };
+    })
+    .unwrap_or_else(|panic| {
+        Err(anyhow::anyhow!(
+            "internal error (a bug; please report): {panic}"
+        ))
+    });
     if let Err(err) = result {
         eprintln!("error: {err:#}");
         std::process::exit(1);

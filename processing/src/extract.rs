@@ -120,6 +120,35 @@ impl DropCounts {
         self.off_cylinder + self.grazing + self.saturated + self.dark_white
     }
 
+    /// The reason most columns were dropped for, with its count (`None` if none was).
+    pub fn dominant(&self) -> Option<(&'static str, usize)> {
+        [
+            ("off the cylinder or unlit", self.off_cylinder),
+            ("grazing", self.grazing),
+            ("saturated", self.saturated),
+            ("dark white reference", self.dark_white),
+        ]
+        .into_iter()
+        .filter(|(_, n)| *n > 0)
+        .max_by_key(|(_, n)| *n)
+    }
+
+    /// Why an extraction gave no sample: the dominant reason and every count.
+    pub fn explain_empty(&self) -> String {
+        match self.dominant() {
+            Some((reason, n)) => format!(
+                "no samples: all {} columns were dropped, most ({n}) as {reason} \
+                 ({} off the cylinder or unlit, {} grazing, {} saturated, {} dark white)",
+                self.total(),
+                self.off_cylinder,
+                self.grazing,
+                self.saturated,
+                self.dark_white
+            ),
+            None => "no samples: no column of the captures was on the strips".to_owned(),
+        }
+    }
+
     fn add(&mut self, other: &DropCounts) {
         self.off_cylinder += other.off_cylinder;
         self.grazing += other.grazing;

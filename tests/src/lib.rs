@@ -125,20 +125,31 @@ impl Daemon {
     /// Writes the scene and `config` (TOML; `SCENE` in it is replaced by the scene
     /// file's path) into `dir`, and starts the daemon with data in `dir/data`.
     pub fn start(dir: &Path, config: &str) -> Daemon {
+        Self::start_with_fd_limit(dir, config, None)
+    }
+
+    /// As [`Daemon::start`], with the daemon's file-descriptor limit (soft and hard)
+    /// set to `fd_limit`, so that it cannot raise it.
+    pub fn start_with_fd_limit(dir: &Path, config: &str, fd_limit: Option<u64>) -> Daemon {
         let scene = dir.join("scene.toml");
         std::fs::write(&scene, SMALL_GOLD_SCENE).expect("writing the scene");
         let config_path = dir.join("gonio.toml");
         let config = config.replace("SCENE", &scene.display().to_string());
         std::fs::write(&config_path, config).expect("writing the config");
-        Self::spawn(dir, &config_path)
+        Self::spawn(dir, &config_path, fd_limit)
     }
 
     /// Starts the daemon again on the same directory and configuration.
     pub fn restart(dir: &Path) -> Daemon {
-        Self::spawn(dir, &dir.join("gonio.toml"))
+        Self::spawn(dir, &dir.join("gonio.toml"), None)
     }
 
-    fn spawn(dir: &Path, config: &Path) -> Daemon {
+    /// The address the daemon listens on, e.g. `127.0.0.1:40123`.
+    pub fn addr(&self) -> &str {
+        self.url.trim_start_matches("http://")
+    }
+
+    fn spawn(dir: &Path, config: &Path, fd_limit: Option<u64>) -> Daemon {
         let data = dir.join("data");
         let log_path = dir.join(format!(
             "daemon-{}.log",
@@ -148,7 +159,25 @@ impl Daemon {
                 .unwrap_or(0)
         ));
         let log = std::fs::File::create(&log_path).expect("creating the daemon log");
-        let mut child = Command::new(gonio_bin())
+        let mut command = Command::new(gonio_bin());
+        if let Some(limit) = fd_limit {
+            use std::os::unix::process::CommandExt;
+            // SAFETY: setrlimit is async-signal-safe and touches only this child.
+            unsafe {
+                command.pre_exec(move || {
+                    let rlimit = libc::rlimit {
+                        rlim_cur: limit,
+                        rlim_max: limit,
+                    };
+                    if libc::setrlimit(libc::RLIMIT_NOFILE, &rlimit) == 0 {
+                        Ok(())
+                    } else {
+                        Err(std::io::Error::last_os_error())
+                    }
+                });
+            }
+        }
+        let mut child = command
             .arg("serve")
             .arg("--config")
             .arg(config)
@@ -307,6 +336,31 @@ impl Drop for Daemon {
         let _ = self.child.kill();
         let _ = self.child.wait();
     }
+}
+
+/// One raw HTTP/1.1 exchange on a new connection to `addr` (for requests a client
+/// library would not send: any Host, any header): the status and the body.
+pub fn raw_http(addr: &str, request: &str) -> (u16, String) {
+    use std::io::Write;
+    let mut stream = std::net::TcpStream::connect(addr).expect("connecting to the daemon");
+    stream
+        .set_read_timeout(Some(Duration::from_secs(30)))
+        .expect("read timeout");
+    stream
+        .write_all(request.as_bytes())
+        .expect("sending the request");
+    let mut answer = String::new();
+    let _ = stream.read_to_string(&mut answer);
+    let status = answer
+        .split_whitespace()
+        .nth(1)
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(0);
+    let body = answer
+        .split_once("\r\n\r\n")
+        .map_or("", |(_, b)| b)
+        .to_owned();
+    (status, body)
 }
 
 /// A daemon configuration on emulators with the small scene, `time_scale` for both

@@ -2,11 +2,13 @@
 
 use std::path::PathBuf;
 
-use anyhow::Context;
+use anyhow::bail;
 use gonio_processing::extract::{self, ExtractOptions};
 use gonio_processing::samples;
 
 use crate::progress;
+
+use super::output::write_output;
 
 /// Arguments of `gonio extract`.
 #[derive(clap::Args)]
@@ -22,12 +24,16 @@ pub struct Args {
     /// Drop points with |θi| or |θr| above this many degrees.
     #[arg(long, default_value_t = 80.0)]
     grazing_limit: f64,
+    /// Largest capture decoded, pixels (width × height as the file stores it).
+    #[arg(long, default_value_t = gonio_processing::capture::DEFAULT_MAX_PIXELS)]
+    max_frame_pixels: u64,
     /// Also write each θL's radiance map there as theta_l_<θL>.exr.
     #[arg(long)]
     hdr_dir: Option<PathBuf>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    gonio_processing::capture::set_max_pixels(args.max_frame_pixels);
     let options = ExtractOptions {
         white_reflectance: args.white_reflectance,
         grazing_limit_deg: args.grazing_limit,
@@ -42,8 +48,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     });
     bar.finish_and_clear();
     let extraction = extraction?;
-    samples::write_csv(&args.out, &extraction.samples)
-        .with_context(|| format!("writing {}", args.out.display()))?;
+    if extraction.samples.is_empty() {
+        bail!(
+            "{}: {}",
+            args.dir.display(),
+            extraction.dropped.explain_empty()
+        );
+    }
+    write_output(&args.out, |path| {
+        samples::write_csv(path, &extraction.samples)
+    })?;
     let d = extraction.dropped;
     println!(
         "wrote {} samples from {} θL to {} (columns dropped: {} off the cylinder or unlit, {} grazing, {} saturated, {} dark white)",

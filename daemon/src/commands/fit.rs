@@ -9,6 +9,7 @@ use gonio_processing::fit::{self, FitMethod, FitOptions};
 use gonio_processing::samples::{self, Sample};
 
 use crate::progress;
+use super::output::write_output;
 
 /// Two θL values closer than this (degrees) are the same illumination direction.
 const THETA_L_MATCH_DEG: f64 = 1e-6;
@@ -113,8 +114,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     spinner.finish_and_clear();
     let result = result?;
     let json = serde_json::to_string_pretty(&result).context("serialising the fit")?;
-    std::fs::write(&args.out, json + "\n")
-        .with_context(|| format!("writing {}", args.out.display()))?;
+    write_output(&args.out, |path| std::fs::write(path, json + "\n"))?;
     let m = result.params().m;
     println!(
         "{} ({}, {}) on {} samples: loss {:.6}, {} evaluations in {:.3} s -> {}",

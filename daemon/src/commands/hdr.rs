@@ -2,11 +2,11 @@
 
 use std::path::PathBuf;
 
-use anyhow::Context;
 use gonio_processing::capture::Frame;
 use gonio_processing::hdr::{self, MergeMethod, MergeOptions, SATURATED, UNDEREXPOSED};
 
 use crate::progress;
+use super::output::write_output;
 
 /// Merge method on the command line.
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -28,6 +28,9 @@ pub struct Args {
     /// Merge method.
     #[arg(long, value_enum, default_value = "auto")]
     method: Method,
+    /// Largest capture decoded, pixels (width × height as the file stores it).
+    #[arg(long, default_value_t = gonio_processing::capture::DEFAULT_MAX_PIXELS)]
+    max_frame_pixels: u64,
     /// Frames of one bracket: TIFF or camera raw files, each with a .json sidecar.
     #[arg(required = true)]
     frames: Vec<PathBuf>,
@@ -36,6 +39,7 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let bar = progress::bar(args.frames.len() as u64, "frames");
     bar.set_message("decoding");
+    gonio_processing::capture::set_max_pixels(args.max_frame_pixels);
     let frames = args
         .frames
         .iter()
@@ -53,8 +57,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let map = hdr::merge(&frames, &options)?;
     spinner.set_message(format!("writing {}", args.out.display()));
-    map.write_exr(&args.out)
-        .with_context(|| format!("writing {}", args.out.display()))?;
+    write_output(&args.out, |path| map.write_exr(path))?;
     spinner.finish_and_clear();
     println!(
         "merged {} frames ({}, {}×{}) into {}: {} saturated, {} underexposed pixels flagged",

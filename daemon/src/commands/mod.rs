@@ -4,6 +4,7 @@ pub mod emulate_arm;
 pub mod extract;
 pub mod fit;
 pub mod hdr;
+mod output;
 pub mod serve;
 pub mod simulate;
 pub mod study;

@@ -3,7 +3,7 @@
 
 use std::convert::Infallible;
 use std::path::Path as FsPath;
-use std::sync::atomic::Ordering;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Arc;
 
 use axum::body::Bytes;
@@ -17,9 +17,11 @@ use axum::{Json, Router};
 use futures_util::{Stream, StreamExt};
 use serde::Deserialize;
 use serde_json::{json, Value};
+use tokio::io::AsyncReadExt;
 use tokio_stream::wrappers::BroadcastStream;
 
-use super::files::{is_partial, safe_join};
+use super::config::Config;
+use super::files::{is_partial, open_under};
 use super::hardware::InjectedFault;
 use super::plan::{theta_dir_name, Step, FIT_MODELS};
 use super::preview;
@@ -97,28 +99,26 @@ async fn db<T: Send + 'static>(
     .map_err(ApiError::from)
 }
 
-/// The routes of the daemon.
+/// The routes of the daemon. Every request first passes the Host check; mutating
+/// routes need the token (reads too when bound beyond loopback without
+/// `public_read`); JSON bodies need `Content-Type: application/json`; every error
+/// answer is JSON.
 pub fn router(shared: Arc<Shared>) -> Router {
-    let mutating = Router::new()
+    let token = || middleware::from_fn_with_state(shared.clone(), require_token);
+    let json_bodies = Router::new()
         .route("/api/scans", post(create_scan))
+        .route("/api/sweeps", post(create_sweep))
+        .route("/api/arm/position", post(declare_arm_position))
+        .route("/api/emulator/fault", post(inject_fault))
+        .route_layer(middleware::from_fn(require_json));
+    let mutating = Router::new()
         .route("/api/scans/{id}/pause", post(pause_scan))
         .route("/api/scans/{id}/resume", post(resume_scan))
         .route("/api/scans/{id}/cancel", post(cancel_scan))
-        .route("/api/sweeps", post(create_sweep))
         .route("/api/arm/stop", post(stop_arm))
-        .route("/api/arm/position", post(declare_arm_position))
-        .route("/api/emulator/fault", post(inject_fault))
-        .route_layer(middleware::from_fn_with_state(
-            shared.clone(),
-            require_token,
-        ));
-    Router::new()
-        .route("/", get(super::web::index))
-        .route("/api/openapi.json", get(super::web::openapi))
-        .route(
-            "/api/health",
-            get(|| async { Json(json!({ "status": "ok" })) }),
-        )
+        .merge(json_bodies)
+        .route_layer(token());
+    let reads = Router::new()
         .route("/api/hardware", get(hardware))
         .route("/api/hardware/log", get(hardware_log))
         .route("/api/scans", get(list_scans))
@@ -130,21 +130,136 @@ pub fn router(shared: Arc<Shared>) -> Router {
         .route("/api/scans/{id}/files", get(list_files))
         .route("/api/scans/{id}/files/{*path}", get(get_file))
         .route("/api/sweeps", get(list_sweeps))
-        .route("/api/sweeps/{id}", get(get_sweep))
+        .route("/api/sweeps/{id}", get(get_sweep));
+    let reads = if reads_need_token(&shared.config) {
+        reads.route_layer(token())
+    } else {
+        reads
+    };
+    Router::new()
+        .route("/", get(super::web::index))
+        .route("/api/openapi.json", get(super::web::openapi))
+        .route(
+            "/api/health",
+            get(|| async { Json(json!({ "status": "ok" })) }),
+        )
+        .merge(reads)
         .merge(mutating)
+        .fallback(|| async { ApiError::not_found("no such route:") })
         .layer(DefaultBodyLimit::max(shared.config.max_body_bytes))
+        .layer(middleware::from_fn(json_errors))
+        .layer(middleware::from_fn_with_state(shared.clone(), check_host))
         .with_state(shared)
 }
 
+/// Whether read routes need the token: bound beyond loopback without `public_read`.
+fn reads_need_token(config: &Config) -> bool {
+    !config.bind.ip().is_loopback() && !config.public_read
+}
+
+/// Whether the daemon answers to `Host` (port ignored): the bind address, `localhost`,
+/// a loopback address, a name of `allowed_hosts`, or, when bound to every interface,
+/// any IP address (a DNS-rebinding page always sends a name, never an address).
+fn host_allowed(config: &Config, host: &str) -> bool {
+    let name = match host.strip_prefix('[') {
+        Some(rest) => rest.split(']').next().unwrap_or(""),
+        None => host.rsplit_once(':').map_or(host, |(name, _)| name),
+    };
+    if name.eq_ignore_ascii_case("localhost")
+        || config
+            .allowed_hosts
+            .iter()
+            .any(|h| h.eq_ignore_ascii_case(name))
+    {
+        return true;
+    }
+    let bind = config.bind.ip();
+    name.parse::<std::net::IpAddr>()
+        .is_ok_and(|ip| ip == bind || ip.is_loopback() || bind.is_unspecified())
+}
+
+/// 421 for a request whose Host the daemon does not answer to (DNS rebinding).
+async fn check_host(State(shared): AppState, request: Request, next: Next) -> Response {
+    let host = request
+        .headers()
+        .get(header::HOST)
+        .and_then(|v| v.to_str().ok())
+        .or_else(|| request.uri().authority().map(|a| a.as_str()))
+        .unwrap_or("");
+    if host_allowed(&shared.config, host) {
+        return next.run(request).await;
+    }
+    ApiError::new(
+        StatusCode::MISDIRECTED_REQUEST,
+        format!(
+            "Host {host:?} is not this daemon's: use its address, localhost, or a name of \
+             allowed_hosts"
+        ),
+    )
+    .into_response()
+}
+
+/// 415 unless the request says its body is JSON.
+async fn require_json(request: Request, next: Next) -> Response {
+    let content_type = request
+        .headers()
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .unwrap_or("");
+    let essence = content_type.split(';').next().unwrap_or("").trim();
+    if essence.eq_ignore_ascii_case("application/json") {
+        return next.run(request).await;
+    }
+    ApiError::new(
+        StatusCode::UNSUPPORTED_MEDIA_TYPE,
+        format!("Content-Type must be application/json, got {content_type:?}"),
+    )
+    .into_response()
+}
+
+/// Gives every error answer the API's JSON shape: axum's rejections (a bad path
+/// parameter, a body over the limit, an unknown method) come as plain text.
+async fn json_errors(request: Request, next: Next) -> Response {
+    let response = next.run(request).await;
+    let status = response.status();
+    let is_json = response
+        .headers()
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .is_some_and(|v| v.starts_with("application/json"));
+    if !(status.is_client_error() || status.is_server_error()) || is_json {
+        return response;
+    }
+    let (parts, body) = response.into_parts();
+    let text = axum::body::to_bytes(body, 4096).await.unwrap_or_default();
+    let text = String::from_utf8_lossy(&text).trim().to_owned();
+    let message = if text.is_empty() {
+        status
+            .canonical_reason()
+            .unwrap_or("error")
+            .to_ascii_lowercase()
+    } else {
+        text
+    };
+    let mut answer = ApiError::new(status, message).into_response();
+    for (name, value) in &parts.headers {
+        if name != header::CONTENT_TYPE && name != header::CONTENT_LENGTH {
+            answer.headers_mut().insert(name.clone(), value.clone());
+        }
+    }
+    answer
+}
+
 /// Rejects a request without the right `Authorization: Bearer` token before its body
-/// is read, so nothing changes.
+/// is read, so nothing changes. The scheme is case-insensitive (RFC 9110).
 async fn require_token(State(shared): AppState, request: Request, next: Next) -> Response {
     let given = request
         .headers()
         .get(header::AUTHORIZATION)
         .and_then(|v| v.to_str().ok())
-        .and_then(|v| v.strip_prefix("Bearer "))
-        .map(str::trim);
+        .and_then(|v| v.trim_start().split_once(' '))
+        .filter(|(scheme, _)| scheme.eq_ignore_ascii_case("bearer"))
+        .map(|(_, token)| token.trim());
     if given.is_some_and(|t| constant_time_eq(t.as_bytes(), shared.token.as_bytes())) {
         return next.run(request).await;
     }
@@ -179,6 +294,7 @@ fn bounds(shared: &Shared) -> Bounds {
         limits: shared.config.limits,
         shutter_min_s: camera.shutter_min_s,
         shutter_max_s: camera.shutter_max_s,
+        max_steps: shared.config.max_steps_per_request,
     }
 }
 
@@ -585,8 +701,18 @@ async fn scan_events(
     State(shared): AppState,
     Path(id): Path<i64>,
 ) -> ApiResult<Sse<impl Stream<Item = Result<Event, Infallible>>>> {
-    let updates = BroadcastStream::new(shared.events.subscribe());
     let first = load_scan(&shared, id).await?;
+    let open = EventStreamSlot::take(shared.config.max_event_streams).ok_or_else(|| {
+        ApiError::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            format!(
+                "{} event streams are open, the most allowed (max_event_streams): close \
+                 one or poll GET /api/scans/{id}",
+                shared.config.max_event_streams
+            ),
+        )
+    })?;
+    let updates = BroadcastStream::new(shared.events.subscribe());
     let view_shared = shared.clone();
     let stream = futures_util::stream::once(async move { first })
         .chain(updates.filter_map(move |msg| async move {
@@ -594,6 +720,8 @@ async fn scan_events(
             msg.ok().filter(|scan| scan.id == id)
         }))
         .scan(false, move |ended, scan| {
+            // The slot is released with the stream.
+            let _open = &open;
             let item = (!*ended).then(|| {
                 *ended = scan.state.is_final();
                 let view = scan_view(&view_shared, &scan);
@@ -602,6 +730,30 @@ async fn scan_events(
             async move { item }
         });
     Ok(Sse::new(stream).keep_alive(KeepAlive::default()))
+}
+
+/// Open server-sent event streams of this process.
+static EVENT_STREAMS: AtomicUsize = AtomicUsize::new(0);
+
+/// One open event stream, counted until dropped.
+struct EventStreamSlot;
+
+impl EventStreamSlot {
+    /// A slot, unless `max` streams are open.
+    fn take(max: usize) -> Option<Self> {
+        EVENT_STREAMS
+            .fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| {
+                (n < max).then_some(n + 1)
+            })
+            .ok()
+            .map(|_| EventStreamSlot)
+    }
+}
+
+impl Drop for EventStreamSlot {
+    fn drop(&mut self) {
+        EVENT_STREAMS.fetch_sub(1, Ordering::AcqRel);
+    }
 }
 
 async fn list_files(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
@@ -618,15 +770,20 @@ async fn list_files(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<J
     Ok(Json(json!(files)))
 }
 
+/// The regular files under `dir`, relative to `base`; symbolic links are neither
+/// listed nor followed.
 fn collect_files(base: &FsPath, dir: &FsPath, out: &mut Vec<String>) {
     let Ok(entries) = std::fs::read_dir(dir) else {
         return;
     };
     for entry in entries.flatten() {
         let path = entry.path();
-        if path.is_dir() {
+        let Ok(kind) = entry.file_type() else {
+            continue;
+        };
+        if kind.is_dir() {
             collect_files(base, &path, out);
-        } else if !is_partial(&entry.file_name().to_string_lossy()) {
+        } else if kind.is_file() && !is_partial(&entry.file_name().to_string_lossy()) {
             if let Ok(rel) = path.strip_prefix(base) {
                 out.push(rel.to_string_lossy().into_owned());
             }
@@ -655,11 +812,18 @@ async fn get_file(
     State(shared): AppState,
     Path((id, rel)): Path<(i64, String)>,
 ) -> ApiResult<Response> {
-    let path = safe_join(&shared.scan_dir(id), &rel)
-        .ok_or_else(|| ApiError::not_found(format!("file {rel:?}")))?;
-    let bytes = tokio::fs::read(&path)
+    let dir = shared.scan_dir(id);
+    let not_found = || ApiError::not_found(format!("file {rel:?} of scan {id}"));
+    let wanted = rel.clone();
+    let (path, file) = tokio::task::spawn_blocking(move || open_under(&dir, &wanted))
         .await
-        .map_err(|_| ApiError::not_found(format!("file {rel:?} of scan {id}")))?;
+        .map_err(internal)?
+        .ok_or_else(not_found)?;
+    let mut bytes = Vec::new();
+    tokio::fs::File::from_std(file)
+        .read_to_end(&mut bytes)
+        .await
+        .map_err(internal)?;
     Ok(([(header::CONTENT_TYPE, content_type(&path))], bytes).into_response())
 }
 
@@ -719,4 +883,39 @@ async fn inject_fault(State(shared): AppState, body: Bytes) -> ApiResult<Json<Va
         .map_err(internal)?
         .map_err(internal)?;
     Ok(Json(json!({ "injected": true })))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn host_check_answers_the_bind_address_localhost_and_allowed_names() {
+        let mut config = Config::default();
+        config.allowed_hosts = vec!["gonio.lab".into()];
+        for host in [
+            "127.0.0.1:8080",
+            "localhost",
+            "LOCALHOST:1",
+            "[::1]:8080",
+            "gonio.lab:80",
+        ] {
+            assert!(host_allowed(&config, host), "{host}");
+        }
+        for host in [
+            "evil.example",
+            "evil.example:8080",
+            "192.168.1.9",
+            "",
+            "[::1",
+        ] {
+            assert!(!host_allowed(&config, host), "{host}");
+        }
+        config.bind = "0.0.0.0:8080".parse().unwrap();
+        assert!(host_allowed(&config, "192.168.1.9:8080"));
+        assert!(!host_allowed(&config, "rebind.evil.example"));
+        assert!(reads_need_token(&config));
+        config.public_read = true;
+        assert!(!reads_need_token(&config));
+    }
 }

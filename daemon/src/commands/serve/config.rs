@@ -6,6 +6,15 @@
 //! data_dir = "gonio-data"
 //! token = "secret"            # else GONIO_TOKEN, else generated into DATA/token
 //! max_body_bytes = 65536
+//! max_steps_per_request = 10000 # steps one POST may queue (a sweep: all its scans)
+//! max_frame_pixels = 100000000  # largest capture decoded (width × height)
+//! allowed_hosts = []           # Host names answered besides the bind address, localhost
+//! public_read = false          # bound beyond loopback: reads need the token unless true
+//! header_timeout_s = 10        # a request's headers must arrive within this
+//! idle_timeout_s = 60          # a connection with no request in flight closes after this
+//! max_connections = 1024       # open connections (fewer if the fd limit is lower)
+//! max_event_streams = 64       # open server-sent event streams
+//! reserved_fds = 256           # file descriptors kept for the hardware, database, files
 //! white_reflectance = 1.0      # of the white strip; emulated scans use the scene's
 //! # [setup] = processing's Setup fields, for real hardware (setup.json of each scan)
 //!
@@ -59,6 +68,24 @@ pub struct Config {
     pub token: Option<String>,
     /// Largest accepted request body, bytes.
     pub max_body_bytes: usize,
+    /// Most steps one request may queue (a sweep: all its scans together).
+    pub max_steps_per_request: usize,
+    /// Largest capture decoded, pixels (width × height as stored in the file).
+    pub max_frame_pixels: u64,
+    /// Host names (without port) answered besides the bind address and `localhost`.
+    pub allowed_hosts: Vec<String>,
+    /// When bound beyond loopback: whether reads are open without the token.
+    pub public_read: bool,
+    /// Seconds a client has to send a request's headers.
+    pub header_timeout_s: f64,
+    /// Seconds a connection may stay open with no request in flight.
+    pub idle_timeout_s: f64,
+    /// Most open connections (lowered to fit the file-descriptor limit).
+    pub max_connections: usize,
+    /// Most open server-sent event streams.
+    pub max_event_streams: usize,
+    /// File descriptors kept free of connections, for the devices, database and files.
+    pub reserved_fds: u64,
     pub arm: ArmConfig,
     pub camera: CameraConfig,
     pub limits: Limits,
@@ -79,6 +106,15 @@ impl Default for Config {
             data_dir: PathBuf::from("gonio-data"),
             token: None,
             max_body_bytes: 64 * 1024,
+            max_steps_per_request: 10_000,
+            max_frame_pixels: gonio_processing::capture::DEFAULT_MAX_PIXELS,
+            allowed_hosts: Vec::new(),
+            public_read: false,
+            header_timeout_s: 10.0,
+            idle_timeout_s: 60.0,
+            max_connections: 1024,
+            max_event_streams: 64,
+            reserved_fds: 256,
             arm: ArmConfig::default(),
             camera: CameraConfig::default(),
             limits: Limits::default(),
@@ -280,6 +316,30 @@ impl Config {
             "max_body_bytes must be at least 1024"
         );
         self.arm.check()?;
+        for (key, value) in [
+            ("max_steps_per_request", self.max_steps_per_request as u64),
+            ("max_frame_pixels", self.max_frame_pixels),
+            ("max_connections", self.max_connections as u64),
+            ("max_event_streams", self.max_event_streams as u64),
+        ] {
+            anyhow::ensure!(value >= 1, "{key} must be at least 1");
+        }
+        for (key, value) in [
+            ("header_timeout_s", self.header_timeout_s),
+            ("idle_timeout_s", self.idle_timeout_s),
+        ] {
+            anyhow::ensure!(
+                value.is_finite() && value > 0.0 && value <= 86_400.0,
+                "{key} must be a positive number of seconds (at most a day), got {value}"
+            );
+        }
+        if let Some(bad) = self
+            .allowed_hosts
+            .iter()
+            .find(|h| h.is_empty() || h.contains(|c: char| c.is_whitespace() || c == '/'))
+        {
+            anyhow::bail!("allowed_hosts: {bad:?} is not a host name");
+        }
         for (what, scale) in [
             ("arm.time_scale", self.arm_time_scale()),
             ("camera.time_scale", self.camera_time_scale()),

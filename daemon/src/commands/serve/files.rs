@@ -65,6 +65,34 @@ pub fn safe_join(base: &Path, relative: &str) -> Option<PathBuf> {
     any.then_some(out)
 }
 
+/// Opens a file under `base` for reading by a client: `relative` is joined as
+/// [`safe_join`] does, no component below `base` may be a symbolic link, the canonical
+/// path must lie under the canonical `base`, the last component is opened without
+/// following a link (`O_NOFOLLOW`), and it must be a regular file.
+pub fn open_under(base: &Path, relative: &str) -> Option<(PathBuf, fs::File)> {
+    let path = safe_join(base, relative)?;
+    let mut prefix = base.to_path_buf();
+    for part in Path::new(relative).components() {
+        prefix.push(part);
+        if fs::symlink_metadata(&prefix).ok()?.file_type().is_symlink() {
+            return None;
+        }
+    }
+    let canonical = path.canonicalize().ok()?;
+    if !canonical.starts_with(base.canonicalize().ok()?) {
+        return None;
+    }
+    let mut options = fs::OpenOptions::new();
+    options.read(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        options.custom_flags(libc::O_NOFOLLOW);
+    }
+    let file = options.open(&canonical).ok()?;
+    file.metadata().ok()?.is_file().then_some((canonical, file))
+}
+
 /// Whether `name` is a safe single path component for a sample: 1–64 characters of
 /// ASCII letters, digits, `-`, `_` and `.`, not starting with `.`.
 pub fn is_safe_name(name: &str) -> bool {
@@ -96,6 +124,30 @@ mod tests {
             "a/.x.1.partial",
         ] {
             assert_eq!(safe_join(base, bad), None, "{bad}");
+        }
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn open_under_follows_no_link() {
+        let dir = tempfile::tempdir().unwrap();
+        let (base, outside) = (dir.path().join("scan"), dir.path().join("secret"));
+        fs::create_dir_all(base.join("sub")).unwrap();
+        fs::create_dir_all(&outside).unwrap();
+        fs::write(outside.join("shadow"), b"secret").unwrap();
+        fs::write(base.join("sub/ok.csv"), b"ok").unwrap();
+        std::os::unix::fs::symlink(outside.join("shadow"), base.join("link.csv")).unwrap();
+        std::os::unix::fs::symlink(&outside, base.join("linked-dir")).unwrap();
+        std::os::unix::fs::symlink(base.join("sub/ok.csv"), base.join("inner-link.csv")).unwrap();
+        assert!(open_under(&base, "sub/ok.csv").is_some());
+        for bad in [
+            "link.csv",
+            "linked-dir/shadow",
+            "inner-link.csv",
+            "sub",
+            "missing",
+        ] {
+            assert!(open_under(&base, bad).is_none(), "{bad}");
         }
     }
 

@@ -3,6 +3,7 @@
 
 mod api;
 mod config;
+mod connections;
 mod files;
 mod hardware;
 mod plan;
@@ -10,6 +11,7 @@ mod preview;
 mod process;
 mod runner;
 mod shared;
+mod step_guard;
 mod store;
 mod validate;
 mod web;
@@ -18,6 +20,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicU64;
 use std::sync::{mpsc, Arc, Mutex};
+use std::time::Duration;
 
 use anyhow::Context;
 use gonio_drivers::ArmState;
@@ -69,6 +72,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     std::fs::create_dir_all(&config.data_dir)
         .with_context(|| format!("creating data directory {}", config.data_dir.display()))?;
+    gonio_processing::capture::set_max_pixels(config.max_frame_pixels);
     // One daemon per data directory: the OS drops the lock when the process ends,
     // however it ends.
     let lock_path = config.data_dir.join("daemon.lock");
@@ -121,6 +125,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         emulators: devices.emulators.clone(),
         config,
     });
+    step_guard::fail_crash_looping_scans(&shared, &mut runner_store)?;
     let runner = runner::Runner::new(shared.clone(), runner_store, wake_rx, devices);
     let owner = std::thread::Builder::new()
         .name("hardware".into())
@@ -164,25 +169,30 @@ async fn serve(shared: Arc<Shared>) -> anyhow::Result<()> {
             "real"
         }
     );
-    let (stopping_tx, stopping) = tokio::sync::oneshot::channel();
-    let server = axum::serve(listener, api::router(shared)).with_graceful_shutdown(async {
+    let config = &shared.config;
+    let limits = connections::ConnectionLimits {
+        header_timeout: Duration::from_secs_f64(config.header_timeout_s),
+        idle_timeout: Duration::from_secs_f64(config.idle_timeout_s),
+        max_connections: connections::connections_within_fd_limit(
+            config.max_connections,
+            config.reserved_fds,
+        ),
+    };
+    tracing::info!(
+        "at most {} connections, headers within {:?}, idle ones closed after {:?}",
+        limits.max_connections,
+        limits.header_timeout,
+        limits.idle_timeout
+    );
+    let stop = async {
         let signal = crate::interrupt::wait_for_signal().await;
         tracing::info!(
             "{signal}: stopping; a scan in progress resumes at its first unfinished step \
              when gonio serve starts again"
         );
-        let _ = stopping_tx.send(());
-    });
-    // Event streams stay open as long as their pages do: give requests in flight a
-    // bounded time to finish, then stop anyway.
-    tokio::select! {
-        served = server => served.context("HTTP server"),
-        Ok(()) = stopping => {
-            tokio::time::sleep(SHUTDOWN_GRACE).await;
-            tracing::info!("closing the connections still open");
-            Ok(())
-        }
-    }
+    };
+    connections::serve(listener, api::router(shared), limits, stop).await;
+    Ok(())
 }
 
 /// The bearer token: from the config, else `GONIO_TOKEN`, else the one in DATA/token,

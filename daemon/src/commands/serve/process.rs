@@ -53,6 +53,11 @@ fn extract(dir: &Path, white_reflectance: f64) -> anyhow::Result<Value> {
         ..ExtractOptions::default()
     };
     let extraction = extract_scan(dir, &options)?;
+    anyhow::ensure!(
+        !extraction.samples.is_empty(),
+        "{}",
+        extraction.dropped.explain_empty()
+    );
     write_atomic_with(&dir.join("samples.csv"), |tmp| {
         write_csv(tmp, &extraction.samples)
     })?;

@@ -19,6 +19,7 @@ use super::hardware::{ArmOpener, Devices, SidecarDefaults};
 use super::plan::{exposure_stem, theta_dir_name, ScanPlan, Step};
 use super::process;
 use super::shared::{lock, scan_dir, Shared, EMERGENCY_STOP};
+use super::step_guard;
 use super::store::{now_rfc3339, now_unix, ScanRecord, ScanState, Store, StoreError};
 
 /// Why a step did not complete.
@@ -446,8 +447,11 @@ impl Runner {
                 shutter_s,
             } => self.capture(id, dir, *theta_l, *index, *shutter_s)?,
             Step::Hdr { .. } | Step::Extract | Step::Fit { .. } => {
-                process::run(step, dir, self.white_reflectance)
-                    .map_err(|err| StepError::Failed(format!("{}: {err:#}", step.describe())))?
+                let white_reflectance = self.white_reflectance;
+                step_guard::run_processing(&step.describe(), || {
+                    process::run(step, dir, white_reflectance)
+                })
+                .map_err(StepError::Failed)?
             }
         };
         Ok((result, Vec::new()))

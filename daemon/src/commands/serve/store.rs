@@ -4,7 +4,7 @@
 use std::path::Path;
 use std::time::Duration;
 
-use rusqlite::{params, Connection, OptionalExtension, Transaction};
+use rusqlite::{params, Connection, OptionalExtension, Transaction, TransactionBehavior};
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
@@ -223,6 +223,7 @@ CREATE TABLE IF NOT EXISTS steps (
     started TEXT,
     finished TEXT,
     result TEXT,
+    crashes INTEGER NOT NULL DEFAULT 0,
     PRIMARY KEY (scan_id, idx)
 );
 CREATE TABLE IF NOT EXISTS hardware_log (
@@ -255,12 +256,78 @@ impl Store {
         conn.pragma_update(None, "synchronous", "FULL")?;
         conn.pragma_update(None, "foreign_keys", "ON")?;
         conn.execute_batch(SCHEMA)?;
+        // Databases made before steps counted the daemon deaths they were running at.
+        let has_crashes: bool = conn.query_row(
+            "SELECT COUNT(*) FROM pragma_table_info('steps') WHERE name = 'crashes'",
+            [],
+            |r| r.get::<_, i64>(0).map(|n| n > 0),
+        )?;
+        if !has_crashes {
+            conn.execute_batch("ALTER TABLE steps ADD COLUMN crashes INTEGER NOT NULL DEFAULT 0")?;
+        }
         Ok(Self { conn })
+    }
+
+    /// Called once at start, before anything runs: every step left `started` was
+    /// running when the previous daemon died, and counts that death. A step that has
+    /// now been running at `limit` deaths fails its scan ("... crashed the daemon N
+    /// times") and goes back to pending, so the queue goes on (and a resume retries
+    /// it). Returns the ids of the scans failed.
+    pub fn count_crashes(&mut self, limit: u32) -> Result<Vec<i64>, StoreError> {
+        let tx = self.write_transaction()?;
+        tx.execute(
+            "UPDATE steps SET crashes = crashes + 1 WHERE state = 'started'",
+            [],
+        )?;
+        let looping: Vec<(i64, u32, String, u32)> = {
+            let mut stmt = tx.prepare(
+                "SELECT scan_id, idx, step, crashes FROM steps
+                 WHERE state = 'started' AND crashes >= ?1 ORDER BY scan_id, idx",
+            )?;
+            let rows = stmt
+                .query_map([limit], |r| {
+                    Ok((r.get(0)?, r.get(1)?, r.get(2)?, r.get(3)?))
+                })?
+                .collect::<Result<_, _>>()?;
+            rows
+        };
+        let now = now_rfc3339();
+        let mut failed = Vec::new();
+        for (scan_id, idx, step, crashes) in looping {
+            let step: Step = serde_json::from_str(&step).map_err(json_err("step"))?;
+            let reason = format!(
+                "step \"{}\" crashed the daemon {crashes} times",
+                step.describe()
+            );
+            tx.execute(
+                "UPDATE steps SET state = 'pending', started = NULL WHERE scan_id = ?1 AND idx = ?2",
+                params![scan_id, idx],
+            )?;
+            let changed = tx.execute(
+                "UPDATE scans SET state = 'failed', error = ?2, finished = ?3
+                 WHERE id = ?1 AND state NOT IN ('done', 'failed', 'cancelled')",
+                params![scan_id, reason, now],
+            )?;
+            if changed > 0 {
+                failed.push(scan_id);
+            }
+        }
+        tx.commit()?;
+        Ok(failed)
+    }
+
+    /// A transaction that takes the write lock at once (`BEGIN IMMEDIATE`): one that
+    /// reads and then writes in a deferred transaction fails with `database is locked`
+    /// when another connection wrote in between, without waiting for the busy timeout.
+    fn write_transaction(&mut self) -> Result<Transaction<'_>, StoreError> {
+        Ok(self
+            .conn
+            .transaction_with_behavior(TransactionBehavior::Immediate)?)
     }
 
     /// Counts a daemon start and returns its number.
     pub fn begin_boot(&mut self) -> Result<i64, StoreError> {
-        let tx = self.conn.transaction()?;
+        let tx = self.write_transaction()?;
         tx.execute(
             "INSERT INTO meta (key, value) VALUES ('boot', 1)
              ON CONFLICT(key) DO UPDATE SET value = value + 1",
@@ -275,7 +342,7 @@ impl Store {
 
     /// Queues scans, plans and steps included, in one transaction.
     pub fn insert_scans(&mut self, scans: &[NewScan]) -> Result<Vec<i64>, StoreError> {
-        let tx = self.conn.transaction()?;
+        let tx = self.write_transaction()?;
         let ids = insert_scans_tx(&tx, scans)?;
         tx.commit()?;
         Ok(ids)
@@ -288,7 +355,7 @@ impl Store {
         start_at: Option<i64>,
         plans: Vec<ScanPlan>,
     ) -> Result<(i64, Vec<i64>), StoreError> {
-        let tx = self.conn.transaction()?;
+        let tx = self.write_transaction()?;
         tx.execute(
             "INSERT INTO sweeps (request, created, start_at) VALUES (?1, ?2, ?3)",
             params![request.to_string(), now_rfc3339(), start_at],
@@ -439,7 +506,7 @@ impl Store {
         to: ScanState,
         error: Option<&str>,
     ) -> Result<bool, StoreError> {
-        let tx = self.conn.transaction()?;
+        let tx = self.write_transaction()?;
         let current: Option<String> = tx
             .query_row("SELECT state FROM scans WHERE id = ?1", [id], |r| r.get(0))
             .optional()?;
@@ -471,7 +538,7 @@ impl Store {
         to: ScanState,
         error: Option<&str>,
     ) -> Result<Vec<i64>, StoreError> {
-        let tx = self.conn.transaction()?;
+        let tx = self.write_transaction()?;
         let ids: Vec<i64> = {
             let mut stmt = tx.prepare("SELECT id FROM scans WHERE state = ?1")?;
             let ids = stmt
@@ -556,7 +623,7 @@ impl Store {
         if followers.len() >= STEP_SPACING as usize {
             return Err(StoreError::TooManySteps(followers.len()));
         }
-        let tx = self.conn.transaction()?;
+        let tx = self.write_transaction()?;
         let now = now_rfc3339();
         for (k, step) in (1..).zip(followers) {
             let step = serde_json::to_string(step).map_err(json_err("step"))?;
@@ -728,6 +795,46 @@ mod tests {
         assert_eq!((scan.state, scan.done), (ScanState::Done, 9));
         assert!(scan.finished.is_some());
         assert!(store.next_runnable(now_unix()).unwrap().is_none());
+        std::fs::remove_dir_all(dir).unwrap();
+    }
+
+    #[test]
+    fn a_step_running_at_three_deaths_fails_its_scan_and_the_queue_goes_on() {
+        let (dir, mut store) = temp_store("crashes");
+        let new = || NewScan {
+            plan: plan(),
+            sweep_id: None,
+            not_before: None,
+        };
+        let ids = store.insert_scans(&[new(), new()]).unwrap();
+        assert!(store
+            .transition(ids[0], &[ScanState::Queued], ScanState::Running, None)
+            .unwrap());
+        let first = store.steps(ids[0]).unwrap()[0].index;
+        for death in 1..=3 {
+            // The step starts, then the daemon dies: the next start counts it.
+            store.step_started(ids[0], first).unwrap();
+            drop(store);
+            store = Store::open(&dir.join("gonio.sqlite")).unwrap();
+            let failed = store.count_crashes(3).unwrap();
+            let scan = store.scan(ids[0]).unwrap().unwrap();
+            if death < 3 {
+                assert!(failed.is_empty());
+                assert_eq!(scan.state, ScanState::Running);
+                assert_eq!(store.next_runnable(now_unix()).unwrap().unwrap().id, ids[0]);
+            } else {
+                assert_eq!(failed, vec![ids[0]]);
+                assert_eq!(scan.state, ScanState::Failed);
+                assert_eq!(
+                    scan.error.as_deref(),
+                    Some("step \"home the arm\" crashed the daemon 3 times")
+                );
+                assert_eq!(store.steps(ids[0]).unwrap()[0].state, StepState::Pending);
+            }
+        }
+        // The queue goes on with the next scan; a further start counts nothing more.
+        assert_eq!(store.next_runnable(now_unix()).unwrap().unwrap().id, ids[1]);
+        assert!(store.count_crashes(3).unwrap().is_empty());
         std::fs::remove_dir_all(dir).unwrap();
     }
 

@@ -30,11 +30,14 @@ pub struct Bounds {
     /// Shutter range of the camera, seconds.
     pub shutter_min_s: f64,
     pub shutter_max_s: f64,
+    /// Most steps one request may queue (`max_steps_per_request`).
+    pub max_steps: usize,
 }
 
 /// Most θL of one scan.
 const MAX_THETA_L: usize = 181;
-/// Most exposures of one bracket.
+/// Most exposures of one bracket; an automatic bracket counts as this many captures
+/// per θL against `max_steps_per_request`.
 const MAX_BRACKET: usize = 32;
 /// Most scans one sweep may queue.
 pub const MAX_SWEEP_SCANS: usize = 1000;
@@ -90,14 +93,17 @@ fn theta_list(field: &str, value: Option<&Value>, limits: Limits) -> Result<Vec<
                 ),
             ));
         }
-        // Directories are named with one decimal: angles must differ there too.
-        if out
-            .iter()
-            .any(|t| format!("{t:.1}") == format!("{theta:.1}"))
-        {
-            return Err(invalid(&f, format!("{theta} is listed twice")));
+        // Directories are named with one decimal: angles must differ there, compared
+        // as numbers (0 and -0.0, or 0.04 and -0.04, are one angle).
+        let tenths = |t: f64| (t * 10.0).round() + 0.0;
+        if let Some(same) = out.iter().find(|t| tenths(**t) == tenths(theta)) {
+            return Err(invalid(
+                &f,
+                format!("{theta} is listed twice (as {same} before, to 0.1°)"),
+            ));
         }
-        out.push(theta);
+        // -0.0 is stored as 0.
+        out.push(theta + 0.0);
     }
     Ok(out)
 }
@@ -157,12 +163,40 @@ pub fn scan_request(body: &Value, bounds: &Bounds) -> Result<ScanPlan, FieldErro
     let sample = sample_name("sample", map.get("sample"))?;
     let theta_l = theta_list("theta_l", map.get("theta_l"), bounds.limits)?;
     let (shutter_s, auto_bracket) = bracket(map.get("bracket"), bounds)?;
-    Ok(ScanPlan {
+    let plan = ScanPlan {
         sample,
         theta_l,
         shutter_s,
         auto_bracket,
-    })
+    };
+    let steps = step_count(&plan.theta_l, &plan.shutter_s, auto_bracket);
+    if steps > bounds.max_steps {
+        return Err(invalid(
+            if auto_bracket {
+                "theta_l"
+            } else {
+                "bracket.shutter_s"
+            },
+            format!(
+                "the scan would queue {steps} steps, more than max_steps_per_request = {}",
+                bounds.max_steps
+            ),
+        ));
+    }
+    Ok(plan)
+}
+
+/// Steps one scan queues, counting an automatic bracket as [`MAX_BRACKET`] captures per
+/// θL (they are planned when each θL is metered).
+fn step_count(theta_l: &[f64], shutter_s: &[f64], auto_bracket: bool) -> usize {
+    let captures = if auto_bracket {
+        MAX_BRACKET
+    } else {
+        shutter_s.len()
+    };
+    // Home, then per θL: move, meter (auto), captures, HDR; then extract and the fits.
+    let per_theta = 2 + usize::from(auto_bracket) + captures;
+    1 + theta_l.len() * per_theta + 1 + super::plan::FIT_MODELS.len()
 }
 
 /// A checked sweep: its scans in queue order and its start time (Unix seconds).
@@ -209,14 +243,43 @@ pub fn sweep_request(body: &Value, bounds: &Bounds) -> Result<SweepPlan, FieldEr
             .ok_or_else(|| invalid("repeats", "must be a whole number from 1"))?
             as usize,
     };
-    let total = samples.len() * sets.len() * repeats;
-    if total > MAX_SWEEP_SCANS {
-        return Err(invalid(
-            "repeats",
-            format!("the sweep would queue {total} scans, more than {MAX_SWEEP_SCANS}"),
-        ));
-    }
     let (shutter_s, auto_bracket) = bracket(map.get("bracket"), bounds)?;
+    // Checked before anything is expanded: the field named is the one whose size made
+    // the request too large (the θL sets alone, then × samples, then × repeats).
+    let set_steps: usize = sets
+        .iter()
+        .map(|set| step_count(set, &shutter_s, auto_bracket))
+        .sum();
+    let round_scans = samples.len() * sets.len();
+    let total = round_scans * repeats;
+    let total_steps = set_steps * samples.len() * repeats;
+    let sizes = format!(
+        "{} samples × {} θL sets × {repeats} repeats",
+        samples.len(),
+        sets.len()
+    );
+    for (field, scans, steps) in [
+        ("theta_l_sets", sets.len(), set_steps),
+        ("samples", round_scans, set_steps * samples.len()),
+        ("repeats", total, total_steps),
+    ] {
+        if scans > MAX_SWEEP_SCANS {
+            return Err(invalid(
+                field,
+                format!("{sizes} would queue {total} scans, more than {MAX_SWEEP_SCANS}"),
+            ));
+        }
+        if steps > bounds.max_steps {
+            return Err(invalid(
+                field,
+                format!(
+                    "{sizes} would queue {total_steps} steps, more than \
+                     max_steps_per_request = {}",
+                    bounds.max_steps
+                ),
+            ));
+        }
+    }
     let start_at = match map.get("start_at") {
         None | Some(Value::Null) => None,
         Some(v) => {
@@ -278,6 +341,7 @@ mod tests {
             },
             shutter_min_s: 1.0 / 4000.0,
             shutter_max_s: 30.0,
+            max_steps: 10_000,
         }
     }
 
@@ -324,6 +388,15 @@ mod tests {
             field_of(json!({"sample": "g", "theta_l": [-20, -20]})),
             "theta_l[1]"
         );
+        // Compared as numbers: 0 and -0.0 are one angle, as are -0.04 and 0.04.
+        assert_eq!(
+            field_of(json!({"sample": "g", "theta_l": [0, -0.0]})),
+            "theta_l[1]"
+        );
+        assert_eq!(
+            field_of(json!({"sample": "g", "theta_l": [-0.04, 0.04]})),
+            "theta_l[1]"
+        );
         let bracket = |b: Value| field_of(json!({"sample": "g", "theta_l": [-20], "bracket": b}));
         assert_eq!(bracket(json!({"shutter_s": []})), "bracket.shutter_s");
         assert_eq!(
@@ -338,6 +411,36 @@ mod tests {
             "x"
         );
         assert_eq!(field_of(json!([1])), "body");
+    }
+
+    #[test]
+    fn too_large_requests_name_the_field_that_makes_them_too_large() {
+        let sweep = |body: Value| sweep_request(&body, &bounds()).unwrap_err();
+        let sets: Vec<Vec<f64>> = (0..40).map(|k| vec![-(k as f64)]).collect();
+        let names: Vec<String> = (0..20).map(|k| format!("s{k}")).collect();
+        // 40 one-angle sets of a 32-capture bracket: 40 × 38 = 1520 steps fit; × 20
+        // samples do not, whatever the repeats.
+        let bracket =
+            json!({"shutter_s": (1..=32).map(|k| f64::from(k) / 100.0).collect::<Vec<_>>()});
+        let err = sweep(
+            json!({"samples": names, "theta_l_sets": sets, "bracket": bracket, "repeats": 1}),
+        );
+        assert_eq!(err.field, "samples", "{err}");
+        assert!(err.message.contains("max_steps_per_request"), "{err}");
+        let err = sweep(
+            json!({"samples": ["a"], "theta_l_sets": sets, "bracket": bracket, "repeats": 7}),
+        );
+        assert_eq!(err.field, "repeats", "{err}");
+        let err = sweep(json!({"samples": names, "theta_l_sets": [[-20]], "repeats": 60}));
+        assert_eq!(err.field, "repeats", "{err}");
+        assert!(err.message.contains("scans"), "{err}");
+        let bounds = Bounds {
+            max_steps: 100,
+            ..bounds()
+        };
+        let many: Vec<f64> = (0..40).map(|k| -(k as f64)).collect();
+        let err = scan_request(&json!({"sample": "g", "theta_l": many}), &bounds).unwrap_err();
+        assert_eq!(err.field, "theta_l", "{err}");
     }
 
     #[test]

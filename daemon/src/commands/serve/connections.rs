@@ -1,0 +1,285 @@
+//! The HTTP server's connections (docs/ARCHITECTURE.md, "Limits and access"): each
+//! connection must send a request's headers within `header_timeout_s` and is closed
+//! once it has had no request in flight for `idle_timeout_s`; at most
+//! `max_connections` are open (fewer when the file-descriptor limit, raised to its hard
+//! maximum at start, leaves less than `reserved_fds` for the hardware, the database and
+//! the files). A new connection beyond the cap closes the connection idle the longest;
+//! with none idle it gets a 503 and is closed. So idle sockets cannot starve the daemon.
+
+use std::collections::HashMap;
+use std::future::Future;
+use std::pin::Pin;
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+use std::task::{Context, Poll};
+use std::time::{Duration, Instant};
+
+use axum::body::{Body, Bytes};
+use axum::Router;
+use hyper::body::Incoming;
+use hyper_util::rt::{TokioIo, TokioTimer};
+use tokio::net::{TcpListener, TcpStream};
+use tokio::sync::Notify;
+use tower::ServiceExt;
+
+use super::shared::lock;
+
+/// What the server enforces on connections.
+#[derive(Debug, Clone, Copy)]
+pub struct ConnectionLimits {
+    pub header_timeout: Duration,
+    pub idle_timeout: Duration,
+    /// Most open connections.
+    pub max_connections: usize,
+}
+
+/// Raises the soft file-descriptor limit to the hard one where allowed and returns
+/// the connections that fit beside `reserved` descriptors (at least 16).
+pub fn connections_within_fd_limit(wanted: usize, reserved: u64) -> usize {
+    let soft = raise_fd_limit();
+    let fit = soft.saturating_sub(reserved).max(16);
+    let cap = wanted.min(usize::try_from(fit).unwrap_or(usize::MAX));
+    if cap < wanted {
+        tracing::warn!(
+            "the file-descriptor limit is {soft}: at most {cap} connections \
+             ({reserved} descriptors kept for hardware, database and files)"
+        );
+    }
+    cap
+}
+
+/// The soft RLIMIT_NOFILE after raising it to the hard limit (capped at 2^20).
+fn raise_fd_limit() -> u64 {
+    let mut limit = libc::rlimit {
+        rlim_cur: 0,
+        rlim_max: 0,
+    };
+    // SAFETY: getrlimit and setrlimit only read and write the struct passed.
+    unsafe {
+        if libc::getrlimit(libc::RLIMIT_NOFILE, &mut limit) != 0 {
+            return 1024;
+        }
+        let target = limit.rlim_max.min(1 << 20);
+        if limit.rlim_cur < target {
+            let raised = libc::rlimit {
+                rlim_cur: target,
+                rlim_max: limit.rlim_max,
+            };
+            if libc::setrlimit(libc::RLIMIT_NOFILE, &raised) == 0 {
+                limit.rlim_cur = target;
+            }
+        }
+    }
+    limit.rlim_cur
+}
+
+/// One open connection as the registry sees it.
+struct Connection {
+    /// Requests in flight (a response body still streaming counts).
+    busy: AtomicUsize,
+    /// When the last request ended, or the connection opened (ms since the server
+    /// started).
+    idle_since_ms: AtomicU64,
+    close: Notify,
+}
+
+struct Registry {
+    started: Instant,
+    connections: Mutex<HashMap<u64, Arc<Connection>>>,
+}
+
+impl Registry {
+    fn now_ms(&self) -> u64 {
+        self.started.elapsed().as_millis() as u64
+    }
+
+    fn idle_for(&self, c: &Connection) -> Option<Duration> {
+        (c.busy.load(Ordering::Acquire) == 0).then(|| {
+            Duration::from_millis(
+                self.now_ms()
+                    .saturating_sub(c.idle_since_ms.load(Ordering::Acquire)),
+            )
+        })
+    }
+
+    /// Closes the connection idle the longest; false if none is idle.
+    fn evict_oldest_idle(&self) -> bool {
+        let connections = lock(&self.connections);
+        let oldest = connections
+            .values()
+            .filter_map(|c| self.idle_for(c).map(|idle| (idle, c)))
+            .max_by_key(|(idle, _)| *idle);
+        match oldest {
+            Some((_, c)) => {
+                c.close.notify_one();
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// Closes every connection idle longer than `timeout`.
+    fn close_idle(&self, timeout: Duration) {
+        for c in lock(&self.connections).values() {
+            if self.idle_for(c).is_some_and(|idle| idle >= timeout) {
+                c.close.notify_one();
+            }
+        }
+    }
+}
+
+/// Marks a request in flight on its connection until dropped (with the response body).
+struct Busy {
+    registry: Arc<Registry>,
+    connection: Arc<Connection>,
+}
+
+impl Busy {
+    fn new(registry: Arc<Registry>, connection: Arc<Connection>) -> Self {
+        connection.busy.fetch_add(1, Ordering::AcqRel);
+        Self {
+            registry,
+            connection,
+        }
+    }
+}
+
+impl Drop for Busy {
+    fn drop(&mut self) {
+        self.connection
+            .idle_since_ms
+            .store(self.registry.now_ms(), Ordering::Release);
+        self.connection.busy.fetch_sub(1, Ordering::AcqRel);
+    }
+}
+
+/// A response body that keeps its connection busy until it is sent or dropped.
+struct BusyBody {
+    inner: Body,
+    _busy: Busy,
+}
+
+impl http_body::Body for BusyBody {
+    type Data = Bytes;
+    type Error = axum::Error;
+
+    fn poll_frame(
+        mut self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+    ) -> Poll<Option<Result<http_body::Frame<Bytes>, axum::Error>>> {
+        Pin::new(&mut self.inner).poll_frame(cx)
+    }
+
+    fn is_end_stream(&self) -> bool {
+        self.inner.is_end_stream()
+    }
+
+    fn size_hint(&self) -> http_body::SizeHint {
+        self.inner.size_hint()
+    }
+}
+
+/// The answer to a connection beyond the cap when none can be closed.
+const BUSY_RESPONSE: &[u8] = b"HTTP/1.1 503 Service Unavailable\r\n\
+Content-Type: application/json\r\nContent-Length: 57\r\nConnection: close\r\n\r\n\
+{\"error\":\"too many open connections, try again shortly\"}\n";
+
+/// Serves `router` on `listener` under `limits` until `shutdown` completes.
+pub async fn serve(
+    listener: TcpListener,
+    router: Router,
+    limits: ConnectionLimits,
+    shutdown: impl Future<Output = ()>,
+) {
+    let registry = Arc::new(Registry {
+        started: Instant::now(),
+        connections: Mutex::new(HashMap::new()),
+    });
+    let reaper = {
+        let registry = registry.clone();
+        let period =
+            (limits.idle_timeout / 4).clamp(Duration::from_millis(50), Duration::from_secs(1));
+        tokio::spawn(async move {
+            loop {
+                tokio::time::sleep(period).await;
+                registry.close_idle(limits.idle_timeout);
+            }
+        })
+    };
+    tokio::pin!(shutdown);
+    let mut next_id = 0u64;
+    loop {
+        let accepted = tokio::select! {
+            accepted = listener.accept() => accepted,
+            () = &mut shutdown => break,
+        };
+        let stream = match accepted {
+            Ok((stream, _)) => stream,
+            Err(err) => {
+                // Out of descriptors (EMFILE/ENFILE) or a connection reset before accept:
+                // free an idle connection and wait a little rather than spin.
+                tracing::warn!("accept: {err}");
+                registry.evict_oldest_idle();
+                tokio::time::sleep(Duration::from_millis(50)).await;
+                continue;
+            }
+        };
+        let open = lock(&registry.connections).len();
+        if open >= limits.max_connections && !registry.evict_oldest_idle() {
+            let _ = stream.try_write(BUSY_RESPONSE);
+            continue;
+        }
+        next_id += 1;
+        let connection = Arc::new(Connection {
+            busy: AtomicUsize::new(0),
+            idle_since_ms: AtomicU64::new(registry.now_ms()),
+            close: Notify::new(),
+        });
+        lock(&registry.connections).insert(next_id, connection.clone());
+        tokio::spawn(serve_connection(
+            next_id,
+            stream,
+            router.clone(),
+            registry.clone(),
+            connection,
+            limits,
+        ));
+    }
+    reaper.abort();
+}
+
+async fn serve_connection(
+    id: u64,
+    stream: TcpStream,
+    router: Router,
+    registry: Arc<Registry>,
+    connection: Arc<Connection>,
+    limits: ConnectionLimits,
+) {
+    let service = {
+        let (registry, connection) = (registry.clone(), connection.clone());
+        hyper::service::service_fn(move |request: hyper::Request<Incoming>| {
+            let busy = Busy::new(registry.clone(), connection.clone());
+            let router = router.clone();
+            async move {
+                let response = router.oneshot(request.map(Body::new)).await?;
+                Ok::<_, std::convert::Infallible>(
+                    response.map(|inner| BusyBody { inner, _busy: busy }),
+                )
+            }
+        })
+    };
+    let served = hyper::server::conn::http1::Builder::new()
+        .timer(TokioTimer::new())
+        .header_read_timeout(limits.header_timeout)
+        .serve_connection(TokioIo::new(stream), service);
+    tokio::pin!(served);
+    tokio::select! {
+        _ = served.as_mut() => {}
+        () = connection.close.notified() => {
+            served.as_mut().graceful_shutdown();
+            let _ = tokio::time::timeout(Duration::from_secs(5), served).await;
+        }
+    }
+    lock(&registry.connections).remove(&id);
+}
