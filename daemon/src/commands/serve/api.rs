@@ -17,7 +17,6 @@ use axum::{Json, Router};
 use futures_util::{Stream, StreamExt};
 use serde::Deserialize;
 use serde_json::{json, Value};
-use tokio::io::AsyncReadExt;
 use tokio_stream::wrappers::BroadcastStream;
 
 use super::config::Config;
@@ -162,7 +161,7 @@ fn reads_need_token(config: &Config) -> bool {
 /// any IP address (a DNS-rebinding page always sends a name, never an address).
 fn host_allowed(config: &Config, host: &str) -> bool {
     let name = match host.strip_prefix('[') {
-        Some(rest) => rest.split(']').next().unwrap_or(""),
+        Some(rest) => rest.split_once(']').map_or("", |(name, _)| name),
         None => host.rsplit_once(':').map_or(host, |(name, _)| name),
     };
     if name.eq_ignore_ascii_case("localhost")
@@ -815,15 +814,15 @@ async fn get_file(
     let dir = shared.scan_dir(id);
     let not_found = || ApiError::not_found(format!("file {rel:?} of scan {id}"));
     let wanted = rel.clone();
-    let (path, file) = tokio::task::spawn_blocking(move || open_under(&dir, &wanted))
-        .await
-        .map_err(internal)?
-        .ok_or_else(not_found)?;
-    let mut bytes = Vec::new();
-    tokio::fs::File::from_std(file)
-        .read_to_end(&mut bytes)
-        .await
-        .map_err(internal)?;
+    let (path, bytes) = tokio::task::spawn_blocking(move || {
+        let (path, mut file) = open_under(&dir, &wanted)?;
+        let mut bytes = Vec::new();
+        std::io::Read::read_to_end(&mut file, &mut bytes).ok()?;
+        Some((path, bytes))
+    })
+    .await
+    .map_err(internal)?
+    .ok_or_else(not_found)?;
     Ok(([(header::CONTENT_TYPE, content_type(&path))], bytes).into_response())
 }
 
