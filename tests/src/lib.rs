@@ -228,6 +228,11 @@ impl Daemon {
         }
     }
 
+    /// The daemon's process id.
+    pub fn pid(&self) -> u32 {
+        self.child.id()
+    }
+
     /// Lines the daemon printed before it listened.
     pub fn startup_output(&self) -> &[String] {
         &self.stdout_lines
@@ -366,16 +371,21 @@ pub fn raw_http(addr: &str, request: &str) -> (u16, String) {
 /// A daemon configuration on emulators with the small scene, `time_scale` for both
 /// devices, fast retries and fault injection on.
 pub fn emulator_config(time_scale: f64) -> String {
+    emulator_config_scaled(time_scale, time_scale)
+}
+
+/// As [`emulator_config`], with the arm's and the camera's time scales apart.
+pub fn emulator_config_scaled(arm_time_scale: f64, camera_time_scale: f64) -> String {
     format!(
         r#"
 [arm]
 kind = "emulator"
-time_scale = {time_scale}
+time_scale = {arm_time_scale}
 
 [camera]
 kind = "emulator"
 scene = "SCENE"
-time_scale = {time_scale}
+time_scale = {camera_time_scale}
 
 [retry]
 attempts = 3

@@ -422,16 +422,21 @@ async fn control(
     verb: &'static str,
 ) -> ApiResult<Json<Value>> {
     let scan = load_scan(&shared, id).await?;
-    let changed = db(&shared, move |shared, store| {
-        let changed = store.transition(id, from, to, None)?;
-        shared.publish(store, id)?;
-        Ok(changed)
+    // The state that refused the control, read in the same call (another control may
+    // have changed it since `scan` was loaded).
+    let refused_in = db(&shared, move |shared, store| {
+        if store.transition(id, from, to, None)? {
+            shared.publish(store, id)?;
+            Ok(None)
+        } else {
+            Ok(Some(store.scan(id)?.map_or(scan.state, |s| s.state)))
+        }
     })
     .await?;
-    if !changed {
+    if let Some(state) = refused_in {
         return Err(ApiError::new(
             StatusCode::CONFLICT,
-            format!("scan {id} is {}: cannot {verb} it", scan.state.as_str()),
+            format!("scan {id} is {}: cannot {verb} it", state.as_str()),
         ));
     }
     shared.wake();

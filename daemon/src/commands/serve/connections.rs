@@ -3,13 +3,14 @@
 //! once it has had no request in flight for `idle_timeout_s`; at most
 //! `max_connections` are open (fewer when the file-descriptor limit, raised to its hard
 //! maximum at start, leaves less than `reserved_fds` for the hardware, the database and
-//! the files). A new connection beyond the cap closes the connection idle the longest;
-//! with none idle it gets a 503 and is closed. So idle sockets cannot starve the daemon.
+//! the files). A new connection beyond the cap is accepted once the connection idle
+//! the longest has closed (the next ones wait in the listen backlog meanwhile); with
+//! none idle it gets a 503 and is closed. So idle sockets cannot starve the daemon.
 
 use std::collections::HashMap;
 use std::future::Future;
 use std::pin::Pin;
-use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::task::{Context, Poll};
 use std::time::{Duration, Instant};
@@ -80,12 +81,28 @@ struct Connection {
     /// When the last request ended, or the connection opened (ms since the server
     /// started).
     idle_since_ms: AtomicU64,
+    /// Told to close (evicted, or idle too long), not yet gone.
+    closing: AtomicBool,
     close: Notify,
+}
+
+impl Connection {
+    /// Tells the connection to close once its requests are answered; false if it
+    /// already was.
+    fn close(&self) -> bool {
+        let first = !self.closing.swap(true, Ordering::AcqRel);
+        if first {
+            self.close.notify_one();
+        }
+        first
+    }
 }
 
 struct Registry {
     started: Instant,
     connections: Mutex<HashMap<u64, Arc<Connection>>>,
+    /// Signalled when a connection has gone.
+    removed: Notify,
 }
 
 impl Registry {
@@ -93,8 +110,10 @@ impl Registry {
         self.started.elapsed().as_millis() as u64
     }
 
+    /// How long `c` has been idle; `None` while it has a request in flight or is
+    /// closing.
     fn idle_for(&self, c: &Connection) -> Option<Duration> {
-        (c.busy.load(Ordering::Acquire) == 0).then(|| {
+        (c.busy.load(Ordering::Acquire) == 0 && !c.closing.load(Ordering::Acquire)).then(|| {
             Duration::from_millis(
                 self.now_ms()
                     .saturating_sub(c.idle_since_ms.load(Ordering::Acquire)),
@@ -109,12 +128,33 @@ impl Registry {
             .values()
             .filter_map(|c| self.idle_for(c).map(|idle| (idle, c)))
             .max_by_key(|(idle, _)| *idle);
-        match oldest {
-            Some((_, c)) => {
-                c.close.notify_one();
-                true
+        oldest.is_some_and(|(_, c)| c.close())
+    }
+
+    /// Open connections, and how many of them are closing.
+    fn counts(&self) -> (usize, usize) {
+        let connections = lock(&self.connections);
+        let closing = connections
+            .values()
+            .filter(|c| c.closing.load(Ordering::Acquire))
+            .count();
+        (connections.len(), closing)
+    }
+
+    /// Waits until fewer than `max` connections are open, closing the connection idle
+    /// the longest (one more each 100 ms that none goes) and waiting for it to go, so
+    /// the process never holds more than `max` (and the one being accepted). Returns
+    /// false if every connection is busy and none is closing.
+    async fn make_room(&self, max: usize) -> bool {
+        loop {
+            let (open, closing) = self.counts();
+            if open < max {
+                return true;
             }
-            None => false,
+            if !self.evict_oldest_idle() && closing == 0 {
+                return false;
+            }
+            let _ = tokio::time::timeout(Duration::from_millis(100), self.removed.notified()).await;
         }
     }
 
@@ -122,7 +162,7 @@ impl Registry {
     fn close_idle(&self, timeout: Duration) {
         for c in lock(&self.connections).values() {
             if self.idle_for(c).is_some_and(|idle| idle >= timeout) {
-                c.close.notify_one();
+                c.close();
             }
         }
     }
@@ -194,6 +234,7 @@ pub async fn serve(
     let registry = Arc::new(Registry {
         started: Instant::now(),
         connections: Mutex::new(HashMap::new()),
+        removed: Notify::new(),
     });
     let reaper = {
         let registry = registry.clone();
@@ -224,8 +265,13 @@ pub async fn serve(
                 continue;
             }
         };
-        let open = lock(&registry.connections).len();
-        if open >= limits.max_connections && !registry.evict_oldest_idle() {
+        // Room for it: meanwhile the next connections wait in the listen backlog,
+        // which costs the process no descriptor.
+        let room = tokio::select! {
+            room = registry.make_room(limits.max_connections) => room,
+            () = &mut shutdown => break,
+        };
+        if !room {
             let _ = stream.try_write(BUSY_RESPONSE);
             continue;
         }
@@ -233,6 +279,7 @@ pub async fn serve(
         let connection = Arc::new(Connection {
             busy: AtomicUsize::new(0),
             idle_since_ms: AtomicU64::new(registry.now_ms()),
+            closing: AtomicBool::new(false),
             close: Notify::new(),
         });
         lock(&registry.connections).insert(next_id, connection.clone());
@@ -282,4 +329,127 @@ async fn serve_connection(
         }
     }
     lock(&registry.connections).remove(&id);
+    registry.removed.notify_one();
+}
+
+#[cfg(test)]
+mod tests {
+    use std::io::{ErrorKind, Read, Write};
+    use std::net::{SocketAddr, TcpStream as Client};
+
+    use axum::routing::get;
+
+    use super::*;
+
+    /// Serves `/ok` (answered at once) and `/busy` (a body that never ends) under
+    /// `limits`, on a runtime of its own; returns the address.
+    fn start(limits: ConnectionLimits) -> SocketAddr {
+        let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        listener.set_nonblocking(true).unwrap();
+        let addr = listener.local_addr().unwrap();
+        std::thread::spawn(move || {
+            let runtime = tokio::runtime::Builder::new_multi_thread()
+                .worker_threads(1)
+                .enable_all()
+                .build()
+                .unwrap();
+            runtime.block_on(async move {
+                let never = || futures_util::stream::pending::<Result<Bytes, std::io::Error>>();
+                let router = Router::new().route("/ok", get(|| async { "ok" })).route(
+                    "/busy",
+                    get(move || async move { Body::from_stream(never()) }),
+                );
+                let listener = TcpListener::from_std(listener).unwrap();
+                serve(listener, router, limits, std::future::pending()).await;
+            });
+        });
+        addr
+    }
+
+    fn connect(addr: SocketAddr) -> Client {
+        let client = Client::connect(addr).unwrap();
+        // Generous: the machine may be loaded; a closed connection answers at once.
+        client
+            .set_read_timeout(Some(Duration::from_secs(30)))
+            .unwrap();
+        client
+    }
+
+    /// Sends `GET path` (keep-alive) and reads the answer's head (and the 2-byte
+    /// body of `/ok`).
+    fn get_head(client: &mut Client, path: &str) -> String {
+        write!(client, "GET {path} HTTP/1.1\r\nHost: x\r\n\r\n").unwrap();
+        let mut head = Vec::new();
+        let mut byte = [0u8];
+        while !head.ends_with(b"\r\n\r\n") && client.read(&mut byte).unwrap() == 1 {
+            head.push(byte[0]);
+        }
+        if path == "/ok" {
+            client.read_exact(&mut [0u8; 2]).unwrap();
+        }
+        String::from_utf8_lossy(&head).into_owned()
+    }
+
+    /// Whether the server closed the connection (within the read timeout).
+    fn closed_by_server(client: &mut Client) -> bool {
+        let mut buffer = [0u8; 256];
+        loop {
+            match client.read(&mut buffer) {
+                Ok(0) => return true,
+                Ok(_) => continue,
+                Err(err) if err.kind() == ErrorKind::ConnectionReset => return true,
+                Err(_) => return false,
+            }
+        }
+    }
+
+    #[test]
+    fn beyond_the_cap_the_longest_idle_connection_closes_and_busy_ones_mean_503() {
+        let addr = start(ConnectionLimits {
+            header_timeout: Duration::from_secs(30),
+            idle_timeout: Duration::from_secs(600),
+            max_connections: 2,
+        });
+        let mut idle = connect(addr);
+        assert!(get_head(&mut idle, "/ok").starts_with("HTTP/1.1 200"));
+        let mut busy = connect(addr);
+        assert!(get_head(&mut busy, "/busy").starts_with("HTTP/1.1 200"));
+        // A third connection: the idle one makes room for it.
+        let mut third = connect(addr);
+        assert!(get_head(&mut third, "/ok").starts_with("HTTP/1.1 200"));
+        assert!(closed_by_server(&mut idle));
+        // Both open connections busy: the next one is told so and closed.
+        assert!(get_head(&mut third, "/busy").starts_with("HTTP/1.1 200"));
+        let mut refused = connect(addr);
+        let mut answer = String::new();
+        refused.read_to_string(&mut answer).unwrap();
+        assert!(answer.starts_with("HTTP/1.1 503"), "{answer}");
+        assert!(answer.contains("too many open connections"), "{answer}");
+    }
+
+    #[test]
+    fn slow_headers_and_idle_connections_are_closed() {
+        let addr = start(ConnectionLimits {
+            header_timeout: Duration::from_millis(300),
+            idle_timeout: Duration::from_millis(300),
+            max_connections: 16,
+        });
+        let mut slow = connect(addr);
+        slow.write_all(b"GET /ok HTTP/1.1\r\nHost: x\r\n").unwrap();
+        let mut silent = connect(addr);
+        let mut idle = connect(addr);
+        assert!(get_head(&mut idle, "/ok").starts_with("HTTP/1.1 200"));
+        for (what, client) in [
+            ("slow", &mut slow),
+            ("silent", &mut silent),
+            ("idle", &mut idle),
+        ] {
+            assert!(closed_by_server(client), "{what} connection left open");
+        }
+        // A busy connection stays open past both timeouts.
+        let mut busy = connect(addr);
+        assert!(get_head(&mut busy, "/busy").starts_with("HTTP/1.1 200"));
+        busy.set_read_timeout(Some(Duration::from_secs(2))).unwrap();
+        assert!(!closed_by_server(&mut busy));
+    }
 }

@@ -153,9 +153,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 }
 
 async fn serve(shared: Arc<Shared>) -> anyhow::Result<()> {
-    let listener = tokio::net::TcpListener::bind(shared.config.bind)
-        .await
-        .with_context(|| format!("binding {}", shared.config.bind))?;
+    let listener =
+        listen(shared.config.bind).with_context(|| format!("binding {}", shared.config.bind))?;
     let addr = listener.local_addr()?;
     println!("gonio: listening on http://{addr}");
     std::io::stdout().flush()?;
@@ -193,6 +192,23 @@ async fn serve(shared: Arc<Shared>) -> anyhow::Result<()> {
     };
     connections::serve(listener, api::router(shared), limits, stop).await;
     Ok(())
+}
+
+/// Connections the kernel queues while the server is busy (or at its connection cap:
+/// a connection beyond it waits there, costing no descriptor).
+const LISTEN_BACKLOG: u32 = 1024;
+
+/// A listener on `addr` with a backlog of [`LISTEN_BACKLOG`] (tokio's `bind` asks for
+/// 128, which a burst of connections fills while the server is loaded).
+fn listen(addr: std::net::SocketAddr) -> std::io::Result<tokio::net::TcpListener> {
+    let socket = if addr.is_ipv4() {
+        tokio::net::TcpSocket::new_v4()?
+    } else {
+        tokio::net::TcpSocket::new_v6()?
+    };
+    socket.set_reuseaddr(true)?;
+    socket.bind(addr)?;
+    socket.listen(LISTEN_BACKLOG)
 }
 
 /// The bearer token: from the config, else `GONIO_TOKEN`, else the one in DATA/token,
