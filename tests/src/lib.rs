@@ -238,6 +238,29 @@ impl Daemon {
         &self.stdout_lines
     }
 
+    /// Sends `signal` (e.g. `libc::SIGTERM`) and waits for the process to end;
+    /// returns its exit status (panics if it is still running after 60 s).
+    pub fn stop_with(mut self, signal: i32) -> std::process::ExitStatus {
+        let pid = i32::try_from(self.child.id()).expect("a pid");
+        // SAFETY: kill only sends a signal to our own child process.
+        assert_eq!(
+            unsafe { libc::kill(pid, signal) },
+            0,
+            "signalling the daemon"
+        );
+        let deadline = Instant::now() + Duration::from_secs(60);
+        loop {
+            if let Some(status) = self.child.try_wait().expect("waiting for the daemon") {
+                return status;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "the daemon did not stop on signal {signal}"
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
     /// Kills the process with SIGKILL (no chance to clean up) and waits for it.
     pub fn kill9(mut self) {
         self.child.kill().expect("killing the daemon");

@@ -194,20 +194,34 @@ fn controls_from_eight_threads_during_a_scan_never_error() {
     std::fs::remove_dir_all(dir).ok();
 }
 
-/// Waits until the journal of scan `id` shows a step for which `which` holds as
-/// started.
-fn wait_step_started(daemon: &Daemon, id: i64, which: impl Fn(&Value) -> bool) {
-    daemon.wait_for(
+/// Waits until the journal of scan `id` has a step record (state, times, step) for
+/// which `which` holds, and returns it.
+fn wait_step(daemon: &Daemon, id: i64, which: impl Fn(&Value) -> bool) -> Value {
+    let steps = daemon.wait_for(
         &format!("/api/scans/{id}/steps"),
         Duration::from_secs(60),
         |steps| {
-            steps.as_array().is_some_and(|steps| {
-                steps
-                    .iter()
-                    .any(|s| s["state"] == "started" && which(&s["step"]))
-            })
+            steps
+                .as_array()
+                .is_some_and(|steps| steps.iter().any(&which))
         },
     );
+    steps
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|s| which(s))
+        .unwrap()
+        .clone()
+}
+
+/// Waits until this daemon has started the move step of scan `id` (a started time
+/// other than `before`, which an earlier daemon left), and returns its started time.
+fn wait_move_started(daemon: &Daemon, id: i64, before: &Value) -> Value {
+    wait_step(daemon, id, |s| {
+        s["step"]["kind"] == "move" && s["state"] == "started" && s["started"] != *before
+    })["started"]
+        .clone()
 }
 
 /// A capture overwritten by one whose header claims 4 billion × 5 pixels: the HDR step
@@ -221,8 +235,8 @@ fn a_corrupt_frame_fails_its_step_and_the_queue_goes_on() {
     let first = post_scan(&daemon, &[-20.0], &[0.01, 2.0]);
     // Pause during the second capture (it completes, the merge waits), corrupt the
     // first frame, resume.
-    wait_step_started(&daemon, first, |step| {
-        step["kind"] == "capture" && step["index"] == 1
+    wait_step(&daemon, first, |s| {
+        s["step"]["kind"] == "capture" && s["step"]["index"] == 1 && s["state"] == "started"
     });
     assert_eq!(
         daemon
@@ -286,9 +300,10 @@ fn a_step_that_kills_the_daemon_three_times_fails_its_scan() {
     let mut daemon = Daemon::start(&dir, &emulator_config(1.0));
     let looping = post_scan(&daemon, &[-80.0], &[0.5]);
     let next = post_scan(&daemon, &[-20.0], &[0.5]);
+    let mut started = Value::Null;
     for _ in 0..3 {
         // The move step is recorded as started before the arm moves (≥ 4 s here).
-        wait_step_started(&daemon, looping, |step| step["kind"] == "move");
+        started = wait_move_started(&daemon, looping, &started);
         daemon.kill9();
         daemon = Daemon::restart(&dir);
     }
@@ -300,6 +315,26 @@ fn a_step_that_kills_the_daemon_three_times_fails_its_scan() {
     );
     let next = daemon.wait_state(next, &["done", "failed"], Duration::from_secs(120));
     assert_eq!(next["state"], "done", "{next}");
+    std::fs::remove_dir_all(dir).ok();
+}
+
+/// A daemon stopped on SIGINT or SIGTERM while a step runs has not crashed: three such
+/// stops during the same step leave its scan to complete at the next start.
+#[test]
+fn stops_on_a_signal_are_not_crashes() {
+    let dir = temp_dir("harden-stops");
+    // Slow motion: the move step lasts long enough to be stopped in.
+    let mut daemon = Daemon::start(&dir, &emulator_config_scaled(1.0, 0.05));
+    let id = post_scan(&daemon, &[-80.0], &[0.01]);
+    let mut started = Value::Null;
+    for signal in [libc::SIGINT, libc::SIGTERM, libc::SIGINT] {
+        started = wait_move_started(&daemon, id, &started);
+        let status = daemon.stop_with(signal);
+        assert!(status.success(), "stopped on signal {signal}: {status}");
+        daemon = Daemon::restart(&dir);
+    }
+    let scan = daemon.wait_state(id, &["done", "failed"], Duration::from_secs(120));
+    assert_eq!(scan["state"], "done", "{scan}");
     std::fs::remove_dir_all(dir).ok();
 }
 
@@ -433,6 +468,20 @@ fn host_content_type_error_shape_and_scheme() {
     let answer = daemon.post("/api/scans", &json!({"sample": "g", "theta_l": [0, -0.0]}));
     assert_eq!(answer.status, 422);
     assert_eq!(answer.json["field"], "theta_l[1]");
+
+    // The API's description lists these answers where they apply.
+    let paths = &daemon.get("/api/openapi.json").json["paths"];
+    for (path, method, code) in [
+        ("/api/scans", "post", "415"),
+        ("/api/scans", "post", "421"),
+        ("/api/scans", "get", "421"),
+        ("/api/scans/{id}/events", "get", "503"),
+    ] {
+        assert!(
+            paths[path][method]["responses"][code].is_object(),
+            "{method} {path} lacks {code}"
+        );
+    }
     std::fs::remove_dir_all(dir).ok();
 }
 

@@ -27,7 +27,7 @@ use gonio_drivers::ArmState;
 use tokio::sync::broadcast;
 
 use config::Config;
-use shared::{ArmView, CameraView, HardwareStatus, Shared};
+use shared::{lock, ArmView, CameraView, HardwareStatus, Shared};
 use store::Store;
 
 /// How long requests in flight may take to finish once a stop is asked for.
@@ -93,6 +93,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let boot = runner_store.begin_boot()?;
     let api_store = Store::open(&db_path)?;
     let devices = hardware::open(&config)?;
+    // Listening before the queue runs: a daemon that cannot bind has started no step.
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
+    let listener = {
+        let _context = runtime.enter();
+        listen(config.bind).with_context(|| format!("binding {}", config.bind))?
+    };
 
     let (wake_tx, wake_rx) = mpsc::channel();
     let (events, _) = broadcast::channel(256);
@@ -142,19 +152,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         })
         .context("starting the hardware watch thread")?;
 
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .context("starting the async runtime")?;
-    let served = runtime.block_on(serve(shared));
+    let served = runtime.block_on(serve(shared.clone(), listener));
+    // Stopped on a signal: the step the hardware is in is redone at the next start,
+    // and is not counted as a crash.
+    lock(&shared.store).record_clean_stop(shared.boot)?;
     drop(lock_file);
     served
 }
 
-async fn serve(shared: Arc<Shared>) -> anyhow::Result<()> {
-    let listener =
-        listen(shared.config.bind).with_context(|| format!("binding {}", shared.config.bind))?;
+async fn serve(shared: Arc<Shared>, listener: tokio::net::TcpListener) -> anyhow::Result<()> {
     let addr = listener.local_addr()?;
     println!("gonio: listening on http://{addr}");
     std::io::stdout().flush()?;
@@ -186,8 +192,8 @@ async fn serve(shared: Arc<Shared>) -> anyhow::Result<()> {
     let stop = async {
         let signal = crate::interrupt::wait_for_signal().await;
         tracing::info!(
-            "{signal}: stopping; a scan in progress resumes at its first unfinished step \
-             when gonio serve starts again"
+            "{signal}: stopping; the step in progress runs again (not counted as a \
+             crash) when gonio serve starts again"
         );
     };
     connections::serve(listener, api::router(shared), limits, stop).await;

@@ -224,6 +224,7 @@ CREATE TABLE IF NOT EXISTS steps (
     finished TEXT,
     result TEXT,
     crashes INTEGER NOT NULL DEFAULT 0,
+    started_boot INTEGER,
     PRIMARY KEY (scan_id, idx)
 );
 CREATE TABLE IF NOT EXISTS hardware_log (
@@ -257,28 +258,49 @@ impl Store {
         conn.pragma_update(None, "foreign_keys", "ON")?;
         conn.execute_batch(SCHEMA)?;
         // Databases made before steps counted the daemon deaths they were running at.
-        let has_crashes: bool = conn.query_row(
-            "SELECT COUNT(*) FROM pragma_table_info('steps') WHERE name = 'crashes'",
-            [],
-            |r| r.get::<_, i64>(0).map(|n| n > 0),
-        )?;
-        if !has_crashes {
-            conn.execute_batch("ALTER TABLE steps ADD COLUMN crashes INTEGER NOT NULL DEFAULT 0")?;
+        for (column, definition) in [
+            ("crashes", "INTEGER NOT NULL DEFAULT 0"),
+            ("started_boot", "INTEGER"),
+        ] {
+            let present: bool = conn.query_row(
+                "SELECT COUNT(*) FROM pragma_table_info('steps') WHERE name = ?1",
+                [column],
+                |r| r.get::<_, i64>(0).map(|n| n > 0),
+            )?;
+            if !present {
+                conn.execute_batch(&format!(
+                    "ALTER TABLE steps ADD COLUMN {column} {definition}"
+                ))?;
+            }
         }
         Ok(Self { conn })
     }
 
-    /// Called once at start, before anything runs: every step left `started` was
-    /// running when the previous daemon died, and counts that death. A step that has
-    /// now been running at `limit` deaths fails its scan ("... crashed the daemon N
-    /// times") and goes back to pending, so the queue goes on (and a resume retries
-    /// it). Returns the ids of the scans failed.
+    /// Called once at start, after [`Store::begin_boot`] and before anything runs.
+    /// Unless the previous daemon stopped cleanly ([`Store::record_clean_stop`]), it
+    /// died, and each step it had started and not finished counts that death. A step
+    /// that has now been running at `limit` deaths fails its scan ("... crashed the
+    /// daemon N times") and goes back to pending, so the queue goes on (and a resume
+    /// retries it). Returns the ids of the scans failed.
     pub fn count_crashes(&mut self, limit: u32) -> Result<Vec<i64>, StoreError> {
         let tx = self.write_transaction()?;
-        tx.execute(
-            "UPDATE steps SET crashes = crashes + 1 WHERE state = 'started'",
-            [],
-        )?;
+        let died: Option<i64> = tx
+            .query_row(
+                "SELECT value - 1 FROM meta WHERE key = 'boot' AND NOT EXISTS
+                   (SELECT 1 FROM meta clean WHERE clean.key = 'clean_stop'
+                    AND clean.value = meta.value - 1)",
+                [],
+                |r| r.get(0),
+            )
+            .optional()?;
+        if let Some(previous) = died {
+            // Steps started before boots were recorded on them count too.
+            tx.execute(
+                "UPDATE steps SET crashes = crashes + 1
+                 WHERE state = 'started' AND (started_boot = ?1 OR started_boot IS NULL)",
+                [previous],
+            )?;
+        }
         let looping: Vec<(i64, u32, String, u32)> = {
             let mut stmt = tx.prepare(
                 "SELECT scan_id, idx, step, crashes FROM steps
@@ -323,6 +345,17 @@ impl Store {
         Ok(self
             .conn
             .transaction_with_behavior(TransactionBehavior::Immediate)?)
+    }
+
+    /// Records that daemon start `boot` is stopping on request (a signal), so the
+    /// steps it leaves unfinished do not count as crashes at the next start.
+    pub fn record_clean_stop(&mut self, boot: i64) -> Result<(), StoreError> {
+        self.conn.execute(
+            "INSERT INTO meta (key, value) VALUES ('clean_stop', ?1)
+             ON CONFLICT(key) DO UPDATE SET value = excluded.value",
+            [boot],
+        )?;
+        Ok(())
     }
 
     /// Counts a daemon start and returns its number.
@@ -601,10 +634,13 @@ impl Store {
             .collect()
     }
 
-    /// Records that a step begins (committed before the hardware is touched).
+    /// Records that a step begins (committed before the hardware is touched), in this
+    /// daemon start.
     pub fn step_started(&mut self, scan_id: i64, index: u32) -> Result<(), StoreError> {
         self.conn.execute(
-            "UPDATE steps SET state = ?3, started = ?4 WHERE scan_id = ?1 AND idx = ?2",
+            "UPDATE steps SET state = ?3, started = ?4,
+                started_boot = (SELECT value FROM meta WHERE key = 'boot')
+             WHERE scan_id = ?1 AND idx = ?2",
             params![scan_id, index, StepState::Started.as_str(), now_rfc3339()],
         )?;
         Ok(())
@@ -798,9 +834,17 @@ mod tests {
         std::fs::remove_dir_all(dir).unwrap();
     }
 
-    #[test]
-    fn a_step_running_at_three_deaths_fails_its_scan_and_the_queue_goes_on() {
-        let (dir, mut store) = temp_store("crashes");
+    /// A daemon start as `gonio serve` makes it: open, count the start, count the
+    /// crashes (limit 3). Returns the store, the boot and the scans failed.
+    fn restart(dir: &std::path::Path) -> (Store, i64, Vec<i64>) {
+        let mut store = Store::open(&dir.join("gonio.sqlite")).unwrap();
+        let boot = store.begin_boot().unwrap();
+        let failed = store.count_crashes(3).unwrap();
+        (store, boot, failed)
+    }
+
+    /// A running scan of two queued ones, and the index of its first step.
+    fn running_scan(store: &mut Store) -> (Vec<i64>, u32) {
         let new = || NewScan {
             plan: plan(),
             sweep_id: None,
@@ -811,12 +855,20 @@ mod tests {
             .transition(ids[0], &[ScanState::Queued], ScanState::Running, None)
             .unwrap());
         let first = store.steps(ids[0]).unwrap()[0].index;
+        (ids, first)
+    }
+
+    #[test]
+    fn a_step_running_at_three_deaths_fails_its_scan_and_the_queue_goes_on() {
+        let (dir, mut store) = temp_store("crashes");
+        store.begin_boot().unwrap();
+        let (ids, first) = running_scan(&mut store);
         for death in 1..=3 {
             // The step starts, then the daemon dies: the next start counts it.
             store.step_started(ids[0], first).unwrap();
             drop(store);
-            store = Store::open(&dir.join("gonio.sqlite")).unwrap();
-            let failed = store.count_crashes(3).unwrap();
+            let failed;
+            (store, _, failed) = restart(&dir);
             let scan = store.scan(ids[0]).unwrap().unwrap();
             if death < 3 {
                 assert!(failed.is_empty());
@@ -834,7 +886,44 @@ mod tests {
         }
         // The queue goes on with the next scan; a further start counts nothing more.
         assert_eq!(store.next_runnable(now_unix()).unwrap().unwrap().id, ids[1]);
-        assert!(store.count_crashes(3).unwrap().is_empty());
+        drop(store);
+        assert!(restart(&dir).2.is_empty());
+        std::fs::remove_dir_all(dir).unwrap();
+    }
+
+    #[test]
+    fn clean_stops_and_deaths_a_step_did_not_run_at_are_not_its_crashes() {
+        let (dir, mut store) = temp_store("clean-stops");
+        let mut boot = store.begin_boot().unwrap();
+        let (ids, first) = running_scan(&mut store);
+        // Stopped on a signal three times while the step ran: no crash.
+        for _ in 0..3 {
+            store.step_started(ids[0], first).unwrap();
+            store.record_clean_stop(boot).unwrap();
+            drop(store);
+            let failed;
+            (store, boot, failed) = restart(&dir);
+            assert!(failed.is_empty());
+        }
+        // Two deaths while it ran, each followed by a death in a start that had not
+        // run it again yet: two crashes, not four.
+        for _ in 0..2 {
+            store.step_started(ids[0], first).unwrap();
+            for _ in 0..2 {
+                drop(store);
+                let failed;
+                (store, _, failed) = restart(&dir);
+                assert!(failed.is_empty());
+            }
+        }
+        let scan = store.scan(ids[0]).unwrap().unwrap();
+        assert_eq!(scan.state, ScanState::Running);
+        // The third death it runs at fails it.
+        store.step_started(ids[0], first).unwrap();
+        drop(store);
+        let (store, _, failed) = restart(&dir);
+        assert_eq!(failed, vec![ids[0]]);
+        drop(store);
         std::fs::remove_dir_all(dir).unwrap();
     }
 
