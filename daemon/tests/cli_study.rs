@@ -293,3 +293,66 @@ fn tradeoff_on_a_tiny_scene_costs_every_setting_and_recommends_one() {
     assert_eq!(summary["scene"], "tiny");
     assert!(summary["recommended"]["total_s"].as_f64().unwrap() > 0.0);
 }
+
+/// The study's results are written in a temporary directory and renamed into place:
+/// nothing temporary is left, a stale result is replaced whole, and a result whose name
+/// is taken by a directory fails the study naming it, removing nothing it did not create.
+#[test]
+fn study_outputs_are_renamed_into_place_and_nothing_else_is_removed() {
+    let dir = tempfile::tempdir().unwrap();
+    write_inputs(dir.path(), &material());
+    let out = dir.path().join("study");
+    std::fs::create_dir_all(out.join("fig9_delta_e_uv.svg")).unwrap();
+    std::fs::write(out.join("notes.txt"), "mine").unwrap();
+    let p = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    let study = || {
+        gonio(&[
+            "study",
+            &p("samples.csv"),
+            "--reference",
+            &p("reference.csv"),
+            "--out",
+            out.to_str().unwrap(),
+            "--no-nelder-mead",
+        ])
+    };
+    let leftovers = || -> Vec<String> {
+        std::fs::read_dir(&out)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|name| name.starts_with('.'))
+            .collect()
+    };
+    let result = study();
+    assert!(!result.status.success());
+    let stderr = text(&result.stderr);
+    assert!(
+        stderr.contains("fig9_delta_e_uv.svg") && stderr.contains("directory"),
+        "{stderr}"
+    );
+    assert!(out.join("fig9_delta_e_uv.svg").is_dir());
+    assert_eq!(
+        std::fs::read_to_string(out.join("notes.txt")).unwrap(),
+        "mine"
+    );
+    assert_eq!(leftovers(), Vec::<String>::new());
+
+    std::fs::remove_dir(out.join("fig9_delta_e_uv.svg")).unwrap();
+    std::fs::write(out.join("combinations.csv"), "stale").unwrap();
+    let result = study();
+    assert!(result.status.success(), "{}", text(&result.stderr));
+    let table = std::fs::read_to_string(out.join("combinations.csv")).unwrap();
+    // The header and a row per combination and variant, not the stale text.
+    assert!(
+        !table.contains("stale") && table.lines().count() == 7,
+        "{table}"
+    );
+    assert!(std::fs::read_to_string(out.join("fig9_delta_e_uv.svg"))
+        .unwrap()
+        .starts_with("<svg"));
+    assert_eq!(
+        std::fs::read_to_string(out.join("notes.txt")).unwrap(),
+        "mine"
+    );
+    assert_eq!(leftovers(), Vec::<String>::new());
+}

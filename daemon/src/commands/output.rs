@@ -2,12 +2,14 @@
 //! written to a temporary file beside it and renamed over it, so a reader never sees
 //! half of it; anything else (a device such as `/dev/null`, a FIFO) is written in place.
 //! On failure only the temporary is removed: a path the command did not create is
-//! never removed.
+//! never removed. A command that writes a directory of results through a writer it
+//! does not control (`gonio study`) writes them into a temporary directory first, then
+//! each file into place as above.
 
 use std::fs;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
-use anyhow::{anyhow, bail};
+use anyhow::{anyhow, bail, Context};
 use gonio_drivers::atomic_file::write_atomically_with;
 
 /// Writes `path` through `write`, which gets the path to write to.
@@ -24,4 +26,36 @@ pub fn write_output<E: std::fmt::Display>(
     // A link to a regular file: replace the file it names, not the link.
     let target = fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf());
     write_atomically_with(&target, write).map_err(|e| failed(e.to_string()))
+}
+
+/// Writes files into directory `out` (created if missing) through `write`, which gets a
+/// fresh temporary directory inside `out` and returns the paths it wrote there; each is
+/// then moved into place by [`write_output`]. The temporary directory is removed
+/// whatever happens. Returns the paths in `out`.
+pub fn write_output_files(
+    out: &Path,
+    write: impl FnOnce(&Path) -> anyhow::Result<Vec<PathBuf>>,
+) -> anyhow::Result<Vec<PathBuf>> {
+    fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let work = tempfile::Builder::new()
+        .prefix(".gonio-output-")
+        .suffix(".partial")
+        .tempdir_in(out)
+        .with_context(|| format!("creating a temporary directory in {}", out.display()))?;
+    let written = write(work.path())?;
+    written
+        .iter()
+        .map(|path| {
+            let name = path.strip_prefix(work.path()).with_context(|| {
+                format!("{} was written outside {}", path.display(), out.display())
+            })?;
+            let target = out.join(name);
+            if let Some(parent) = target.parent() {
+                fs::create_dir_all(parent)
+                    .with_context(|| format!("creating {}", parent.display()))?;
+            }
+            write_output(&target, |temp| fs::rename(path, temp))?;
+            Ok(target)
+        })
+        .collect()
 }

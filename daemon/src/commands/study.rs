@@ -13,6 +13,8 @@ use gonio_processing::study::{self, StudyOptions, Variant};
 
 use crate::progress;
 
+use super::output::write_output_files;
+
 /// Which roughness forms a study fits.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum RoughnessChoice {
@@ -105,7 +107,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     bar.finish_and_clear();
     let report = report.with_context(|| format!("studying {}", args.samples.display()))?;
-    let written = study::write_outputs(&report, &args.out, &args.name)?;
+    let written = write_output_files(&args.out, |dir| {
+        Ok(study::write_outputs(&report, dir, &args.name)?)
+    })?;
 
     println!(
         "{} θL, {} combinations × {} variants = {} fits on {} samples, scored at {} points in {:.2} s",

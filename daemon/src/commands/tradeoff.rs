@@ -38,6 +38,7 @@ use gonio_processing::samples::Sample;
 use gonio_processing::study::figures::{xy_svg, Mark, XyPlot, XySeries};
 use gonio_processing::study::{pareto::pareto_front, subsample};
 
+use super::output::write_output;
 use crate::interrupt::RemoveOnInterrupt;
 use crate::progress;
 use scan::{discover, extract_subset, spread, Position};
@@ -386,7 +387,7 @@ fn write_outputs(
         let _ = writeln!(csv, "{head},{scores}");
     }
     let csv_path = out.join("tradeoff.csv");
-    std::fs::write(&csv_path, csv).with_context(|| format!("writing {}", csv_path.display()))?;
+    write_output(&csv_path, |temp| std::fs::write(temp, csv))?;
 
     let series_of = |method: FitMethod| XySeries {
         name: format!("{method} fits"),
@@ -426,7 +427,7 @@ fn write_outputs(
         series,
     };
     let svg_path = out.join("pareto.svg");
-    xy_svg(&svg_path, &plot)?;
+    write_output(&svg_path, |temp| xy_svg(temp, &plot))?;
 
     let row_json = |r: &Row| {
         serde_json::json!({
@@ -463,8 +464,8 @@ fn write_outputs(
             .collect::<Vec<_>>(),
     });
     let json_path = out.join("tradeoff.json");
-    std::fs::write(&json_path, serde_json::to_string_pretty(&summary)? + "\n")
-        .with_context(|| format!("writing {}", json_path.display()))?;
+    let json = serde_json::to_string_pretty(&summary)? + "\n";
+    write_output(&json_path, |temp| std::fs::write(temp, json))?;
 
     println!(
         "{}: {} settings ({} failed); Pareto front:",
