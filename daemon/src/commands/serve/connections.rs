@@ -316,18 +316,21 @@ async fn serve_connection(
             }
         })
     };
-    let served = hyper::server::conn::http1::Builder::new()
-        .timer(TokioTimer::new())
-        .header_read_timeout(limits.header_timeout)
-        .serve_connection(TokioIo::new(stream), service);
-    tokio::pin!(served);
+    let mut served = Box::pin(
+        hyper::server::conn::http1::Builder::new()
+            .timer(TokioTimer::new())
+            .header_read_timeout(limits.header_timeout)
+            .serve_connection(TokioIo::new(stream), service),
+    );
     tokio::select! {
         _ = served.as_mut() => {}
         () = connection.close.notified() => {
             served.as_mut().graceful_shutdown();
-            let _ = tokio::time::timeout(Duration::from_secs(5), served).await;
+            let _ = tokio::time::timeout(Duration::from_secs(5), served.as_mut()).await;
         }
     }
+    // The socket is closed before the connection leaves the count.
+    drop(served);
     lock(&registry.connections).remove(&id);
     registry.removed.notify_one();
 }
