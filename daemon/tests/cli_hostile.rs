@@ -30,6 +30,16 @@ fn capture_from_seed(dir: &Path, name: &str) -> PathBuf {
     image
 }
 
+/// `gonio hdr --out OUT INPUT`.
+fn hdr(out: &Path, input: &Path) -> Output {
+    gonio(&[
+        "hdr".as_ref(),
+        "--out".as_ref(),
+        out.as_os_str(),
+        input.as_os_str(),
+    ])
+}
+
 /// A failure: exit 1, one line on stderr starting `error:`, no panic text.
 fn assert_clean_failure(output: &Output, needle: &str) -> String {
     let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
@@ -57,12 +67,7 @@ fn hdr_refuses_crafted_captures_with_one_line() {
     ] {
         let image = capture_from_seed(dir.path(), name);
         let out = dir.path().join(format!("{name}.exr"));
-        let output = gonio(&[
-            "hdr".as_ref(),
-            "--out".as_ref(),
-            out.as_os_str(),
-            image.as_os_str(),
-        ]);
+        let output = hdr(&out, &image);
         let needle = if needle == "frame.tiff" { name } else { needle };
         assert_clean_failure(&output, needle);
         assert!(!out.exists(), "{name}: no output on failure");
@@ -76,21 +81,11 @@ fn hdr_refuses_crafted_captures_with_one_line() {
     )
     .unwrap();
     let out = dir.path().join("raw.exr");
-    let output = gonio(&[
-        "hdr".as_ref(),
-        "--out".as_ref(),
-        out.as_os_str(),
-        raw.as_os_str(),
-    ]);
+    let output = hdr(&out, &raw);
     assert_clean_failure(&output, "max_frame_pixels");
     // Raw data the decoder cannot read: rawler's own caught panics print nothing.
     std::fs::write(&raw, seed("raw", "truncated_dng")).unwrap();
-    let output = gonio(&[
-        "hdr".as_ref(),
-        "--out".as_ref(),
-        out.as_os_str(),
-        raw.as_os_str(),
-    ]);
+    let output = hdr(&out, &raw);
     assert_clean_failure(&output, "huge.dng");
 }
 
@@ -104,12 +99,7 @@ fn a_failed_output_never_removes_a_path_it_did_not_create() {
     let link = dir.path().join("out.exr");
     if full.exists() {
         std::os::unix::fs::symlink(full, &link).unwrap();
-        let output = gonio(&[
-            "hdr".as_ref(),
-            "--out".as_ref(),
-            link.as_os_str(),
-            image.as_os_str(),
-        ]);
+        let output = hdr(&link, &image);
         assert_clean_failure(&output, "out.exr");
         assert!(std::fs::symlink_metadata(&link)
             .unwrap()
@@ -121,23 +111,13 @@ fn a_failed_output_never_removes_a_path_it_did_not_create() {
     let target = dir.path().join("a-directory");
     std::fs::create_dir(&target).unwrap();
     std::fs::write(target.join("keep"), b"x").unwrap();
-    let output = gonio(&[
-        "hdr".as_ref(),
-        "--out".as_ref(),
-        target.as_os_str(),
-        image.as_os_str(),
-    ]);
+    let output = hdr(&target, &image);
     assert_clean_failure(&output, "directory");
     assert!(target.join("keep").is_file());
     // A regular file is replaced whole, with no temporary left beside it.
     let good = dir.path().join("good.exr");
     std::fs::write(&good, b"old").unwrap();
-    let output = gonio(&[
-        "hdr".as_ref(),
-        "--out".as_ref(),
-        good.as_os_str(),
-        image.as_os_str(),
-    ]);
+    let output = hdr(&good, &image);
     assert!(
         output.status.success(),
         "{}",

@@ -61,20 +61,28 @@ fn write_inputs(dir: &Path, p: &Params) {
     std::fs::write(dir.join("reference.csv"), csv).unwrap();
 }
 
+/// `gonio study` on the inputs of [`write_inputs`] in `dir`, writing to `out`.
+fn study(dir: &Path, out: &Path, extra: &[&str]) -> Output {
+    let p = |name: &str| dir.join(name).to_str().unwrap().to_string();
+    let (samples, reference) = (p("samples.csv"), p("reference.csv"));
+    let mut args = vec![
+        "study",
+        &samples,
+        "--reference",
+        &reference,
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend(extra);
+    gonio(&args)
+}
+
 #[test]
 fn study_writes_tables_and_figures_with_near_zero_error_for_the_true_model() {
     let dir = tempfile::tempdir().unwrap();
     write_inputs(dir.path(), &material());
     let out = dir.path().join("study");
-    let p = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
-    let result = gonio(&[
-        "study",
-        &p("samples.csv"),
-        "--reference",
-        &p("reference.csv"),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let result = study(dir.path(), &out, &[]);
     assert!(result.status.success(), "{}", text(&result.stderr));
     let stdout = text(&result.stdout);
     assert!(
@@ -304,18 +312,7 @@ fn study_outputs_are_renamed_into_place_and_nothing_else_is_removed() {
     let out = dir.path().join("study");
     std::fs::create_dir_all(out.join("fig9_delta_e_uv.svg")).unwrap();
     std::fs::write(out.join("notes.txt"), "mine").unwrap();
-    let p = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
-    let study = || {
-        gonio(&[
-            "study",
-            &p("samples.csv"),
-            "--reference",
-            &p("reference.csv"),
-            "--out",
-            out.to_str().unwrap(),
-            "--no-nelder-mead",
-        ])
-    };
+    let study = || study(dir.path(), &out, &["--no-nelder-mead"]);
     let leftovers = || -> Vec<String> {
         std::fs::read_dir(&out)
             .unwrap()

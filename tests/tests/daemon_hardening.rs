@@ -215,13 +215,26 @@ fn wait_step(daemon: &Daemon, id: i64, which: impl Fn(&Value) -> bool) -> Value 
         .clone()
 }
 
-/// Waits until this daemon has started the move step of scan `id` (a started time
-/// other than `before`, which an earlier daemon left), and returns its started time.
-fn wait_move_started(daemon: &Daemon, id: i64, before: &Value) -> Value {
-    wait_step(daemon, id, |s| {
-        s["step"]["kind"] == "move" && s["state"] == "started" && s["started"] != *before
-    })["started"]
-        .clone()
+/// Three times: waits until this daemon has started the move step of scan `id` (the
+/// arm then moves for ≥ 4 s at time scale 1), ends it with `end` (given the round), and
+/// starts a new daemon on `dir`, which it returns. A move step an earlier daemon left
+/// started does not count: its started time must be new.
+fn end_three_times_during_the_move(
+    dir: &std::path::Path,
+    mut daemon: Daemon,
+    id: i64,
+    end: impl Fn(Daemon, usize),
+) -> Daemon {
+    let mut before = Value::Null;
+    for round in 0..3 {
+        let step = wait_step(&daemon, id, |s| {
+            s["step"]["kind"] == "move" && s["state"] == "started" && s["started"] != before
+        });
+        before = step["started"].clone();
+        end(daemon, round);
+        daemon = Daemon::restart(dir);
+    }
+    daemon
 }
 
 /// A capture overwritten by one whose header claims 4 billion × 5 pixels: the HDR step
@@ -297,16 +310,10 @@ fn gonio_fuzz_seed(target: &str, name: &str) -> std::path::PathBuf {
 fn a_step_that_kills_the_daemon_three_times_fails_its_scan() {
     let dir = temp_dir("harden-crashloop");
     // Slow motion: the move step lasts long enough to be killed in.
-    let mut daemon = Daemon::start(&dir, &emulator_config(1.0));
+    let daemon = Daemon::start(&dir, &emulator_config(1.0));
     let looping = post_scan(&daemon, &[-80.0], &[0.5]);
     let next = post_scan(&daemon, &[-20.0], &[0.5]);
-    let mut started = Value::Null;
-    for _ in 0..3 {
-        // The move step is recorded as started before the arm moves (≥ 4 s here).
-        started = wait_move_started(&daemon, looping, &started);
-        daemon.kill9();
-        daemon = Daemon::restart(&dir);
-    }
+    let daemon = end_three_times_during_the_move(&dir, daemon, looping, |daemon, _| daemon.kill9());
     let scan = daemon.get(&format!("/api/scans/{looping}")).json;
     assert_eq!(scan["state"], "failed", "{scan}");
     assert_eq!(
@@ -324,15 +331,13 @@ fn a_step_that_kills_the_daemon_three_times_fails_its_scan() {
 fn stops_on_a_signal_are_not_crashes() {
     let dir = temp_dir("harden-stops");
     // Slow motion: the move step lasts long enough to be stopped in.
-    let mut daemon = Daemon::start(&dir, &emulator_config_scaled(1.0, 0.05));
+    let daemon = Daemon::start(&dir, &emulator_config_scaled(1.0, 0.05));
     let id = post_scan(&daemon, &[-80.0], &[0.01]);
-    let mut started = Value::Null;
-    for signal in [libc::SIGINT, libc::SIGTERM, libc::SIGINT] {
-        started = wait_move_started(&daemon, id, &started);
+    let daemon = end_three_times_during_the_move(&dir, daemon, id, |daemon, round| {
+        let signal = [libc::SIGINT, libc::SIGTERM, libc::SIGINT][round];
         let status = daemon.stop_with(signal);
         assert!(status.success(), "stopped on signal {signal}: {status}");
-        daemon = Daemon::restart(&dir);
-    }
+    });
     let scan = daemon.wait_state(id, &["done", "failed"], Duration::from_secs(120));
     assert_eq!(scan["state"], "done", "{scan}");
     std::fs::remove_dir_all(dir).ok();
