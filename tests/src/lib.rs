@@ -238,9 +238,9 @@ impl Daemon {
         &self.stdout_lines
     }
 
-    /// Sends `signal` (e.g. `libc::SIGTERM`) and waits for the process to end;
-    /// returns its exit status (panics if it is still running after 60 s).
-    pub fn stop_with(mut self, signal: i32) -> std::process::ExitStatus {
+    /// Sends `signal` (e.g. `libc::SIGTERM`) and waits for the process to end, at most
+    /// `timeout`; returns its exit status.
+    pub fn stop_with(mut self, signal: i32, timeout: Duration) -> std::process::ExitStatus {
         let pid = i32::try_from(self.child.id()).expect("a pid");
         // SAFETY: kill only sends a signal to our own child process.
         assert_eq!(
@@ -248,14 +248,14 @@ impl Daemon {
             0,
             "signalling the daemon"
         );
-        let deadline = Instant::now() + Duration::from_secs(60);
+        let deadline = Instant::now() + timeout;
         loop {
             if let Some(status) = self.child.try_wait().expect("waiting for the daemon") {
                 return status;
             }
             assert!(
                 Instant::now() < deadline,
-                "the daemon did not stop on signal {signal}"
+                "the daemon still runs {timeout:?} after signal {signal}"
             );
             std::thread::sleep(Duration::from_millis(50));
         }
@@ -268,23 +268,8 @@ impl Daemon {
     }
 
     /// Sends SIGINT (Ctrl-C) and waits for the process to end, at most `timeout`.
-    pub fn interrupt(mut self, timeout: Duration) -> std::process::ExitStatus {
-        let sent = Command::new("kill")
-            .args(["-INT", &self.child.id().to_string()])
-            .status()
-            .expect("running kill");
-        assert!(sent.success(), "kill -INT failed");
-        let deadline = Instant::now() + timeout;
-        loop {
-            if let Some(status) = self.child.try_wait().expect("waiting for the daemon") {
-                return status;
-            }
-            assert!(
-                Instant::now() < deadline,
-                "the daemon still runs {timeout:?} after SIGINT"
-            );
-            std::thread::sleep(Duration::from_millis(50));
-        }
+    pub fn interrupt(self, timeout: Duration) -> std::process::ExitStatus {
+        self.stop_with(libc::SIGINT, timeout)
     }
 
     fn request(&self, method: &str, path: &str, token: Option<&str>, body: Option<&str>) -> Answer {

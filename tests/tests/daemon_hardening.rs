@@ -335,7 +335,7 @@ fn stops_on_a_signal_are_not_crashes() {
     let id = post_scan(&daemon, &[-80.0], &[0.01]);
     let daemon = end_three_times_during_the_move(&dir, daemon, id, |daemon, round| {
         let signal = [libc::SIGINT, libc::SIGTERM, libc::SIGINT][round];
-        let status = daemon.stop_with(signal);
+        let status = daemon.stop_with(signal, Duration::from_secs(60));
         assert!(status.success(), "stopped on signal {signal}: {status}");
     });
     let scan = daemon.wait_state(id, &["done", "failed"], Duration::from_secs(120));

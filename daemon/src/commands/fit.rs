@@ -8,8 +8,8 @@ use gonio_processing::brdf::{Model, Roughness};
 use gonio_processing::fit::{self, FitMethod, FitOptions};
 use gonio_processing::samples::{self, Sample};
 
-use crate::progress;
 use super::output::write_output;
+use crate::progress;
 
 /// Two θL values closer than this (degrees) are the same illumination direction.
 const THETA_L_MATCH_DEG: f64 = 1e-6;

@@ -5,8 +5,8 @@ use std::path::PathBuf;
 use gonio_processing::capture::Frame;
 use gonio_processing::hdr::{self, MergeMethod, MergeOptions, SATURATED, UNDEREXPOSED};
 
-use crate::progress;
 use super::output::write_output;
+use crate::progress;
 
 /// Merge method on the command line.
 #[derive(Clone, Copy, clap::ValueEnum)]

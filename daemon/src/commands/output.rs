@@ -12,6 +12,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{anyhow, bail, Context};
 use gonio_drivers::atomic_file::write_atomically_with;
 
+use crate::interrupt::RemoveOnInterrupt;
+
 /// Writes `path` through `write`, which gets the path to write to.
 pub fn write_output<E: std::fmt::Display>(
     path: &Path,
@@ -31,7 +33,7 @@ pub fn write_output<E: std::fmt::Display>(
 /// Writes files into directory `out` (created if missing) through `write`, which gets a
 /// fresh temporary directory inside `out` and returns the paths it wrote there; each is
 /// then moved into place by [`write_output`]. The temporary directory is removed
-/// whatever happens. Returns the paths in `out`.
+/// whatever happens (on Ctrl-C too). Returns the paths in `out`.
 pub fn write_output_files(
     out: &Path,
     write: impl FnOnce(&Path) -> anyhow::Result<Vec<PathBuf>>,
@@ -42,6 +44,7 @@ pub fn write_output_files(
         .suffix(".partial")
         .tempdir_in(out)
         .with_context(|| format!("creating a temporary directory in {}", out.display()))?;
+    let _removed_on_interrupt = RemoveOnInterrupt::new(work.path());
     let written = write(work.path())?;
     written
         .iter()

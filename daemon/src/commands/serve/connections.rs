@@ -224,12 +224,15 @@ const BUSY_RESPONSE: &[u8] = b"HTTP/1.1 503 Service Unavailable\r\n\
 Content-Type: application/json\r\nContent-Length: 57\r\nConnection: close\r\n\r\n\
 {\"error\":\"too many open connections, try again shortly\"}\n";
 
-/// Serves `router` on `listener` under `limits` until `shutdown` completes.
+/// Serves `router` on `listener` under `limits` until `shutdown` completes; then tells
+/// every connection to close once its request in flight is answered, and waits for them
+/// at most `grace` (an event stream never ends by itself).
 pub async fn serve(
     listener: TcpListener,
     router: Router,
     limits: ConnectionLimits,
     shutdown: impl Future<Output = ()>,
+    grace: Duration,
 ) {
     let registry = Arc::new(Registry {
         started: Instant::now(),
@@ -293,6 +296,24 @@ pub async fn serve(
         ));
     }
     reaper.abort();
+    drop(listener);
+    for connection in lock(&registry.connections).values() {
+        connection.close();
+    }
+    let drained = tokio::time::timeout(grace, async {
+        loop {
+            let open = lock(&registry.connections).len();
+            if open == 0 {
+                break;
+            }
+            let _ =
+                tokio::time::timeout(Duration::from_millis(100), registry.removed.notified()).await;
+        }
+    })
+    .await;
+    if drained.is_err() {
+        tracing::info!("closing the connections still open");
+    }
 }
 
 async fn serve_connection(
@@ -363,7 +384,8 @@ mod tests {
                     get(move || async move { Body::from_stream(never()) }),
                 );
                 let listener = TcpListener::from_std(listener).unwrap();
-                serve(listener, router, limits, std::future::pending()).await;
+                let grace = Duration::ZERO;
+                serve(listener, router, limits, std::future::pending(), grace).await;
             });
         });
         addr

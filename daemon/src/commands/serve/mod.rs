@@ -192,11 +192,11 @@ async fn serve(shared: Arc<Shared>, listener: tokio::net::TcpListener) -> anyhow
     let stop = async {
         let signal = crate::interrupt::wait_for_signal().await;
         tracing::info!(
-            "{signal}: stopping; the step in progress runs again (not counted as a \
-             crash) when gonio serve starts again"
+            "{signal}: stopping; a scan in progress resumes at its first unfinished step \
+             when gonio serve starts again"
         );
     };
-    connections::serve(listener, api::router(shared), limits, stop).await;
+    connections::serve(listener, api::router(shared), limits, stop, SHUTDOWN_GRACE).await;
     Ok(())
 }
 
