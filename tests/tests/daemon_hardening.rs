@@ -349,7 +349,8 @@ fn stops_on_a_signal_are_not_crashes() {
 fn an_amplifying_sweep_is_refused_before_anything_is_inserted() {
     let dir = temp_dir("harden-amplify");
     let daemon = Daemon::start(&dir, &emulator_config(0.01));
-    let theta: Vec<f64> = (0..181).map(|k| -(k as f64) / 2.0).collect();
+    // The 179 angles -1°, -1.5°, ..., -90° (the default soft limits).
+    let theta: Vec<f64> = (2..=180).map(|k| -(k as f64) / 2.0).collect();
     let sweep =
         |samples: &[String]| json!({"samples": samples, "theta_l_sets": [theta], "repeats": 1000});
     // Each sample name adds 9 bytes (`"s00000",`): as many as fit in 60,000 bytes.
@@ -366,7 +367,7 @@ fn an_amplifying_sweep_is_refused_before_anything_is_inserted() {
     assert!(ms < 2000.0, "refusal took {ms} ms");
     assert_eq!(daemon.get("/api/scans").json, json!([]));
     eprintln!(
-        "a {}-byte sweep for {} samples × 181 θL × 1000 repeats refused in {ms:.1} ms",
+        "a {}-byte sweep for {} samples × 179 θL × 1000 repeats refused in {ms:.1} ms",
         body.to_string().len(),
         samples.len()
     );
@@ -408,7 +409,12 @@ fn the_files_route_follows_no_link() {
 #[test]
 fn host_content_type_error_shape_and_scheme() {
     let dir = temp_dir("harden-http");
-    let daemon = Daemon::start(&dir, &emulator_config(0.01));
+    // θL up to 0 allowed, so that 0 and -0.0 can be asked for.
+    let config = format!(
+        "{}\n[limits]\nmin_deg = -90.0\nmax_deg = 0.0\n",
+        emulator_config(0.01)
+    );
+    let daemon = Daemon::start(&dir, &config);
     let addr = daemon.addr();
     let request = |head: &str, body: &str| {
         raw_http(
