@@ -344,7 +344,7 @@ fn stops_on_a_signal_are_not_crashes() {
 }
 
 /// The largest body allowed (64 KB) asking for billions of steps is refused with 422
-/// naming the field, fast, and nothing is queued.
+/// naming the field, and nothing is queued (how fast is printed, as a figure).
 #[test]
 fn an_amplifying_sweep_is_refused_before_anything_is_inserted() {
     let dir = temp_dir("harden-amplify");
@@ -364,7 +364,6 @@ fn an_amplifying_sweep_is_refused_before_anything_is_inserted() {
     assert_eq!(answer.status, 422, "{:?}", answer.json);
     // One round of the samples × θL sets already exceeds the bound: not `repeats`.
     assert_eq!(answer.json["field"], "samples", "{:?}", answer.json);
-    assert!(ms < 2000.0, "refusal took {ms} ms");
     assert_eq!(daemon.get("/api/scans").json, json!([]));
     eprintln!(
         "a {}-byte sweep for {} samples × 179 θL × 1000 repeats refused in {ms:.1} ms",
