@@ -895,8 +895,10 @@ mod tests {
 
     #[test]
     fn host_check_answers_the_bind_address_localhost_and_allowed_names() {
-        let mut config = Config::default();
-        config.allowed_hosts = vec!["gonio.lab".into()];
+        let mut config = Config {
+            allowed_hosts: vec!["gonio.lab".into()],
+            ..Config::default()
+        };
         for host in [
             "127.0.0.1:8080",
             "localhost",
