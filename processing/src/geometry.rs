@@ -1,18 +1,28 @@
-//! Cylinder setup geometry: which (φ, θi, θr) each pixel column sees.
+//! Cylinder setup geometry in 3D: which surface point, normal, light and viewing
+//! directions each pixel sees (docs/ARCHITECTURE.md, "Angles and geometry").
 //!
-//! World frame: the horizontal plane through the cylinder axis, origin on the axis,
-//! angles counter-clockwise from +x. The camera sits at angle 0 (on +x) at
-//! `camera_distance_mm` looking at the axis; the point light at angle θL at
-//! `light_distance_mm`. A surface point at azimuth φ has its normal at angle φ.
-//! Image columns: pixel `u` has its centre at coordinate `u`; a column right of the
-//! principal point (u > cx) looks toward +y, i.e. toward larger φ.
+//! Frame: origin on the cylinder axis at the height of the camera centre; x parallel to
+//! the camera's optical axis, from the cylinder toward the camera; z up, the axis the
+//! light arm turns about; y = z × x (toward the image's right). The camera centre is at
+//! (`camera_distance_mm`, `camera_offset_mm`, 0) looking along −x; pixel (u, v), with
+//! its centre at coordinates (u, v), sees along (−f, (u − cx)·p, −(v − cy)·p) (columns
+//! right of the principal point look toward +y, rows below it look down). The point
+//! light is at `light_distance_mm` from the origin, in the plane z = 0, at the angle
+//! θL + `arm_zero_offset_deg` counter-clockwise from +x. The cylinder's axis passes
+//! through the origin along (0, sin τ, cos τ), τ = `cylinder_tilt_deg` (its top leans
+//! toward +y). A surface point's azimuth φ is that of its normal, counter-clockwise
+//! from +x about the cylinder's axis.
 
 use serde::{Deserialize, Serialize};
 
-/// The physical setup of one scan. Lengths in millimetres, pixel pitch in micrometres.
+use crate::brdf::Cosines;
+
+/// The physical setup of one scan. Lengths in millimetres, pixel pitch in micrometres,
+/// angles in degrees; see the module documentation for the frame.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Setup {
     pub cylinder_radius_mm: f64,
+    /// Distance of the camera centre from the cylinder axis along the optical axis.
     pub camera_distance_mm: f64,
     pub light_distance_mm: f64,
     pub focal_length_mm: f64,
@@ -22,10 +32,27 @@ pub struct Setup {
     /// Principal point column in pixels; `None` means the image centre, (width − 1)/2.
     #[serde(default)]
     pub principal_point_x: Option<f64>,
+    /// Principal point row in pixels; `None` means the image centre, (height − 1)/2.
+    #[serde(default)]
+    pub principal_point_y: Option<f64>,
     /// Centre row of the sample strip.
     pub sample_row: u32,
     /// Centre row of the white-reference strip.
     pub white_row: u32,
+    /// Reflectance of the white reference strip (1 = perfect reflecting diffuser);
+    /// `None`: not recorded (extraction then takes 1).
+    #[serde(default)]
+    pub white_reflectance: Option<f64>,
+    /// Sideways offset of the camera centre (+y, toward the image's right) from the
+    /// plane through the cylinder axis parallel to the optical axis.
+    #[serde(default)]
+    pub camera_offset_mm: f64,
+    /// Tilt of the cylinder axis about the optical axis, its top toward +y.
+    #[serde(default)]
+    pub cylinder_tilt_deg: f64,
+    /// The light is at θL plus this (the arm's zero is off by this much).
+    #[serde(default)]
+    pub arm_zero_offset_deg: f64,
 }
 
 /// What one pixel column sees on the cylinder, angles in degrees.
@@ -36,6 +63,24 @@ pub struct SurfaceAngles {
     pub theta_r: f64,
 }
 
+/// What one pixel sees on the cylinder: angles in degrees, the true 3D cosines, and the
+/// point light's irradiance up to its intensity.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PixelGeometry {
+    /// Azimuth of the point's normal about the cylinder axis.
+    pub phi: f64,
+    /// Signed in-plane angles (specular at θr = θi) of the light and viewing directions
+    /// projected on the cylinder's cross-section plane through the point.
+    pub theta_i: f64,
+    pub theta_r: f64,
+    /// n·l, n·v, n·h, v·h of the true 3D directions.
+    pub cosines: Cosines,
+    /// cos θi / |L − P|², mm⁻² (0 where the point is not lit).
+    pub irradiance: f64,
+    /// Position of the point along the cylinder axis, mm (0 at the camera's height).
+    pub height_mm: f64,
+}
+
 /// Why a [`Setup`] cannot be used.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum GeometryError {
@@ -43,6 +88,13 @@ pub enum GeometryError {
     NotPositive { field: &'static str, value: f64 },
     #[error("setup field `{field}` must be finite, got {value}")]
     NotFinite { field: &'static str, value: f64 },
+    #[error("setup field `{field}` is {value}, outside [{min}, {max}]")]
+    OutOfRange {
+        field: &'static str,
+        value: f64,
+        min: f64,
+        max: f64,
+    },
     #[error("the {what} ({distance} mm from the axis) must lie outside the cylinder of radius {radius} mm")]
     InsideCylinder {
         what: &'static str,
@@ -62,9 +114,160 @@ pub enum GeometryError {
 /// Largest image side a setup may describe, pixels (per-column tables are sized from it).
 pub const MAX_IMAGE_SIDE: u32 = 100_000;
 
+/// Largest |tilt| and |arm zero offset| a setup may state, degrees.
+pub const MAX_MISALIGNMENT_DEG: f64 = 30.0;
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn scale(a: [f64; 3], k: f64) -> [f64; 3] {
+    a.map(|x| x * k)
+}
+
+/// The setup's frame, precomputed: camera centre, axis direction and image scale.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct SetupFrame {
+    pub camera: [f64; 3],
+    /// Unit direction of the cylinder axis.
+    pub axis: [f64; 3],
+    /// Unit vectors ⊥ the axis from which φ is measured: φ = atan2(n·ey, n·ex).
+    ex: [f64; 3],
+    ey: [f64; 3],
+    pub radius: f64,
+    focal: f64,
+    /// Pixel pitch, mm.
+    pitch: f64,
+    cx: f64,
+    cy: f64,
+}
+
+/// A ray's nearest meeting with the cylinder.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Hit {
+    pub point: [f64; 3],
+    pub normal: [f64; 3],
+}
+
+impl SetupFrame {
+    /// Direction (not unit) of the ray through pixel (u, v).
+    pub fn ray(&self, u: f64, v: f64) -> [f64; 3] {
+        [
+            -self.focal,
+            (u - self.cx) * self.pitch,
+            -(v - self.cy) * self.pitch,
+        ]
+    }
+
+    /// The ray's closest approach to the axis, in the plane ⊥ the axis: the point Q
+    /// (component ⊥ axis) and the unit direction of the ray's ⊥ component. Computed
+    /// with cross products, so a distant camera loses no precision. `None` for a ray
+    /// parallel to the axis.
+    fn closest_approach(&self, d: [f64; 3]) -> Option<([f64; 3], [f64; 3])> {
+        let a = self.axis;
+        let c_perp = sub(self.camera, scale(a, dot(self.camera, a)));
+        let d_perp = sub(d, scale(a, dot(d, a)));
+        let len = dot(d_perp, d_perp).sqrt();
+        if !(len > 0.0) {
+            return None;
+        }
+        let dh = scale(d_perp, 1.0 / len);
+        // (d̂ × C) × d̂ = C − (C·d̂)d̂.
+        Some((cross(cross(dh, c_perp), dh), dh))
+    }
+
+    /// Signed distance of the ray through (u, v) from the axis (mm): positive when the
+    /// ray passes the axis on the +y side (toward larger φ as seen from the camera).
+    pub fn signed_axis_distance(&self, u: f64, v: f64) -> f64 {
+        match self.closest_approach(self.ray(u, v)) {
+            Some((q, dh)) => dot(cross(dh, q), self.axis).signum() * dot(q, q).sqrt(),
+            None => f64::NAN,
+        }
+    }
+
+    /// Where the ray through (u, v) first meets the cylinder, if it does (not grazing).
+    pub fn hit(&self, u: f64, v: f64) -> Option<Hit> {
+        let d = self.ray(u, v);
+        let (q, dh) = self.closest_approach(d)?;
+        let half_chord_sq = self.radius * self.radius - dot(q, q);
+        if !(half_chord_sq > 0.0) {
+            return None;
+        }
+        let half_chord = half_chord_sq.sqrt();
+        let a = self.axis;
+        let p_perp = sub(q, scale(dh, half_chord));
+        // Distance along d̂⊥ from the camera's ⊥ component to the hit, then along d.
+        let c_perp = sub(self.camera, scale(a, dot(self.camera, a)));
+        let along = dot(sub(p_perp, c_perp), dh);
+        let d_perp_len = dot(sub(d, scale(a, dot(d, a))), dh);
+        let s = along / d_perp_len;
+        if !(s > 0.0) {
+            return None;
+        }
+        let axial = dot(self.camera, a) + s * dot(d, a);
+        Some(Hit {
+            point: [
+                p_perp[0] + axial * a[0],
+                p_perp[1] + axial * a[1],
+                p_perp[2] + axial * a[2],
+            ],
+            normal: scale(p_perp, 1.0 / self.radius),
+        })
+    }
+
+    /// Azimuth (radians) of a normal about the axis.
+    pub fn azimuth(&self, normal: [f64; 3]) -> f64 {
+        dot(normal, self.ey).atan2(dot(normal, self.ex))
+    }
+
+    /// Position along the axis of a point.
+    pub fn height(&self, point: [f64; 3]) -> f64 {
+        dot(point, self.axis)
+    }
+
+    /// Everything a model needs at a hit, for a light at `light`.
+    pub fn geometry(&self, hit: &Hit, light: [f64; 3]) -> PixelGeometry {
+        let n = hit.normal;
+        let to_light = sub(light, hit.point);
+        let to_camera = sub(self.camera, hit.point);
+        let tangent = cross(self.axis, n);
+        let theta_i = dot(to_light, tangent).atan2(dot(to_light, n));
+        let theta_r = -dot(to_camera, tangent).atan2(dot(to_camera, n));
+        let l2 = dot(to_light, to_light);
+        let n_l = dot(to_light, n);
+        let irradiance = if n_l > 0.0 && l2 > 0.0 {
+            n_l / (l2 * l2.sqrt())
+        } else {
+            0.0
+        };
+        PixelGeometry {
+            phi: self.azimuth(n).to_degrees(),
+            theta_i: theta_i.to_degrees(),
+            theta_r: theta_r.to_degrees(),
+            cosines: Cosines::from_directions(n, to_light, to_camera),
+            irradiance,
+            height_mm: self.height(hit.point),
+        }
+    }
+}
+
 impl Setup {
     /// Checks that the setup describes a real geometry: positive lengths, the camera and
-    /// the light outside the cylinder, a finite principal point.
+    /// the light outside the cylinder, image sides up to [`MAX_IMAGE_SIDE`] with the
+    /// strip rows inside, finite principal point and misalignments within
+    /// ±[`MAX_MISALIGNMENT_DEG`], a white reflectance in (0, 2].
     pub fn validate(&self) -> Result<(), GeometryError> {
         let positive = [
             ("cylinder_radius_mm", self.cylinder_radius_mm),
@@ -98,16 +301,53 @@ impl Setup {
                 });
             }
         }
-        if let Some(cx) = self.principal_point_x {
-            if !cx.is_finite() {
-                return Err(GeometryError::NotFinite {
-                    field: "principal_point_x",
-                    value: cx,
+        let finite = [
+            ("principal_point_x", self.principal_point_x),
+            ("principal_point_y", self.principal_point_y),
+            ("camera_offset_mm", Some(self.camera_offset_mm)),
+        ];
+        for (field, value) in finite {
+            if let Some(value) = value.filter(|v| !v.is_finite()) {
+                return Err(GeometryError::NotFinite { field, value });
+            }
+        }
+        let ranged = [
+            (
+                "cylinder_tilt_deg",
+                self.cylinder_tilt_deg,
+                -MAX_MISALIGNMENT_DEG,
+                MAX_MISALIGNMENT_DEG,
+            ),
+            (
+                "arm_zero_offset_deg",
+                self.arm_zero_offset_deg,
+                -MAX_MISALIGNMENT_DEG,
+                MAX_MISALIGNMENT_DEG,
+            ),
+            (
+                "white_reflectance",
+                self.white_reflectance.unwrap_or(1.0),
+                f64::MIN_POSITIVE,
+                2.0,
+            ),
+        ];
+        for (field, value, min, max) in ranged {
+            if !(value >= min && value <= max) {
+                return Err(GeometryError::OutOfRange {
+                    field,
+                    value,
+                    min,
+                    max,
                 });
             }
         }
+        let frame = self.frame();
+        let camera_perp = sub(
+            frame.camera,
+            scale(frame.axis, dot(frame.camera, frame.axis)),
+        );
         for (what, distance) in [
-            ("camera", self.camera_distance_mm),
+            ("camera", dot(camera_perp, camera_perp).sqrt()),
             ("light", self.light_distance_mm),
         ] {
             if distance <= self.cylinder_radius_mm {
@@ -127,62 +367,76 @@ impl Setup {
             .unwrap_or((f64::from(self.image_width) - 1.0) / 2.0)
     }
 
-    /// The surface point seen by pixel column `u` (centre at coordinate `u`) for a light at
-    /// `theta_l_deg`, or `None` when the column's ray misses the cylinder (or only grazes it).
+    /// Principal point row in pixels: the given one or the image centre (height − 1)/2.
+    pub fn principal_row(&self) -> f64 {
+        self.principal_point_y
+            .unwrap_or((f64::from(self.image_height) - 1.0) / 2.0)
+    }
+
+    /// The white reference's reflectance, 1 (a perfect reflecting diffuser) when the
+    /// setup does not record it.
+    pub fn white_reflectance(&self) -> f64 {
+        self.white_reflectance.unwrap_or(1.0)
+    }
+
+    /// The frame of this setup (see the module documentation).
+    pub(crate) fn frame(&self) -> SetupFrame {
+        let tilt = self.cylinder_tilt_deg.to_radians();
+        let axis = [0.0, tilt.sin(), tilt.cos()];
+        let ex = [1.0, 0.0, 0.0];
+        SetupFrame {
+            camera: [self.camera_distance_mm, self.camera_offset_mm, 0.0],
+            axis,
+            ex,
+            ey: cross(axis, ex),
+            radius: self.cylinder_radius_mm,
+            focal: self.focal_length_mm,
+            pitch: self.pixel_pitch_um * 1e-3,
+            cx: self.principal_point(),
+            cy: self.principal_row(),
+        }
+    }
+
+    /// Position of the point light for the arm at `theta_l_deg`.
+    pub(crate) fn light_position(&self, theta_l_deg: f64) -> [f64; 3] {
+        let angle = (theta_l_deg + self.arm_zero_offset_deg).to_radians();
+        [
+            self.light_distance_mm * angle.cos(),
+            self.light_distance_mm * angle.sin(),
+            0.0,
+        ]
+    }
+
+    /// What pixel (u, v) (centre at those coordinates) sees for a light at
+    /// `theta_l_deg`, or `None` when its ray misses the cylinder (or only grazes it).
+    /// |θi| ≥ 90° (irradiance 0) means the point is not lit; callers that need lit
+    /// points filter on it. Assumes a valid setup ([`Setup::validate`]).
+    pub fn pixel_geometry(&self, u: f64, v: f64, theta_l_deg: f64) -> Option<PixelGeometry> {
+        let frame = self.frame();
+        let hit = frame.hit(u, v)?;
+        Some(frame.geometry(&hit, self.light_position(theta_l_deg)))
+    }
+
+    /// The in-plane angles seen by pixel column `u` on the principal point's row (the
+    /// plane of the light for an untilted cylinder), or `None` when the ray misses.
     ///
     /// θi is the signed angle from the normal to the light direction and θr minus the
     /// signed angle from the normal to the viewing direction (both counter-clockwise), so
-    /// the distant limit gives θi = θL − φ and θr = φ. |θi| ≥ 90° means the point is
-    /// not lit; callers that need lit points filter on it.
+    /// the distant limit gives θi = θL − φ and θr = φ.
     pub fn angles_at_column(&self, u: f64, theta_l_deg: f64) -> Option<SurfaceAngles> {
-        let radius = self.cylinder_radius_mm;
-        let camera = [self.camera_distance_mm, 0.0];
-        // Ray from the camera centre: along −x, tilted toward +y for u > cx.
-        let lateral_mm = (u - self.principal_point()) * self.pixel_pitch_um * 1e-3;
-        let norm = self.focal_length_mm.hypot(lateral_mm);
-        let dir = [-self.focal_length_mm / norm, lateral_mm / norm];
-        // Closest point of the ray to the axis, (C·e)e with e ⟂ dir; then step back along
-        // the ray to the near intersection. This form stays exact for distant cameras.
-        let e = [-dir[1], dir[0]];
-        let offset = camera[0] * e[0] + camera[1] * e[1];
-        let half_chord_sq = radius * radius - offset * offset;
-        if half_chord_sq.is_nan() || half_chord_sq <= 0.0 {
-            return None;
-        }
-        let half_chord = half_chord_sq.sqrt();
-        let p = [
-            offset * e[0] - half_chord * dir[0],
-            offset * e[1] - half_chord * dir[1],
-        ];
-        let phi = p[1].atan2(p[0]);
-        let normal = [phi.cos(), phi.sin()];
-        let theta_l = theta_l_deg.to_radians();
-        let light = [
-            self.light_distance_mm * theta_l.cos(),
-            self.light_distance_mm * theta_l.sin(),
-        ];
-        let to_light = [light[0] - p[0], light[1] - p[1]];
-        let to_camera = [camera[0] - p[0], camera[1] - p[1]];
-        let theta_i = signed_angle(normal, to_light);
-        let theta_r = -signed_angle(normal, to_camera);
-        Some(SurfaceAngles {
-            phi: phi.to_degrees(),
-            theta_i: theta_i.to_degrees(),
-            theta_r: theta_r.to_degrees(),
-        })
+        self.pixel_geometry(u, self.principal_row(), theta_l_deg)
+            .map(|g| SurfaceAngles {
+                phi: g.phi,
+                theta_i: g.theta_i,
+                theta_r: g.theta_r,
+            })
     }
 }
 
-/// Signed counter-clockwise angle in radians from unit vector `from` to vector `to`.
-fn signed_angle(from: [f64; 2], to: [f64; 2]) -> f64 {
-    let cross = from[0] * to[1] - from[1] * to[0];
-    let dot = from[0] * to[0] + from[1] * to[1];
-    cross.atan2(dot)
-}
-
-/// (φ, θi, θr) in degrees of every pixel column (index = column) for a light at
-/// `theta_l_deg`, with the finite camera and light distances of `setup`; `None` where the
-/// column misses the cylinder. An invalid setup (see [`Setup::validate`]) gives all `None`.
+/// (φ, θi, θr) in degrees of every pixel column (index = column) on the principal
+/// point's row for a light at `theta_l_deg`, with the finite camera and light distances
+/// of `setup`; `None` where the column misses the cylinder. An invalid setup (see
+/// [`Setup::validate`]) gives all `None`.
 pub fn column_angles(setup: &Setup, theta_l_deg: f64) -> Vec<Option<SurfaceAngles>> {
     let valid = setup.validate().is_ok() && theta_l_deg.is_finite();
     (0..setup.image_width)

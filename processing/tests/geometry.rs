@@ -12,6 +12,11 @@ fn setup(radius: f64, camera: f64, light: f64, focal: f64, width: u32) -> Setup 
         principal_point_x: None,
         sample_row: 30,
         white_row: 70,
+        principal_point_y: None,
+        white_reflectance: None,
+        camera_offset_mm: 0.0,
+        cylinder_tilt_deg: 0.0,
+        arm_zero_offset_deg: 0.0,
     }
 }
 
@@ -115,4 +120,160 @@ fn invalid_setups_are_reported_and_give_no_columns() {
         })
     ));
     assert!(setup(50.0, 500.0, 800.0, 50.0, 100).validate().is_ok());
+}
+
+/// The paper's setup with a D200-sized sensor, for the 3D checks.
+fn d200() -> Setup {
+    let mut s = setup(40.0, 700.0, 1000.0, 85.0, 3872);
+    s.pixel_pitch_um = 6.1;
+    s.image_height = 2592;
+    s
+}
+
+fn norm(v: [f64; 3]) -> [f64; 3] {
+    let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    v.map(|x| x / l)
+}
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// The hit of pixel (u, v) by marching along its ray and bisecting on the distance from
+/// the axis: independent of the closed form. Returns the point.
+fn marched_hit(s: &Setup, u: f64, v: f64) -> Option<[f64; 3]> {
+    let pitch = s.pixel_pitch_um * 1e-3;
+    let camera = [s.camera_distance_mm, s.camera_offset_mm, 0.0];
+    let d = norm([
+        -s.focal_length_mm,
+        (u - s.principal_point()) * pitch,
+        -(v - s.principal_row()) * pitch,
+    ]);
+    let tilt = s.cylinder_tilt_deg.to_radians();
+    let axis = [0.0, tilt.sin(), tilt.cos()];
+    let at = |t: f64| std::array::from_fn::<f64, 3, _>(|k| camera[k] + t * d[k]);
+    let inside = |t: f64| {
+        let p = at(t);
+        let h = dot(p, axis);
+        let q: [f64; 3] = std::array::from_fn(|k| p[k] - h * axis[k]);
+        dot(q, q) < s.cylinder_radius_mm * s.cylinder_radius_mm
+    };
+    let step = 0.01;
+    let mut t = 0.0;
+    while !inside(t + step) {
+        t += step;
+        if t > 2.0 * s.camera_distance_mm {
+            return None;
+        }
+    }
+    let (mut lo, mut hi) = (t, t + step);
+    for _ in 0..60 {
+        let mid = 0.5 * (lo + hi);
+        if inside(mid) {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    Some(at(0.5 * (lo + hi)))
+}
+
+#[test]
+fn pixel_geometry_matches_a_marched_ray_with_every_misalignment() {
+    let mut s = d200();
+    s.camera_offset_mm = 3.0;
+    s.cylinder_tilt_deg = 0.5;
+    s.arm_zero_offset_deg = 0.3;
+    s.validate().unwrap();
+    let theta_l = -30.0;
+    let tilt = s.cylinder_tilt_deg.to_radians();
+    let axis = [0.0, tilt.sin(), tilt.cos()];
+    let angle = (theta_l + s.arm_zero_offset_deg).to_radians();
+    let light = [1000.0 * angle.cos(), 1000.0 * angle.sin(), 0.0];
+    let camera = [700.0, 3.0, 0.0];
+    let mut checked = 0;
+    for (u, v) in [
+        (1700.0, 1190.0),
+        (2100.0, 1401.0),
+        (1200.0, 300.0),
+        (1935.5, 1295.5),
+    ] {
+        let g = s.pixel_geometry(u, v, theta_l).expect("on the cylinder");
+        let p = marched_hit(&s, u, v).expect("marched hit");
+        let h = dot(p, axis);
+        let n = norm(std::array::from_fn(|k| p[k] - h * axis[k]));
+        let l = norm(std::array::from_fn(|k| light[k] - p[k]));
+        let c = norm(std::array::from_fn(|k| camera[k] - p[k]));
+        let half = norm(std::array::from_fn(|k| l[k] + c[k]));
+        assert!((g.height_mm - h).abs() < 1e-6, "{g:?} vs height {h}");
+        assert!((g.cosines.n_dot_l - dot(n, l)).abs() < 1e-9, "{g:?}");
+        assert!((g.cosines.n_dot_v - dot(n, c)).abs() < 1e-9, "{g:?}");
+        assert!((g.cosines.n_dot_h - dot(n, half)).abs() < 1e-9, "{g:?}");
+        assert!((g.cosines.v_dot_h - dot(c, half)).abs() < 1e-9, "{g:?}");
+        let to_light: [f64; 3] = std::array::from_fn(|k| light[k] - p[k]);
+        let d2 = dot(to_light, to_light);
+        assert!(
+            (g.irradiance - dot(n, to_light) / d2.powf(1.5)).abs() < 1e-15,
+            "{g:?}"
+        );
+        checked += 1;
+    }
+    assert_eq!(checked, 4);
+}
+
+#[test]
+fn rows_off_the_plane_keep_in_plane_angles_but_not_cosines() {
+    // An upright cylinder: the in-plane projections do not depend on the row; the 3D
+    // half vector tilts out of plane above and below it, so n·h drops there.
+    let s = d200();
+    let (u, theta_l) = (1700.0, -30.0);
+    let centre = s.pixel_geometry(u, s.principal_row(), theta_l).unwrap();
+    let above = s.pixel_geometry(u, 1190.0, theta_l).unwrap();
+    let below = s
+        .pixel_geometry(u, 2.0 * s.principal_row() - 1190.0, theta_l)
+        .unwrap();
+    assert!((above.theta_i - centre.theta_i).abs() < 1e-9);
+    assert!((above.theta_r - centre.theta_r).abs() < 1e-9);
+    assert!(above.height_mm > 4.0 && (above.height_mm + below.height_mm).abs() < 1e-9);
+    // Mirror rows about the plane of the light see the same cosines.
+    assert!((above.cosines.n_dot_h - below.cosines.n_dot_h).abs() < 1e-12);
+    let in_plane = gonio_processing::brdf::Cosines::in_plane(centre.theta_i, centre.theta_r);
+    assert!((centre.cosines.n_dot_h - in_plane.n_dot_h).abs() < 1e-12);
+    assert!(above.cosines.n_dot_h < centre.cosines.n_dot_h - 1e-6);
+}
+
+#[test]
+fn arm_zero_offset_is_a_light_angle_and_tilt_rotates_the_image() {
+    let mut s = d200();
+    s.arm_zero_offset_deg = 0.3;
+    let shifted = s.pixel_geometry(1800.0, 1190.0, -30.0).unwrap();
+    s.arm_zero_offset_deg = 0.0;
+    assert_eq!(s.pixel_geometry(1800.0, 1190.0, -29.7).unwrap(), shifted);
+
+    // With the camera on the x axis, tilting the cylinder about it rotates the whole
+    // picture of the cylinder about the principal point: the rotated pixel sees the
+    // same point at the same height and azimuth.
+    let upright = d200();
+    let mut tilted = d200();
+    tilted.cylinder_tilt_deg = 2.0;
+    let (cx, cy) = (upright.principal_point(), upright.principal_row());
+    let tau = 2f64.to_radians();
+    for (u, v) in [(1700.0, 1190.0), (2200.0, 1500.0), (1400.0, 1000.0)] {
+        let (x, y_up) = (u - cx, cy - v);
+        // Clockwise by τ in the image (top toward the right).
+        let (xr, yr) = (
+            x * tau.cos() + y_up * tau.sin(),
+            -x * tau.sin() + y_up * tau.cos(),
+        );
+        let seen = |s: &Setup, u: f64, v: f64| {
+            let g = s.pixel_geometry(u, v, -30.0).expect("on the cylinder");
+            (g.height_mm, g.phi)
+        };
+        let a = seen(&upright, u, v);
+        let b = seen(&tilted, cx + xr, cy - yr);
+        assert!(
+            (a.0 - b.0).abs() < 1e-9 && (a.1 - b.1).abs() < 1e-9,
+            "{a:?} vs {b:?}"
+        );
+    }
 }

@@ -19,5 +19,10 @@ pub fn d200_setup() -> Setup {
         principal_point_x: None,
         sample_row: 1100,
         white_row: 1491,
+        principal_point_y: None,
+        white_reflectance: None,
+        camera_offset_mm: 0.0,
+        cylinder_tilt_deg: 0.0,
+        arm_zero_offset_deg: 0.0,
     }
 }
