@@ -19,7 +19,7 @@ fn cook_torrance_samples(p: &Params, theta_ls: &[f64]) -> Vec<Sample> {
                     theta_i,
                     theta_r,
                     rgb: Model::CookTorrance.evaluate(p, theta_i, theta_r),
-                    cosines: None,
+                    ..Sample::default()
                 });
             }
         }

@@ -39,7 +39,7 @@ fn write_inputs(dir: &Path, p: &Params) {
                     theta_i,
                     theta_r,
                     rgb,
-                    cosines: None,
+                    ..Sample::default()
                 });
             }
         }

@@ -27,7 +27,7 @@ fn samples(model: Model) -> Vec<Sample> {
                 theta_i,
                 theta_r,
                 rgb,
-                cosines: None,
+                ..Sample::default()
             });
         }
     }

@@ -40,7 +40,7 @@ fn samples(params: &Params) -> Vec<Sample> {
                     theta_i: a.theta_i,
                     theta_r: a.theta_r,
                     rgb,
-                    cosines: None,
+                    ..Sample::default()
                 });
             }
         }

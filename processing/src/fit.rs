@@ -213,8 +213,11 @@ pub(crate) struct Data {
     pub bases: Vec<Basis>,
     /// Diffuse basis per point (copied out of `bases` for the inner loops).
     pub diffuse: Vec<f64>,
-    /// Measured β per point.
+    /// Measured β per point; 0 where a channel was dropped.
     pub y: Vec<[f64; 3]>,
+    /// Per point and channel 1 (measured) or 0 (dropped: left out of the loss);
+    /// `None` when no value was dropped.
+    pub keep: Option<Vec<[f64; 3]>>,
     /// Residual norms below this count as this in reweighting.
     pub residual_floor: f64,
     /// Eq. 10 loss of the all-zero model, Σ_p ‖y_p‖: the scale of the data.
@@ -244,7 +247,16 @@ impl Data {
             }
             bases.push(basis);
         }
-        let y: Vec<[f64; 3]> = samples.iter().map(|s| s.rgb).collect();
+        let y: Vec<[f64; 3]> = samples
+            .iter()
+            .map(|s| [0, 1, 2].map(|c| s.channel(c).unwrap_or(0.0)))
+            .collect();
+        let keep = samples.iter().any(|s| s.dropped.contains(&true)).then(|| {
+            samples
+                .iter()
+                .map(|s| s.dropped.map(|d| if d { 0.0 } else { 1.0 }))
+                .collect()
+        });
         for (c, channel) in ['R', 'G', 'B'].into_iter().enumerate() {
             if y.iter().map(|v| v[c]).sum::<f64>() <= 0.0 {
                 return Err(FitError::NoSignal { channel });
@@ -256,22 +268,33 @@ impl Data {
             diffuse: bases.iter().map(|b| b.diffuse).collect(),
             bases,
             y,
+            keep,
             residual_floor: 1e-12 * mean_norm + f64::MIN_POSITIVE,
             zero_loss,
         })
     }
 
-    /// Eq. 10 loss of `params`.
+    /// Eq. 10 loss of `params` over the measured values.
     pub fn loss(&self, params: &Params) -> f64 {
-        self.bases
+        self.estimates(params)
             .iter()
             .zip(&self.y)
-            .map(|(b, y)| metrics::point_loss(y, &b.evaluate(params)))
+            .map(|(estimate, y)| metrics::point_loss(y, estimate))
             .sum()
     }
 
+    /// The model's β at every point, 0 where the measured value was dropped (so dropped
+    /// values count in neither the loss nor ΔErr_p).
     fn estimates(&self, params: &Params) -> Vec<[f64; 3]> {
-        self.bases.iter().map(|b| b.evaluate(params)).collect()
+        let mut estimates: Vec<[f64; 3]> = self.bases.iter().map(|b| b.evaluate(params)).collect();
+        if let Some(keep) = &self.keep {
+            for (estimate, keep) in estimates.iter_mut().zip(keep) {
+                for (e, k) in estimate.iter_mut().zip(keep) {
+                    *e *= k;
+                }
+            }
+        }
+        estimates
     }
 }
 

@@ -3,7 +3,9 @@
 //! named ones. The four optional columns `n_dot_l,n_dot_v,n_dot_h,v_dot_h` (see
 //! [`COSINE_COLUMNS`]) carry the point's true 3D cosines; when a file has all four, the
 //! models are evaluated with them instead of the in-plane angles. Other extra columns are
-//! ignored on reading.
+//! ignored on reading. An empty `r`, `g` or `b` field is a value dropped at that point
+//! (clipped or underexposed in every exposure, or a white too dark to divide by): it is
+//! unknown, never 0 ([`Sample::dropped`]).
 
 use std::fs::File;
 use std::io::{BufWriter, Read, Write};
@@ -14,7 +16,7 @@ use serde::{Deserialize, Serialize};
 use crate::brdf::Cosines;
 
 /// One measured surface point: angles in degrees, β per camera channel.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct Sample {
     pub theta_l: f64,
     /// In-plane incidence angle (the angle of the light's projection on the plane of the
@@ -26,6 +28,15 @@ pub struct Sample {
     /// The point's true 3D cosines, when known; `None` means in-plane.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cosines: Option<Cosines>,
+    /// Channels whose β is unknown at this point (dropped by extraction: clipped,
+    /// underexposed, or a white too dark); their `rgb` entry is 0 and carries no
+    /// information, and fits and metrics leave them out.
+    #[serde(default, skip_serializing_if = "none_dropped")]
+    pub dropped: [bool; 3],
+}
+
+fn none_dropped(dropped: &[bool; 3]) -> bool {
+    !dropped.iter().any(|&d| d)
 }
 
 impl Sample {
@@ -36,8 +47,13 @@ impl Sample {
             theta_i,
             theta_r,
             rgb,
-            cosines: None,
+            ..Sample::default()
         }
+    }
+
+    /// β of channel `c`, `None` where it was dropped.
+    pub fn channel(&self, c: usize) -> Option<f64> {
+        (!self.dropped[c]).then_some(self.rgb[c])
     }
 
     /// The cosines the models are evaluated with: the stored 3D ones, or the in-plane ones.
@@ -46,15 +62,16 @@ impl Sample {
             .unwrap_or_else(|| Cosines::in_plane(self.theta_i, self.theta_r))
     }
 
-    /// The name of the first field (in CSV column order) that is NaN or infinite.
+    /// The name of the first field (in CSV column order) that is NaN or infinite (dropped
+    /// channels are not looked at).
     pub fn non_finite_field(&self) -> Option<&'static str> {
         [
             ("theta_l", self.theta_l),
             ("theta_i", self.theta_i),
             ("theta_r", self.theta_r),
-            ("r", self.rgb[0]),
-            ("g", self.rgb[1]),
-            ("b", self.rgb[2]),
+            ("r", self.channel(0).unwrap_or(0.0)),
+            ("g", self.channel(1).unwrap_or(0.0)),
+            ("b", self.channel(2).unwrap_or(0.0)),
         ]
         .into_iter()
         .chain(
@@ -177,8 +194,16 @@ pub fn read_csv_from<R: Read>(reader: R) -> Result<Vec<Sample>, SamplesError> {
             });
         }
         let mut values = [0.0; 6];
-        for ((value, column), text) in values.iter_mut().zip(HEADER).zip(record.iter()) {
-            *value = parse_field(text, line, column)?;
+        let mut dropped = [false; 3];
+        for (i, ((value, column), text)) in
+            values.iter_mut().zip(HEADER).zip(record.iter()).enumerate()
+        {
+            // An empty β field is a dropped value; the angles are always required.
+            if i >= 3 && text.is_empty() {
+                dropped[i - 3] = true;
+            } else {
+                *value = parse_field(text, line, column)?;
+            }
         }
         let cosines = match &cosine_index {
             None => None,
@@ -206,6 +231,7 @@ pub fn read_csv_from<R: Read>(reader: R) -> Result<Vec<Sample>, SamplesError> {
             theta_r: values[2],
             rgb: [values[3], values[4], values[5]],
             cosines,
+            dropped,
         });
     }
     Ok(samples)
@@ -252,7 +278,7 @@ pub fn write_csv(path: &Path, samples: &[Sample]) -> Result<(), SamplesError> {
 
 /// Writes samples as CSV text to any writer; numbers use Rust's shortest round-trip form.
 /// When any sample carries 3D cosines, every row gets the four cosine columns (in-plane
-/// cosines for samples without).
+/// cosines for samples without). A dropped channel is written as an empty field.
 pub fn write_csv_to<W: Write>(writer: W, samples: &[Sample]) -> Result<(), SamplesError> {
     let with_cosines = samples.iter().any(|s| s.cosines.is_some());
     let mut csv = csv::Writer::from_writer(writer);
@@ -260,16 +286,11 @@ pub fn write_csv_to<W: Write>(writer: W, samples: &[Sample]) -> Result<(), Sampl
     csv.write_record(HEADER.iter().chain(cosine_header))
         .map_err(SamplesError::Csv)?;
     for s in samples {
-        let row = [
-            s.theta_l, s.theta_i, s.theta_r, s.rgb[0], s.rgb[1], s.rgb[2],
-        ];
-        let cosines = with_cosines.then(|| s.cosines().to_array());
-        csv.write_record(
-            row.iter()
-                .chain(cosines.iter().flatten())
-                .map(f64::to_string),
-        )
-        .map_err(SamplesError::Csv)?;
+        let angles = [s.theta_l, s.theta_i, s.theta_r].map(|v| v.to_string());
+        let beta = [0, 1, 2].map(|c| s.channel(c).map_or_else(String::new, |v| v.to_string()));
+        let cosines = with_cosines.then(|| s.cosines().to_array().map(|v| v.to_string()));
+        csv.write_record(angles.iter().chain(&beta).chain(cosines.iter().flatten()))
+            .map_err(SamplesError::Csv)?;
     }
     csv.flush().map_err(|error| SamplesError::Io {
         path: String::from("samples CSV output"),

@@ -35,7 +35,7 @@ fn synthetic(model: Model, p: &Params, theta_ls: &[f64], noise: f64) -> Vec<Samp
                 theta_i,
                 theta_r,
                 rgb,
-                cosines: None,
+                ..Sample::default()
             });
         }
     }
@@ -449,4 +449,45 @@ fn bad_input_is_reported() {
         fit(&samples, &bad_range),
         Err(FitError::InvalidOptions(_))
     ));
+}
+
+#[test]
+fn dropped_channels_are_left_out_of_the_fit() {
+    // Clipped peaks: where the noise-free G exceeds a ceiling it is dropped, and the
+    // value left in its place is garbage. The fit must recover the truth from the rest;
+    // fitting the garbage instead is far off.
+    let truth = Params::shared([9.0, 6.5, 2.0], [25.0, 20.0, 7.0], 0.07);
+    let clean = synthetic(Model::CookTorrance, &truth, &ALL_THETA_L, 0.0);
+    let ceiling = 60.0;
+    let mut garbage = clean.clone();
+    let mut dropped = clean.clone();
+    let mut count = 0;
+    for (g, d) in garbage.iter_mut().zip(dropped.iter_mut()) {
+        for c in 0..3 {
+            if g.rgb[c] > ceiling {
+                g.rgb[c] = ceiling;
+                d.rgb[c] = 1e9;
+                d.dropped[c] = true;
+                count += 1;
+            }
+        }
+    }
+    assert!(count > 20, "{count} values above the ceiling");
+    for method in [FitMethod::Robust, FitMethod::NelderMead] {
+        let o = options(Model::CookTorrance, Roughness::Shared, method);
+        let fitted = fit(&dropped, &o).unwrap();
+        if method == FitMethod::Robust {
+            assert_recovers(&fitted, &truth, 1e-4, 0.0, true);
+        }
+        assert!(fitted.err_p.iter().all(|e| e.is_finite()), "{fitted:?}");
+    }
+    let clipped = fit(
+        &garbage,
+        &options(Model::CookTorrance, Roughness::Shared, FitMethod::Robust),
+    )
+    .unwrap();
+    assert!(
+        (clipped.ks[1] - truth.ks[1]).abs() > 0.05 * truth.ks[1],
+        "{clipped:?}"
+    );
 }

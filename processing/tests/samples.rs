@@ -7,14 +7,14 @@ fn samples() -> Vec<Sample> {
             theta_i: -30.125,
             theta_r: 10.1,
             rgb: [1.0 / 3.0, 50.0, 1e-7],
-            cosines: None,
+            ..Sample::default()
         },
         Sample {
             theta_l: -45.0,
             theta_i: 0.0,
             theta_r: -44.9,
             rgb: [0.0, 99.5, 12.25],
-            cosines: None,
+            ..Sample::default()
         },
     ]
 }
@@ -88,7 +88,7 @@ fn non_finite_field_names_the_first_bad_column() {
         theta_i: 10.0,
         theta_r: -10.0,
         rgb: [1.0, 2.0, 3.0],
-        cosines: None,
+        ..Sample::default()
     };
     assert_eq!(good.non_finite_field(), None);
     let bad = Sample {
@@ -131,4 +131,23 @@ fn cosine_columns_round_trip_and_reach_the_models() {
     let three = "theta_l,theta_i,theta_r,r,g,b,n_dot_l,n_dot_v,n_dot_h\n";
     let err = read_csv_from(three.as_bytes()).unwrap_err();
     assert!(err.to_string().contains("v_dot_h"), "{err}");
+}
+
+#[test]
+fn empty_beta_fields_are_dropped_values_and_empty_angles_are_errors() {
+    let text = "theta_l,theta_i,theta_r,r,g,b\n-20,-25,5,1,,3\n-20,-24,4,,,7\n";
+    let read = read_csv_from(text.as_bytes()).unwrap();
+    assert_eq!(read[0].dropped, [false, true, false]);
+    assert_eq!(
+        (read[0].channel(0), read[0].channel(1), read[0].channel(2)),
+        (Some(1.0), None, Some(3.0))
+    );
+    assert_eq!(read[1].dropped, [true, true, false]);
+    // Written back the same way.
+    let mut out = Vec::new();
+    gonio_processing::samples::write_csv_to(&mut out, &read).unwrap();
+    assert_eq!(String::from_utf8(out).unwrap(), text);
+    let bad = "theta_l,theta_i,theta_r,r,g,b\n-20,,5,1,2,3\n";
+    let message = read_csv_from(bad.as_bytes()).unwrap_err().to_string();
+    assert!(message.contains("theta_i"), "{message}");
 }

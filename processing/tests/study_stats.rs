@@ -128,7 +128,7 @@ fn subsample_keeps_every_nth_sample_of_each_theta_l() {
         theta_i: theta_l - theta_r,
         theta_r,
         rgb: [1.0, 1.0, 1.0],
-        cosines: None,
+        ..Sample::default()
     };
     // Interleaved θL: counting restarts per θL.
     let samples: Vec<Sample> = (0..10)

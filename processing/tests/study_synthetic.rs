@@ -28,7 +28,7 @@ fn samples(params: &Params, theta_l: &[f64]) -> Vec<Sample> {
                     theta_i,
                     theta_r,
                     rgb,
-                    cosines: None,
+                    ..Sample::default()
                 });
             }
         }

@@ -83,6 +83,19 @@ fn loss_of(
     let (y, a, out) = (&data.y[..n], &data.diffuse[..n], &mut residuals[..n]);
     let (s0, s1, s2) = (&spec[0][..n], &spec[1][..n], &spec[2][..n]);
     let mut loss = 0.0;
+    if let Some(keep) = &data.keep {
+        // Dropped values (y = 0, keep = 0) leave no residual.
+        let keep = &keep[..n];
+        for p in 0..n {
+            let r0 = y[p][0] - keep[p][0] * (kd[0] * a[p] + ks[0] * s0[p]);
+            let r1 = y[p][1] - keep[p][1] * (kd[1] * a[p] + ks[1] * s1[p]);
+            let r2 = y[p][2] - keep[p][2] * (kd[2] * a[p] + ks[2] * s2[p]);
+            let norm = (r0 * r0 + r1 * r1 + r2 * r2).sqrt();
+            out[p] = norm;
+            loss += norm;
+        }
+        return loss;
+    }
     for p in 0..n {
         let r0 = y[p][0] - kd[0] * a[p] - ks[0] * s0[p];
         let r1 = y[p][1] - kd[1] * a[p] - ks[1] * s1[p];
@@ -99,15 +112,29 @@ fn weighted_nnls(data: &Data, spec: [&[f64]; 3], weights: &[f64]) -> ([f64; 3], 
     let n = data.y.len();
     let (y, a, w) = (&data.y[..n], &data.diffuse[..n], &weights[..n]);
     let s = [&spec[0][..n], &spec[1][..n], &spec[2][..n]];
-    let mut saa = 0.0;
+    let mut saa = [0.0; 3];
     let (mut sas, mut sss, mut say, mut ssy) = ([0.0; 3], [0.0; 3], [0.0; 3], [0.0; 3]);
-    if std::ptr::eq(s[0], s[1]) && std::ptr::eq(s[0], s[2]) {
+    if let Some(keep) = &data.keep {
+        // Each channel's sums over its measured values only (y is 0 where dropped).
+        let keep = &keep[..n];
+        for p in 0..n {
+            for c in 0..3 {
+                let wk = w[p] * keep[p][c];
+                let sc = s[c][p];
+                saa[c] += wk * a[p] * a[p];
+                sas[c] += wk * a[p] * sc;
+                sss[c] += wk * sc * sc;
+                say[c] += w[p] * a[p] * y[p][c];
+                ssy[c] += w[p] * sc * y[p][c];
+            }
+        }
+    } else if std::ptr::eq(s[0], s[1]) && std::ptr::eq(s[0], s[2]) {
         // One specular basis for all channels: its sums are shared too.
         let s = s[0];
         for p in 0..n {
             let wa = w[p] * a[p];
             let ws = w[p] * s[p];
-            saa += wa * a[p];
+            saa[0] += wa * a[p];
             sas[0] += wa * s[p];
             sss[0] += ws * s[p];
             for c in 0..3 {
@@ -115,12 +142,13 @@ fn weighted_nnls(data: &Data, spec: [&[f64]; 3], weights: &[f64]) -> ([f64; 3], 
                 ssy[c] += ws * y[p][c];
             }
         }
+        saa = [saa[0]; 3];
         sas = [sas[0]; 3];
         sss = [sss[0]; 3];
     } else {
         for p in 0..n {
             let wa = w[p] * a[p];
-            saa += wa * a[p];
+            saa[0] += wa * a[p];
             for c in 0..3 {
                 let sc = s[c][p];
                 let ws = w[p] * sc;
@@ -130,11 +158,12 @@ fn weighted_nnls(data: &Data, spec: [&[f64]; 3], weights: &[f64]) -> ([f64; 3], 
                 ssy[c] += ws * y[p][c];
             }
         }
+        saa = [saa[0]; 3];
     }
     let mut kd = [0.0; 3];
     let mut ks = [0.0; 3];
     for c in 0..3 {
-        (kd[c], ks[c]) = nnls2(saa, sas[c], sss[c], say[c], ssy[c]);
+        (kd[c], ks[c]) = nnls2(saa[c], sas[c], sss[c], say[c], ssy[c]);
     }
     (kd, ks)
 }
