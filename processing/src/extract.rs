@@ -3,21 +3,28 @@
 //! `DIR/setup.json` holds the [`Setup`]; captures are found recursively (TIFF or camera
 //! raw with a JSON sidecar) and grouped by the sidecar's θL. Each group is merged
 //! ([`hdr::merge`]) into one radiance map, of the strip rows only unless the maps are
-//! wanted as files ([`ExtractOptions::hdr_dir`]); the sample and white strips are each the mean of
-//! 5 rows around their centre rows; every pixel column maps to (θi, θr) through the
-//! setup geometry; then per channel c
+//! wanted as files ([`ExtractOptions::hdr_dir`]). Each pixel column gives one sample:
+//! the mean of the [`STRIP_ROWS`] rows around each strip's centre row, with the mean of
+//! the true 3D geometry of those sample pixels (the point on the cylinder, its normal,
+//! the light and the camera: [`Setup::pixel_geometry`]); then per channel c
 //!
-//! β_c = (L_sample,c / L_white,c) · ρ_white · W_c,
+//! β_c = (L̄_sample,c / L̄_white,c) · (Ē_white / Ē_sample) · ρ_white · W_c,
 //!
-//! with ρ_white the white reference's reflectance (1 for a perfect reflecting
-//! diffuser) and W_c = k Σ c̄ I the camera RGB of a perfect white (eq. 4), so β is in
-//! the camera-RGB domain where a perfect white has β_G = 100.
+//! with Ē the mean irradiance cos θi/|L − P|² of each strip's pixels (1 when the strips
+//! lie symmetric about the light's plane), ρ_white the white reference's reflectance
+//! (setup.json's `white_reflectance`; 1 for a perfect reflecting diffuser) and
+//! W_c = k Σ c̄ I the camera RGB of a perfect white (eq. 4), so β is in the camera-RGB
+//! domain where a perfect white has β_G = 100. Why one sample per column and not per
+//! pixel row: docs/ARCHITECTURE.md, "Angles and geometry".
 //!
 //! Captures may be full resolution (as `setup.image_width`) or 2×2-superpixel raw
 //! (half of it): columns and rows are mapped accordingly. Columns are dropped, and
-//! counted, when they miss the cylinder or are unlit (|θi| ≥ 90°), lie past the
-//! grazing limit, have a clipped pixel in either strip, or see a white reference too
-//! dark to divide by.
+//! counted, when a strip pixel misses the cylinder or is unlit (|θi| ≥ 90°) or the
+//! sample lies past the grazing limit. Single values (one channel of one column) are
+//! dropped, and counted per channel, when a strip pixel is clipped in every exposure,
+//! the sample is below the noise floor in every exposure, or the white is too dark to
+//! divide by; the sample keeps its other channels ([`Sample::dropped`]), and a column
+//! that keeps none is dropped.
 
 use std::collections::BTreeMap;
 use std::fs;
@@ -27,9 +34,10 @@ use std::path::{Path, PathBuf};
 use rayon::prelude::*;
 use thiserror::Error;
 
+use crate::brdf::Cosines;
 use crate::capture::{self, CaptureError, Frame};
 use crate::color::CameraModel;
-use crate::geometry::{GeometryError, Setup};
+use crate::geometry::{GeometryError, PixelGeometry, Setup};
 use crate::hdr::{self, HdrError, HdrImage, MergeOptions, SATURATED, UNDEREXPOSED};
 use crate::samples::Sample;
 
@@ -40,12 +48,13 @@ pub const STRIP_ROWS: usize = 5;
 #[derive(Debug, Clone, PartialEq)]
 pub struct ExtractOptions {
     pub merge: MergeOptions,
-    /// Reflectance of the white reference (1 = perfect reflecting diffuser).
-    pub white_reflectance: f64,
+    /// Reflectance of the white reference (1 = perfect reflecting diffuser), overriding
+    /// setup.json's `white_reflectance`; `None`: setup.json's (1 if it has none).
+    pub white_reflectance: Option<f64>,
     /// Columns with |θi| or |θr| above this (degrees) are dropped.
     pub grazing_limit_deg: f64,
-    /// Columns whose white strip (any channel) is below this fraction of the brightest
-    /// white column of the same θL are dropped.
+    /// A channel whose white strip is below this fraction of the brightest white column
+    /// of the same θL and channel is dropped at that column.
     pub min_white_fraction: f64,
     /// Camera and illuminant that define the camera-RGB domain.
     pub camera: CameraModel,
@@ -57,7 +66,7 @@ impl Default for ExtractOptions {
     fn default() -> Self {
         Self {
             merge: MergeOptions::default(),
-            white_reflectance: 1.0,
+            white_reflectance: None,
             grazing_limit_deg: 80.0,
             min_white_fraction: 0.02,
             camera: CameraModel::builtin(),
@@ -102,31 +111,59 @@ pub enum ExtractError {
     Options(String),
 }
 
-/// Columns dropped, by reason (each column counts once, in the first reason that applies).
+/// What was dropped. Columns count once, in the first reason that applies; values (one
+/// channel of one kept or dropped column) count per channel R, G, B, in the first
+/// reason that applies to that channel.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct DropCounts {
-    /// The column misses the cylinder, or the point is not lit (|θi| ≥ 90°).
+    /// Columns: a strip pixel misses the cylinder, or is not lit (|θi| ≥ 90°).
     pub off_cylinder: usize,
-    /// |θi| or |θr| beyond the grazing limit.
+    /// Columns: |θi| or |θr| beyond the grazing limit.
     pub grazing: usize,
-    /// A pixel of the sample or white strip is clipped in every exposure.
-    pub saturated: usize,
-    /// The white strip is too dark (or black in every exposure).
-    pub dark_white: usize,
+    /// Columns whose three channels were all dropped (counted below too).
+    pub no_channel: usize,
+    /// Values: a pixel of the sample or white strip is clipped in every exposure.
+    pub saturated: [usize; 3],
+    /// Values: a pixel of the sample strip is below the noise floor in every exposure.
+    pub underexposed: [usize; 3],
+    /// Values: the white strip is too dark (or black in every exposure).
+    pub dark_white: [usize; 3],
 }
 
 impl DropCounts {
+    /// Columns dropped.
     pub fn total(&self) -> usize {
-        self.off_cylinder + self.grazing + self.saturated + self.dark_white
+        self.off_cylinder + self.grazing + self.no_channel
+    }
+
+    /// Values dropped in channel `c` (R, G, B = 0, 1, 2), whatever the reason.
+    pub fn values(&self, c: usize) -> usize {
+        self.saturated[c] + self.underexposed[c] + self.dark_white[c]
     }
 
     /// The reason most columns were dropped for, with its count (`None` if none was).
+    /// Columns with no usable channel are named for the reason most of their values
+    /// were dropped for.
     pub fn dominant(&self) -> Option<(&'static str, usize)> {
+        let sum = |v: [usize; 3]| v.iter().sum::<usize>();
+        let no_channel = [
+            ("no usable channel (mostly saturated)", sum(self.saturated)),
+            (
+                "no usable channel (mostly underexposed)",
+                sum(self.underexposed),
+            ),
+            (
+                "no usable channel (mostly a dark white reference)",
+                sum(self.dark_white),
+            ),
+        ]
+        .into_iter()
+        .max_by_key(|(_, n)| *n)
+        .map_or("no usable channel", |(reason, _)| reason);
         [
             ("off the cylinder or unlit", self.off_cylinder),
             ("grazing", self.grazing),
-            ("saturated", self.saturated),
-            ("dark white reference", self.dark_white),
+            (no_channel, self.no_channel),
         ]
         .into_iter()
         .filter(|(_, n)| *n > 0)
@@ -135,15 +172,19 @@ impl DropCounts {
 
     /// Why an extraction gave no sample: the dominant reason and every count.
     pub fn explain_empty(&self) -> String {
+        let rgb = |v: [usize; 3]| format!("{}/{}/{}", v[0], v[1], v[2]);
         match self.dominant() {
             Some((reason, n)) => format!(
                 "no samples: all {} columns were dropped, most ({n}) as {reason} \
-                 ({} off the cylinder or unlit, {} grazing, {} saturated, {} dark white)",
+                 ({} off the cylinder or unlit, {} grazing, {} with no usable channel; \
+                 values dropped R/G/B: {} saturated, {} underexposed, {} dark white)",
                 self.total(),
                 self.off_cylinder,
                 self.grazing,
-                self.saturated,
-                self.dark_white
+                self.no_channel,
+                rgb(self.saturated),
+                rgb(self.underexposed),
+                rgb(self.dark_white),
             ),
             None => "no samples: no column of the captures was on the strips".to_owned(),
         }
@@ -152,8 +193,12 @@ impl DropCounts {
     fn add(&mut self, other: &DropCounts) {
         self.off_cylinder += other.off_cylinder;
         self.grazing += other.grazing;
-        self.saturated += other.saturated;
-        self.dark_white += other.dark_white;
+        self.no_channel += other.no_channel;
+        for c in 0..3 {
+            self.saturated[c] += other.saturated[c];
+            self.underexposed[c] += other.underexposed[c];
+            self.dark_white[c] += other.dark_white[c];
+        }
     }
 }
 
@@ -166,6 +211,17 @@ pub struct ThetaSummary {
     pub dropped: DropCounts,
 }
 
+/// Where the white reflectance an extraction used came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum WhiteSource {
+    /// [`ExtractOptions::white_reflectance`].
+    Option,
+    /// setup.json's `white_reflectance`.
+    Setup,
+    /// Neither gave one: 1, a perfect reflecting diffuser.
+    Assumed,
+}
+
 /// Result of [`extract_scan`]: samples ordered by θL then column.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Extraction {
@@ -174,6 +230,9 @@ pub struct Extraction {
     pub per_theta: Vec<ThetaSummary>,
     /// Image files of capture type that were skipped for lack of a sidecar.
     pub skipped_without_sidecar: Vec<PathBuf>,
+    /// The white reference's reflectance used, and where it came from.
+    pub white_reflectance: f64,
+    pub white_source: WhiteSource,
 }
 
 /// Extracts the samples of the scan in `dir`.
@@ -181,14 +240,9 @@ pub fn extract_scan(dir: &Path, options: &ExtractOptions) -> Result<Extraction, 
     extract_scan_with_progress(dir, options, |_, _| {})
 }
 
-/// [`extract_scan`], calling `progress(done, total)` before the first θL and after each.
-pub fn extract_scan_with_progress(
-    dir: &Path,
-    options: &ExtractOptions,
-    progress: impl Fn(usize, usize),
-) -> Result<Extraction, ExtractError> {
-    check_options(options)?;
-    let setup = read_setup(&dir.join("setup.json"))?;
+/// The captures of a scan directory grouped by θL (ascending), and the image files
+/// skipped for lack of a sidecar. Errors when no capture has a sidecar.
+pub fn theta_groups(dir: &Path) -> Result<(Vec<(f64, Vec<PathBuf>)>, Vec<PathBuf>), ExtractError> {
     let mut images = Vec::new();
     find_captures(dir, &mut images)?;
     images.sort();
@@ -211,6 +265,24 @@ pub fn extract_scan_with_progress(
             dir: dir.to_path_buf(),
         });
     }
+    Ok((groups.into_values().collect(), skipped_without_sidecar))
+}
+
+/// [`extract_scan`], calling `progress(done, total)` before the first θL and after each.
+pub fn extract_scan_with_progress(
+    dir: &Path,
+    options: &ExtractOptions,
+    progress: impl Fn(usize, usize),
+) -> Result<Extraction, ExtractError> {
+    check_options(options)?;
+    let setup = read_setup(&dir.join("setup.json"))?;
+    let (white_reflectance, white_source) =
+        match (options.white_reflectance, setup.white_reflectance) {
+            (Some(given), _) => (given, WhiteSource::Option),
+            (None, Some(recorded)) => (recorded, WhiteSource::Setup),
+            (None, None) => (1.0, WhiteSource::Assumed),
+        };
+    let (groups, skipped_without_sidecar) = theta_groups(dir)?;
     if let Some(hdr_dir) = &options.hdr_dir {
         fs::create_dir_all(hdr_dir).map_err(|error| ExtractError::Walk {
             path: hdr_dir.clone(),
@@ -224,8 +296,10 @@ pub fn extract_scan_with_progress(
         dropped: DropCounts::default(),
         per_theta: Vec::new(),
         skipped_without_sidecar,
+        white_reflectance,
+        white_source,
     };
-    for (done, (theta_l, paths)) in groups.into_values().enumerate() {
+    for (done, (theta_l, paths)) in groups.into_iter().enumerate() {
         // Without a map to write, only the strip rows are kept and merged.
         let keep_full = options.hdr_dir.is_some();
         let frames: Vec<(Frame, StripLayout)> = paths
@@ -236,16 +310,14 @@ pub fn extract_scan_with_progress(
                     let layout = StripLayout::new(&setup, frame.width, frame.height, theta_l)?;
                     return Ok((frame, layout));
                 }
+                let mut layout = None;
                 let frame = Frame::read_rows(path, |width, height| {
-                    StripLayout::new(&setup, width, height, theta_l).map(|l| l.bands())
+                    let full = StripLayout::new(&setup, width, height, theta_l)?;
+                    layout = Some(full);
+                    Ok::<_, ExtractError>(full.bands())
                 })?;
-                // The selector accepted the size: full width, or half of it for raw.
-                let scale = if frame.width == setup.image_width as usize {
-                    1
-                } else {
-                    2
-                };
-                Ok((frame, StripLayout::strips_only(scale)))
+                let layout = layout.expect("the row selector ran").strips_only();
+                Ok((frame, layout))
             })
             .collect::<Result<_, ExtractError>>()?;
         let layout = frames[0].1;
@@ -256,7 +328,8 @@ pub fn extract_scan_with_progress(
             map.write_exr(&hdr_dir.join(format!("theta_l_{theta_l:.1}.exr")))
                 .map_err(|error| ExtractError::Hdr { theta_l, error })?;
         }
-        let (samples, dropped) = extract_theta(&setup, &map, &layout, theta_l, options);
+        let (samples, dropped) =
+            extract_theta(&setup, &map, &layout, theta_l, options, white_reflectance);
         extraction.per_theta.push(ThetaSummary {
             theta_l,
             frames: frames.len(),
@@ -271,12 +344,12 @@ pub fn extract_scan_with_progress(
 }
 
 fn check_options(o: &ExtractOptions) -> Result<(), ExtractError> {
-    if !(o.white_reflectance.is_finite() && o.white_reflectance > 0.0 && o.white_reflectance <= 2.0)
-    {
-        return Err(ExtractError::Options(format!(
-            "white reflectance {} is not in (0, 2]",
-            o.white_reflectance
-        )));
+    if let Some(white) = o.white_reflectance {
+        if !(white.is_finite() && white > 0.0 && white <= 2.0) {
+            return Err(ExtractError::Options(format!(
+                "white reflectance {white} is not in (0, 2]"
+            )));
+        }
     }
     if !(o.grazing_limit_deg.is_finite()
         && o.grazing_limit_deg > 0.0
@@ -330,45 +403,71 @@ fn find_captures(dir: &Path, out: &mut Vec<PathBuf>) -> Result<(), ExtractError>
     Ok(())
 }
 
-/// Mean radiance of the 5 rows around `row` at column `x`, and the OR of their flags.
-fn strip_mean(map: &HdrImage, x: usize, row: usize) -> ([f64; 3], u8) {
-    let mut sum = [0.0; 3];
-    let mut flags = 0;
-    for y in row - STRIP_ROWS / 2..=row + STRIP_ROWS / 2 {
-        let p = map.pixel(x, y);
-        for c in 0..3 {
-            sum[c] += f64::from(p[c]);
-        }
-        flags |= map.flags(x, y);
-    }
-    (sum.map(|s| s / STRIP_ROWS as f64), flags)
+/// The mean radiance of one strip's rows at one column, with each channel's flags
+/// (OR over the rows).
+#[derive(Debug, Clone, Copy)]
+struct StripMean {
+    rgb: [f64; 3],
+    flags: [u8; 3],
 }
 
-/// Where the strips lie in a capture of a given size.
+fn strip_mean(map: &HdrImage, x: usize, centre: usize) -> StripMean {
+    let mut rgb = [0.0; 3];
+    let mut flags = [0; 3];
+    for y in centre - STRIP_ROWS / 2..=centre + STRIP_ROWS / 2 {
+        let p = map.pixel(x, y);
+        for c in 0..3 {
+            rgb[c] += f64::from(p[c]);
+            flags[c] |= map.channel_flags(x, y, c);
+        }
+    }
+    StripMean {
+        rgb: rgb.map(|s| s / STRIP_ROWS as f64),
+        flags,
+    }
+}
+
+/// Sensor pixels per pixel of a `width`×`height` capture of `setup`'s sensor: 1 for
+/// full resolution, 2 for 2×2-superpixel raw; other sizes are refused.
+pub(crate) fn capture_scale(
+    setup: &Setup,
+    width: usize,
+    height: usize,
+    theta_l: f64,
+) -> Result<usize, ExtractError> {
+    let (sw, sh) = (setup.image_width as usize, setup.image_height as usize);
+    if (width, height) == (sw, sh) {
+        Ok(1)
+    } else if (width, height) == (sw / 2, sh / 2) {
+        Ok(2)
+    } else {
+        Err(ExtractError::SizeMismatch {
+            theta_l,
+            width,
+            height,
+            setup_width: setup.image_width,
+            setup_height: setup.image_height,
+        })
+    }
+}
+
+/// Where the strips lie in a capture of a given size, and in the merged map.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 struct StripLayout {
     /// Sensor pixels per capture pixel: 1, or 2 for superpixel raw.
     scale: usize,
+    /// Centre rows of the strips in the capture.
     sample_row: usize,
     white_row: usize,
+    /// Centre rows of the strips in the merged map (the capture's, or those of a map
+    /// holding only [`StripLayout::bands`]).
+    sample_map_row: usize,
+    white_map_row: usize,
 }
 
 impl StripLayout {
     fn new(setup: &Setup, width: usize, height: usize, theta_l: f64) -> Result<Self, ExtractError> {
-        let (sw, sh) = (setup.image_width as usize, setup.image_height as usize);
-        let scale = if (width, height) == (sw, sh) {
-            1
-        } else if (width, height) == (sw / 2, sh / 2) {
-            2
-        } else {
-            return Err(ExtractError::SizeMismatch {
-                theta_l,
-                width,
-                height,
-                setup_width: setup.image_width,
-                setup_height: setup.image_height,
-            });
-        };
+        let scale = capture_scale(setup, width, height, theta_l)?;
         let row = |which: &'static str, sensor_row: u32| {
             let row = sensor_row as usize / scale;
             if row < STRIP_ROWS / 2 || row + STRIP_ROWS / 2 >= height {
@@ -377,14 +476,20 @@ impl StripLayout {
                 Ok(row)
             }
         };
+        let (sample_row, white_row) = (
+            row("sample", setup.sample_row)?,
+            row("white", setup.white_row)?,
+        );
         Ok(Self {
             scale,
-            sample_row: row("sample", setup.sample_row)?,
-            white_row: row("white", setup.white_row)?,
+            sample_row,
+            white_row,
+            sample_map_row: sample_row,
+            white_map_row: white_row,
         })
     }
 
-    /// The row ranges of the two strips (sample, then white).
+    /// The capture row ranges of the two strips (sample, then white).
     fn bands(&self) -> Vec<Range<usize>> {
         let half = STRIP_ROWS / 2;
         [self.sample_row, self.white_row]
@@ -392,14 +497,104 @@ impl StripLayout {
             .to_vec()
     }
 
-    /// The layout of a frame holding only [`StripLayout::bands`].
-    fn strips_only(scale: usize) -> Self {
+    /// The same strips in a frame holding only [`StripLayout::bands`].
+    fn strips_only(self) -> Self {
         let half = STRIP_ROWS / 2;
         Self {
-            scale,
-            sample_row: half,
-            white_row: STRIP_ROWS + half,
+            sample_map_row: half,
+            white_map_row: STRIP_ROWS + half,
+            ..self
         }
+    }
+
+    /// Sensor coordinate of the centre of capture pixel `i` (a superpixel spans two).
+    fn sensor(&self, i: usize) -> f64 {
+        (self.scale * i) as f64 + (self.scale as f64 - 1.0) / 2.0
+    }
+
+    /// The geometry of the strip rows around capture row `centre` at column `x`:
+    /// `None` if any of those pixels misses the cylinder or is unlit.
+    fn strip_geometry(
+        &self,
+        setup: &Setup,
+        x: usize,
+        centre: usize,
+        theta_l: f64,
+    ) -> Option<Vec<PixelGeometry>> {
+        let u = self.sensor(x);
+        (centre - STRIP_ROWS / 2..=centre + STRIP_ROWS / 2)
+            .map(|y| {
+                setup
+                    .pixel_geometry(u, self.sensor(y), theta_l)
+                    .filter(|g| g.irradiance > 0.0 && g.theta_i.abs() < 90.0)
+            })
+            .collect()
+    }
+}
+
+/// The mean geometry of a column's sample pixels, and the irradiance ratio
+/// Ē_white / Ē_sample of its two strips.
+#[derive(Debug, Clone, Copy)]
+struct ColumnGeometry {
+    theta_i: f64,
+    theta_r: f64,
+    cosines: Cosines,
+    irradiance_ratio: f64,
+}
+
+impl ColumnGeometry {
+    fn new(sample: &[PixelGeometry], white: &[PixelGeometry]) -> Self {
+        let mean = |f: &dyn Fn(&PixelGeometry) -> f64, of: &[PixelGeometry]| {
+            of.iter().map(f).sum::<f64>() / of.len() as f64
+        };
+        Self {
+            theta_i: mean(&|g| g.theta_i, sample),
+            theta_r: mean(&|g| g.theta_r, sample),
+            cosines: Cosines {
+                n_dot_l: mean(&|g| g.cosines.n_dot_l, sample),
+                n_dot_v: mean(&|g| g.cosines.n_dot_v, sample),
+                n_dot_h: mean(&|g| g.cosines.n_dot_h, sample),
+                v_dot_h: mean(&|g| g.cosines.v_dot_h, sample),
+            },
+            irradiance_ratio: mean(&|g| g.irradiance, white) / mean(&|g| g.irradiance, sample),
+        }
+    }
+}
+
+/// Why one value (a channel of a column) is dropped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum DropReason {
+    Saturated,
+    Underexposed,
+    DarkWhite,
+}
+
+impl DropReason {
+    /// Why channel `c` of a column with these strips is dropped, if it is; `threshold`
+    /// is the channel's too-dark white level.
+    fn of(sample: &StripMean, white: &StripMean, c: usize, threshold: f64) -> Option<Self> {
+        if (sample.flags[c] | white.flags[c]) & SATURATED != 0 {
+            Some(Self::Saturated)
+        } else if white.flags[c] & UNDEREXPOSED != 0
+            || !(white.rgb[c] > threshold && white.rgb[c] > 0.0)
+        {
+            Some(Self::DarkWhite)
+        } else if sample.flags[c] & UNDEREXPOSED != 0 {
+            Some(Self::Underexposed)
+        } else {
+            None
+        }
+    }
+}
+
+impl DropCounts {
+    fn count(&mut self, reason: DropReason, c: usize) {
+        let counts = match reason {
+            DropReason::Saturated => &mut self.saturated,
+            DropReason::Underexposed => &mut self.underexposed,
+            DropReason::DarkWhite => &mut self.dark_white,
+        };
+        counts[c] += 1;
     }
 }
 
@@ -409,57 +604,71 @@ fn extract_theta(
     layout: &StripLayout,
     theta_l: f64,
     options: &ExtractOptions,
+    white_reflectance: f64,
 ) -> (Vec<Sample>, DropCounts) {
-    let (width, scale) = (map.width, layout.scale);
-    let (sample_row, white_row) = (layout.sample_row, layout.white_row);
-    let columns: Vec<_> = (0..width)
+    let columns: Vec<_> = (0..map.width)
+        .into_par_iter()
         .map(|x| {
-            // Centre of the column in sensor pixels (a superpixel spans two columns).
-            let u = (scale * x) as f64 + (scale as f64 - 1.0) / 2.0;
-            let angles = setup.angles_at_column(u, theta_l);
+            let geometry = layout
+                .strip_geometry(setup, x, layout.sample_row, theta_l)
+                .zip(layout.strip_geometry(setup, x, layout.white_row, theta_l))
+                .map(|(sample, white)| ColumnGeometry::new(&sample, &white));
             (
-                angles,
-                strip_mean(map, x, sample_row),
-                strip_mean(map, x, white_row),
+                geometry,
+                strip_mean(map, x, layout.sample_map_row),
+                strip_mean(map, x, layout.white_map_row),
             )
         })
         .collect();
-    let brightest_white = columns
-        .iter()
-        .filter(|(angles, _, (_, flags))| {
-            angles.is_some() && flags & (SATURATED | UNDEREXPOSED) == 0
-        })
-        .map(|(_, _, (white, _))| white[0].min(white[1]).min(white[2]))
-        .fold(0.0, f64::max);
-    let threshold = options.min_white_fraction * brightest_white;
+    // The brightest usable white of each channel, for the too-dark threshold.
+    let mut brightest_white = [0.0f64; 3];
+    for (geometry, _, white) in &columns {
+        for c in 0..3 {
+            if geometry.is_some() && white.flags[c] == 0 {
+                brightest_white[c] = brightest_white[c].max(white.rgb[c]);
+            }
+        }
+    }
+    let threshold = brightest_white.map(|w| options.min_white_fraction * w);
     let white_rgb = options.camera.white_rgb();
     let limit = options.grazing_limit_deg;
 
     let mut samples = Vec::new();
     let mut dropped = DropCounts::default();
-    for (angles, (sample, sample_flags), (white, white_flags)) in columns {
-        let Some(a) = angles.filter(|a| a.theta_i.abs() < 90.0) else {
+    for (geometry, sample, white) in columns {
+        let Some(g) = geometry else {
             dropped.off_cylinder += 1;
             continue;
         };
-        if a.theta_i.abs() > limit || a.theta_r.abs() > limit {
+        if g.theta_i.abs() > limit || g.theta_r.abs() > limit {
             dropped.grazing += 1;
-        } else if (sample_flags | white_flags) & SATURATED != 0 {
-            dropped.saturated += 1;
-        } else if white_flags & UNDEREXPOSED != 0
-            || white.iter().any(|&w| !(w > threshold && w > 0.0))
-        {
-            dropped.dark_white += 1;
+            continue;
+        }
+        let mut point = Sample {
+            theta_l,
+            theta_i: g.theta_i,
+            theta_r: g.theta_r,
+            cosines: Some(g.cosines),
+            ..Sample::default()
+        };
+        for c in 0..3 {
+            match DropReason::of(&sample, &white, c, threshold[c]) {
+                Some(reason) => {
+                    dropped.count(reason, c);
+                    point.dropped[c] = true;
+                }
+                None => {
+                    point.rgb[c] = sample.rgb[c] / white.rgb[c]
+                        * g.irradiance_ratio
+                        * white_reflectance
+                        * white_rgb[c];
+                }
+            }
+        }
+        if point.dropped.iter().all(|&d| d) {
+            dropped.no_channel += 1;
         } else {
-            let rgb =
-                [0, 1, 2].map(|c| sample[c] / white[c] * options.white_reflectance * white_rgb[c]);
-            samples.push(Sample {
-                theta_l,
-                theta_i: a.theta_i,
-                theta_r: a.theta_r,
-                rgb,
-                cosines: None,
-            });
+            samples.push(point);
         }
     }
     (samples, dropped)

@@ -5,9 +5,9 @@ use std::path::Path;
 
 use gonio_processing::capture::{self, CaptureError, Response, Sidecar};
 use gonio_processing::color::CameraModel;
-use gonio_processing::extract::{self, ExtractError, ExtractOptions};
+use gonio_processing::extract::{self, ExtractError, ExtractOptions, WhiteSource};
 use gonio_processing::geometry::Setup;
-use gonio_processing::samples::Sample;
+use gonio_processing::samples::{self, Sample};
 
 const W: u32 = 64;
 const H: u32 = 48;
@@ -27,6 +27,11 @@ fn setup() -> Setup {
         principal_point_x: None,
         sample_row: 14,
         white_row: 34,
+        principal_point_y: None,
+        white_reflectance: None,
+        camera_offset_mm: 0.0,
+        cylinder_tilt_deg: 0.0,
+        arm_zero_offset_deg: 0.0,
     }
 }
 
@@ -36,6 +41,10 @@ struct Scene {
     /// Radiance (normalised signal per second) of the white strip at θi = 0, per channel.
     white_level: [f64; 3],
     sample_scale: f64,
+    /// Camera-RGB β of the Lambertian sample.
+    kd: [f64; 3],
+    /// setup.json's `white_reflectance`.
+    recorded_white: Option<f64>,
 }
 
 impl Default for Scene {
@@ -44,13 +53,18 @@ impl Default for Scene {
             white_reflectance: 1.0,
             white_level: [10.0, 12.0, 6.0],
             sample_scale: 1.0,
+            kd: KD,
+            recorded_white: None,
         }
     }
 }
 
 /// Writes setup.json and the TIFF captures of a Lambertian sample above a diffuse white.
 fn write_scan(dir: &Path, theta_ls: &[f64], scene: &Scene) {
-    let setup = setup();
+    let setup = Setup {
+        white_reflectance: scene.recorded_white,
+        ..setup()
+    };
     fs::write(
         dir.join("setup.json"),
         serde_json::to_string(&setup).unwrap(),
@@ -65,16 +79,17 @@ fn write_scan(dir: &Path, theta_ls: &[f64], scene: &Scene) {
             let mut counts = Vec::with_capacity((W * H * 3) as usize);
             for y in 0..H {
                 for x in 0..W {
-                    let cos_i = setup
-                        .angles_at_column(f64::from(x), theta_l)
-                        .map_or(0.0, |a| a.theta_i.to_radians().cos().max(0.0));
+                    // Irradiance cos θi/d² of the pixel's point, relative to 1 m.
+                    let irradiance = setup
+                        .pixel_geometry(f64::from(x), f64::from(y), theta_l)
+                        .map_or(0.0, |g| g.irradiance * 1e6);
                     for c in 0..3 {
                         // The white's radiance is ρ·PRD; the sample's is β/W_c times the PRD.
-                        let prd = scene.white_level[c] * cos_i;
+                        let prd = scene.white_level[c] * irradiance;
                         let radiance = if (24..44).contains(&y) {
                             prd * scene.white_reflectance
                         } else {
-                            prd * KD[c] / white_rgb[c] * scene.sample_scale
+                            prd * scene.kd[c] / white_rgb[c] * scene.sample_scale
                         };
                         let signal = (radiance * t).min(1.0);
                         counts.push((black + signal * (white - black)).round() as u16);
@@ -156,11 +171,10 @@ fn synthetic_lambertian_scan_gives_the_known_beta() {
             (off, grazing),
             "{summary:?}"
         );
-        assert_eq!(
-            summary.dropped.saturated + summary.dropped.dark_white,
-            0,
-            "{summary:?}"
-        );
+        assert_eq!(summary.dropped.no_channel, 0, "{summary:?}");
+        for c in 0..3 {
+            assert_eq!(summary.dropped.values(c), 0, "{summary:?}");
+        }
     }
     for s in &extraction.samples {
         assert!(s.theta_i.abs() <= 80.0 && s.theta_r.abs() <= 80.0);
@@ -179,7 +193,7 @@ fn white_reflectance_scales_beta_and_is_validated() {
     };
     write_scan(dir.path(), &[-30.0], &scene);
     let options = ExtractOptions {
-        white_reflectance: 0.8,
+        white_reflectance: Some(0.8),
         ..ExtractOptions::default()
     };
     let extraction = extract::extract_scan(dir.path(), &options).unwrap();
@@ -189,7 +203,7 @@ fn white_reflectance_scales_beta_and_is_validated() {
     }
     for bad in [0.0, -1.0, f64::NAN] {
         let options = ExtractOptions {
-            white_reflectance: bad,
+            white_reflectance: Some(bad),
             ..ExtractOptions::default()
         };
         assert!(matches!(
@@ -210,7 +224,8 @@ fn dark_white_reference_drops_columns_instead_of_dividing_by_zero() {
     let extraction = extract::extract_scan(dir.path(), &ExtractOptions::default()).unwrap();
     assert!(extraction.samples.is_empty());
     let d = extraction.dropped;
-    assert!(d.dark_white > 25, "{d:?}");
+    assert!(d.dark_white.iter().all(|&n| n > 25), "{d:?}");
+    assert!(d.no_channel > 25, "{d:?}");
     assert_eq!(d.total(), W as usize);
 }
 
@@ -225,7 +240,7 @@ fn saturated_strips_are_dropped_and_counted() {
     write_scan(dir.path(), &[-30.0], &scene);
     let extraction = extract::extract_scan(dir.path(), &ExtractOptions::default()).unwrap();
     assert!(
-        extraction.dropped.saturated > 20,
+        extraction.dropped.saturated.iter().all(|&n| n > 20),
         "{:?}",
         extraction.dropped
     );
@@ -339,4 +354,78 @@ fn captures_of_another_size_than_the_setup_are_refused() {
         extract::extract_scan(dir.path(), &ExtractOptions::default()),
         Err(ExtractError::RowOutside { which: "white", .. })
     ));
+}
+
+#[test]
+fn white_reflectance_comes_from_setup_json_and_the_option_overrides_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = Scene {
+        white_reflectance: 0.8,
+        recorded_white: Some(0.8),
+        ..Scene::default()
+    };
+    write_scan(dir.path(), &[-30.0], &scene);
+    let extraction = extract::extract_scan(dir.path(), &ExtractOptions::default()).unwrap();
+    assert_eq!(
+        (extraction.white_reflectance, extraction.white_source),
+        (0.8, WhiteSource::Setup)
+    );
+    assert!(extraction.samples.len() > 25);
+    extraction.samples.iter().for_each(assert_beta_is_kd);
+    // The option overrides setup.json: β scales with it.
+    let options = ExtractOptions {
+        white_reflectance: Some(0.4),
+        ..ExtractOptions::default()
+    };
+    let halved = extract::extract_scan(dir.path(), &options).unwrap();
+    assert_eq!(halved.white_source, WhiteSource::Option);
+    for (h, s) in halved.samples.iter().zip(&extraction.samples) {
+        for c in 0..3 {
+            assert!((h.rgb[c] - 0.5 * s.rgb[c]).abs() < 1e-9 * s.rgb[c]);
+        }
+    }
+    // A setup.json without it: a perfect diffuser is assumed, and said so.
+    write_scan(dir.path(), &[-30.0], &Scene::default());
+    let assumed = extract::extract_scan(dir.path(), &ExtractOptions::default()).unwrap();
+    assert_eq!(
+        (assumed.white_reflectance, assumed.white_source),
+        (1.0, WhiteSource::Assumed)
+    );
+}
+
+#[test]
+fn a_channel_below_the_noise_floor_is_dropped_not_written_as_zero() {
+    let dir = tempfile::tempdir().unwrap();
+    // Blue far below the noise floor in every exposure; red and green well exposed.
+    let scene = Scene {
+        kd: [30.0, 50.0, 1e-4],
+        ..Scene::default()
+    };
+    write_scan(dir.path(), &[-30.0], &scene);
+    let extraction = extract::extract_scan(dir.path(), &ExtractOptions::default()).unwrap();
+    let d = extraction.dropped;
+    assert!(extraction.samples.len() > 25, "{d:?}");
+    assert_eq!(d.underexposed[2], extraction.samples.len(), "{d:?}");
+    assert_eq!(
+        (d.underexposed[0], d.underexposed[1], d.no_channel),
+        (0, 0, 0)
+    );
+    for s in &extraction.samples {
+        assert_eq!(s.dropped, [false, false, true], "{s:?}");
+        assert_eq!(s.channel(2), None);
+        for c in 0..2 {
+            assert!((s.rgb[c] - scene.kd[c]).abs() < 0.01 * scene.kd[c], "{s:?}");
+        }
+    }
+    // Written as an empty field, read back as dropped.
+    let mut text = Vec::new();
+    samples::write_csv_to(&mut text, &extraction.samples).unwrap();
+    let text = String::from_utf8(text).unwrap();
+    let row = text.lines().nth(1).unwrap();
+    let fields: Vec<&str> = row.split(',').collect();
+    assert_eq!(fields[5], "", "{row}");
+    assert_eq!(
+        samples::read_csv_from(text.as_bytes()).unwrap(),
+        extraction.samples
+    );
 }

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use anyhow::bail;
-use gonio_processing::extract::{self, ExtractOptions};
+use gonio_processing::extract::{self, ExtractOptions, WhiteSource};
 use gonio_processing::samples;
 
 use crate::progress;
@@ -15,12 +15,14 @@ use super::output::write_output;
 pub struct Args {
     /// Scan directory: setup.json plus captures (TIFF or camera raw with .json sidecars).
     dir: PathBuf,
-    /// Output samples CSV (theta_l,theta_i,theta_r,r,g,b; β in camera RGB).
+    /// Output samples CSV (theta_l,theta_i,theta_r,r,g,b, then the 3D cosines
+    /// n_dot_l,n_dot_v,n_dot_h,v_dot_h; β in camera RGB, empty where dropped).
     #[arg(long)]
     out: PathBuf,
-    /// Reflectance of the white reference (1 = perfect reflecting diffuser).
-    #[arg(long, default_value_t = 1.0)]
-    white_reflectance: f64,
+    /// Reflectance of the white reference (1 = perfect reflecting diffuser), instead of
+    /// setup.json's `white_reflectance`.
+    #[arg(long)]
+    white_reflectance: Option<f64>,
     /// Drop points with |θi| or |θr| above this many degrees.
     #[arg(long, default_value_t = 80.0)]
     grazing_limit: f64,
@@ -59,15 +61,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         samples::write_csv(path, &extraction.samples)
     })?;
     let d = extraction.dropped;
+    let rgb = |v: [usize; 3]| format!("{}/{}/{}", v[0], v[1], v[2]);
     println!(
-        "wrote {} samples from {} θL to {} (columns dropped: {} off the cylinder or unlit, {} grazing, {} saturated, {} dark white)",
+        "wrote {} samples from {} θL to {} (columns dropped: {} off the cylinder or unlit, {} grazing, {} with no usable channel; values dropped R/G/B: {} saturated, {} underexposed, {} dark white)",
         extraction.samples.len(),
         extraction.per_theta.len(),
         args.out.display(),
         d.off_cylinder,
         d.grazing,
-        d.saturated,
-        d.dark_white,
+        d.no_channel,
+        rgb(d.saturated),
+        rgb(d.underexposed),
+        rgb(d.dark_white),
+    );
+    let source = match extraction.white_source {
+        WhiteSource::Option => "--white-reflectance",
+        WhiteSource::Setup => "setup.json",
+        WhiteSource::Assumed => "assumed: setup.json gives none",
+    };
+    println!(
+        "white reference reflectance {} ({source})",
+        extraction.white_reflectance
     );
     if !extraction.skipped_without_sidecar.is_empty() {
         eprintln!(

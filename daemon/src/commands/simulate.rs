@@ -77,7 +77,7 @@ pub fn render_scan(args: Args) -> anyhow::Result<(usize, String)> {
     let out = &args.out;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
 
-    let setup: Setup = serde_json::from_value(scene.setup().setup_json())
+    let setup: Setup = serde_json::from_value(scene.setup_json())
         .context("scene setup does not convert to the processing setup")?;
     write_json(&out.join("setup.json"), &serde_json::to_value(&setup)?)?;
     write_json(&out.join("truth.json"), &scene.truth_json())?;

@@ -201,7 +201,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .or(truth.model.map(|(_, r, _)| r))
         .unwrap_or(Roughness::Shared);
 
-    let extracted = extract_all(&scan_dir, &args.out, &positions, bracket_len, &truth)?;
+    let extracted = extract_all(&scan_dir, &args.out, &positions, bracket_len)?;
     let full: Vec<Sample> = extracted[bracket_len - 1]
         .iter()
         .flat_map(|e| e.samples.iter().copied())
@@ -285,16 +285,13 @@ fn extract_all(
     out: &Path,
     positions: &[Position],
     bracket_len: usize,
-    truth: &Truth,
 ) -> anyhow::Result<Vec<Vec<scan::Extracted>>> {
     let work = tempfile::Builder::new()
         .prefix(".extract-")
         .tempdir_in(out)
         .context("creating a work directory")?;
-    let options = ExtractOptions {
-        white_reflectance: truth.white_reflectance,
-        ..ExtractOptions::default()
-    };
+    // The scan's setup.json carries the white reflectance.
+    let options = ExtractOptions::default();
     let _guard = RemoveOnInterrupt::new(work.path());
     let bar = progress::bar((bracket_len * positions.len()) as u64, "extractions");
     let mut all = Vec::new();

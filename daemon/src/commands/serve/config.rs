@@ -15,8 +15,9 @@
 //! max_connections = 1024       # open connections (fewer if the fd limit is lower)
 //! max_event_streams = 64       # open server-sent event streams
 //! reserved_fds = 256           # file descriptors kept for the hardware, database, files
-//! white_reflectance = 1.0      # of the white strip; emulated scans use the scene's
-//! # [setup] = processing's Setup fields, for real hardware (setup.json of each scan)
+//! white_reflectance = 1.0      # of the white strip where [setup] gives none
+//! # [setup] = processing's Setup fields, for real hardware (setup.json of each scan),
+//! # white_reflectance among them; emulated scans use the scene's setup
 //!
 //! [arm]                        # or: kind = "grbl", path = "/dev/serial/by-id/..."
 //! kind = "emulator"
@@ -92,10 +93,10 @@ pub struct Config {
     pub retry: RetryConfig,
     pub emulator: EmulatorConfig,
     /// Reflectance of the white reference strip of the real setup (1 = perfect
-    /// reflecting diffuser); emulated scans take the scene's.
+    /// reflecting diffuser) where `[setup]` gives none; emulated scans take the scene's.
     pub white_reflectance: f64,
-    /// Geometry of the real setup (written to each scan's setup.json); emulated scans
-    /// take the scene's geometry.
+    /// Geometry and white reflectance of the real setup (written to each scan's
+    /// setup.json); emulated scans take the scene's.
     pub setup: Option<Setup>,
 }
 
@@ -352,6 +353,17 @@ impl Config {
             }
         }
         Ok(())
+    }
+
+    /// The real setup of `[setup]`, its white reflectance from the top-level key when it
+    /// gives none.
+    pub fn setup(&self) -> Option<Setup> {
+        self.setup.clone().map(|mut setup| {
+            setup
+                .white_reflectance
+                .get_or_insert(self.white_reflectance);
+            setup
+        })
     }
 
     fn arm_time_scale(&self) -> Option<f64> {

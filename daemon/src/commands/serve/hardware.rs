@@ -58,14 +58,12 @@ pub struct Emulators {
 pub struct Devices {
     pub arm: ArmOpener,
     pub camera: Box<dyn Camera>,
-    /// Geometry written to each scan's setup.json, if known.
+    /// Geometry and white reflectance written to each scan's setup.json, if known.
     pub setup: Option<Setup>,
     /// Scene truth written to each emulated scan's truth.json.
     pub truth: Option<Value>,
     /// Levels and response written to every capture sidecar.
     pub sidecar: SidecarDefaults,
-    /// Reflectance of the white reference strip (1 = perfect reflecting diffuser).
-    pub white_reflectance: f64,
     /// ISO set for every exposure, where the body has one.
     pub iso: Option<u32>,
     pub emulators: Option<Arc<Emulators>>,
@@ -166,8 +164,8 @@ pub fn open(config: &Config) -> anyhow::Result<Devices> {
                 ..CaptureTiming::default()
             };
             let camera = EmulatedCamera::new(scene.clone(), world.clone(), timing);
-            let setup: Setup = serde_json::from_value(scene.setup().setup_json())
-                .context("converting the scene setup")?;
+            let setup: Setup =
+                serde_json::from_value(scene.setup_json()).context("converting the scene setup")?;
             let body = scene.camera();
             let levels = camera.file_levels();
             let sidecar = SidecarDefaults {
@@ -193,7 +191,6 @@ pub fn open(config: &Config) -> anyhow::Result<Devices> {
                 setup: Some(setup),
                 truth: Some(scene.truth_json()),
                 sidecar,
-                white_reflectance: scene.white_reflectance(),
                 iso: Some(body.iso),
                 emulators,
             })
@@ -201,10 +198,9 @@ pub fn open(config: &Config) -> anyhow::Result<Devices> {
         CameraConfig::Gphoto2 { iso, model, port } => Ok(Devices {
             arm,
             camera: open_gphoto2(model.as_deref(), port.as_deref())?,
-            setup: config.setup.clone(),
+            setup: config.setup(),
             truth: None,
             sidecar: SidecarDefaults::default(),
-            white_reflectance: config.white_reflectance,
             iso: Some(*iso),
             emulators: None,
         }),

@@ -15,12 +15,11 @@ use serde_json::{json, Value};
 use super::files::{write_atomic, write_atomic_with};
 use super::plan::{theta_dir_name, Step, FIT_MODELS};
 
-/// Runs one processing step in scan directory `dir`; `white_reflectance` is that of
-/// the white reference strip. Returns the step's result record.
-pub fn run(step: &Step, dir: &Path, white_reflectance: f64) -> anyhow::Result<Value> {
+/// Runs one processing step in scan directory `dir`. Returns the step's result record.
+pub fn run(step: &Step, dir: &Path) -> anyhow::Result<Value> {
     match step {
         Step::Hdr { theta_l } => hdr(dir, *theta_l),
-        Step::Extract => extract(dir, white_reflectance),
+        Step::Extract => extract(dir),
         Step::Fit { model } => fit_model(dir, model),
         Step::Home | Step::Move { .. } | Step::Meter { .. } | Step::Capture { .. } => {
             anyhow::bail!("{} is not a processing step", step.describe())
@@ -47,12 +46,9 @@ fn hdr(dir: &Path, theta_l: f64) -> anyhow::Result<Value> {
     Ok(json!({ "path": rel, "frames": frames.len() }))
 }
 
-fn extract(dir: &Path, white_reflectance: f64) -> anyhow::Result<Value> {
-    let options = ExtractOptions {
-        white_reflectance,
-        ..ExtractOptions::default()
-    };
-    let extraction = extract_scan(dir, &options)?;
+/// Extracts with setup.json's white reflectance.
+fn extract(dir: &Path) -> anyhow::Result<Value> {
+    let extraction = extract_scan(dir, &ExtractOptions::default())?;
     anyhow::ensure!(
         !extraction.samples.is_empty(),
         "{}",

@@ -71,7 +71,6 @@ pub struct Runner {
     truth: Option<Value>,
     sidecar: SidecarDefaults,
     iso: Option<u32>,
-    white_reflectance: f64,
 }
 
 impl Runner {
@@ -99,7 +98,6 @@ impl Runner {
             truth: devices.truth,
             sidecar: devices.sidecar,
             iso: devices.iso,
-            white_reflectance: devices.white_reflectance,
         }
     }
 
@@ -447,11 +445,8 @@ impl Runner {
                 shutter_s,
             } => self.capture(id, dir, *theta_l, *index, *shutter_s)?,
             Step::Hdr { .. } | Step::Extract | Step::Fit { .. } => {
-                let white_reflectance = self.white_reflectance;
-                step_guard::run_processing(&step.describe(), || {
-                    process::run(step, dir, white_reflectance)
-                })
-                .map_err(StepError::Failed)?
+                step_guard::run_processing(&step.describe(), || process::run(step, dir))
+                    .map_err(StepError::Failed)?
             }
         };
         Ok((result, Vec::new()))

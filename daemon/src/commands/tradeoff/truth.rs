@@ -20,7 +20,6 @@ struct TruthFile {
     ks: Option<[f64; 3]>,
     #[serde(default)]
     m: Option<Vec<f64>>,
-    white_reflectance: f64,
 }
 
 /// A scene's truth: its parameters when its material is one of the fitted models.
@@ -31,7 +30,6 @@ pub struct Truth {
     pub material: String,
     /// Model, roughness form and parameters when the material is Cook–Torrance or Ward.
     pub model: Option<(Model, Roughness, Params)>,
-    pub white_reflectance: f64,
 }
 
 impl Truth {
@@ -55,7 +53,6 @@ impl Truth {
             scene: file.scene,
             material: file.model,
             model,
-            white_reflectance: file.white_reflectance,
         })
     }
 }
