@@ -18,6 +18,12 @@
 //! Separability: the ray–cylinder intersection, the surface normal and the in-plane
 //! light and view vectors depend only on the column; a pixel adds only its height z
 //! (exact, no approximation).
+//!
+//! A scene that names `[effects.misalignment]` breaks that symmetry: then every pixel's
+//! ray meets the (possibly tilted) cylinder in 3D, seen from the moved or turned camera,
+//! lit from where the misaligned arm puts the light, and the strips are bands on the
+//! cylinder between the heights the nominal strip rows see at its front
+//! ([`crate::scene::SceneSetup::front_height_mm`]).
 
 pub mod brdf;
 pub mod effects;
@@ -29,7 +35,7 @@ use std::path::Path;
 use gonio_drivers::atomic_file::write_atomically;
 use rayon::prelude::*;
 
-use crate::scene::Scene;
+use crate::scene::{Misalignment, Scene};
 use brdf::Geom;
 use effects::NoiseModel;
 
@@ -239,6 +245,155 @@ enum Strip {
     Dark,
 }
 
+/// What a pixel sees at its surface point: cosines of unit vectors, the squared light
+/// distance (mm²) and the signed in-plane angles (degrees).
+#[derive(Debug, Clone, Copy)]
+struct Local {
+    cos_i: f64,
+    cos_r: f64,
+    l_dot_v: f64,
+    l2: f64,
+    theta_i_deg: f64,
+    theta_r_deg: f64,
+}
+
+impl Column {
+    /// The pixel of this column at sensor height `y_mm`; `None` where it is unlit.
+    #[inline]
+    fn at(&self, y_mm: f64) -> Option<Local> {
+        let z = -self.t * y_mm;
+        let z2 = z * z;
+        let l2 = self.l2 + z2;
+        let (l_len, v_len) = (l2.sqrt(), (self.v2 + z2).sqrt());
+        let cos_i = self.n_l / l_len;
+        if cos_i <= 0.0 {
+            return None;
+        }
+        Some(Local {
+            cos_i,
+            cos_r: self.n_v / v_len,
+            l_dot_v: (self.l_v + z2) / (l_len * v_len),
+            l2,
+            theta_i_deg: self.theta_i_deg,
+            theta_r_deg: self.theta_r_deg,
+        })
+    }
+}
+
+type Vec3 = [f64; 3];
+
+fn dot(a: Vec3, b: Vec3) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// The world of a misaligned scene for one light angle (see
+/// [`crate::scene::Misalignment`]): world frame as the scene's setup, z up.
+struct Misaligned {
+    camera: Vec3,
+    /// f times the unit optical axis, and the unit image right and up vectors (mm).
+    forward: Vec3,
+    right: Vec3,
+    up: Vec3,
+    /// Unit cylinder axis.
+    axis: Vec3,
+    radius: f64,
+    light: Vec3,
+    /// Heights along the axis (low, high) of the sample and white bands, mm.
+    sample_band: (f64, f64),
+    white_band: (f64, f64),
+}
+
+impl Misaligned {
+    fn new(scene: &Scene, m: &Misalignment, theta_l_deg: f64) -> Self {
+        let s = scene.setup();
+        let (sin_y, cos_y) = m.camera_yaw_deg.to_radians().sin_cos();
+        let (sin_t, cos_t) = m.cylinder_tilt_deg.to_radians().sin_cos();
+        let (sin_l, cos_l) = (theta_l_deg + m.arm_zero_offset_deg).to_radians().sin_cos();
+        let light = s.light_distance_mm + m.light_distance_error_mm;
+        let f = s.focal_length_mm;
+        // Rows r0..=r1 cover sensor rows r0 − ½ to r1 + ½; lower rows are higher up.
+        let band = |rows: [u32; 2]| {
+            (
+                s.front_height_mm(f64::from(rows[1]) + 0.5),
+                s.front_height_mm(f64::from(rows[0]) - 0.5),
+            )
+        };
+        Self {
+            camera: [s.camera_distance_mm, m.camera_offset_mm, 0.0],
+            forward: [-f * cos_y, -f * sin_y, 0.0],
+            right: [-sin_y, cos_y, 0.0],
+            up: [0.0, 0.0, 1.0],
+            axis: [0.0, sin_t, cos_t],
+            radius: s.cylinder_radius_mm,
+            light: [light * cos_l, light * sin_l, 0.0],
+            sample_band: band(s.sample_rows),
+            white_band: band(s.white_rows),
+        }
+    }
+
+    /// What the pixel at sensor offsets (`x_mm` right, `y_mm` down) of the principal
+    /// point sees: the strip it falls on and its local geometry; `None` where the ray
+    /// misses the cylinder, the point is unlit or lies outside both strips.
+    fn pixel(&self, x_mm: f64, y_mm: f64) -> Option<(Strip, Local)> {
+        let d: Vec3 =
+            std::array::from_fn(|k| self.forward[k] + x_mm * self.right[k] - y_mm * self.up[k]);
+        // Components ⊥ the axis: |C⊥ + t·d⊥|² = r², near root t = c / (−b/2 + √disc).
+        let perp = |v: Vec3| {
+            let along = dot(v, self.axis);
+            [
+                v[0] - along * self.axis[0],
+                v[1] - along * self.axis[1],
+                v[2] - along * self.axis[2],
+            ]
+        };
+        let (c, dp) = (perp(self.camera), perp(d));
+        let a = dot(dp, dp);
+        let half_b = dot(c, dp);
+        let c0 = dot(c, c) - self.radius * self.radius;
+        let disc = half_b * half_b - a * c0;
+        if disc <= 0.0 || half_b >= 0.0 {
+            return None;
+        }
+        let t = c0 / (-half_b + disc.sqrt());
+        let p: Vec3 = std::array::from_fn(|k| self.camera[k] + t * d[k]);
+        let height = dot(p, self.axis);
+        let strip = if (self.sample_band.0..=self.sample_band.1).contains(&height) {
+            Strip::Sample
+        } else if (self.white_band.0..=self.white_band.1).contains(&height) {
+            Strip::White
+        } else {
+            return None;
+        };
+        let n = perp(p).map(|x| x / self.radius);
+        let l: Vec3 = std::array::from_fn(|k| self.light[k] - p[k]);
+        let v: Vec3 = d.map(|x| -t * x);
+        let (l2, v2) = (dot(l, l), dot(v, v));
+        let (n_l, n_v) = (dot(n, l), dot(n, v));
+        if n_l <= 0.0 || n_v <= 0.0 {
+            return None;
+        }
+        let (l_len, v_len) = (l2.sqrt(), v2.sqrt());
+        // In-plane angles in the cross-section plane: tangent = axis × n.
+        let a = self.axis;
+        let tangent = [
+            a[1] * n[2] - a[2] * n[1],
+            a[2] * n[0] - a[0] * n[2],
+            a[0] * n[1] - a[1] * n[0],
+        ];
+        Some((
+            strip,
+            Local {
+                cos_i: n_l / l_len,
+                cos_r: n_v / v_len,
+                l_dot_v: dot(l, v) / (l_len * v_len),
+                l2,
+                theta_i_deg: dot(tangent, l).atan2(n_l).to_degrees(),
+                theta_r_deg: -dot(tangent, v).atan2(n_v).to_degrees(),
+            },
+        ))
+    }
+}
+
 /// Per-frame constants of the light reaching the sensor.
 struct Lighting<'a> {
     scene: &'a Scene,
@@ -251,47 +406,77 @@ struct Lighting<'a> {
 }
 
 impl Lighting<'_> {
-    /// Signal (counts above black) of the pixel at sensor height `y_mm` in column
-    /// `col` of a strip; `None` where no light arrives.
+    /// Signal (counts above black) of a lit pixel at sensor offsets (`x_mm`, `y_mm`)
+    /// seeing `local` on `strip`.
     #[inline]
-    fn signal(&self, col: &Column, y_mm: f64, strip: Strip) -> Option<[f64; 3]> {
-        if strip == Strip::Dark {
-            return None;
-        }
-        let z = -col.t * y_mm;
-        let z2 = z * z;
-        let l2 = col.l2 + z2;
-        let (l_len, v_len) = (l2.sqrt(), (col.v2 + z2).sqrt());
-        let cos_i = col.n_l / l_len;
-        if cos_i <= 0.0 {
-            return None;
-        }
+    fn signal(&self, local: &Local, strip: Strip, x_mm: f64, y_mm: f64) -> [f64; 3] {
         let beta = if strip == Strip::White {
             self.white_beta
         } else {
-            let l_v = (col.l_v + z2) / (l_len * v_len);
             let g = Geom::new(
-                cos_i,
-                col.n_v / v_len,
-                l_v,
-                col.theta_i_deg,
-                col.theta_r_deg,
+                local.cos_i,
+                local.cos_r,
+                local.l_dot_v,
+                local.theta_i_deg,
+                local.theta_r_deg,
             );
             let mut beta = self.scene.material().beta(&g);
             if let Some((kr, w2)) = self.retro {
-                let lobe = brdf::retro_lobe(l_v, w2);
+                let lobe = brdf::retro_lobe(local.l_dot_v, w2);
                 for (b, k) in beta.iter_mut().zip(kr) {
                     *b += k * lobe;
                 }
             }
             beta
         };
-        let mut gain = self.scale * cos_i * 1e6 / l2;
+        let mut gain = self.scale * local.cos_i * 1e6 / local.l2;
         if let Some(strength) = self.vignetting {
             let f = self.scene.setup().focal_length_mm;
-            gain *= effects::vignetting_gain(strength, f, col.x_mm, y_mm);
+            gain *= effects::vignetting_gain(strength, f, x_mm, y_mm);
         }
-        Some(beta.map(|b| b * gain))
+        beta.map(|b| b * gain)
+    }
+}
+
+/// How pixels are traced: separably per column, or each in 3D (misaligned scenes).
+enum View {
+    Columns(Vec<Option<Column>>),
+    Misaligned(Misaligned),
+}
+
+/// Quantises one row of signals (counts above black, `None` where no light arrives)
+/// into `out`, with noise when the scene has it (`rng` gives the row's generator).
+#[inline]
+fn fill_row(
+    out: &mut [u16],
+    signal: impl Fn(usize) -> Option<[f64; 3]>,
+    noise: Option<&NoiseModel>,
+    rng: impl FnOnce() -> rand_pcg::Pcg64Mcg,
+    quantise: &impl Fn(f64) -> u16,
+    dark: u16,
+) {
+    match noise {
+        None => {
+            for (u, px) in out.chunks_exact_mut(3).enumerate() {
+                match signal(u) {
+                    Some(signal) => {
+                        for (v, s) in px.iter_mut().zip(signal) {
+                            *v = quantise(s);
+                        }
+                    }
+                    None => px.fill(dark),
+                }
+            }
+        }
+        Some(model) => {
+            let mut rng = rng();
+            for (u, px) in out.chunks_exact_mut(3).enumerate() {
+                let signal = signal(u).unwrap_or([0.0; 3]);
+                for (v, s) in px.iter_mut().zip(signal) {
+                    *v = quantise(model.apply(s, &mut rng));
+                }
+            }
+        }
     }
 }
 
@@ -301,9 +486,12 @@ pub fn render(scene: &Scene, shot: &Shot) -> Frame16 {
     let (width, height) = (setup.image_width, setup.image_height);
     let camera = scene.camera();
     let effects = scene.effects();
-    let cols = columns(scene, shot.theta_l_deg);
+    let view = match &effects.misalignment {
+        Some(m) => View::Misaligned(Misaligned::new(scene, m, shot.theta_l_deg)),
+        None => View::Columns(columns(scene, shot.theta_l_deg)),
+    };
     let pitch = setup.pixel_pitch_um / 1000.0;
-    let cy = setup.cy();
+    let (cx, cy) = (setup.cx(), setup.cy());
     let lighting = Lighting {
         scene,
         scale: shot.shutter_s * f64::from(shot.iso) / 100.0 * scene.light_intensity() / 100.0,
@@ -346,37 +534,34 @@ pub fn render(scene: &Scene, shot: &Shot) -> Frame16 {
         .enumerate()
         .for_each(|(row, out)| {
             let row = row as u32;
-            let strip = if (setup.sample_rows[0]..=setup.sample_rows[1]).contains(&row) {
-                Strip::Sample
-            } else if (setup.white_rows[0]..=setup.white_rows[1]).contains(&row) {
-                Strip::White
-            } else {
-                Strip::Dark
-            };
             let y_mm = (f64::from(row) - cy) * pitch;
-            match &noise {
-                None => {
-                    for (col, px) in cols.iter().zip(out.chunks_exact_mut(3)) {
-                        match col.and_then(|col| lighting.signal(&col, y_mm, strip)) {
-                            Some(signal) => {
-                                for (v, s) in px.iter_mut().zip(signal) {
-                                    *v = quantise(s);
-                                }
-                            }
-                            None => px.fill(dark),
+            let rng = || NoiseModel::row_rng(frame_seed, row);
+            match &view {
+                View::Columns(cols) => {
+                    let strip = if (setup.sample_rows[0]..=setup.sample_rows[1]).contains(&row) {
+                        Strip::Sample
+                    } else if (setup.white_rows[0]..=setup.white_rows[1]).contains(&row) {
+                        Strip::White
+                    } else {
+                        Strip::Dark
+                    };
+                    let signal = |u: usize| {
+                        if strip == Strip::Dark {
+                            return None;
                         }
-                    }
+                        let col = cols[u].as_ref()?;
+                        let local = col.at(y_mm)?;
+                        Some(lighting.signal(&local, strip, col.x_mm, y_mm))
+                    };
+                    fill_row(out, signal, noise.as_ref(), rng, &quantise, dark);
                 }
-                Some(model) => {
-                    let mut rng = NoiseModel::row_rng(frame_seed, row);
-                    for (col, px) in cols.iter().zip(out.chunks_exact_mut(3)) {
-                        let signal = col
-                            .and_then(|col| lighting.signal(&col, y_mm, strip))
-                            .unwrap_or([0.0; 3]);
-                        for (v, s) in px.iter_mut().zip(signal) {
-                            *v = quantise(model.apply(s, &mut rng));
-                        }
-                    }
+                View::Misaligned(world) => {
+                    let signal = |u: usize| {
+                        let x_mm = (u as f64 - cx) * pitch;
+                        let (strip, local) = world.pixel(x_mm, y_mm)?;
+                        Some(lighting.signal(&local, strip, x_mm, y_mm))
+                    };
+                    fill_row(out, signal, noise.as_ref(), rng, &quantise, dark);
                 }
             }
         });

@@ -45,7 +45,8 @@ fn invalid(key: &str, reason: impl Into<String>) -> SceneError {
 
 /// The physical setup. Lengths in mm, pixel pitch in µm, rows and columns in pixels.
 /// Field names match `processing::geometry::Setup` where they overlap (see
-/// [`SceneSetup::setup_json`]).
+/// [`Scene::setup_json`]). This is the nominal setup, what setup.json states; the
+/// optional [`Misalignment`] effect says how the rendered world differs from it.
 ///
 /// World frame: origin on the (vertical) cylinder axis, z up; the camera centre at
 /// (`camera_distance_mm`, 0, 0) looking at the axis, optical axis horizontal; the
@@ -96,20 +97,12 @@ impl SceneSetup {
         (self.white_rows[0] + self.white_rows[1]) / 2
     }
 
-    /// The fields of `processing::geometry::Setup`, as its JSON.
-    pub fn setup_json(&self) -> serde_json::Value {
-        serde_json::json!({
-            "cylinder_radius_mm": self.cylinder_radius_mm,
-            "camera_distance_mm": self.camera_distance_mm,
-            "light_distance_mm": self.light_distance_mm,
-            "focal_length_mm": self.focal_length_mm,
-            "pixel_pitch_um": self.pixel_pitch_um,
-            "image_width": self.image_width,
-            "image_height": self.image_height,
-            "principal_point_x": self.principal_point_x,
-            "sample_row": self.sample_row(),
-            "white_row": self.white_row(),
-        })
+    /// Height along the cylinder axis (mm, 0 at the camera's height) that sensor row
+    /// coordinate `row` sees at the front of the cylinder (the point nearest the camera)
+    /// in the nominal geometry.
+    pub fn front_height_mm(&self, row: f64) -> f64 {
+        let depth = self.camera_distance_mm - self.cylinder_radius_mm;
+        -depth / self.focal_length_mm * (row - self.cy()) * self.pixel_pitch_um / 1000.0
     }
 
     fn validate(&self) -> Result<(), SceneError> {
@@ -377,6 +370,74 @@ pub struct RetroReflection {
     pub width_deg: f64,
 }
 
+/// How the rendered world differs from the nominal `[setup]` (which setup.json states),
+/// as in a real lab that measured it imperfectly. Every key defaults to 0. Naming this
+/// table renders every pixel by its own ray in 3D, with the strips as bands on the
+/// cylinder (between the heights the nominal strip rows see at the cylinder's front);
+/// without it the faster separable renderer runs, with strips as image rows.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Misalignment {
+    /// The camera centre moved sideways by this (toward +y, the image's right), mm.
+    pub camera_offset_mm: f64,
+    /// The camera turned about the vertical through its centre, counter-clockwise seen
+    /// from above (its optical axis from −x toward −y: the cylinder moves toward the
+    /// image's right), degrees.
+    pub camera_yaw_deg: f64,
+    /// The cylinder's axis turned about the world x axis, its top toward +y (leaning
+    /// right in the image), degrees; the arm still turns about the vertical.
+    pub cylinder_tilt_deg: f64,
+    /// The light stands at θL plus this (the arm's zero is off), degrees.
+    pub arm_zero_offset_deg: f64,
+    /// The light is this much farther from the axis than `setup.light_distance_mm`, mm.
+    pub light_distance_error_mm: f64,
+}
+
+/// Largest |yaw|, |tilt| and |arm zero offset| a scene may name, degrees.
+const MAX_MISALIGNMENT_DEG: f64 = 10.0;
+
+impl Misalignment {
+    fn validate(&self, setup: &SceneSetup) -> Result<(), SceneError> {
+        for (key, value) in [
+            ("effects.misalignment.camera_yaw_deg", self.camera_yaw_deg),
+            (
+                "effects.misalignment.cylinder_tilt_deg",
+                self.cylinder_tilt_deg,
+            ),
+            (
+                "effects.misalignment.arm_zero_offset_deg",
+                self.arm_zero_offset_deg,
+            ),
+        ] {
+            if !(value.abs() <= MAX_MISALIGNMENT_DEG) {
+                return Err(invalid(
+                    key,
+                    format!("{value} must be in [-{MAX_MISALIGNMENT_DEG}, {MAX_MISALIGNMENT_DEG}]"),
+                ));
+            }
+        }
+        let gap = setup.camera_distance_mm - setup.cylinder_radius_mm;
+        if !(self.camera_offset_mm.abs() < 0.5 * gap) {
+            return Err(invalid(
+                "effects.misalignment.camera_offset_mm",
+                format!(
+                    "{} must be smaller in size than half the camera's gap to the cylinder ({} mm)",
+                    self.camera_offset_mm,
+                    0.5 * gap
+                ),
+            ));
+        }
+        let light = setup.light_distance_mm + self.light_distance_error_mm;
+        if !(light > setup.cylinder_radius_mm) {
+            return Err(invalid(
+                "effects.misalignment.light_distance_error_mm",
+                "puts the light inside the cylinder",
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// The optional effects; each is off unless the scene names it.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -389,10 +450,14 @@ pub struct Effects {
     pub response: Option<Response>,
     pub hot_pixels: Option<HotPixels>,
     pub retro_reflection: Option<RetroReflection>,
+    pub misalignment: Option<Misalignment>,
 }
 
 impl Effects {
-    fn validate(&self) -> Result<(), SceneError> {
+    fn validate(&self, setup: &SceneSetup) -> Result<(), SceneError> {
+        if let Some(m) = &self.misalignment {
+            m.validate(setup)?;
+        }
         if let Some(noise) = &self.noise {
             check_positive("effects.noise.electrons_per_dn", noise.electrons_per_dn)?;
             check_non_negative("effects.noise.read_noise_dn", &[noise.read_noise_dn])?;
@@ -554,7 +619,7 @@ impl Scene {
         if !(25..=102_400).contains(&camera.iso) {
             return Err(invalid("camera.iso", "must be in 25..=102400"));
         }
-        file.effects.validate()?;
+        file.effects.validate(&file.setup)?;
 
         let resolve = |p: &str| {
             let p = Path::new(p);
@@ -687,7 +752,7 @@ impl Scene {
 
     /// Replaces the optional effects.
     pub fn set_effects(&mut self, effects: Effects) -> Result<(), SceneError> {
-        effects.validate()?;
+        effects.validate(&self.setup)?;
         self.effects = effects;
         Ok(())
     }
@@ -708,6 +773,26 @@ impl Scene {
         }
         self.theta_l_deg = theta_l_deg;
         Ok(())
+    }
+
+    /// The nominal setup as `processing::geometry::Setup`'s JSON (setup.json): the
+    /// geometry of `[setup]` and the white reference's reflectance.
+    pub fn setup_json(&self) -> serde_json::Value {
+        let s = &self.setup;
+        serde_json::json!({
+            "cylinder_radius_mm": s.cylinder_radius_mm,
+            "camera_distance_mm": s.camera_distance_mm,
+            "light_distance_mm": s.light_distance_mm,
+            "focal_length_mm": s.focal_length_mm,
+            "pixel_pitch_um": s.pixel_pitch_um,
+            "image_width": s.image_width,
+            "image_height": s.image_height,
+            "principal_point_x": s.principal_point_x,
+            "principal_point_y": s.principal_point_y,
+            "sample_row": s.sample_row(),
+            "white_row": s.white_row(),
+            "white_reflectance": self.white_reflectance,
+        })
     }
 
     /// The true model parameters (camera-RGB β domain) as `truth.json`.
@@ -762,6 +847,9 @@ impl Scene {
         }
         if let Some(retro) = &self.effects.retro_reflection {
             put("retro_reflection", serde_json::json!(retro));
+        }
+        if let Some(misalignment) = &self.effects.misalignment {
+            put("misalignment", serde_json::json!(misalignment));
         }
         truth
     }
