@@ -4,7 +4,9 @@
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use gonio_mock_hw::render::render_frame;
-use gonio_mock_hw::scene::{Effects, HotPixels, Response, RetroReflection, Scene, Vignetting};
+use gonio_mock_hw::scene::{
+    Effects, HotPixels, Misalignment, Response, RetroReflection, Scene, Vignetting,
+};
 
 fn with_effects(name: &str, effects: Effects) -> Scene {
     let mut scene = Scene::builtin(name).expect("built-in scene");
@@ -25,6 +27,17 @@ fn render(c: &mut Criterion) {
             kr: [5.0, 5.0, 5.0],
             width_deg: 5.0,
         }),
+        misalignment: None,
+    };
+    let misaligned = Effects {
+        misalignment: Some(Misalignment {
+            camera_offset_mm: 3.0,
+            camera_yaw_deg: 0.2,
+            cylinder_tilt_deg: 0.5,
+            arm_zero_offset_deg: 0.3,
+            light_distance_error_mm: 5.0,
+        }),
+        ..gold.effects().clone()
     };
     let sets = [
         ("none", with_effects("gold", Effects::default())),
@@ -38,6 +51,10 @@ fn render(c: &mut Criterion) {
                     ..Effects::default()
                 },
             ),
+        ),
+        (
+            "misaligned (default effects + every misalignment)",
+            with_effects("gold", misaligned),
         ),
         (
             "spectral (thin film)",

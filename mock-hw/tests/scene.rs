@@ -140,6 +140,28 @@ fn bad_values_are_named() {
         "{SMALL}\n{CT}\n[effects.noise]\nelectrons_per_dn = 0.0\nread_noise_dn = 1.0\n"
     ));
     assert!(err.contains("effects.noise.electrons_per_dn"), "{err}");
+    for (line, key) in [
+        (
+            "cylinder_tilt_deg = 45.0",
+            "effects.misalignment.cylinder_tilt_deg",
+        ),
+        (
+            "camera_yaw_deg = nan",
+            "effects.misalignment.camera_yaw_deg",
+        ),
+        (
+            "camera_offset_mm = 500.0",
+            "effects.misalignment.camera_offset_mm",
+        ),
+        (
+            "light_distance_error_mm = -990.0",
+            "effects.misalignment.light_distance_error_mm",
+        ),
+        ("camera_roll_deg = 1.0", "camera_roll_deg"),
+    ] {
+        let err = error_text(&format!("{SMALL}\n{CT}\n[effects.misalignment]\n{line}\n"));
+        assert!(err.contains(key), "{line}: {err}");
+    }
     let err = error_text(
         &format!("{SMALL}\n{CT}").replace("\"nikon-d5100\"", "\"/nonexistent/sens.csv\""),
     );
@@ -186,7 +208,19 @@ fn truth_and_setup_json() {
     let per_channel = small(&CT.replace("[0.1]", "[0.1, 0.2, 0.3]")).unwrap();
     assert_eq!(per_channel.truth_json()["roughness"], "per-channel");
 
-    let setup = scene.setup().setup_json();
+    assert!(truth.get("misalignment").is_none());
+    let misaligned = small(&format!(
+        "{CT}\n[effects.misalignment]\ncamera_offset_mm = 3.0\narm_zero_offset_deg = 0.3\n"
+    ))
+    .unwrap();
+    let stated = misaligned.truth_json()["misalignment"].clone();
+    assert_eq!(stated["camera_offset_mm"], 3.0);
+    assert_eq!(stated["arm_zero_offset_deg"], 0.3);
+    assert_eq!(stated["cylinder_tilt_deg"], 0.0);
+    // setup.json states the nominal setup, whatever the misalignment.
+    assert_eq!(misaligned.setup_json(), scene.setup_json());
+
+    let setup = scene.setup_json();
     let keys: Vec<&str> = setup
         .as_object()
         .unwrap()
@@ -204,10 +238,13 @@ fn truth_and_setup_json() {
             "light_distance_mm",
             "pixel_pitch_um",
             "principal_point_x",
+            "principal_point_y",
             "sample_row",
+            "white_reflectance",
             "white_row"
         ]
     );
+    assert_eq!(setup["white_reflectance"], 0.9);
     assert_eq!(setup["sample_row"], 30);
     assert_eq!(setup["white_row"], 89);
 }
