@@ -25,6 +25,8 @@ enum Command {
     Hdr(commands::hdr::Args),
     /// Turn the captures of a scan into a samples CSV.
     Extract(commands::extract::Args),
+    /// Estimate a scan's setup (strip rows, camera offset, cylinder tilt, arm zero) from its captures.
+    Calibrate(commands::calibrate::Args),
     /// Fit a reflection model to a samples CSV.
     Fit(commands::fit::Args),
     /// Fit every combination of the θL present and compare against a reference.
@@ -51,6 +53,7 @@ fn main() {
         Command::Simulate(args) => commands::simulate::run(args),
         Command::Hdr(args) => commands::hdr::run(args),
         Command::Extract(args) => commands::extract::run(args),
+        Command::Calibrate(args) => commands::calibrate::run(args),
         Command::Fit(args) => commands::fit::run(args),
         Command::Study(args) => commands::study::run(args),
         Command::Tradeoff(args) => commands::tradeoff::run(args),

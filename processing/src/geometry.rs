@@ -192,7 +192,7 @@ impl SetupFrame {
     /// ray passes the axis on the +y side (toward larger φ as seen from the camera).
     pub fn signed_axis_distance(&self, u: f64, v: f64) -> f64 {
         match self.closest_approach(self.ray(u, v)) {
-            Some((q, dh)) => dot(cross(dh, q), self.axis).signum() * dot(q, q).sqrt(),
+            Some((q, dh)) => dot(cross(q, dh), self.axis).signum() * dot(q, q).sqrt(),
             None => f64::NAN,
         }
     }

@@ -14,6 +14,7 @@ pub mod geometry;
 pub mod metrics;
 pub mod samples;
 
+pub mod calibrate;
 pub mod capture;
 pub mod color;
 pub mod extract;

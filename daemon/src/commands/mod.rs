@@ -1,5 +1,6 @@
 //! One module per `gonio` subcommand: its arguments and its `run`.
 
+pub mod calibrate;
 pub mod emulate_arm;
 pub mod extract;
 pub mod fit;
