@@ -125,6 +125,18 @@ pub struct Calibration {
     pub notes: Vec<String>,
 }
 
+impl Calibration {
+    /// The calibrated setup as setup.json: its fields, plus this calibration under
+    /// `calibration` (which reading a [`Setup`] ignores).
+    pub fn setup_json(&self) -> serde_json::Value {
+        let mut value = serde_json::to_value(&self.setup).unwrap_or_default();
+        if let (Some(map), Ok(calibration)) = (value.as_object_mut(), serde_json::to_value(self)) {
+            map.insert("calibration".to_owned(), calibration);
+        }
+        value
+    }
+}
+
 /// What one θL's captures showed.
 struct Measured {
     /// Sensor rows of the strips' centres.

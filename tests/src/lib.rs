@@ -314,6 +314,11 @@ impl Daemon {
         self.request("POST", path, Some(TOKEN), Some(&body.to_string()))
     }
 
+    /// DELETE with the daemon's token.
+    pub fn delete(&self, path: &str) -> Answer {
+        self.request("DELETE", path, Some(TOKEN), None)
+    }
+
     /// POST with an explicit token (or none) and raw body.
     pub fn post_raw(&self, path: &str, token: Option<&str>, body: &str) -> Answer {
         self.request("POST", path, token, Some(body))

@@ -22,16 +22,6 @@ pub struct Args {
     pub setup: Option<PathBuf>,
 }
 
-/// The setup JSON written: the calibrated setup's fields plus `calibration`.
-pub fn setup_with_calibration(calibration: &Calibration) -> anyhow::Result<serde_json::Value> {
-    let mut value = serde_json::to_value(&calibration.setup)?;
-    value
-        .as_object_mut()
-        .context("a setup is a JSON object")?
-        .insert("calibration".to_owned(), serde_json::to_value(calibration)?);
-    Ok(value)
-}
-
 fn show(name: &str, estimate: Option<Estimate>, prior: f64, unit: &str) -> String {
     match estimate {
         Some(e) => format!("{name} {:.4} ± {:.4}{unit}", e.value, e.stderr),
@@ -44,7 +34,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let prior = read_setup(&prior_path)?;
     let calibration = calibrate::calibrate_scan(&args.dir, &prior, &CalibrateOptions::default())
         .with_context(|| format!("calibrating {}", args.dir.display()))?;
-    let mut text = serde_json::to_string_pretty(&setup_with_calibration(&calibration)?)?;
+    let mut text = serde_json::to_string_pretty(&calibration.setup_json())?;
     text.push('\n');
     write_atomically(&args.out, text.as_bytes())
         .with_context(|| format!("writing {}", args.out.display()))?;

@@ -12,13 +12,14 @@ use axum::http::{header, HeaderValue, StatusCode};
 use axum::middleware::{self, Next};
 use axum::response::sse::{Event, KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
-use axum::routing::{get, post};
+use axum::routing::{delete, get, post};
 use axum::{Json, Router};
 use futures_util::{Stream, StreamExt};
 use serde::Deserialize;
 use serde_json::{json, Value};
 use tokio_stream::wrappers::BroadcastStream;
 
+use super::calibration;
 use super::config::Config;
 use super::files::{is_partial, open_under};
 use super::hardware::InjectedFault;
@@ -114,6 +115,8 @@ pub fn router(shared: Arc<Shared>) -> Router {
         .route("/api/scans/{id}/pause", post(pause_scan))
         .route("/api/scans/{id}/resume", post(resume_scan))
         .route("/api/scans/{id}/cancel", post(cancel_scan))
+        .route("/api/scans/{id}/calibrate", post(calibrate_scan))
+        .route("/api/setup", delete(forget_calibration))
         .route("/api/arm/stop", post(stop_arm))
         .merge(json_bodies)
         .route_layer(token());
@@ -506,6 +509,46 @@ async fn cancel_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<
         "cancel",
     )
     .await
+}
+
+/// Calibrates the setup from a scan that is no longer running and stores it as the
+/// setup of later scans (see `calibration`).
+async fn calibrate_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
+    let scan = load_scan(&shared, id).await?;
+    if !matches!(
+        scan.state,
+        ScanState::Done | ScanState::Failed | ScanState::Cancelled
+    ) {
+        return Err(ApiError::new(
+            StatusCode::CONFLICT,
+            format!(
+                "scan {id} is {}: calibrate from a scan that has ended",
+                scan.state.as_str()
+            ),
+        ));
+    }
+    let (dir, data) = (shared.scan_dir(id), shared.config.data_dir.clone());
+    let stored =
+        tokio::task::spawn_blocking(move || calibration::calibrate_and_store(&dir, &data, id))
+            .await
+            .map_err(internal)?
+            .map_err(|e| {
+                ApiError::new(
+                    StatusCode::UNPROCESSABLE_ENTITY,
+                    format!("calibrating from scan {id}: {e:#}"),
+                )
+            })?;
+    Ok(Json(stored))
+}
+
+/// Forgets the calibrated setup: later scans use the configured (or scene) setup.
+async fn forget_calibration(State(shared): AppState) -> ApiResult<Json<Value>> {
+    let data = shared.config.data_dir.clone();
+    let removed = tokio::task::spawn_blocking(move || calibration::forget(&data))
+        .await
+        .map_err(internal)?
+        .map_err(internal)?;
+    Ok(Json(json!({ "removed": removed })))
 }
 
 /// Stops the arm at once (feed hold, then reset) and pauses the running scan.

@@ -2,6 +2,7 @@
 //! a durable SQLite store; one hardware owner thread runs them step by step.
 
 mod api;
+mod calibration;
 mod config;
 mod connections;
 mod files;

@@ -14,6 +14,7 @@ use gonio_processing::capture::{sidecar_path, Frame, Sidecar};
 use gonio_processing::geometry::{column_angles, Setup};
 use serde_json::{json, Value};
 
+use super::calibration;
 use super::files::{remove_partials, write_atomic};
 use super::hardware::{ArmOpener, Devices, SidecarDefaults};
 use super::plan::{exposure_stem, theta_dir_name, ScanPlan, Step};
@@ -400,6 +401,11 @@ impl Runner {
         self.shared.publish(&self.store, id)
     }
 
+    /// The setup of a scan starting now: the calibrated one, else the configured one.
+    fn setup(&self) -> Option<Setup> {
+        calibration::current_setup(&self.shared.config.data_dir, self.setup.as_ref())
+    }
+
     /// Creates the scan directory with setup.json (and truth.json for emulated scans),
     /// and removes temporary files a crash left behind.
     fn prepare_dir(&self, dir: &Path) -> std::io::Result<()> {
@@ -409,7 +415,7 @@ impl Runner {
             tracing::info!("{}: removed {removed} partial file(s)", dir.display());
         }
         let files = [
-            ("setup.json", self.setup.as_ref().map(|s| json!(s))),
+            ("setup.json", self.setup().map(|s| json!(s))),
             ("truth.json", self.truth.clone()),
         ];
         for (name, value) in files {
@@ -456,7 +462,10 @@ impl Runner {
     /// the strips clip), then the fewest allowed shutters that expose every strip pixel
     /// well ([`auto_bracket`]).
     fn meter(&mut self, id: i64, theta_l: f64) -> Result<(Value, Vec<Step>), StepError> {
-        let setup = self.setup.clone().ok_or_else(|| {
+        // The scan's own setup (written when it started), whatever was calibrated since.
+        let own =
+            gonio_processing::extract::read_setup(&self.shared.scan_dir(id).join("setup.json"));
+        let setup = own.ok().or_else(|| self.setup()).ok_or_else(|| {
             StepError::Failed("an automatic bracket needs the setup geometry ([setup])".into())
         })?;
         let allowed = self.allowed_s.clone();

@@ -1,0 +1,86 @@
+//! The daemon calibrates its setup from an ended scan and writes it as the setup of
+//! later scans, whose fits then recover the scene; `DELETE /api/setup` forgets it.
+
+use std::time::Duration;
+
+use gonio_tests::{emulator_config, temp_dir, Daemon, SMALL_GOLD_SCENE};
+use serde_json::{json, Value};
+
+fn scan(daemon: &Daemon) -> (i64, Value) {
+    let created = daemon.post(
+        "/api/scans",
+        &json!({"sample": "gold", "theta_l": [-20, -30, -45],
+                "bracket": {"shutter_s": [0.5, 0.125, 0.033333333333333333, 0.01]}}),
+    );
+    assert_eq!(created.status, 201, "{:?}", created.json);
+    let id = created.json["id"].as_i64().unwrap();
+    let state = daemon.wait_state(id, &["done", "failed"], Duration::from_secs(120));
+    assert_eq!(state["state"], "done", "{state}");
+    (id, state)
+}
+
+/// The largest relative error of the scan's Cook–Torrance Ks against the scene's.
+fn ks_error(daemon: &Daemon, scan: &Value) -> f64 {
+    let fit = daemon
+        .get(scan["results"]["fits"]["cook-torrance"].as_str().unwrap())
+        .json;
+    [25.0, 20.0, 7.0]
+        .iter()
+        .enumerate()
+        .map(|(c, truth)| (fit["ks"][c].as_f64().unwrap() / truth - 1.0).abs())
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn a_calibration_becomes_the_setup_of_later_scans() {
+    let dir = temp_dir("daemon-calibrate");
+    let scene = dir.join("misaligned.toml");
+    std::fs::write(
+        &scene,
+        format!(
+            "{SMALL_GOLD_SCENE}\n[effects.misalignment]\ncamera_offset_mm = 3.0\narm_zero_offset_deg = 0.3\n"
+        ),
+    )
+    .unwrap();
+    let config = emulator_config(0.01).replace("SCENE", scene.to_str().unwrap());
+    let daemon = Daemon::start(&dir, &config);
+
+    let (first, first_scan) = scan(&daemon);
+    let missing = daemon.post("/api/scans/999/calibrate", &json!({}));
+    assert_eq!(missing.status, 404, "{:?}", missing.json);
+    let calibrated = daemon.post(&format!("/api/scans/{first}/calibrate"), &json!({}));
+    assert_eq!(calibrated.status, 200, "{:?}", calibrated.json);
+    let c = &calibrated.json["calibration"];
+    assert_eq!(c["scan"], first);
+    let offset = c["camera_offset_mm"]["value"].as_f64().unwrap();
+    let arm = c["arm_zero_offset_deg"]["value"].as_f64().unwrap();
+    assert!((offset - 3.0).abs() < 0.1, "{c}");
+    assert!((arm - 0.3).abs() < 0.15, "{c}");
+    let stored = dir.join("data").join("setup.json");
+    assert!(stored.is_file());
+
+    // The next scan is set up with the calibration, and its fit recovers the scene
+    // where the first one's could not.
+    let (second, second_scan) = scan(&daemon);
+    let setup: Value = serde_json::from_slice(
+        &daemon
+            .get(&format!("/api/scans/{second}/files/setup.json"))
+            .bytes,
+    )
+    .unwrap();
+    assert_eq!(setup["camera_offset_mm"].as_f64().unwrap(), offset);
+    assert_eq!(setup["white_reflectance"], 0.99);
+    let (before, after) = (
+        ks_error(&daemon, &first_scan),
+        ks_error(&daemon, &second_scan),
+    );
+    assert!(
+        before > 0.1 && after < 0.01,
+        "Ks off by {before} then {after}"
+    );
+
+    let forgotten = daemon.delete("/api/setup");
+    assert_eq!(forgotten.json, json!({"removed": true}));
+    assert!(!stored.exists());
+    std::fs::remove_dir_all(dir).ok();
+}
