@@ -18,7 +18,7 @@ fn lambertian(beta: [f64; 3]) -> Vec<Sample> {
                     theta_i,
                     theta_r,
                     rgb: beta,
-                    cosines: None,
+                    ..Sample::default()
                 });
             }
         }

@@ -353,7 +353,7 @@ fn frames_near_the_black_threshold_do_not_bias_the_linear_merge() {
         read_noise: 5e-4,
     };
     let options = MergeOptions::default();
-    let mut rng = Noise(0x2545_f491_4f6c_dd1d);
+    let mut rng = Rng(0x2545_f491_4f6c_dd1d);
     for radiance in [0.012, 0.02] {
         let frames: Vec<Frame> = [0.5, 0.125]
             .iter()
