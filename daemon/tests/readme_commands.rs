@@ -30,7 +30,15 @@ fn readme_offline_commands_run_as_written() {
             .expect("README.md");
     let commands = offline_commands(&readme);
     assert!(commands.len() >= 6, "{commands:?}");
-    for sub in ["simulate", "hdr", "extract", "fit", "study", "tradeoff"] {
+    for sub in [
+        "simulate",
+        "hdr",
+        "extract",
+        "calibrate",
+        "fit",
+        "study",
+        "tradeoff",
+    ] {
         assert!(
             commands
                 .iter()
