@@ -1,6 +1,7 @@
 //! Scan directory → radiance-factor samples in the camera-RGB domain (paper §2.2).
 //!
-//! `DIR/setup.json` holds the [`Setup`]; captures are found recursively (TIFF or camera
+//! `DIR/setup.json` holds the [`Setup`] (unless [`ExtractOptions::setup`] names
+//! another file); captures are found recursively (TIFF or camera
 //! raw with a JSON sidecar) and grouped by the sidecar's θL. Each group is merged
 //! ([`hdr::merge`]) into one radiance map, of the strip rows only unless the maps are
 //! wanted as files ([`ExtractOptions::hdr_dir`]). Each pixel column gives one sample:
@@ -60,6 +61,9 @@ pub struct ExtractOptions {
     pub camera: CameraModel,
     /// When set, each θL's radiance map is written there as `theta_l_<θL>.exr`.
     pub hdr_dir: Option<PathBuf>,
+    /// The setup to use instead of the scan's `setup.json` (say, one `gonio calibrate`
+    /// wrote).
+    pub setup: Option<PathBuf>,
 }
 
 impl Default for ExtractOptions {
@@ -71,6 +75,7 @@ impl Default for ExtractOptions {
             min_white_fraction: 0.02,
             camera: CameraModel::builtin(),
             hdr_dir: None,
+            setup: None,
         }
     }
 }
@@ -240,9 +245,12 @@ pub fn extract_scan(dir: &Path, options: &ExtractOptions) -> Result<Extraction, 
     extract_scan_with_progress(dir, options, |_, _| {})
 }
 
-/// The captures of a scan directory grouped by θL (ascending), and the image files
-/// skipped for lack of a sidecar. Errors when no capture has a sidecar.
-pub fn theta_groups(dir: &Path) -> Result<(Vec<(f64, Vec<PathBuf>)>, Vec<PathBuf>), ExtractError> {
+/// Capture paths grouped by θL (degrees, ascending).
+pub type ThetaGroups = Vec<(f64, Vec<PathBuf>)>;
+
+/// The captures of a scan directory grouped by θL, and the image files skipped for lack
+/// of a sidecar. Errors when no capture has a sidecar.
+pub fn theta_groups(dir: &Path) -> Result<(ThetaGroups, Vec<PathBuf>), ExtractError> {
     let mut images = Vec::new();
     find_captures(dir, &mut images)?;
     images.sort();
@@ -275,7 +283,10 @@ pub fn extract_scan_with_progress(
     progress: impl Fn(usize, usize),
 ) -> Result<Extraction, ExtractError> {
     check_options(options)?;
-    let setup = read_setup(&dir.join("setup.json"))?;
+    let setup = match &options.setup {
+        Some(path) => read_setup(path)?,
+        None => read_setup(&dir.join("setup.json"))?,
+    };
     let (white_reflectance, white_source) =
         match (options.white_reflectance, setup.white_reflectance) {
             (Some(given), _) => (given, WhiteSource::Option),
@@ -623,9 +634,9 @@ fn extract_theta(
     // The brightest usable white of each channel, for the too-dark threshold.
     let mut brightest_white = [0.0f64; 3];
     for (geometry, _, white) in &columns {
-        for c in 0..3 {
+        for (c, brightest) in brightest_white.iter_mut().enumerate() {
             if geometry.is_some() && white.flags[c] == 0 {
-                brightest_white[c] = brightest_white[c].max(white.rgb[c]);
+                *brightest = brightest.max(white.rgb[c]);
             }
         }
     }

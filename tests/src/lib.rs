@@ -45,6 +45,18 @@ pub fn gonio_bin() -> &'static Path {
     })
 }
 
+/// Runs `gonio ARGS` and returns its standard output; panics with its standard error
+/// if it fails.
+pub fn gonio(args: &[&str]) -> String {
+    let output = Command::new(gonio_bin()).args(args).output().unwrap();
+    assert!(
+        output.status.success(),
+        "gonio {args:?}: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    String::from_utf8_lossy(&output.stdout).into_owned()
+}
+
 /// A fresh, empty directory under the system temp dir, unique to this process and name.
 pub fn temp_dir(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("gonio-test-{}-{name}", std::process::id()));

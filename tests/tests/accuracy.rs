@@ -7,23 +7,12 @@
 //! in-plane angles instead of each pixel's 3D cosines leaves gold's Ks ~0.9 % low.
 
 use std::path::Path;
-use std::process::Command;
 
 use gonio_processing::brdf::Model;
 use gonio_processing::fit::{fit, FitOptions, FitResult};
 use gonio_processing::samples::{read_csv, Sample};
-use gonio_tests::{gonio_bin, temp_dir};
+use gonio_tests::{gonio, temp_dir};
 use serde_json::Value;
-
-fn gonio(args: &[&str]) -> String {
-    let output = Command::new(gonio_bin()).args(args).output().unwrap();
-    assert!(
-        output.status.success(),
-        "gonio {args:?}: {}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    String::from_utf8_lossy(&output.stdout).into_owned()
-}
 
 fn json(path: &Path) -> Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()

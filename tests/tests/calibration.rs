@@ -8,27 +8,16 @@
 //! with six θL, the uncertainties are several times smaller.)
 
 use std::path::Path;
-use std::process::Command;
 
 use gonio_processing::brdf::Model;
-use gonio_processing::extract::{extract_scan, ExtractOptions};
 use gonio_processing::fit::{fit, FitOptions, FitResult};
 use gonio_processing::geometry::Setup;
-use gonio_tests::{gonio_bin, temp_dir};
+use gonio_processing::samples::read_csv;
+use gonio_tests::{gonio, temp_dir};
 use serde_json::Value;
 
 const GOLD: &str = include_str!("../../mock-hw/scenes/gold.toml");
 const THETA_L: &str = "--theta-l=-20,-30,-45";
-
-fn gonio(args: &[&str]) -> String {
-    let output = Command::new(gonio_bin()).args(args).output().unwrap();
-    assert!(
-        output.status.success(),
-        "gonio {args:?}: {}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    String::from_utf8_lossy(&output.stdout).into_owned()
-}
 
 /// The misalignments of a test, as the scene states them.
 #[derive(Clone, Copy)]
@@ -48,16 +37,23 @@ struct Outcome {
     truth: Value,
 }
 
-fn fit_with(scan: &Path, setup: &Setup) -> FitResult {
-    std::fs::write(
-        scan.join("setup.json"),
-        serde_json::to_string(setup).unwrap(),
+/// `gonio extract SCAN --setup SETUP`, then a Cook–Torrance fit of its samples.
+fn fit_with(scan: &Path, setup: &Path) -> FitResult {
+    let samples = scan.with_extension("csv");
+    let s = |p: &Path| p.to_str().unwrap().to_owned();
+    gonio(&[
+        "extract",
+        &s(scan),
+        "--setup",
+        &s(setup),
+        "--out",
+        &s(&samples),
+    ]);
+    fit(
+        &read_csv(&samples).unwrap(),
+        &FitOptions::new(Model::CookTorrance),
     )
-    .unwrap();
-    let samples = extract_scan(scan, &ExtractOptions::default())
-        .unwrap()
-        .samples;
-    fit(&samples, &FitOptions::new(Model::CookTorrance)).unwrap()
+    .unwrap()
 }
 
 fn run(name: &str, m: Misalignment) -> Outcome {
@@ -87,7 +83,6 @@ fn run(name: &str, m: Misalignment) -> Outcome {
     let summary = gonio(&["calibrate", &s(&scan), "--out", &s(&out)]);
     assert!(summary.contains("camera offset"), "{summary}");
     let written: Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
-    let calibrated: Setup = serde_json::from_value(written.clone()).unwrap();
     let nominal: Setup =
         serde_json::from_str(&std::fs::read_to_string(scan.join("setup.json")).unwrap()).unwrap();
     let true_setup = Setup {
@@ -96,13 +91,16 @@ fn run(name: &str, m: Misalignment) -> Outcome {
         arm_zero_offset_deg: m.arm_zero_offset_deg,
         ..nominal.clone()
     };
+    let true_path = dir.join("true-setup.json");
+    std::fs::write(&true_path, serde_json::to_string(&true_setup).unwrap()).unwrap();
     let truth: Value =
         serde_json::from_str(&std::fs::read_to_string(scan.join("truth.json")).unwrap()).unwrap();
     let outcome = Outcome {
         calibration: written["calibration"].clone(),
-        nominal: fit_with(&scan, &nominal),
-        true_setup: fit_with(&scan, &true_setup),
-        calibrated: fit_with(&scan, &calibrated),
+        nominal: fit_with(&scan, &scan.join("setup.json")),
+        true_setup: fit_with(&scan, &true_path),
+        // The file calibrate wrote, `calibration` block and all, is a setup.
+        calibrated: fit_with(&scan, &out),
         truth,
     };
     std::fs::remove_dir_all(dir).ok();
@@ -168,82 +166,78 @@ fn assert_calibrated_fits_as_well_as_the_truth(o: &Outcome) {
     assert!(calibrated < 3e-3 && exact < 3e-3, "{calibrated} {exact}");
 }
 
+/// Scans gold with misalignment `m`, checks that calibration recovers each of its
+/// parts (and finds none of the others) and that the calibrated fits are as good as
+/// the true setup's; returns the outcome for the test's own checks.
+fn recovered(name: &str, m: Misalignment) -> Outcome {
+    let o = run(name, m);
+    assert_recovered(&o.calibration, "camera_offset_mm", m.camera_offset_mm, 0.03);
+    assert_recovered(
+        &o.calibration,
+        "cylinder_tilt_deg",
+        m.cylinder_tilt_deg,
+        0.03,
+    );
+    assert_recovered(
+        &o.calibration,
+        "arm_zero_offset_deg",
+        m.arm_zero_offset_deg,
+        0.08,
+    );
+    assert_calibrated_fits_as_well_as_the_truth(&o);
+    o
+}
+
 #[test]
 fn every_misalignment_together_is_recovered() {
-    let m = Misalignment {
-        camera_offset_mm: 3.0,
-        cylinder_tilt_deg: 0.5,
-        arm_zero_offset_deg: 0.3,
-    };
-    let o = run("all", m);
-    assert_recovered(&o.calibration, "camera_offset_mm", 3.0, 0.03);
-    assert_recovered(&o.calibration, "cylinder_tilt_deg", 0.5, 0.03);
-    assert_recovered(&o.calibration, "arm_zero_offset_deg", 0.3, 0.08);
+    let o = recovered(
+        "all",
+        Misalignment {
+            camera_offset_mm: 3.0,
+            cylinder_tilt_deg: 0.5,
+            arm_zero_offset_deg: 0.3,
+        },
+    );
     // One limb lit (θL < 0 everywhere): the distance stays the prior's, and says so.
     assert!(o.calibration["camera_distance_mm"].is_null());
     assert!(o.calibration["residuals"]["chi2_per_dof"].as_f64().unwrap() < 4.0);
-    assert_calibrated_fits_as_well_as_the_truth(&o);
     // The uncalibrated setup misplaces every column by degrees: the fit is far off.
     assert!(largest_error(&o.nominal, &o.truth) > 0.1, "{:?}", o.nominal);
 }
 
+/// [`recovered`] for one misalignment alone; returns how far off the nominal setup's fit
+/// is (the largest relative error of Kd, Ks and m).
+fn nominal_error_alone(
+    name: &str,
+    camera_offset_mm: f64,
+    cylinder_tilt_deg: f64,
+    arm_zero_offset_deg: f64,
+) -> f64 {
+    let m = Misalignment {
+        camera_offset_mm,
+        cylinder_tilt_deg,
+        arm_zero_offset_deg,
+    };
+    let o = recovered(name, m);
+    largest_error(&o.nominal, &o.truth)
+}
+
 #[test]
 fn a_camera_off_axis_alone_is_recovered() {
-    let o = run(
-        "camera",
-        Misalignment {
-            camera_offset_mm: 3.0,
-            cylinder_tilt_deg: 0.0,
-            arm_zero_offset_deg: 0.0,
-        },
-    );
-    assert_recovered(&o.calibration, "camera_offset_mm", 3.0, 0.03);
-    assert_recovered(&o.calibration, "cylinder_tilt_deg", 0.0, 0.03);
-    assert_recovered(&o.calibration, "arm_zero_offset_deg", 0.0, 0.08);
-    assert_calibrated_fits_as_well_as_the_truth(&o);
-    assert!(largest_error(&o.nominal, &o.truth) > 0.1, "{:?}", o.nominal);
+    let error = nominal_error_alone("camera", 3.0, 0.0, 0.0);
+    assert!(error > 0.1, "nominal setup off by {error}");
 }
 
 #[test]
 fn a_tilted_cylinder_alone_is_recovered() {
-    let o = run(
-        "tilt",
-        Misalignment {
-            camera_offset_mm: 0.0,
-            cylinder_tilt_deg: 0.5,
-            arm_zero_offset_deg: 0.0,
-        },
-    );
-    assert_recovered(&o.calibration, "camera_offset_mm", 0.0, 0.03);
-    assert_recovered(&o.calibration, "cylinder_tilt_deg", 0.5, 0.03);
-    assert_recovered(&o.calibration, "arm_zero_offset_deg", 0.0, 0.08);
-    assert_calibrated_fits_as_well_as_the_truth(&o);
     // A tilt of 0.5° lifts the fitted Ks and m by about 0.7 %.
-    assert!(
-        largest_error(&o.nominal, &o.truth) > 4e-3,
-        "{:?}",
-        o.nominal
-    );
+    let error = nominal_error_alone("tilt", 0.0, 0.5, 0.0);
+    assert!(error > 4e-3, "nominal setup off by {error}");
 }
 
 #[test]
 fn an_arm_zero_offset_alone_is_recovered() {
-    let o = run(
-        "arm",
-        Misalignment {
-            camera_offset_mm: 0.0,
-            cylinder_tilt_deg: 0.0,
-            arm_zero_offset_deg: 0.3,
-        },
-    );
-    assert_recovered(&o.calibration, "camera_offset_mm", 0.0, 0.03);
-    assert_recovered(&o.calibration, "cylinder_tilt_deg", 0.0, 0.03);
-    assert_recovered(&o.calibration, "arm_zero_offset_deg", 0.3, 0.08);
-    assert_calibrated_fits_as_well_as_the_truth(&o);
     // An arm 0.3° off lifts the fitted Ks by about 3 %.
-    assert!(
-        largest_error(&o.nominal, &o.truth) > 0.015,
-        "{:?}",
-        o.nominal
-    );
+    let error = nominal_error_alone("arm", 0.0, 0.0, 0.3);
+    assert!(error > 0.015, "nominal setup off by {error}");
 }

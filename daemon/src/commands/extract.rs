@@ -32,6 +32,9 @@ pub struct Args {
     /// Also write each θL's radiance map there as theta_l_<θL>.exr.
     #[arg(long)]
     hdr_dir: Option<PathBuf>,
+    /// Setup JSON to use instead of DIR/setup.json (e.g. what `gonio calibrate` wrote).
+    #[arg(long)]
+    setup: Option<PathBuf>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -40,6 +43,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         white_reflectance: args.white_reflectance,
         grazing_limit_deg: args.grazing_limit,
         hdr_dir: args.hdr_dir,
+        setup: args.setup,
         ..ExtractOptions::default()
     };
     let bar = progress::bar(0, "θL");
