@@ -409,7 +409,7 @@ impl Misalignment {
                 self.arm_zero_offset_deg,
             ),
         ] {
-            if !(value.abs() <= MAX_MISALIGNMENT_DEG) {
+            if !(value.is_finite() && value.abs() <= MAX_MISALIGNMENT_DEG) {
                 return Err(invalid(
                     key,
                     format!("{value} must be in [-{MAX_MISALIGNMENT_DEG}, {MAX_MISALIGNMENT_DEG}]"),
@@ -417,7 +417,7 @@ impl Misalignment {
             }
         }
         let gap = setup.camera_distance_mm - setup.cylinder_radius_mm;
-        if !(self.camera_offset_mm.abs() < 0.5 * gap) {
+        if !(self.camera_offset_mm.is_finite() && self.camera_offset_mm.abs() < 0.5 * gap) {
             return Err(invalid(
                 "effects.misalignment.camera_offset_mm",
                 format!(
@@ -428,7 +428,7 @@ impl Misalignment {
             ));
         }
         let light = setup.light_distance_mm + self.light_distance_error_mm;
-        if !(light > setup.cylinder_radius_mm) {
+        if !(light.is_finite() && light > setup.cylinder_radius_mm) {
             return Err(invalid(
                 "effects.misalignment.light_distance_error_mm",
                 "puts the light inside the cylinder",

@@ -270,14 +270,16 @@ fn set_uncertainties(obs: &mut Observations, setup: &Setup) {
             }
             _ => false,
         });
-    let floor = median(obs.terminators.iter().map(|r| r.sigma).collect());
-    obs.terminators
-        .iter_mut()
-        .for_each(|r| r.sigma = r.sigma.max(floor));
-    let floor = median(obs.peaks.iter().map(|r| r.sigma).collect());
-    obs.peaks
-        .iter_mut()
-        .for_each(|r| r.sigma = r.sigma.max(floor));
+    raise_to_median(obs.terminators.iter_mut().map(|r| &mut r.sigma).collect());
+    raise_to_median(obs.peaks.iter_mut().map(|r| &mut r.sigma).collect());
+}
+
+/// Raises every uncertainty below the median of them to it.
+fn raise_to_median(sigmas: Vec<&mut f64>) {
+    let floor = median(sigmas.iter().map(|s| **s).collect());
+    for sigma in sigmas {
+        *sigma = sigma.max(floor);
+    }
 }
 
 /// Image position (sensor pixels) of a point given in the setup's frame.

@@ -180,7 +180,7 @@ impl SetupFrame {
         let c_perp = sub(self.camera, scale(a, dot(self.camera, a)));
         let d_perp = sub(d, scale(a, dot(d, a)));
         let len = dot(d_perp, d_perp).sqrt();
-        if !(len > 0.0) {
+        if !(len.is_finite() && len > 0.0) {
             return None;
         }
         let dh = scale(d_perp, 1.0 / len);
@@ -202,7 +202,7 @@ impl SetupFrame {
         let d = self.ray(u, v);
         let (q, dh) = self.closest_approach(d)?;
         let half_chord_sq = self.radius * self.radius - dot(q, q);
-        if !(half_chord_sq > 0.0) {
+        if !(half_chord_sq.is_finite() && half_chord_sq > 0.0) {
             return None;
         }
         let half_chord = half_chord_sq.sqrt();
@@ -213,7 +213,7 @@ impl SetupFrame {
         let along = dot(sub(p_perp, c_perp), dh);
         let d_perp_len = dot(sub(d, scale(a, dot(d, a))), dh);
         let s = along / d_perp_len;
-        if !(s > 0.0) {
+        if !(s.is_finite() && s > 0.0) {
             return None;
         }
         let axial = dot(self.camera, a) + s * dot(d, a);

@@ -83,13 +83,13 @@ fn write_scan(dir: &Path, theta_ls: &[f64], scene: &Scene) {
                     let irradiance = setup
                         .pixel_geometry(f64::from(x), f64::from(y), theta_l)
                         .map_or(0.0, |g| g.irradiance * 1e6);
-                    for c in 0..3 {
+                    for (c, w) in white_rgb.iter().enumerate() {
                         // The white's radiance is ρ·PRD; the sample's is β/W_c times the PRD.
                         let prd = scene.white_level[c] * irradiance;
                         let radiance = if (24..44).contains(&y) {
                             prd * scene.white_reflectance
                         } else {
-                            prd * scene.kd[c] / white_rgb[c] * scene.sample_scale
+                            prd * scene.kd[c] / w * scene.sample_scale
                         };
                         let signal = (radiance * t).min(1.0);
                         counts.push((black + signal * (white - black)).round() as u16);

@@ -10,7 +10,7 @@ fn scan(daemon: &Daemon) -> (i64, Value) {
     let created = daemon.post(
         "/api/scans",
         &json!({"sample": "gold", "theta_l": [-20, -30, -45],
-                "bracket": {"shutter_s": [0.5, 0.125, 0.033333333333333333, 0.01]}}),
+                "bracket": {"shutter_s": [0.5, 0.125, 1.0 / 30.0, 0.01]}}),
     );
     assert_eq!(created.status, 201, "{:?}", created.json);
     let id = created.json["id"].as_i64().unwrap();

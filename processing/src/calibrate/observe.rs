@@ -115,7 +115,7 @@ pub fn limb(profile: &[Option<f64>], side: Side) -> Option<f64> {
     let width = profile.len();
     let value = |i: usize| profile[i].unwrap_or(0.0);
     let brightest = (0..width).map(value).fold(0.0, f64::max);
-    if !(brightest > 0.0) {
+    if !(brightest.is_finite() && brightest > 0.0) {
         return None;
     }
     // Outermost column above a quarter of the row's brightest, from `side`.
@@ -166,6 +166,15 @@ fn smoothed(profile: &[Option<f64>], half: usize) -> Vec<Option<f64>> {
         .collect()
 }
 
+/// Index and value of the largest known value of a profile.
+fn largest(profile: &[Option<f64>]) -> Option<(usize, f64)> {
+    profile
+        .iter()
+        .enumerate()
+        .filter_map(|(i, v)| v.map(|v| (i, v)))
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+}
+
 /// The ramp of a row of the white strip toward its terminator on `side`: the
 /// (capture column, brightness) of the contiguous run of columns, counted outward from
 /// the row's brightest, whose brightness (smoothed over 5 columns) lies between 2 % and
@@ -174,12 +183,7 @@ fn smoothed(profile: &[Option<f64>], half: usize) -> Vec<Option<f64>> {
 pub fn terminator_ramp(profile: &[Option<f64>], side: Side) -> Vec<(usize, f64)> {
     let width = profile.len();
     let smooth = smoothed(profile, 2);
-    let Some((peak, brightest)) = smooth
-        .iter()
-        .enumerate()
-        .filter_map(|(i, v)| v.map(|v| (i, v)))
-        .max_by(|a, b| a.1.total_cmp(&b.1))
-    else {
+    let Some((peak, brightest)) = largest(&smooth) else {
         return Vec::new();
     };
     let outward: Box<dyn Iterator<Item = usize>> = match side {
@@ -247,12 +251,7 @@ pub fn specular_peak(map: &HdrImage, y: usize, white: &[Option<f64>]) -> Vec<(us
     }
     values.sort_by(f64::total_cmp);
     let baseline = values[values.len() / 10];
-    let Some((peak, top)) = ratio
-        .iter()
-        .enumerate()
-        .filter_map(|(i, v)| v.map(|v| (i, v)))
-        .max_by(|a, b| a.1.total_cmp(&b.1))
-    else {
+    let Some((peak, top)) = largest(&ratio) else {
         return Vec::new();
     };
     let height = top - baseline;

@@ -216,7 +216,7 @@ pub fn peak_vertex(setup: &Setup, row: &PeakRow) -> Option<(f64, f64)> {
     let (c1, c2) = (coef[1], coef[2]);
     // A clearly curved peak (c2 five standard errors below 0) whose vertex lies among
     // the points: otherwise the vertex is ill-determined and swings with the geometry.
-    if !(c2 < -5.0 * cov[(2, 2)].max(0.0).sqrt()) {
+    if !(c2.is_finite() && c2 < -5.0 * cov[(2, 2)].max(0.0).sqrt()) {
         return None;
     }
     let x0 = -c1 / (2.0 * c2);
