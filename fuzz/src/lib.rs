@@ -188,7 +188,7 @@ fn scene_toml(_: &Scratch, data: &[u8]) -> Outcome {
     match Scene::from_toml_str(text) {
         Ok(scene) => {
             let _ = scene.truth_json();
-            let _ = scene.setup().setup_json();
+            let _ = scene.setup_json();
             Ok(())
         }
         Err(err) => refused(&err),
