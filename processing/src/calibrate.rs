@@ -254,31 +254,40 @@ fn row_estimate(centres: Vec<f64>, scale: f64) -> Estimate {
 /// at least the median of its kind's: a regression on a few points can come out
 /// lucky, and would then outweigh all the others.
 fn set_uncertainties(obs: &mut Observations, setup: &Setup) {
-    obs.terminators
-        .retain_mut(|row| match solve::terminator_offset(setup, row) {
-            Some((_, sigma)) if sigma.is_finite() => {
-                row.sigma = sigma.max(1e-3);
-                true
-            }
-            _ => false,
-        });
-    obs.peaks
-        .retain_mut(|row| match solve::peak_vertex(setup, row) {
-            Some((_, sigma)) if sigma.is_finite() => {
-                row.sigma = sigma.max(1e-7);
-                true
-            }
-            _ => false,
-        });
-    raise_to_median(obs.terminators.iter_mut().map(|r| &mut r.sigma).collect());
-    raise_to_median(obs.peaks.iter_mut().map(|r| &mut r.sigma).collect());
+    regression_uncertainties(
+        &mut obs.terminators,
+        1e-3,
+        |row| solve::terminator_offset(setup, row),
+        |row| &mut row.sigma,
+    );
+    regression_uncertainties(
+        &mut obs.peaks,
+        1e-7,
+        |row| solve::peak_vertex(setup, row),
+        |row| &mut row.sigma,
+    );
 }
 
-/// Raises every uncertainty below the median of them to it.
-fn raise_to_median(sigmas: Vec<&mut f64>) {
-    let floor = median(sigmas.iter().map(|s| **s).collect());
-    for sigma in sigmas {
-        *sigma = sigma.max(floor);
+/// Sets each row's uncertainty (`sigma`) to its regression's (`regress`: the residual
+/// and its uncertainty), at least `least` and at least the median of them; drops the
+/// rows whose regression fails.
+fn regression_uncertainties<R>(
+    rows: &mut Vec<R>,
+    least: f64,
+    regress: impl Fn(&R) -> Option<(f64, f64)>,
+    sigma: fn(&mut R) -> &mut f64,
+) {
+    rows.retain_mut(|row| match regress(row) {
+        Some((_, s)) if s.is_finite() => {
+            *sigma(row) = s.max(least);
+            true
+        }
+        _ => false,
+    });
+    let floor = median(rows.iter_mut().map(|row| *sigma(row)).collect());
+    for row in rows.iter_mut() {
+        let s = sigma(row);
+        *s = s.max(floor);
     }
 }
 
