@@ -738,9 +738,20 @@ fn decode_raw(path: &Path) -> Result<Decoded, CaptureError> {
         path: path.to_path_buf(),
         reason: e.to_string(),
     })?;
-    // The largest image the file's directories claim, checked before rawler allocates.
+    // The largest image and the largest entry the file's directories claim, checked
+    // before rawler allocates for them.
     if let Some(claim) = tiff_ifd::largest_claim(&bytes) {
         let file_len = bytes.len() as u64;
+        let (entry_bytes, tag) = claim.largest_entry;
+        if entry_bytes > file_len {
+            return Err(too_large(
+                path,
+                format!(
+                    "TIFF tag {tag} claims {entry_bytes} bytes of values, but the file has \
+                     only {file_len}"
+                ),
+            ));
+        }
         check_claim(
             path,
             file_len,

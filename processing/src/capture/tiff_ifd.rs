@@ -1,8 +1,11 @@
 //! A bounded walk over the image file directories (IFDs) of a TIFF-structured file
 //! (TIFF, and the camera raw formats built on it: NEF, DNG, CR2, ARW, PEF, ORF, RW2),
-//! to learn the largest image any of them claims before a decoder allocates for it.
+//! to learn, before a decoder allocates for them, the largest image any of them claims
+//! and the largest value any entry claims (a decoder reads an entry's `count` values
+//! into a buffer of that size, so a count beyond the file is refused here).
 //! Reads at most [`MAX_IFDS`] directories of at most [`MAX_ENTRIES`] entries each,
-//! follows the next-IFD chain, SubIFDs and the Exif IFD, and never loops.
+//! follows the next-IFD chain, SubIFDs, the Exif IFD and the TIFF structure embedded in
+//! a Nikon maker note, and never loops.
 
 /// Most IFDs visited in one file.
 const MAX_IFDS: usize = 256;
@@ -18,6 +21,23 @@ const EXIF_IFD: u16 = 34665;
 const RW2_SENSOR_WIDTH: u16 = 2;
 const RW2_SENSOR_HEIGHT: u16 = 3;
 const RW2_MAGIC: u16 = 0x55;
+const MAKER_NOTE: u16 = 37500;
+/// A Nikon maker note: this prefix, then a whole TIFF structure whose offsets count from
+/// its own header at [`NIKON_TIFF_AT`].
+const NIKON_PREFIX: &[u8] = b"Nikon\0";
+const NIKON_TIFF_AT: usize = 10;
+/// Most maker notes walked inside one another.
+const MAX_NESTING: usize = 2;
+
+/// Bytes per value of a TIFF field type (1 for types a decoder would refuse anyway).
+fn type_size(field_type: u16) -> u64 {
+    match field_type {
+        3 | 8 => 2,
+        4 | 9 | 11 | 13 => 4,
+        5 | 10 | 12 | 16..=18 => 8,
+        _ => 1,
+    }
+}
 
 /// The largest image an IFD of the file claims.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -26,6 +46,8 @@ pub struct Claim {
     pub height: u64,
     /// Samples per pixel (1 for a mosaic).
     pub samples: u64,
+    /// The largest value any entry claims (count × bytes per value), and its tag.
+    pub largest_entry: (u64, u16),
 }
 
 impl Claim {
@@ -93,6 +115,10 @@ impl Reader<'_> {
 /// The largest image claimed by any IFD, or `None` when `bytes` do not start like a
 /// TIFF-structured file (BigTIFF included in that: its directories are not walked).
 pub fn largest_claim(bytes: &[u8]) -> Option<Claim> {
+    walk(bytes, 0)
+}
+
+fn walk(bytes: &[u8], nesting: usize) -> Option<Claim> {
     let little = match bytes.get(..2)? {
         b"II" => true,
         b"MM" => false,
@@ -106,6 +132,7 @@ pub fn largest_claim(bytes: &[u8]) -> Option<Claim> {
     let mut queue = vec![r.u32(4)? as usize];
     let mut visited = Vec::new();
     let mut largest = Claim::default();
+    let mut largest_entry = (0, 0);
     while let Some(offset) = queue.pop() {
         if offset == 0 || visited.contains(&offset) || visited.len() >= MAX_IFDS {
             continue;
@@ -123,6 +150,11 @@ pub fn largest_claim(bytes: &[u8]) -> Option<Claim> {
             let Some(tag) = r.u16(entry) else {
                 break;
             };
+            let values = u64::from(r.u32(entry + 4).unwrap_or(0));
+            let size = values.saturating_mul(type_size(r.u16(entry + 2).unwrap_or(0)));
+            if size > largest_entry.0 {
+                largest_entry = (size, tag);
+            }
             match tag {
                 IMAGE_WIDTH => claim.width = r.scalar(entry).unwrap_or(0),
                 IMAGE_LENGTH => claim.height = r.scalar(entry).unwrap_or(0),
@@ -134,6 +166,24 @@ pub fn largest_claim(bytes: &[u8]) -> Option<Claim> {
                 }
                 SAMPLES_PER_PIXEL => claim.samples = r.scalar(entry).unwrap_or(1),
                 SUB_IFDS | EXIF_IFD => queue.extend(r.offsets(entry)),
+                MAKER_NOTE if nesting < MAX_NESTING => {
+                    let note = r
+                        .u32(entry + 8)
+                        .map_or(&[][..], |at| bytes.get(at as usize..).unwrap_or_default());
+                    let inner = note
+                        .starts_with(NIKON_PREFIX)
+                        .then(|| note.get(NIKON_TIFF_AT..))
+                        .flatten()
+                        .and_then(|tiff| walk(tiff, nesting + 1));
+                    if let Some(inner) = inner {
+                        if inner.largest_entry.0 > largest_entry.0 {
+                            largest_entry = inner.largest_entry;
+                        }
+                        if inner.values() > largest.values() {
+                            largest = inner;
+                        }
+                    }
+                }
                 _ => {}
             }
         }
@@ -144,7 +194,10 @@ pub fn largest_claim(bytes: &[u8]) -> Option<Claim> {
             queue.push(next as usize);
         }
     }
-    Some(largest)
+    Some(Claim {
+        largest_entry,
+        ..largest
+    })
 }
 
 #[cfg(test)]
@@ -177,11 +230,39 @@ mod tests {
             (claim.width, claim.height, claim.samples),
             (70_000, 60_000, 1)
         );
+        assert_eq!(claim.largest_entry, (4, 330));
         assert_eq!(largest_claim(b"not a tiff"), None);
         // Truncated anywhere: still an answer, never a panic.
         let full = nested(5, 5);
         for cut in 0..full.len() {
             let _ = largest_claim(&full[..cut]);
         }
+    }
+
+    /// A value count beyond the file, in IFD0 or in a Nikon maker note's own TIFF.
+    #[test]
+    fn finds_the_largest_entry_in_ifds_and_nikon_maker_notes() {
+        // IFD0 at 8: one Make (ASCII) entry with 0xFFFF_F81A values, next -> 0.
+        let mut plain = b"MM\0*\0\0\0\x08\0\x01".to_vec();
+        plain.extend([0x01, 0x0f, 0, 2, 0xff, 0xff, 0xf8, 0x1a, 0, 0, 0, 26]);
+        plain.extend([0, 0, 0, 0]);
+        assert_eq!(
+            largest_claim(&plain).unwrap().largest_entry,
+            (0xFFFF_F81A, 0x010f)
+        );
+        // IFD0 holds a maker note (UNDEFINED, 30 bytes at 26); inside, after "Nikon\0"
+        // and 4 bytes, a TIFF whose IFD claims 2^30 RATIONALs under tag 0x0097.
+        let mut nested = b"II*\0\x08\0\0\0\x01\0".to_vec();
+        nested.extend([0x7c, 0x92, 7, 0, 30, 0, 0, 0, 26, 0, 0, 0]);
+        nested.extend([0, 0, 0, 0]);
+        assert_eq!(nested.len(), 26);
+        nested.extend(b"Nikon\0\x02\x10\0\0");
+        nested.extend(b"II*\0\x08\0\0\0\x01\0");
+        nested.extend([0x97, 0, 5, 0, 0, 0, 0, 0x40, 0, 0, 0, 0]);
+        nested.extend([0, 0, 0, 0]);
+        assert_eq!(
+            largest_claim(&nested).unwrap().largest_entry,
+            (8 << 30, 0x0097)
+        );
     }
 }
