@@ -1,12 +1,19 @@
 //! Cook–Torrance and isotropic Ward reflection models in the paper's form (eq. 6–9, F = 1),
-//! as radiance factor β per camera channel, at in-plane angles (θi, θr) in degrees or at
-//! the 3D cosines of a surface point ([`Cosines`]).
+//! and the goniochromatic Cook–Torrance–Fresnel model (Cook–Torrance with a fitted colour
+//! Fresnel term, `docs/ARCHITECTURE.md`, "Quantities and models"), as radiance factor β
+//! per camera channel, at in-plane angles (θi, θr) in degrees or at the 3D cosines of a
+//! surface point ([`Cosines`]).
 //!
-//! Both models are linear in their coefficients: β_c = Kd_c·a + Ks_c·s(m_c), with a
-//! diffuse basis `a` (1 for Cook–Torrance, 1/π for Ward) and a specular lobe
+//! All models are linear in their coefficients: β_c = Kd_c·a + s(m_c)·F_c(x), with a
+//! diffuse basis `a` (1 for the Cook–Torrance forms, 1/π for Ward), a specular lobe
 //! s(m) = g · exp(−tan²α/m²) / m², where g depends on the angles only:
-//! - Cook–Torrance: g = G / (π cos⁴α cos θi cos θr), G = min(1, 2(n·h)(n·v)/(v·h), 2(n·h)(n·l)/(v·h));
-//! - Ward: g = 1 / (4π sqrt(cos θi cos θr)).
+//! - Cook–Torrance (both forms): g = G / (π cos⁴α cos θi cos θr),
+//!   G = min(1, 2(n·h)(n·v)/(v·h), 2(n·h)(n·l)/(v·h));
+//! - Ward: g = 1 / (4π sqrt(cos θi cos θr));
+//!
+//! and the specular colour F_c(x) = Ks_c·(1 − x) + Ks_grazing_c·x, x = sin²θd = 1 − (v·h)²
+//! the facet incidence of the half vector: x = 0 for Cook–Torrance and Ward (F_c = Ks_c),
+//! the point's sin²θd for Cook–Torrance–Fresnel.
 //!
 //! Numerics: tan²α = (1 − c²)/c² with c = cos α clamped to [1e−12, 1]; the lobe is exactly 0
 //! where tan²α/m² exceeds the exponent at which exp(−x) leaves the normal f64 range;
@@ -40,6 +47,9 @@ pub enum Model {
     CookTorrance,
     /// Isotropic Ward (paper eq. 7, 9).
     Ward,
+    /// Cook–Torrance whose specular colour varies with the facet incidence θd:
+    /// F_c = Ks_c·cos²θd + Ks_grazing_c·sin²θd (goniochromatic samples).
+    CookTorranceFresnel,
 }
 
 /// Whether the three channels share one roughness m or have one each.
@@ -128,21 +138,32 @@ fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
-/// The model at one (θi, θr), as the basis of its linear form β_c = Kd_c·diffuse + Ks_c·specular(m_c).
+/// The model at one (θi, θr), as the basis of its linear form
+/// β_c = Kd_c·diffuse + specular(m_c)·(Ks_c·(1 − x) + Ks_grazing_c·x), x = [`Basis::grazing`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Basis {
-    /// Diffuse basis a: 1 (Cook–Torrance) or 1/π (Ward); 0 at or past grazing.
+    /// Diffuse basis a: 1 (Cook–Torrance forms) or 1/π (Ward); 0 at or past grazing.
     pub diffuse: f64,
     /// tan²α of the half vector.
     tan2_alpha: f64,
     /// Angular factor g of the lobe; 0 at or past grazing.
     gain: f64,
+    /// Weight x ∈ [0, 1] of the grazing specular colour: sin²θd for Cook–Torrance–Fresnel,
+    /// 0 for the models whose specular colour is constant.
+    grazing: f64,
 }
 
 impl Basis {
     /// Specular basis s(m) = g·exp(−tan²α/m²)/m², finite and ≥ 0.
     #[inline]
     pub fn specular(&self, m: f64) -> f64 {
+        self.specular_and_slope(m).0
+    }
+
+    /// s(m) and its derivative with respect to ln m, ∂s/∂ln m = 2·s·(tan²α/m² − 1), both
+    /// finite (m clamped to [[`M_MIN`], [`M_MAX`]], NaN taken as [`M_MAX`]).
+    #[inline]
+    pub fn specular_and_slope(&self, m: f64) -> (f64, f64) {
         let m = if m.is_nan() {
             M_MAX
         } else {
@@ -151,21 +172,39 @@ impl Basis {
         let inv_m2 = 1.0 / (m * m);
         let x = self.tan2_alpha * inv_m2;
         if self.gain == 0.0 || x > EXP_UNDERFLOW {
-            0.0
+            (0.0, 0.0)
         } else {
-            self.gain * (-x).exp() * inv_m2
+            let s = self.gain * (-x).exp() * inv_m2;
+            (s, 2.0 * s * (x - 1.0))
         }
     }
 
-    /// β per channel for the given parameters.
+    /// Weight x ∈ [0, 1] of the grazing specular colour in F_c = Ks_c·(1 − x) +
+    /// Ks_grazing_c·x: sin²θd (1 − (v·h)²) for Cook–Torrance–Fresnel, 0 for the others.
+    #[inline]
+    pub fn grazing(&self) -> f64 {
+        self.grazing
+    }
+
+    /// β per channel for the given parameters, with a constant specular colour
+    /// (Ks_grazing = Ks: Cook–Torrance–Fresnel then equals Cook–Torrance).
     pub fn evaluate(&self, params: &Params) -> [f64; 3] {
+        self.evaluate_fresnel(params, &params.ks)
+    }
+
+    /// β per channel with the specular colour Ks·(1 − x) + `ks_grazing`·x.
+    pub fn evaluate_fresnel(&self, params: &Params, ks_grazing: &[f64; 3]) -> [f64; 3] {
         let [m0, m1, m2] = params.m;
         let s0 = self.specular(m0);
         // A shared roughness needs one lobe evaluation for all channels.
         let s1 = if m1 == m0 { s0 } else { self.specular(m1) };
         let s2 = if m2 == m0 { s0 } else { self.specular(m2) };
         let s = [s0, s1, s2];
-        std::array::from_fn(|c| params.kd[c] * self.diffuse + params.ks[c] * s[c])
+        let x = self.grazing;
+        std::array::from_fn(|c| {
+            let colour = params.ks[c] + x * (ks_grazing[c] - params.ks[c]);
+            params.kd[c] * self.diffuse + colour * s[c]
+        })
     }
 }
 
@@ -175,6 +214,7 @@ impl Model {
         match self {
             Model::CookTorrance => "cook-torrance",
             Model::Ward => "ward",
+            Model::CookTorranceFresnel => "cook-torrance-fresnel",
         }
     }
 
@@ -182,7 +222,7 @@ impl Model {
     /// Ward (eq. 7). The papers' two models put Kd on scales π apart.
     pub fn diffuse_weight(self) -> f64 {
         match self {
-            Model::CookTorrance => 1.0,
+            Model::CookTorrance | Model::CookTorranceFresnel => 1.0,
             Model::Ward => 1.0 / PI,
         }
     }
@@ -192,6 +232,14 @@ impl Model {
     /// models report it on one scale (docs/ARCHITECTURE.md, "Quantities and models").
     pub fn diffuse_albedo(self, kd: [f64; 3]) -> [f64; 3] {
         kd.map(|k| k * self.diffuse_weight() / WHITE_BETA_G)
+    }
+
+    /// Every model, in the order figures and tables list them.
+    pub const ALL: [Model; 3] = [Model::CookTorrance, Model::Ward, Model::CookTorranceFresnel];
+
+    /// Whether the model has a grazing specular colour (Ks_grazing) besides Ks.
+    pub fn has_fresnel_colour(self) -> bool {
+        self == Model::CookTorranceFresnel
     }
 
     /// The linear basis of the model at in-plane (θi, θr) in degrees.
@@ -213,6 +261,7 @@ impl Model {
                 diffuse: 0.0,
                 tan2_alpha: 0.0,
                 gain: 0.0,
+                grazing: 0.0,
             };
         }
         let cos_alpha = if n_dot_h.is_nan() {
@@ -222,14 +271,14 @@ impl Model {
         };
         let cos_alpha2 = cos_alpha * cos_alpha;
         let tan2_alpha = ((1.0 - cos_alpha2) / cos_alpha2).max(0.0);
+        // v·h > 0 for directions before grazing.
+        let v_dot_h = if v_dot_h.is_nan() {
+            COS_GRAZING
+        } else {
+            v_dot_h.max(COS_GRAZING)
+        };
         match self {
-            Model::CookTorrance => {
-                // v·h > 0 for directions before grazing.
-                let v_dot_h = if v_dot_h.is_nan() {
-                    COS_GRAZING
-                } else {
-                    v_dot_h.max(COS_GRAZING)
-                };
+            Model::CookTorrance | Model::CookTorranceFresnel => {
                 let masking = 2.0 * cos_alpha * cos_r / v_dot_h;
                 let shadowing = 2.0 * cos_alpha * cos_i / v_dot_h;
                 let g = 1f64.min(masking).min(shadowing);
@@ -237,12 +286,18 @@ impl Model {
                     diffuse: self.diffuse_weight(),
                     tan2_alpha,
                     gain: g / (PI * cos_alpha2 * cos_alpha2 * cos_i * cos_r),
+                    grazing: if self.has_fresnel_colour() {
+                        (1.0 - v_dot_h * v_dot_h).clamp(0.0, 1.0)
+                    } else {
+                        0.0
+                    },
                 }
             }
             Model::Ward => Basis {
                 diffuse: self.diffuse_weight(),
                 tan2_alpha,
                 gain: 1.0 / (4.0 * PI * (cos_i * cos_r).sqrt()),
+                grazing: 0.0,
             },
         }
     }
@@ -291,10 +346,11 @@ impl FromStr for Model {
         match s {
             "cook-torrance" => Ok(Model::CookTorrance),
             "ward" => Ok(Model::Ward),
+            "cook-torrance-fresnel" => Ok(Model::CookTorranceFresnel),
             _ => Err(UnknownName {
                 what: "model",
                 name: s.to_owned(),
-                expected: "cook-torrance or ward",
+                expected: "cook-torrance, ward or cook-torrance-fresnel",
             }),
         }
     }

@@ -1,9 +1,11 @@
-//! Fitting Cook–Torrance or Ward to β samples by minimising the eq. 10 loss,
-//! Σ_p sqrt(Σ_c (β_c,mea − β_c,est)²) (a sum of Euclidean norms, not of squares).
+//! Fitting a reflection model (Cook–Torrance, Ward, Cook–Torrance–Fresnel) to β samples by
+//! minimising the eq. 10 loss, Σ_p sqrt(Σ_c (β_c,mea − β_c,est)²) (a sum of Euclidean
+//! norms, not of squares). Every fit also reports the standard uncertainty of its
+//! parameters (see `uncertainty`).
 //!
 //! Two methods:
-//! - [`FitMethod::Robust`] (default): at fixed m the models are linear in Kd, Ks and the
-//!   loss is convex in them, so it is minimised over Kd, Ks ≥ 0 for each trial m by
+//! - [`FitMethod::Robust`] (default): at fixed m the models are linear in Kd, Ks (and
+//!   Ks_grazing) and the loss is convex in them, so it is minimised over them (≥ 0) for each trial m by
 //!   reweighted non-negative least squares (see `linear`; relative tolerance 1e-9, 1e-3
 //!   while scanning the grid; each solve after the first starts from the previous m's
 //!   solution). log m is searched globally: a grid over the whole range
@@ -13,7 +15,8 @@
 //!   later rounds: Brent near the current value) until a round stops lowering the loss.
 //!   Optionally polished by Nelder–Mead.
 //! - [`FitMethod::NelderMead`]: the paper's downhill simplex over all parameters at once,
-//!   MATLAB's fminsearch with its defaults (see `nelder_mead`), kept as the baseline.
+//!   MATLAB's fminsearch with its defaults (see `nelder_mead`), kept as the baseline for
+//!   the paper's two models.
 //!
 //! β are in the camera-RGB domain (a white gives G = 100), so Kd is typically 0–100.
 
@@ -21,6 +24,7 @@ mod linear;
 mod nelder_mead;
 mod robust;
 mod simplex;
+mod uncertainty;
 
 use std::fmt;
 use std::str::FromStr;
@@ -28,9 +32,11 @@ use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
-use crate::brdf::{Basis, Model, Params, Roughness, UnknownName};
+use crate::brdf::{Basis, Cosines, Model, Params, Roughness, UnknownName};
 use crate::metrics;
-use crate::samples::Sample;
+use crate::samples::{distinct_theta_l, Sample};
+
+pub use uncertainty::{chi2_3_survival, ColourShift, Correlation, ParameterSet, Z95};
 
 /// How to minimise the loss.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
@@ -142,7 +148,12 @@ pub struct FitResult {
     pub model: Model,
     pub roughness: Roughness,
     pub kd: [f64; 3],
+    /// Specular colour (Cook–Torrance–Fresnel: at normal facet incidence, θd = 0).
     pub ks: [f64; 3],
+    /// Cook–Torrance–Fresnel only: the specular colour at θd = 90°; F_c is linear in
+    /// sin²θd between `ks` and this.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ks_grazing: Option<[f64; 3]>,
     pub m: FittedRoughness,
     /// Diffuse albedo per channel, on one scale for every model
     /// ([`Model::diffuse_albedo`] of `kd`); `None` only in fit files written before it
@@ -159,6 +170,18 @@ pub struct FitResult {
     pub evaluations: u64,
     /// Wall time of the fit in seconds.
     pub seconds: f64,
+    /// Standard uncertainty of each parameter (`None` in files written without it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stderr: Option<ParameterSet<f64>>,
+    /// 95 % interval of each parameter, `[lo, hi]`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ci95: Option<ParameterSet<[f64; 2]>>,
+    /// Correlations between fitted parameters.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub correlation: Option<Correlation>,
+    /// Cook–Torrance–Fresnel only: whether the colour shift was fitted, and its test.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub colour_shift: Option<ColourShift>,
 }
 
 impl FitResult {
@@ -171,15 +194,27 @@ impl FitResult {
         }
     }
 
+    /// The specular colour at grazing facet incidence: `ks_grazing`, or `ks` for the
+    /// models whose specular colour is constant.
+    pub fn specular_grazing(&self) -> [f64; 3] {
+        self.ks_grazing.unwrap_or(self.ks)
+    }
+
     /// β the fit predicts at in-plane (θi, θr) in degrees.
     pub fn predict(&self, theta_i_deg: f64, theta_r_deg: f64) -> [f64; 3] {
-        self.model
-            .evaluate(&self.params(), theta_i_deg, theta_r_deg)
+        self.predict_at(&Cosines::in_plane(theta_i_deg, theta_r_deg))
     }
 
     /// β the fit predicts at a sample's point (its 3D cosines when it has them).
     pub fn predict_sample(&self, sample: &Sample) -> [f64; 3] {
-        self.model.evaluate_at(&self.params(), &sample.cosines())
+        self.predict_at(&sample.cosines())
+    }
+
+    /// β the fit predicts at a point given by its 3D cosines.
+    pub fn predict_at(&self, cosines: &Cosines) -> [f64; 3] {
+        self.model
+            .basis_at(cosines)
+            .evaluate_fresnel(&self.params(), &self.specular_grazing())
     }
 }
 
@@ -213,6 +248,9 @@ pub(crate) struct Data {
     pub bases: Vec<Basis>,
     /// Diffuse basis per point (copied out of `bases` for the inner loops).
     pub diffuse: Vec<f64>,
+    /// Weight of the grazing specular colour per point (`Basis::grazing`), for the models
+    /// that have one, when the samples span several θL (see [`fits_colour_shift`]).
+    pub grazing: Option<Vec<f64>>,
     /// Measured β per point; 0 where a channel was dropped.
     pub y: Vec<[f64; 3]>,
     /// Per point and channel 1 (measured) or 0 (dropped: left out of the loss);
@@ -266,6 +304,8 @@ impl Data {
         let mean_norm = zero_loss / y.len() as f64;
         Ok(Data {
             diffuse: bases.iter().map(|b| b.diffuse).collect(),
+            grazing: fits_colour_shift(model, samples)
+                .then(|| bases.iter().map(Basis::grazing).collect()),
             bases,
             y,
             keep,
@@ -274,9 +314,15 @@ impl Data {
         })
     }
 
-    /// Eq. 10 loss of `params` over the measured values.
+    /// Eq. 10 loss of `params` (specular colour constant) over the measured values.
     pub fn loss(&self, params: &Params) -> f64 {
-        self.estimates(params)
+        self.loss_fresnel(params, &params.ks)
+    }
+
+    /// Eq. 10 loss of `params` with the grazing specular colour `ks_grazing`, over the
+    /// measured values.
+    pub fn loss_fresnel(&self, params: &Params, ks_grazing: &[f64; 3]) -> f64 {
+        self.estimates(params, ks_grazing)
             .iter()
             .zip(&self.y)
             .map(|(estimate, y)| metrics::point_loss(y, estimate))
@@ -285,8 +331,12 @@ impl Data {
 
     /// The model's β at every point, 0 where the measured value was dropped (so dropped
     /// values count in neither the loss nor ΔErr_p).
-    fn estimates(&self, params: &Params) -> Vec<[f64; 3]> {
-        let mut estimates: Vec<[f64; 3]> = self.bases.iter().map(|b| b.evaluate(params)).collect();
+    fn estimates(&self, params: &Params, ks_grazing: &[f64; 3]) -> Vec<[f64; 3]> {
+        let mut estimates: Vec<[f64; 3]> = self
+            .bases
+            .iter()
+            .map(|b| b.evaluate_fresnel(params, ks_grazing))
+            .collect();
         if let Some(keep) = &self.keep {
             for (estimate, keep) in estimates.iter_mut().zip(keep) {
                 for (e, k) in estimate.iter_mut().zip(keep) {
@@ -304,28 +354,87 @@ pub(crate) struct Found {
     pub evaluations: u64,
 }
 
+/// Significance level of the colour-shift test: Ks_grazing is kept when the Wald test of
+/// Ks_grazing = Ks rejects it at this level.
+pub const COLOUR_SHIFT_LEVEL: f64 = 0.01;
+
+/// Whether a fit of `model` to `samples` may fit a grazing specular colour apart from Ks:
+/// only for Cook–Torrance–Fresnel, and only from two θL or more. One θL sees one facet
+/// incidence θd ≈ |θL|/2 where the lobe is (its spread there is the parallax of the
+/// setup, about 0.1°), which cannot tell a colour changing with θd from the lobe's own
+/// shape; the fit then ties Ks_grazing to Ks, which is Cook–Torrance. From several θL
+/// the shift is kept only when significant ([`COLOUR_SHIFT_LEVEL`]).
+pub fn fits_colour_shift(model: Model, samples: &[Sample]) -> bool {
+    model.has_fresnel_colour() && distinct_theta_l(samples).len() >= 2
+}
+
+/// Number of fitted parameters of `model` with `roughness`.
+pub fn parameter_count(model: Model, roughness: Roughness) -> usize {
+    let colours = if model.has_fresnel_colour() { 9 } else { 6 };
+    colours + roughness.count()
+}
+
 /// Fits `options.model` to `samples`.
 pub fn fit(samples: &[Sample], options: &FitOptions) -> Result<FitResult, FitError> {
     let start = Instant::now();
-    let parameters = 6 + options.roughness.count();
-    let data = Data::new(samples, options.model, parameters)?;
-    let found = match options.method {
+    if options.model.has_fresnel_colour() {
+        if options.method == FitMethod::NelderMead {
+            return Err(FitError::InvalidOptions(format!(
+                "{} is fitted by the robust method only (Nelder–Mead is the baseline of \
+                 cook-torrance and ward)",
+                options.model
+            )));
+        }
+        if options.robust.polish {
+            return Err(FitError::InvalidOptions(format!(
+                "polishing applies to cook-torrance and ward, not {}",
+                options.model
+            )));
+        }
+    }
+    let parameters = parameter_count(options.model, options.roughness);
+    let mut data = Data::new(samples, options.model, parameters)?;
+    let (mut found, mut ks_grazing) = match options.method {
         FitMethod::Robust => robust::fit(&data, options)?,
-        FitMethod::NelderMead => nelder_mead::fit(&data, options)?,
+        FitMethod::NelderMead => {
+            let found = nelder_mead::fit(&data, options)?;
+            let ks = found.params.ks;
+            (found, ks)
+        }
     };
+    let colour_shift = options.model.has_fresnel_colour().then(|| {
+        let chi2 = data.grazing.as_ref().and_then(|_| {
+            uncertainty::covariance(&data, options, &found.params, &ks_grazing)?
+                .shift_statistic(&found.params, &ks_grazing)
+        });
+        let p_value = chi2.map(chi2_3_survival);
+        ColourShift {
+            fitted: p_value.is_some_and(|p| p < COLOUR_SHIFT_LEVEL),
+            chi2,
+            p_value,
+        }
+    });
+    if colour_shift.is_some_and(|c| !c.fitted) && data.grazing.is_some() {
+        // Not supported by the data: Ks_grazing tied to Ks, which is Cook–Torrance.
+        data.grazing = None;
+        let evaluations = found.evaluations;
+        (found, ks_grazing) = robust::fit(&data, options)?;
+        found.evaluations += evaluations;
+    }
     let params = found.params;
     let m = match options.roughness {
         Roughness::Shared => FittedRoughness::Shared([params.m[0]]),
         Roughness::PerChannel => FittedRoughness::PerChannel(params.m),
     };
-    let err_p = metrics::err_p(&data.y, &data.estimates(&params))?;
-    let loss = data.loss(&params);
+    let err_p = metrics::err_p(&data.y, &data.estimates(&params, &ks_grazing))?;
+    let loss = data.loss_fresnel(&params, &ks_grazing);
     // JSON has no NaN or infinity: a fit that overflowed is an error, never `null`.
     let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
     for (what, ok) in [
         ("loss", loss.is_finite()),
         ("kd", finite(&params.kd)),
         ("ks", finite(&params.ks)),
+        ("ks_90", finite(&ks_grazing)),
         ("m", finite(&params.m)),
         ("err_p", finite(&err_p)),
     ] {
@@ -333,11 +442,17 @@ pub fn fit(samples: &[Sample], options: &FitOptions) -> Result<FitResult, FitErr
             return Err(FitError::Overflow(what));
         }
     }
+    let (stderr, ci95, correlation) =
+        match uncertainty::estimate(&data, options, &params, &ks_grazing) {
+            Some(s) => (Some(s.stderr), Some(s.ci95), Some(s.correlation)),
+            None => (None, None, None),
+        };
     Ok(FitResult {
         model: options.model,
         roughness: options.roughness,
         kd: params.kd,
         ks: params.ks,
+        ks_grazing: options.model.has_fresnel_colour().then_some(ks_grazing),
         m,
         rho_d: Some(options.model.diffuse_albedo(params.kd)),
         loss,
@@ -345,17 +460,36 @@ pub fn fit(samples: &[Sample], options: &FitOptions) -> Result<FitResult, FitErr
         method: options.method,
         evaluations: found.evaluations,
         seconds: start.elapsed().as_secs_f64(),
+        stderr,
+        ci95,
+        correlation,
+        colour_shift,
     })
 }
 
-/// The eq. 10 minimum over Kd, Ks ≥ 0 at the given roughness per channel, with its loss.
+/// The eq. 10 minimum over the colour coefficients at one roughness.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RoughnessSolve {
+    /// Kd, Ks and the given m.
+    pub params: Params,
+    /// The grazing specular colour (equal to Ks for the models without one).
+    pub ks_grazing: [f64; 3],
+    /// Eq. 10 loss there.
+    pub loss: f64,
+}
+
+/// The eq. 10 minimum over Kd, Ks (Ks_grazing) ≥ 0 at the given roughness per channel.
 /// The robust method's inner solve, exposed for profiles and brute-force checks.
 pub fn solve_at_roughness(
     samples: &[Sample],
     model: Model,
     m: [f64; 3],
-) -> Result<(Params, f64), FitError> {
-    let data = Data::new(samples, model, 6)?;
+) -> Result<RoughnessSolve, FitError> {
+    let data = Data::new(
+        samples,
+        model,
+        parameter_count(model, Roughness::Shared) - 1,
+    )?;
     let spec: Vec<Vec<f64>> = m
         .iter()
         .map(|&mc| data.bases.iter().map(|b| b.specular(mc)).collect())
@@ -367,14 +501,15 @@ pub fn solve_at_roughness(
         false,
         &mut linear::Workspace::default(),
     );
-    Ok((
-        Params {
+    Ok(RoughnessSolve {
+        params: Params {
             kd: fit.kd,
             ks: fit.ks,
             m,
         },
-        fit.loss,
-    ))
+        ks_grazing: fit.kg,
+        loss: fit.loss,
+    })
 }
 
 impl FitMethod {

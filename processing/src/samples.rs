@@ -85,6 +85,23 @@ impl Sample {
     }
 }
 
+/// θL values closer than this (degrees) are the same illumination direction.
+pub const THETA_L_TOLERANCE: f64 = 1e-6;
+
+/// Distinct θL of `samples` in order of first appearance.
+pub fn distinct_theta_l(samples: &[Sample]) -> Vec<f64> {
+    let mut out: Vec<f64> = Vec::new();
+    for s in samples {
+        if !out
+            .iter()
+            .any(|t| (t - s.theta_l).abs() <= THETA_L_TOLERANCE)
+        {
+            out.push(s.theta_l);
+        }
+    }
+    out
+}
+
 /// The six leading columns of a samples CSV, in order.
 pub const HEADER: [&str; 6] = ["theta_l", "theta_i", "theta_r", "r", "g", "b"];
 

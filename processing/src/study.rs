@@ -6,9 +6,12 @@
 //! Evaluation points are the (θi, θr) of every sample (all θL, whatever subset was
 //! fitted), where the reference covers them; so every fit is scored on the same points.
 //! Per fit: ΔErr_p per channel (eq. 11, reference as "measured") and the mean ΔE_u′v′
-//! (eq. 13) through the camera's RGB → XYZ matrix. Each combination is also fitted by
-//! Nelder–Mead from its default start, to count how often the paper's method ends at a
-//! higher loss than the robust fitter (a local minimum).
+//! (eq. 13) through the camera's RGB → XYZ matrix, on all points and, separately, on the
+//! held-out points only (those of the θL the combination did not fit: how well a model
+//! predicts angles it did not see; the combination of every θL has none). Each
+//! combination is also fitted by Nelder–Mead from its default start, to count how often
+//! the paper's method ends at a higher loss than the robust fitter (a local minimum);
+//! models that only the robust method fits are not compared.
 
 pub mod boxplot;
 pub mod combinations;
@@ -28,15 +31,13 @@ use crate::color::CameraModel;
 use crate::fit::{self, FitMethod, FitOptions, FitResult};
 use crate::metrics::{self, MetricsError};
 use crate::reference::Reference;
-use crate::samples::Sample;
+pub use crate::samples::distinct_theta_l;
+use crate::samples::{Sample, THETA_L_TOLERANCE};
 use boxplot::BoxStats;
 use figures::FigureError;
 
 pub use plots::write_figures;
 pub use tables::write_tables;
-
-/// θL values closer than this (degrees) are the same direction.
-const THETA_L_TOLERANCE: f64 = 1e-6;
 
 /// Why a study could not be run or written.
 #[derive(Debug, thiserror::Error)]
@@ -101,11 +102,11 @@ pub struct StudyOptions {
 }
 
 impl Default for StudyOptions {
-    /// Cook–Torrance and Ward with shared roughness, Nelder–Mead compared at 0.1 %,
-    /// every sample fitted.
+    /// Every model with shared roughness, Nelder–Mead compared at 0.1 %, every sample
+    /// fitted.
     fn default() -> Self {
         StudyOptions {
-            variants: [Model::CookTorrance, Model::Ward]
+            variants: Model::ALL
                 .into_iter()
                 .map(|model| Variant {
                     model,
@@ -131,6 +132,17 @@ pub struct EvalPoint {
     pub reference_xyz: [f64; 3],
 }
 
+/// Errors of a fit against the reference on a set of evaluation points.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Errors {
+    /// Number of evaluation points.
+    pub points: usize,
+    /// ΔErr_p (eq. 11) per channel.
+    pub err_p: [f64; 3],
+    /// Mean ΔE_u′v′ (eq. 13) over the points with a defined chromaticity; `None` if none.
+    pub delta_e_uv: Option<f64>,
+}
+
 /// The scores of one successful fit.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Scores {
@@ -140,6 +152,9 @@ pub struct Scores {
     pub err_p: [f64; 3],
     /// Mean ΔE_u′v′ (eq. 13) over the points with a defined chromaticity; `None` if none.
     pub delta_e_uv: Option<f64>,
+    /// The same errors on the points of the θL the combination did not fit; `None` when
+    /// it fitted them all (or their reference has no signal in a channel).
+    pub held_out: Option<Errors>,
     /// Loss of the Nelder–Mead fit on the same samples (when compared and it succeeded).
     pub nelder_mead_loss: Option<f64>,
 }
@@ -163,9 +178,24 @@ pub struct GroupSummary {
     pub failed: usize,
     pub err_p: [Option<BoxStats>; 3],
     pub delta_e_uv: Option<BoxStats>,
+    /// The same on the held-out points (combinations that left some θL out).
+    pub held_out_err_p: [Option<BoxStats>; 3],
+    pub held_out_delta_e_uv: Option<BoxStats>,
     /// Nelder–Mead fits compared, and those ending above the robust loss.
     pub nelder_mead_compared: usize,
     pub nelder_mead_above: usize,
+}
+
+/// Box-plot statistics of one variant's held-out errors over every combination that left
+/// some θL out (62 of the 63 for six θL): the paper's protocol of judging a fit on
+/// angles it did not see.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HeldOutSummary {
+    pub variant: Variant,
+    /// Combinations with held-out points that were fitted.
+    pub combinations: usize,
+    pub err_p: [Option<BoxStats>; 3],
+    pub delta_e_uv: Option<BoxStats>,
 }
 
 /// Everything a study computed.
@@ -181,20 +211,6 @@ pub struct StudyReport {
     pub results: Vec<CombinationResult>,
     /// Wall time of the fits and scoring, seconds.
     pub seconds: f64,
-}
-
-/// Distinct θL of `samples` in order of first appearance.
-pub fn distinct_theta_l(samples: &[Sample]) -> Vec<f64> {
-    let mut out: Vec<f64> = Vec::new();
-    for s in samples {
-        if !out
-            .iter()
-            .any(|t| (t - s.theta_l).abs() <= THETA_L_TOLERANCE)
-        {
-            out.push(s.theta_l);
-        }
-    }
-    out
 }
 
 /// The evaluation points: every sample's (θi, θr) the reference covers.
@@ -355,8 +371,8 @@ fn score_combination(
     let mut fit_options = FitOptions::new(variant.model);
     fit_options.roughness = variant.roughness;
     let robust = fit::fit(&subset, &fit_options).map_err(|e| e.to_string())?;
-    let nelder_mead_loss = options
-        .compare_nelder_mead
+    // Nelder–Mead is the baseline of the paper's two models only.
+    let nelder_mead_loss = (options.compare_nelder_mead && !variant.model.has_fresnel_colour())
         .then(|| {
             fit_options.method = FitMethod::NelderMead;
             fit::fit(&subset, &fit_options).ok().map(|f| f.loss)
@@ -366,15 +382,42 @@ fn score_combination(
         .iter()
         .map(|p| robust.predict(p.theta_i, p.theta_r))
         .collect();
-    let err_p = metrics::err_p(measured, &estimated).map_err(|e| e.to_string())?;
-    let reference_xyz: Vec<[f64; 3]> = points.iter().map(|p| p.reference_xyz).collect();
-    let estimated_xyz: Vec<[f64; 3]> = estimated.iter().map(|&rgb| camera.xyz(rgb)).collect();
-    let delta_e_uv = metrics::delta_e_uv(&reference_xyz, &estimated_xyz).ok();
+    let all = errors(points, measured, &estimated, camera, |_| true)?;
+    let held_out = errors(points, measured, &estimated, camera, |p| {
+        !combo
+            .iter()
+            .any(|t| (t - p.theta_l).abs() <= THETA_L_TOLERANCE)
+    })
+    .ok()
+    .filter(|e| e.points > 0);
     Ok(Scores {
         fit: robust,
-        err_p,
-        delta_e_uv,
+        err_p: all.err_p,
+        delta_e_uv: all.delta_e_uv,
+        held_out,
         nelder_mead_loss,
+    })
+}
+
+/// ΔErr_p and mean ΔE_u′v′ of `estimated` against the reference on the points `keep`
+/// selects.
+fn errors(
+    points: &[EvalPoint],
+    measured: &[[f64; 3]],
+    estimated: &[[f64; 3]],
+    camera: &CameraModel,
+    keep: impl Fn(&EvalPoint) -> bool,
+) -> Result<Errors, String> {
+    let chosen: Vec<usize> = (0..points.len()).filter(|&i| keep(&points[i])).collect();
+    let pick = |values: &[[f64; 3]]| chosen.iter().map(|&i| values[i]).collect::<Vec<_>>();
+    let (measured, estimated) = (pick(measured), pick(estimated));
+    let err_p = metrics::err_p(&measured, &estimated).map_err(|e| e.to_string())?;
+    let reference_xyz: Vec<[f64; 3]> = chosen.iter().map(|&i| points[i].reference_xyz).collect();
+    let estimated_xyz: Vec<[f64; 3]> = estimated.iter().map(|&rgb| camera.xyz(rgb)).collect();
+    Ok(Errors {
+        points: chosen.len(),
+        err_p,
+        delta_e_uv: metrics::delta_e_uv(&reference_xyz, &estimated_xyz).ok(),
     })
 }
 
@@ -409,6 +452,11 @@ impl StudyReport {
                 let channel = |c: usize| {
                     BoxStats::from_values(&scores.iter().map(|s| s.err_p[c]).collect::<Vec<_>>())
                 };
+                let held_out: Vec<&Errors> =
+                    scores.iter().filter_map(|s| s.held_out.as_ref()).collect();
+                let held_out_channel = |c: usize| {
+                    BoxStats::from_values(&held_out.iter().map(|e| e.err_p[c]).collect::<Vec<_>>())
+                };
                 out.push(GroupSummary {
                     variant,
                     size,
@@ -421,12 +469,53 @@ impl StudyReport {
                             .filter_map(|s| s.delta_e_uv)
                             .collect::<Vec<_>>(),
                     ),
+                    held_out_err_p: [
+                        held_out_channel(0),
+                        held_out_channel(1),
+                        held_out_channel(2),
+                    ],
+                    held_out_delta_e_uv: BoxStats::from_values(
+                        &held_out
+                            .iter()
+                            .filter_map(|e| e.delta_e_uv)
+                            .collect::<Vec<_>>(),
+                    ),
                     nelder_mead_compared: above.len(),
                     nelder_mead_above: above.iter().filter(|&&a| a).count(),
                 });
             }
         }
         out
+    }
+
+    /// Held-out errors per variant over every combination that left some θL out,
+    /// variants in option order.
+    pub fn held_out_summary(&self) -> Vec<HeldOutSummary> {
+        self.options
+            .variants
+            .iter()
+            .map(|&variant| {
+                let held_out: Vec<&Errors> = self
+                    .results
+                    .iter()
+                    .filter(|r| r.variant == variant)
+                    .filter_map(|r| r.outcome.as_ref().ok()?.held_out.as_ref())
+                    .collect();
+                let stats = |f: &dyn Fn(&Errors) -> Option<f64>| {
+                    BoxStats::from_values(&held_out.iter().filter_map(|e| f(e)).collect::<Vec<_>>())
+                };
+                HeldOutSummary {
+                    variant,
+                    combinations: held_out.len(),
+                    err_p: [
+                        stats(&|e| Some(e.err_p[0])),
+                        stats(&|e| Some(e.err_p[1])),
+                        stats(&|e| Some(e.err_p[2])),
+                    ],
+                    delta_e_uv: stats(&|e| e.delta_e_uv),
+                }
+            })
+            .collect()
     }
 
     /// The result of `variant` fitted on the single θL closest to `theta_l`.

@@ -3,8 +3,9 @@ use std::f64::consts::PI;
 use gonio_processing::brdf::{Model, Params, Roughness};
 use proptest::prelude::*;
 
-/// Independent vector-form evaluation: n = +z, l and v in the x–z plane, h = (l + v)/|l + v|.
-fn vector_form(model: Model, p: &Params, theta_i: f64, theta_r: f64) -> [f64; 3] {
+/// Independent vector-form evaluation: n = +z, l and v in the x–z plane, h = (l + v)/|l + v|;
+/// `kg` is Cook–Torrance–Fresnel's grazing specular colour.
+fn vector_form(model: Model, p: &Params, kg: &[f64; 3], theta_i: f64, theta_r: f64) -> [f64; 3] {
     let (ti, tr) = (theta_i.to_radians(), theta_r.to_radians());
     // Specular direction at θr = θi: l and v on opposite sides of the normal.
     let l = [ti.sin(), ti.cos()];
@@ -25,6 +26,13 @@ fn vector_form(model: Model, p: &Params, theta_i: f64, theta_r: f64) -> [f64; 3]
             Model::Ward => {
                 p.kd[c] / PI + p.ks[c] * (-tan2 / m2).exp() / (4.0 * PI * m2 * (nl * nv).sqrt())
             }
+            Model::CookTorranceFresnel => {
+                let d = (-tan2 / m2).exp() / (m2 * nh.powi(4));
+                let g = 1f64.min(2.0 * nh * nv / vh).min(2.0 * nh * nl / vh);
+                let sin2_d = 1.0 - vh * vh;
+                let f = p.ks[c] * (1.0 - sin2_d) + kg[c] * sin2_d;
+                f * d * g / (PI * nl * nv) + p.kd[c]
+            }
         }
     })
 }
@@ -40,12 +48,13 @@ fn matches_vector_form_on_a_grid() {
         ks: [20.0, 40.0, 5.0],
         m: [0.05, 0.2, 0.6],
     };
-    for model in [Model::CookTorrance, Model::Ward] {
+    let kg = [2.0, 60.0, 9.0];
+    for model in Model::ALL {
         for ti in (-85..=85).step_by(5) {
             for tr in (-85..=85).step_by(5) {
                 let (ti, tr) = (f64::from(ti) + 0.3, f64::from(tr) - 0.2);
-                let got = model.evaluate(&params, ti, tr);
-                let want = vector_form(model, &params, ti, tr);
+                let got = model.basis(ti, tr).evaluate_fresnel(&params, &kg);
+                let want = vector_form(model, &params, &kg, ti, tr);
                 for c in 0..3 {
                     assert!(
                         close(got[c], want[c], 1e-9),
@@ -81,9 +90,34 @@ fn specular_peak_hand_values() {
 }
 
 #[test]
+fn fresnel_colour_is_linear_in_sin2_theta_d() {
+    // At the specular peak θi = θr = θ the half vector is the normal and v·h = cos θ, so
+    // F = Ks·cos²θ + Ks_grazing·sin²θ multiplies the Cook–Torrance lobe.
+    let p = Params::shared([1.0, 2.0, 3.0], [10.0, 20.0, 30.0], 0.2);
+    let kg = [40.0, 0.0, 30.0];
+    for theta in [0.0f64, 10.0, 25.0, 60.0] {
+        let (c, s) = (theta.to_radians().cos(), theta.to_radians().sin());
+        let ct = Model::CookTorrance.evaluate(&p, theta, theta);
+        let got = Model::CookTorranceFresnel
+            .basis(theta, theta)
+            .evaluate_fresnel(&p, &kg);
+        for ch in 0..3 {
+            let f = p.ks[ch] * c * c + kg[ch] * s * s;
+            let want = p.kd[ch] + (ct[ch] - p.kd[ch]) * f / p.ks[ch];
+            assert!(close(got[ch], want, 1e-12), "θ {theta}: {got:?} vs {want}");
+        }
+    }
+    // A grazing colour equal to Ks is Cook–Torrance itself.
+    assert_eq!(
+        Model::CookTorranceFresnel.evaluate(&p, -10.0, 35.0),
+        Model::CookTorrance.evaluate(&p, -10.0, 35.0)
+    );
+}
+
+#[test]
 fn lobe_is_exactly_zero_where_exp_underflows() {
     let p = Params::shared([0.0; 3], [1.0; 3], 1e-3);
-    for model in [Model::CookTorrance, Model::Ward] {
+    for model in Model::ALL {
         assert_eq!(model.evaluate(&p, 30.0, -30.0), [0.0; 3]);
         assert_eq!(model.evaluate(&p, 89.99, -89.99), [0.0; 3]);
     }
@@ -92,7 +126,7 @@ fn lobe_is_exactly_zero_where_exp_underflows() {
 #[test]
 fn grazing_and_beyond_is_masked_to_zero() {
     let p = Params::shared([5.0; 3], [10.0; 3], 0.3);
-    for model in [Model::CookTorrance, Model::Ward] {
+    for model in Model::ALL {
         for (ti, tr) in [
             (90.0, 10.0),
             (10.0, -90.0),
@@ -107,7 +141,7 @@ fn grazing_and_beyond_is_masked_to_zero() {
 
 #[test]
 fn names_round_trip() {
-    for model in [Model::CookTorrance, Model::Ward] {
+    for model in Model::ALL {
         assert_eq!(model.name().parse::<Model>().unwrap(), model);
         assert_eq!(
             serde_json::to_string(&model).unwrap(),
@@ -129,10 +163,11 @@ proptest! {
         m in prop::array::uniform3(1e-3f64..=2.0),
         kd in prop::array::uniform3(0.0f64..=100.0),
         ks in prop::array::uniform3(0.0f64..=100.0),
+        kg in prop::array::uniform3(0.0f64..=100.0),
     ) {
         let p = Params { kd, ks, m };
-        for model in [Model::CookTorrance, Model::Ward] {
-            let beta = model.evaluate(&p, ti, tr);
+        for model in Model::ALL {
+            let beta = model.basis(ti, tr).evaluate_fresnel(&p, &kg);
             for b in beta {
                 prop_assert!(b.is_finite() && b >= 0.0, "{model} {ti} {tr} {m:?}: {beta:?}");
             }
@@ -151,7 +186,7 @@ proptest! {
         m in 1e-3f64..=2.0,
     ) {
         let p = Params::shared([1.0; 3], [100.0; 3], m);
-        for model in [Model::CookTorrance, Model::Ward] {
+        for model in Model::ALL {
             for b in model.evaluate(&p, ti, tr) {
                 prop_assert!(b.is_finite() && b >= 0.0);
             }

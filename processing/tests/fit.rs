@@ -64,7 +64,7 @@ fn brute_force_min(samples: &[Sample], model: Model) -> (f64, f64) {
     (0..n)
         .map(|k| {
             let m = (1e-3f64.ln() + (2000f64).ln() * f64::from(k) / f64::from(n - 1)).exp();
-            let (_, loss) = solve_at_roughness(samples, model, [m; 3]).unwrap();
+            let loss = solve_at_roughness(samples, model, [m; 3]).unwrap().loss;
             (loss, m)
         })
         .min_by(|a, b| a.0.total_cmp(&b.0))
@@ -180,7 +180,7 @@ fn per_channel_roughness_is_recovered() {
             for k in 0..200 {
                 let mut m = r.params().m;
                 m[c] = (1e-3f64.ln() + 2000f64.ln() * f64::from(k) / 199.0).exp();
-                let (_, loss) = solve_at_roughness(&samples, model, m).unwrap();
+                let loss = solve_at_roughness(&samples, model, m).unwrap().loss;
                 assert!(
                     loss >= r.loss * (1.0 - 1e-9),
                     "channel {c} m {}: {loss} < {}",
@@ -209,7 +209,7 @@ fn two_basin_profile_finds_the_global_one() {
     let profile: Vec<f64> = (0..200)
         .map(|k| {
             let m = (1e-3f64.ln() + 2000f64.ln() * f64::from(k) / 199.0).exp();
-            solve_at_roughness(&samples, model, [m; 3]).unwrap().1
+            solve_at_roughness(&samples, model, [m; 3]).unwrap().loss
         })
         .collect();
     let basins = (1..199)
@@ -270,7 +270,8 @@ fn fixed_roughness_solution_is_optimal_in_kd_ks() {
     let truth = Params::shared([10.0, 12.0, 8.0], [5.0, 6.0, 4.0], 0.1);
     let model = Model::CookTorrance;
     let samples = synthetic(model, &truth, &ALL_THETA_L, 0.05);
-    let (p, loss) = solve_at_roughness(&samples, model, [0.1; 3]).unwrap();
+    let solved = solve_at_roughness(&samples, model, [0.1; 3]).unwrap();
+    let (p, loss) = (solved.params, solved.loss);
     assert_close(
         "reported loss",
         loss,

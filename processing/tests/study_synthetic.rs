@@ -61,7 +61,7 @@ fn generating_model_scores_near_zero_on_every_combination() {
     let report = run_study(&samples, &reference, &camera, &StudyOptions::default()).unwrap();
 
     assert_eq!(report.theta_l, theta_l.to_vec());
-    assert_eq!(report.results.len(), 7 * 2, "7 combinations × 2 models");
+    assert_eq!(report.results.len(), 7 * 3, "7 combinations × 3 models");
     assert_eq!(
         report.points.len(),
         samples.len(),
@@ -85,9 +85,35 @@ fn generating_model_scores_near_zero_on_every_combination() {
         let m = s.fit.params().m[0];
         assert!((m - 0.3).abs() < 0.01, "{:?}: m {m}", r.theta_l);
         assert!(s.nelder_mead_loss.is_some(), "Nelder–Mead was compared");
+        // Held out: the other θL's points, none when every θL was fitted.
+        match &s.held_out {
+            Some(h) => {
+                let other = samples
+                    .iter()
+                    .filter(|p| !r.theta_l.contains(&p.theta_l))
+                    .count();
+                assert_eq!(h.points, other, "{:?}", r.theta_l);
+                assert!(h.err_p.iter().all(|&e| e < 5e-3), "{:?}: {h:?}", r.theta_l);
+            }
+            None => assert_eq!(r.theta_l.len(), 3),
+        }
+    }
+    // Cook–Torrance–Fresnel on (noise-free) Cook–Torrance data: no colour shift, so it is
+    // Cook–Torrance; Nelder–Mead is not its method.
+    for r in report
+        .results
+        .iter()
+        .filter(|r| r.variant.model == Model::CookTorranceFresnel)
+    {
+        let s = r.outcome.as_ref().unwrap();
+        let shift = s.fit.colour_shift.unwrap();
+        assert!(!shift.fitted, "{:?}: {shift:?}", r.theta_l);
+        assert_eq!(s.fit.ks_grazing, Some(s.fit.ks));
+        assert!(s.err_p.iter().all(|&e| e < 5e-3), "{:?}", r.theta_l);
+        assert!(s.nelder_mead_loss.is_none());
     }
     let summary = report.summary();
-    assert_eq!(summary.len(), 2 * 3, "2 variants × sizes 1..=3");
+    assert_eq!(summary.len(), 3 * 3, "3 variants × sizes 1..=3");
     let sizes: Vec<(usize, usize)> = summary.iter().map(|g| (g.size, g.fitted)).collect();
     assert_eq!(&sizes[..3], &[(1, 3), (2, 3), (3, 1)]);
     // Ward is not the generating model: it must do worse than Cook–Torrance.
@@ -114,7 +140,7 @@ fn generating_model_scores_near_zero_on_every_combination() {
         assert!(written.contains(&dir.path().join(name)), "{name} written");
     }
     let table = std::fs::read_to_string(dir.path().join("combinations.csv")).unwrap();
-    assert_eq!(table.lines().count(), 1 + 14);
+    assert_eq!(table.lines().count(), 1 + 21);
     assert!(table
         .lines()
         .nth(1)

@@ -19,6 +19,8 @@ const THETA_L_MATCH_DEG: f64 = 1e-6;
 enum ModelArg {
     CookTorrance,
     Ward,
+    /// Cook–Torrance with a specular colour that varies with the facet incidence θd.
+    CookTorranceFresnel,
 }
 
 /// One roughness for all channels or one per channel.
@@ -98,6 +100,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut options = FitOptions::new(match args.model {
         ModelArg::CookTorrance => Model::CookTorrance,
         ModelArg::Ward => Model::Ward,
+        ModelArg::CookTorranceFresnel => Model::CookTorranceFresnel,
     });
     options.roughness = match args.roughness {
         RoughnessArg::Shared => Roughness::Shared,

@@ -48,7 +48,11 @@ pub struct Args {
     #[arg(long)]
     pub out: PathBuf,
     /// Models to fit, comma-separated.
-    #[arg(long, value_delimiter = ',', default_value = "cook-torrance,ward")]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "cook-torrance,ward,cook-torrance-fresnel"
+    )]
     pub models: Vec<Model>,
     /// Roughness forms to fit: `both` for a goniochromatic sample.
     #[arg(long, value_enum, default_value_t = RoughnessChoice::Shared)]
@@ -121,18 +125,24 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         report.points.len(),
         report.seconds
     );
-    println!("variant  n_θL  median ΔErr_p(G)  median ΔE_u′v′  NM above robust");
+    println!(
+        "variant  n_θL  median ΔErr_p(G)  median ΔE_u′v′  held out: median ΔErr_p(R, G, B)  median ΔE_u′v′  NM above robust"
+    );
     for g in report.summary() {
         let median = |b: &Option<study::boxplot::BoxStats>| {
             b.as_ref()
                 .map_or("-".to_string(), |b| format!("{:.4}", b.median))
         };
         println!(
-            "{:<26} {:>2}  {:>8}  {:>8}  {}/{}{}",
+            "{:<33} {:>2}  {:>8}  {:>8}  {:>8} {:>8} {:>8}  {:>8}  {}/{}{}",
             g.variant.label(),
             g.size,
             median(&g.err_p[1]),
             median(&g.delta_e_uv),
+            median(&g.held_out_err_p[0]),
+            median(&g.held_out_err_p[1]),
+            median(&g.held_out_err_p[2]),
+            median(&g.held_out_delta_e_uv),
             g.nelder_mead_above,
             g.nelder_mead_compared,
             if g.failed > 0 {
@@ -140,6 +150,24 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             } else {
                 String::new()
             }
+        );
+    }
+    println!(
+        "held out, every combination that leaves a θL out: median ΔErr_p (R, G, B), median ΔE_u′v′"
+    );
+    for h in report.held_out_summary() {
+        let median = |b: &Option<study::boxplot::BoxStats>| {
+            b.as_ref()
+                .map_or("-".to_string(), |b| format!("{:.4}", b.median))
+        };
+        println!(
+            "{:<33} {:>2} fits  {:>8} {:>8} {:>8}  {:>8}",
+            h.variant.label(),
+            h.combinations,
+            median(&h.err_p[0]),
+            median(&h.err_p[1]),
+            median(&h.err_p[2]),
+            median(&h.delta_e_uv),
         );
     }
     for path in written {

@@ -1,13 +1,14 @@
-//! Minimisation of the eq. 10 loss over Kd, Ks ≥ 0 at a fixed roughness.
+//! Minimisation of the eq. 10 loss over Kd, Ks (and Ks_grazing) ≥ 0 at a fixed roughness.
 //!
-//! At fixed m both models are linear in (Kd_c, Ks_c), so eq. 10, Σ_p ‖y_p − ŷ_p‖₂, is a
-//! convex function of the six coefficients. It is minimised by iteratively reweighted
-//! least squares, a majorise–minimise scheme: with w_p = 1/‖r_p‖ of the current
-//! residuals, Σ_p w_p‖r_p‖²/2 + const majorises the loss, and each majoriser splits into
-//! one weighted two-variable non-negative least-squares problem per channel, solved in
-//! closed form. The first pass (unit weights) is the ordinary NNLS solution. Weights are
-//! capped through a smoothing ε that shrinks to the requested tolerance, so the result
-//! is within that relative tolerance of the exact minimum; the best iterate is kept.
+//! At fixed m every model is linear in its coefficients (Kd_c, Ks_c, and Ks_grazing_c for
+//! Cook–Torrance–Fresnel), so eq. 10, Σ_p ‖y_p − ŷ_p‖₂, is a convex function of them. It is
+//! minimised by iteratively reweighted least squares, a majorise–minimise scheme: with
+//! w_p = 1/‖r_p‖ of the current residuals, Σ_p w_p‖r_p‖²/2 + const majorises the loss, and
+//! each majoriser splits into one weighted non-negative least-squares problem per channel
+//! in two or three variables, solved exactly (closed form, or every active set of three).
+//! The first pass (unit weights) is the ordinary NNLS solution. Weights are capped through
+//! a smoothing ε that shrinks to the requested tolerance, so the result is within that
+//! relative tolerance of the exact minimum; the best iterate is kept.
 
 use super::Data;
 
@@ -27,11 +28,13 @@ const WARM_EPSILON_START: f64 = 1e-4;
 /// Largest extrapolation factor tried along a pass's step.
 const MAX_EXTRAPOLATION: f64 = 64.0;
 
-/// Coefficients minimising eq. 10 at one roughness, with that loss.
+/// Coefficients minimising eq. 10 at one roughness, with that loss. `kg` is the grazing
+/// specular colour Ks_grazing; equal to `ks` for the models without one.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct LinearFit {
     pub kd: [f64; 3],
     pub ks: [f64; 3],
+    pub kg: [f64; 3],
     pub loss: f64,
 }
 
@@ -58,6 +61,73 @@ fn nnls2(saa: f64, sas: f64, sss: f64, say: f64, ssy: f64) -> (f64, f64) {
     }
 }
 
+/// Minimises Σ w (y − Σ_k z_k·b_k)² over z ≥ 0 for three bases, from the weighted Gram
+/// matrix `g` (g_jk = Σ w b_j b_k) and `r` (r_k = Σ w b_k y): the convex problem's optimum
+/// is the best feasible unconstrained optimum over the seven non-empty active sets (and 0).
+/// An active set whose Gram block is singular (relative pivot below 1e-12) is skipped.
+fn nnls3(g: &[[f64; 3]; 3], r: &[f64; 3]) -> [f64; 3] {
+    let mut best = ([0.0; 3], 0.0);
+    for set in 1u8..8 {
+        let mut members = [0; 3];
+        let mut len = 0;
+        for k in 0..3 {
+            if set & (1 << k) != 0 {
+                members[len] = k;
+                len += 1;
+            }
+        }
+        let index = &members[..len];
+        let Some(z) = solve_block(g, r, index) else {
+            continue;
+        };
+        if z.iter().any(|&v| v < 0.0) {
+            continue;
+        }
+        // The objective ½zᵀGz − rᵀz at the block's optimum is −½ rᵀz.
+        let value = -0.5 * index.iter().map(|&k| r[k] * z[k]).sum::<f64>();
+        if value < best.1 {
+            best = (z, value);
+        }
+    }
+    best.0
+}
+
+/// The solution of G_SS z_S = r_S on the indices S (others 0) by Gaussian elimination
+/// with partial pivoting; `None` when the block is singular.
+fn solve_block(g: &[[f64; 3]; 3], r: &[f64; 3], index: &[usize]) -> Option<[f64; 3]> {
+    let n = index.len();
+    let mut a = [[0.0; 4]; 3];
+    for (i, &gi) in index.iter().enumerate() {
+        for (j, &gj) in index.iter().enumerate() {
+            a[i][j] = g[gi][gj];
+        }
+        a[i][n] = r[gi];
+    }
+    let scale = index.iter().map(|&k| g[k][k]).fold(0.0, f64::max);
+    if !(scale > 0.0 && scale.is_finite()) {
+        return None;
+    }
+    for col in 0..n {
+        let pivot = (col..n).max_by(|&x, &y| a[x][col].abs().total_cmp(&a[y][col].abs()))?;
+        if a[pivot][col].abs() <= 1e-12 * scale {
+            return None;
+        }
+        a.swap(col, pivot);
+        for row in col + 1..n {
+            let f = a[row][col] / a[col][col];
+            for k in col..=n {
+                a[row][k] -= f * a[col][k];
+            }
+        }
+    }
+    let mut z = [0.0; 3];
+    for i in (0..n).rev() {
+        let tail: f64 = (i + 1..n).map(|k| a[i][k] * z[index[k]]).sum();
+        z[index[i]] = (a[i][n] - tail) / a[i][i];
+    }
+    z.iter().all(|v| v.is_finite()).then_some(z)
+}
+
 /// Scratch buffers of [`solve`], reused across calls.
 #[derive(Debug, Default)]
 pub(crate) struct Workspace {
@@ -70,14 +140,16 @@ pub(crate) struct Workspace {
     last: Option<LinearFit>,
 }
 
-/// Eq. 10 loss of (kd, ks), writing each point's residual norm to `residuals`.
+/// Eq. 10 loss of (kd, ks, kg), writing each point's residual norm to `residuals`.
 fn loss_of(
     data: &Data,
     spec: [&[f64]; 3],
-    kd: &[f64; 3],
-    ks: &[f64; 3],
+    [kd, ks, kg]: [&[f64; 3]; 3],
     residuals: &mut [f64],
 ) -> f64 {
+    if let Some(x) = &data.grazing {
+        return fresnel_loss_of(data, spec, x, [kd, ks, kg], residuals);
+    }
     let n = data.y.len();
     // Equal-length slices let the loop run without bounds checks.
     let (y, a, out) = (&data.y[..n], &data.diffuse[..n], &mut residuals[..n]);
@@ -107,8 +179,39 @@ fn loss_of(
     loss
 }
 
-/// One reweighted pass: the weighted NNLS solution of each channel.
-fn weighted_nnls(data: &Data, spec: [&[f64]; 3], weights: &[f64]) -> ([f64; 3], [f64; 3]) {
+/// [`loss_of`] for the models with a grazing specular colour: Ks·(1 − x) + kg·x.
+fn fresnel_loss_of(
+    data: &Data,
+    spec: [&[f64]; 3],
+    x: &[f64],
+    [kd, ks, kg]: [&[f64; 3]; 3],
+    residuals: &mut [f64],
+) -> f64 {
+    let n = data.y.len();
+    let (y, a, x, out) = (
+        &data.y[..n],
+        &data.diffuse[..n],
+        &x[..n],
+        &mut residuals[..n],
+    );
+    let s = [&spec[0][..n], &spec[1][..n], &spec[2][..n]];
+    let shift: [f64; 3] = std::array::from_fn(|c| kg[c] - ks[c]);
+    let mut loss = 0.0;
+    for p in 0..n {
+        let r: [f64; 3] =
+            std::array::from_fn(|c| y[p][c] - kd[c] * a[p] - (ks[c] + x[p] * shift[c]) * s[c][p]);
+        let norm = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
+        out[p] = norm;
+        loss += norm;
+    }
+    loss
+}
+
+/// One reweighted pass: the weighted NNLS solution of each channel, as (kd, ks, kg).
+fn weighted_nnls(data: &Data, spec: [&[f64]; 3], weights: &[f64]) -> [[f64; 3]; 3] {
+    if let Some(x) = &data.grazing {
+        return fresnel_weighted_nnls(data, spec, x, weights);
+    }
     let n = data.y.len();
     let (y, a, w) = (&data.y[..n], &data.diffuse[..n], &weights[..n]);
     let s = [&spec[0][..n], &spec[1][..n], &spec[2][..n]];
@@ -165,7 +268,41 @@ fn weighted_nnls(data: &Data, spec: [&[f64]; 3], weights: &[f64]) -> ([f64; 3], 
     for c in 0..3 {
         (kd[c], ks[c]) = nnls2(saa[c], sas[c], sss[c], say[c], ssy[c]);
     }
-    (kd, ks)
+    [kd, ks, ks]
+}
+
+/// [`weighted_nnls`] with the bases a, s·(1 − x), s·x of Kd, Ks, Ks_grazing.
+fn fresnel_weighted_nnls(
+    data: &Data,
+    spec: [&[f64]; 3],
+    x: &[f64],
+    weights: &[f64],
+) -> [[f64; 3]; 3] {
+    let n = data.y.len();
+    let (y, a, x, w) = (&data.y[..n], &data.diffuse[..n], &x[..n], &weights[..n]);
+    let mut gram = [[[0.0; 3]; 3]; 3];
+    let mut rhs = [[0.0; 3]; 3];
+    for c in 0..3 {
+        let s = &spec[c][..n];
+        let (g, r) = (&mut gram[c], &mut rhs[c]);
+        for p in 0..n {
+            let b = [a[p], s[p] * (1.0 - x[p]), s[p] * x[p]];
+            for j in 0..3 {
+                let wb = w[p] * b[j];
+                r[j] += wb * y[p][c];
+                for k in j..3 {
+                    g[j][k] += wb * b[k];
+                }
+            }
+        }
+        for j in 0..3 {
+            for k in 0..j {
+                g[j][k] = g[k][j];
+            }
+        }
+    }
+    let z: [[f64; 3]; 3] = std::array::from_fn(|c| nnls3(&gram[c], &rhs[c]));
+    std::array::from_fn(|k| std::array::from_fn(|c| z[c][k]))
 }
 
 /// Minimises eq. 10 over Kd, Ks ≥ 0 given each channel's specular basis values `spec[c][p]`.
@@ -198,7 +335,7 @@ pub(crate) fn solve(
     ws.weights.clear();
     ws.weights.resize(n, 1.0);
     if let (true, Some(last)) = (warm, ws.last) {
-        let loss = loss_of(data, spec, &last.kd, &last.ks, &mut ws.current);
+        let loss = loss_of(data, spec, [&last.kd, &last.ks, &last.kg], &mut ws.current);
         let cap = (WARM_EPSILON_START * loss / n as f64).max(floor);
         for (w, r) in ws.weights.iter_mut().zip(&ws.current) {
             *w = 1.0 / r.max(cap);
@@ -207,22 +344,25 @@ pub(crate) fn solve(
         epsilon = (WARM_EPSILON_START * EPSILON_SHRINK).max(tolerance);
     }
     for _ in 0..MAX_PASSES {
-        let (kd, ks) = weighted_nnls(data, spec, &ws.weights);
+        let [kd, ks, kg] = weighted_nnls(data, spec, &ws.weights);
         let mut next = LinearFit {
             kd,
             ks,
-            loss: loss_of(data, spec, &kd, &ks, &mut ws.candidate),
+            kg,
+            loss: loss_of(data, spec, [&kd, &ks, &kg], &mut ws.candidate),
         };
         if let Some(cur) = &current {
             let mut t = 2.0;
             while t <= MAX_EXTRAPOLATION {
-                let kd = std::array::from_fn(|c| (cur.kd[c] + t * (kd[c] - cur.kd[c])).max(0.0));
-                let ks = std::array::from_fn(|c| (cur.ks[c] + t * (ks[c] - cur.ks[c])).max(0.0));
-                let loss = loss_of(data, spec, &kd, &ks, &mut ws.trial);
+                let step = |from: &[f64; 3], to: &[f64; 3]| -> [f64; 3] {
+                    std::array::from_fn(|c| (from[c] + t * (to[c] - from[c])).max(0.0))
+                };
+                let (kd, ks, kg) = (step(&cur.kd, &kd), step(&cur.ks, &ks), step(&cur.kg, &kg));
+                let loss = loss_of(data, spec, [&kd, &ks, &kg], &mut ws.trial);
                 if loss >= next.loss {
                     break;
                 }
-                next = LinearFit { kd, ks, loss };
+                next = LinearFit { kd, ks, kg, loss };
                 std::mem::swap(&mut ws.candidate, &mut ws.trial);
                 t *= 2.0;
             }
@@ -246,6 +386,7 @@ pub(crate) fn solve(
     let fit = current.unwrap_or_else(|| LinearFit {
         kd: [0.0; 3],
         ks: [0.0; 3],
+        kg: [0.0; 3],
         loss: data
             .y
             .iter()

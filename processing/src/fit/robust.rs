@@ -1,4 +1,5 @@
-//! The robust method: Kd, Ks solved at each m (see `linear`) and a global search over log m.
+//! The robust method: the colour coefficients solved at each m (see `linear`) and a global
+//! search over log m.
 
 use std::cell::{Cell, RefCell};
 
@@ -47,7 +48,8 @@ struct Profile<'a> {
     spec_m: [f64; 3],
     workspace: linear::Workspace,
     evaluations: u64,
-    best: Option<(Params, f64)>,
+    /// The best solve so far: its parameters, grazing specular colour and loss.
+    best: Option<(Params, [f64; 3], f64)>,
 }
 
 impl<'a> Profile<'a> {
@@ -88,7 +90,7 @@ impl<'a> Profile<'a> {
         };
         self.evaluations += 1;
         let better = match &self.best {
-            Some((_, loss)) => fit.loss < *loss,
+            Some((_, _, loss)) => fit.loss < *loss,
             None => true,
         };
         if better {
@@ -98,6 +100,7 @@ impl<'a> Profile<'a> {
                     ks: fit.ks,
                     m,
                 },
+                fit.kg,
                 fit.loss,
             ));
         }
@@ -105,11 +108,13 @@ impl<'a> Profile<'a> {
     }
 
     fn best_m(&self) -> [f64; 3] {
-        self.best.as_ref().map_or([f64::NAN; 3], |(p, _)| p.m)
+        self.best.as_ref().map_or([f64::NAN; 3], |(p, _, _)| p.m)
     }
 
     fn best_loss(&self) -> f64 {
-        self.best.as_ref().map_or(f64::INFINITY, |(_, loss)| *loss)
+        self.best
+            .as_ref()
+            .map_or(f64::INFINITY, |(_, _, loss)| *loss)
     }
 }
 
@@ -225,7 +230,8 @@ fn validate(options: &FitOptions) -> Result<(f64, f64), FitError> {
     Ok((o.m_min.ln(), o.m_max.ln()))
 }
 
-pub(crate) fn fit(data: &Data, options: &FitOptions) -> Result<Found, FitError> {
+/// The robust fit: the parameters found and the grazing specular colour.
+pub(crate) fn fit(data: &Data, options: &FitOptions) -> Result<(Found, [f64; 3]), FitError> {
     let ln_range = validate(options)?;
     let grid_points = options.robust.grid_points;
     let profile = RefCell::new(Profile::new(data));
@@ -254,7 +260,7 @@ pub(crate) fn fit(data: &Data, options: &FitOptions) -> Result<Found, FitError> 
         }
     }
     let profile = profile.into_inner();
-    let (params, loss) = profile
+    let (params, ks_grazing, loss) = profile
         .best
         .ok_or_else(|| FitError::Optimizer("no roughness was evaluated".into()))?;
     let mut found = Found {
@@ -266,7 +272,8 @@ pub(crate) fn fit(data: &Data, options: &FitOptions) -> Result<Found, FitError> 
         found.evaluations += polished.evaluations;
         if data.loss(&polished.params) < loss {
             found.params = polished.params;
+            return Ok((found, polished.params.ks));
         }
     }
-    Ok(found)
+    Ok((found, ks_grazing))
 }

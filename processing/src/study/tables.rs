@@ -1,18 +1,22 @@
 //! CSV tables and the JSON summary of a study.
 //!
-//! - `combinations.csv`: one row per (variant, θL combination): the robust fit, its
-//!   scores and the Nelder–Mead loss; θL joined by `;`; empty cells where undefined.
+//! - `combinations.csv`: one row per (variant, θL combination): the robust fit with its
+//!   uncertainty, its scores on all points and on the held-out ones, and the Nelder–Mead
+//!   loss; θL joined by `;`; empty cells where undefined.
 //! - `boxplots.csv`: per variant, number of θL and metric (`err_p_r|g|b`,
-//!   `delta_e_uv`): count, min, quartiles, max, whiskers, outliers (`;`-joined).
+//!   `delta_e_uv`, and the same on held-out points, `held_out_…`): count, min,
+//!   quartiles, max, whiskers, outliers (`;`-joined).
 //! - `local_minima.csv`: per variant and number of θL, Nelder–Mead fits compared and how
 //!   many ended above the robust loss.
-//! - `study.json`: totals and timing.
+//! - `study.json`: totals, timing, and per variant the medians of the held-out errors over
+//!   every combination that left some θL out.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use super::boxplot::BoxStats;
-use super::{StudyError, StudyReport};
+use super::{Scores, StudyError, StudyReport};
+use crate::fit::ParameterSet;
 
 fn write_file(path: PathBuf, text: &str) -> Result<PathBuf, StudyError> {
     std::fs::write(&path, text).map_err(|error| StudyError::Io {
@@ -44,11 +48,84 @@ pub fn write_tables(report: &StudyReport, dir: &Path) -> Result<Vec<PathBuf>, St
     ])
 }
 
+/// A column of `combinations.csv` after `status`, with its value for a fit.
+type Column = (String, Box<dyn Fn(&Scores) -> Option<f64>>);
+
+fn column(name: &str, value: impl Fn(&Scores) -> Option<f64> + 'static) -> Column {
+    (name.to_owned(), Box::new(value))
+}
+
+/// The columns `name_r`, `name_g`, `name_b` of a per-channel value.
+fn per_channel(
+    name: &str,
+    value: impl Fn(&Scores, usize) -> Option<f64> + Copy + 'static,
+) -> [Column; 3] {
+    [("r", 0), ("g", 1), ("b", 2)]
+        .map(|(suffix, c)| column(&format!("{name}_{suffix}"), move |s: &Scores| value(s, c)))
+}
+
+/// Scores' columns: errors on all points and on the held-out ones, parameters (m per
+/// channel; `ks_grazing` empty for models without it), their standard uncertainties, the
+/// 95 % interval of m and the Ks–m correlation.
+fn score_columns() -> Vec<Column> {
+    let mut columns = vec![column("loss", |s| Some(s.fit.loss))];
+    columns.extend(per_channel("err_p", |s, c| Some(s.err_p[c])));
+    columns.push(column("delta_e_uv", |s| s.delta_e_uv));
+    columns.extend(per_channel("held_out_err_p", |s, c| {
+        s.held_out.as_ref().map(|h| h.err_p[c])
+    }));
+    columns.push(column("held_out_delta_e_uv", |s| {
+        s.held_out.as_ref().and_then(|h| h.delta_e_uv)
+    }));
+    columns.extend(per_channel("kd", |s, c| Some(s.fit.kd[c])));
+    columns.extend(per_channel("ks", |s, c| Some(s.fit.ks[c])));
+    columns.extend(per_channel("ks_grazing", |s, c| {
+        s.fit.ks_grazing.map(|k| k[c])
+    }));
+    columns.extend(per_channel("m", |s, c| Some(s.fit.params().m[c])));
+    columns.extend(per_channel("kd_stderr", |s, c| {
+        stderr_of(s).map(|e| e.kd[c])
+    }));
+    columns.extend(per_channel("ks_stderr", |s, c| {
+        stderr_of(s).map(|e| e.ks[c])
+    }));
+    columns.extend(per_channel("ks_grazing_stderr", |s, c| {
+        stderr_of(s).and_then(|e| e.ks_grazing).map(|k| k[c])
+    }));
+    columns.extend(per_channel("m_stderr", |s, c| {
+        stderr_of(s).map(|e| channel_m(&e.m, c))
+    }));
+    columns.extend(per_channel("m_ci95_lo", |s, c| {
+        s.fit.ci95.as_ref().map(|e| channel_m(&e.m, c)[0])
+    }));
+    columns.extend(per_channel("m_ci95_hi", |s, c| {
+        s.fit.ci95.as_ref().map(|e| channel_m(&e.m, c)[1])
+    }));
+    columns.extend(per_channel("ks_m_correlation", |s, c| {
+        s.fit.correlation.map(|k| k.ks_m[c])
+    }));
+    columns.push(column("nelder_mead_loss", |s| s.nelder_mead_loss));
+    columns.push(column("fit_seconds", |s| Some(s.fit.seconds)));
+    columns
+}
+
+fn stderr_of(s: &Scores) -> Option<&ParameterSet<f64>> {
+    s.fit.stderr.as_ref()
+}
+
+/// Channel c's entry of a per-roughness list: the one shared value or the channel's.
+fn channel_m<T: Copy>(m: &[T], c: usize) -> T {
+    m[c.min(m.len() - 1)]
+}
+
 fn combinations_csv(report: &StudyReport) -> String {
-    let mut out = String::from(
-        "model,roughness,n_theta_l,theta_l,status,loss,err_p_r,err_p_g,err_p_b,delta_e_uv,\
-         kd_r,kd_g,kd_b,ks_r,ks_g,ks_b,m_r,m_g,m_b,nelder_mead_loss,fit_seconds,error\n",
-    );
+    let columns = score_columns();
+    let mut out = String::from("model,roughness,n_theta_l,theta_l,status,");
+    for (name, _) in &columns {
+        out.push_str(name);
+        out.push(',');
+    }
+    out.push_str("error\n");
     for r in &report.results {
         let head = format!(
             "{},{},{},{}",
@@ -59,27 +136,14 @@ fn combinations_csv(report: &StudyReport) -> String {
         );
         match &r.outcome {
             Ok(s) => {
-                let p = s.fit.params();
-                let numbers: Vec<String> = [s.fit.loss]
-                    .iter()
-                    .chain(&s.err_p)
-                    .map(|v| format!("{v:.6}"))
-                    .chain([opt(s.delta_e_uv)])
-                    .chain(
-                        p.kd.iter()
-                            .chain(&p.ks)
-                            .chain(&p.m)
-                            .map(|v| format!("{v:.6}")),
-                    )
-                    .chain([opt(s.nelder_mead_loss), format!("{:.6}", s.fit.seconds)])
-                    .collect();
+                let numbers: Vec<String> = columns.iter().map(|(_, f)| opt(f(s))).collect();
                 let _ = writeln!(out, "{head},ok,{},", numbers.join(","));
             }
             Err(e) => {
                 let _ = writeln!(
                     out,
                     "{head},failed{},\"{}\"",
-                    ",".repeat(16),
+                    ",".repeat(columns.len()),
                     e.replace('"', "'")
                 );
             }
@@ -93,11 +157,15 @@ fn boxplots_csv(report: &StudyReport) -> String {
         "model,roughness,n_theta_l,metric,count,min,q1,median,q3,max,whisker_low,whisker_high,outliers\n",
     );
     for g in report.summary() {
-        let metrics: [(&str, &Option<BoxStats>); 4] = [
+        let metrics: [(&str, &Option<BoxStats>); 8] = [
             ("err_p_r", &g.err_p[0]),
             ("err_p_g", &g.err_p[1]),
             ("err_p_b", &g.err_p[2]),
             ("delta_e_uv", &g.delta_e_uv),
+            ("held_out_err_p_r", &g.held_out_err_p[0]),
+            ("held_out_err_p_g", &g.held_out_err_p[1]),
+            ("held_out_err_p_b", &g.held_out_err_p[2]),
+            ("held_out_delta_e_uv", &g.held_out_delta_e_uv),
         ];
         for (name, stats) in metrics {
             let Some(b) = stats else { continue };
@@ -171,6 +239,20 @@ fn summary_json(report: &StudyReport) -> String {
             })
         })
         .collect();
+    let median = |b: &Option<BoxStats>| b.as_ref().map(|b| b.median);
+    let held_out: Vec<serde_json::Value> = report
+        .held_out_summary()
+        .iter()
+        .map(|h| {
+            serde_json::json!({
+                "model": h.variant.model,
+                "roughness": h.variant.roughness,
+                "combinations": h.combinations,
+                "median_err_p": h.err_p.each_ref().map(median),
+                "median_delta_e_uv": median(&h.delta_e_uv),
+            })
+        })
+        .collect();
     let value = serde_json::json!({
         "theta_l": report.theta_l,
         "evaluation_points": report.points.len(),
@@ -179,6 +261,7 @@ fn summary_json(report: &StudyReport) -> String {
         "seconds": report.seconds,
         "local_minimum_margin": report.options.local_minimum_margin,
         "variants": variants,
+        "held_out": held_out,
     });
     let mut text = serde_json::to_string_pretty(&value).unwrap_or_default();
     text.push('\n');
