@@ -245,6 +245,21 @@ pub enum Sample {
         medium_index: f64,
         substrate_index: f64,
     },
+    /// Flakes of a photonic crystal (a periodic multilayer) in a clear binder over a
+    /// diffuse base, a goniochromatic mechanism other than the thin film's: each flake
+    /// reflects a Gaussian band of unit peak and width `band_width_nm` centred at
+    /// λc = `wavelength_nm`·√(1 − sin²θd/n²) (Bragg–Snell, n = `effective_index`, θd the
+    /// incidence on the flake), flake slopes of roughness `m` as the thin film's facets:
+    /// β(λ) = ks·R(λ, θd)·D·G/(π (n·l)(n·v)) + Kd(λ), Kd(λ) the smooth spectrum whose
+    /// camera RGB is `kd`.
+    BraggFlakes {
+        kd: [f64; 3],
+        ks: f64,
+        m: f64,
+        wavelength_nm: f64,
+        effective_index: f64,
+        band_width_nm: f64,
+    },
     /// A measured table in the reference CSV format (`theta_i,theta_r,390,…,730`, a
     /// full regular grid of spectral radiance factor).
     Measured { path: PathBuf },
@@ -262,13 +277,17 @@ impl Sample {
             Sample::CookTorrance { .. } => "cook-torrance",
             Sample::Ward { .. } => "ward",
             Sample::ThinFilm { .. } => "thin-film",
+            Sample::BraggFlakes { .. } => "bragg-flakes",
             Sample::Measured { .. } => "measured",
         }
     }
 
     /// Whether rendering needs spectral bands (goniochromatic or measured spectra).
     pub fn is_spectral(&self) -> bool {
-        matches!(self, Sample::ThinFilm { .. } | Sample::Measured { .. })
+        matches!(
+            self,
+            Sample::ThinFilm { .. } | Sample::BraggFlakes { .. } | Sample::Measured { .. }
+        )
     }
 
     fn validate(&self) -> Result<(), SceneError> {
@@ -295,6 +314,32 @@ impl Sample {
                 check_index("sample.medium_index", *medium_index, 1.0)?;
                 check_index("sample.film_index", *film_index, *medium_index)?;
                 check_index("sample.substrate_index", *substrate_index, *medium_index)
+            }
+            Sample::BraggFlakes {
+                kd,
+                ks,
+                m,
+                wavelength_nm,
+                effective_index,
+                band_width_nm,
+            } => {
+                check_non_negative("sample.kd", kd)?;
+                check_non_negative("sample.ks", &[*ks])?;
+                roughness("sample.m", &[*m])?;
+                if !(wavelength_nm.is_finite() && (300.0..=1000.0).contains(wavelength_nm)) {
+                    return Err(invalid(
+                        "sample.wavelength_nm",
+                        format!("{wavelength_nm} must be in [300, 1000]"),
+                    ));
+                }
+                check_index("sample.effective_index", *effective_index, 1.0)?;
+                if !(band_width_nm.is_finite() && (1.0..=500.0).contains(band_width_nm)) {
+                    return Err(invalid(
+                        "sample.band_width_nm",
+                        format!("{band_width_nm} must be in [1, 500]"),
+                    ));
+                }
+                Ok(())
             }
             Sample::Measured { .. } => Ok(()),
         }
@@ -536,6 +581,7 @@ pub struct Scene {
 const GOLD: &str = include_str!("../scenes/gold.toml");
 const RED: &str = include_str!("../scenes/red.toml");
 const BLUE_GREEN: &str = include_str!("../scenes/blue-green.toml");
+const OPAL: &str = include_str!("../scenes/opal.toml");
 
 impl Scene {
     /// Reads a scene file; relative paths inside resolve against its directory.
@@ -553,12 +599,13 @@ impl Scene {
         Self::parse(text, "(string)", Path::new("."))
     }
 
-    /// One of the built-in scenes "gold", "red", "blue-green".
+    /// One of the built-in scenes "gold", "red", "blue-green", "opal".
     pub fn builtin(name: &str) -> Option<Scene> {
         let text = match name {
             "gold" => GOLD,
             "red" => RED,
             "blue-green" => BLUE_GREEN,
+            "opal" => OPAL,
             _ => return None,
         };
         Some(
@@ -568,7 +615,7 @@ impl Scene {
     }
 
     /// Names of the built-in scenes.
-    pub const BUILTIN: [&'static str; 3] = ["gold", "red", "blue-green"];
+    pub const BUILTIN: [&'static str; 4] = ["gold", "red", "blue-green", "opal"];
 
     fn parse(text: &str, origin: &str, base: &Path) -> Result<Scene, SceneError> {
         let file: SceneFile = toml::from_str(text).map_err(|e| SceneError::Parse {
@@ -840,6 +887,27 @@ impl Scene {
                         "film_index": film_index,
                         "medium_index": medium_index,
                         "substrate_index": substrate_index,
+                    }),
+                );
+            }
+            Sample::BraggFlakes {
+                kd,
+                ks,
+                m,
+                wavelength_nm,
+                effective_index,
+                band_width_nm,
+            } => {
+                put("roughness", "shared".into());
+                put("kd", serde_json::json!(kd));
+                put("m", serde_json::json!([m]));
+                put("ks_scale", serde_json::json!(ks));
+                put(
+                    "flakes",
+                    serde_json::json!({
+                        "bragg_wavelength_nm": wavelength_nm,
+                        "effective_index": effective_index,
+                        "band_width_nm": band_width_nm,
                     }),
                 );
             }

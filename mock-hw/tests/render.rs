@@ -464,21 +464,56 @@ fn measured_table_renders_like_its_model() {
 }
 
 #[test]
-fn thin_film_table_matches_spectral_integration() {
+fn incidence_tables_match_spectral_integration() {
     use gonio_mock_hw::render::brdf::{Geom, Material};
-    let scene = Scene::builtin("blue-green").unwrap();
-    let domain = scene.camera_domain();
-    let material = Material::new(scene.sample(), domain).unwrap();
-    let mut worst: f64 = 0.0;
-    for ti in (-80..=80).step_by(7) {
-        for tr in (-80..=80).step_by(3) {
-            let g = Geom::in_plane(f64::from(ti), f64::from(tr));
-            let table = material.beta(&g);
-            let exact = domain.rgb(&material.beta_spectrum(&g, domain));
-            for c in 0..3 {
-                worst = worst.max((table[c] - exact[c]).abs() / exact[c]);
+    for name in ["blue-green", "opal"] {
+        let scene = Scene::builtin(name).unwrap();
+        let domain = scene.camera_domain();
+        let material = Material::new(scene.sample(), domain).unwrap();
+        let mut worst: f64 = 0.0;
+        for ti in (-80..=80).step_by(7) {
+            for tr in (-80..=80).step_by(3) {
+                let g = Geom::in_plane(f64::from(ti), f64::from(tr));
+                let table = material.beta(&g);
+                let exact = domain.rgb(&material.beta_spectrum(&g, domain));
+                for c in 0..3 {
+                    worst = worst.max((table[c] - exact[c]).abs() / exact[c]);
+                }
             }
         }
+        assert!(worst < 1e-4, "{name}: worst relative error {worst}");
     }
-    assert!(worst < 1e-4, "worst relative error {worst}");
+}
+
+#[test]
+fn bragg_flakes_rotate_the_hue_with_the_facet_incidence() {
+    use gonio_mock_hw::render::brdf::{BraggBand, Geom, Material};
+    // Bragg–Snell: the band centre λ0·√(1 − sin²θ/n²), hand values at θ = 0 and 45°.
+    let band = BraggBand {
+        wavelength_nm: 600.0,
+        effective_index: 1.35,
+        width_nm: 30.0,
+    };
+    let peak = |cos0: f64| {
+        let r = band.spectrum(cos0);
+        (0..r.len()).max_by(|&a, &b| r[a].total_cmp(&r[b])).unwrap()
+    };
+    assert_eq!(390 + 10 * peak(1.0), 600);
+    let at_45 = 600.0 * (1.0f64 - 0.5 / (1.35 * 1.35)).sqrt();
+    assert!((390.0 + 10.0 * peak(0.5f64.sqrt()) as f64 - at_45).abs() <= 5.0);
+    // The opal scene's highlight turns from orange toward yellow as θL grows: at the
+    // specular peak of θL the light meets the flakes at θd = |θL|/2.
+    let scene = Scene::builtin("opal").unwrap();
+    let material = Material::new(scene.sample(), scene.camera_domain()).unwrap();
+    let ratio = |theta_l: f64| {
+        let b = material.beta(&Geom::in_plane(theta_l / 2.0, theta_l / 2.0));
+        b[0] / b[1]
+    };
+    assert!(
+        ratio(-20.0) > 1.8 && ratio(-45.0) < 1.1,
+        "{} {}",
+        ratio(-20.0),
+        ratio(-45.0)
+    );
+    assert!(ratio(-30.0) < ratio(-20.0) && ratio(-45.0) < ratio(-30.0));
 }

@@ -47,6 +47,10 @@ fn builtin_scenes_are_realistic() {
         Sample::CookTorrance { m, .. } if (m[0] - 0.4).abs() < 0.1
     ));
     assert!(Scene::builtin("blue-green").unwrap().sample().is_spectral());
+    assert!(matches!(
+        Scene::builtin("opal").unwrap().sample(),
+        Sample::BraggFlakes { .. }
+    ));
 }
 
 #[test]
@@ -168,6 +172,30 @@ fn bad_values_are_named() {
     assert!(err.contains("/nonexistent/sens.csv"), "{err}");
     let err = error_text(&format!("{SMALL}\n{CT}").replace("name = \"small\"\n", ""));
     assert!(err.contains("name"), "{err}");
+    let flakes = "[sample]\nmodel = \"bragg-flakes\"\nkd = [3.0, 4.0, 8.0]\nks = 0.5\nm = 0.12\n\
+                  wavelength_nm = 600.0\neffective_index = 1.35\nband_width_nm = 30.0\n";
+    assert!(small(flakes).is_ok());
+    for (from, to, key) in [
+        (
+            "effective_index = 1.35",
+            "effective_index = 0.9",
+            "sample.effective_index",
+        ),
+        (
+            "wavelength_nm = 600.0",
+            "wavelength_nm = 60.0",
+            "sample.wavelength_nm",
+        ),
+        (
+            "band_width_nm = 30.0",
+            "band_width_nm = 0.0",
+            "sample.band_width_nm",
+        ),
+        ("m = 0.12", "m = 0.0", "sample.m"),
+    ] {
+        let err = error_text(&format!("{SMALL}\n{}", flakes.replace(from, to)));
+        assert!(err.contains(key), "{to}: {err}");
+    }
 }
 
 #[test]

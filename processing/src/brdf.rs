@@ -4,16 +4,18 @@
 //! per camera channel, at in-plane angles (θi, θr) in degrees or at the 3D cosines of a
 //! surface point ([`Cosines`]).
 //!
-//! All models are linear in their coefficients: β_c = Kd_c·a + s(m_c)·F_c(x), with a
+//! All models are linear in their coefficients: β_c = Kd_c·a + s(m_c)·F_c(w), with a
 //! diffuse basis `a` (1 for the Cook–Torrance forms, 1/π for Ward), a specular lobe
 //! s(m) = g · exp(−tan²α/m²) / m², where g depends on the angles only:
 //! - Cook–Torrance (both forms): g = G / (π cos⁴α cos θi cos θr),
 //!   G = min(1, 2(n·h)(n·v)/(v·h), 2(n·h)(n·l)/(v·h));
 //! - Ward: g = 1 / (4π sqrt(cos θi cos θr));
 //!
-//! and the specular colour F_c(x) = Ks_c·(1 − x) + Ks_grazing_c·x, x = sin²θd = 1 − (v·h)²
-//! the facet incidence of the half vector: x = 0 for Cook–Torrance and Ward (F_c = Ks_c),
-//! the point's sin²θd for Cook–Torrance–Fresnel.
+//! and the specular colour F_c(w) = Ks_c·(1 − w) + Ks_90_c·w: w = 0 for Cook–Torrance and
+//! Ward (F_c = Ks_c); for Cook–Torrance–Fresnel w = min(1, 1 − l·v) = min(1, 2 sin²θd),
+//! θd the incidence on the facet (cos θd = v·h), so the colour moves linearly in the
+//! cosine of the angle γ = 2θd between light and camera from Ks at γ = 0 to Ks_90 at
+//! γ = 90° (θd = 45°), and stays at Ks_90 beyond.
 //!
 //! Numerics: tan²α = (1 − c²)/c² with c = cos α clamped to [1e−12, 1]; the lobe is exactly 0
 //! where tan²α/m² exceeds the exponent at which exp(−x) leaves the normal f64 range;
@@ -48,7 +50,8 @@ pub enum Model {
     /// Isotropic Ward (paper eq. 7, 9).
     Ward,
     /// Cook–Torrance whose specular colour varies with the facet incidence θd:
-    /// F_c = Ks_c·cos²θd + Ks_grazing_c·sin²θd (goniochromatic samples).
+    /// F_c = Ks_c·cos 2θd + Ks_90_c·(1 − cos 2θd) up to θd = 45°, Ks_90_c beyond
+    /// (goniochromatic samples).
     CookTorranceFresnel,
 }
 
@@ -139,7 +142,7 @@ fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
 }
 
 /// The model at one (θi, θr), as the basis of its linear form
-/// β_c = Kd_c·diffuse + specular(m_c)·(Ks_c·(1 − x) + Ks_grazing_c·x), x = [`Basis::grazing`].
+/// β_c = Kd_c·diffuse + specular(m_c)·(Ks_c·(1 − w) + Ks_90_c·w), w = [`Basis::shift_weight`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Basis {
     /// Diffuse basis a: 1 (Cook–Torrance forms) or 1/π (Ward); 0 at or past grazing.
@@ -148,9 +151,8 @@ pub struct Basis {
     tan2_alpha: f64,
     /// Angular factor g of the lobe; 0 at or past grazing.
     gain: f64,
-    /// Weight x ∈ [0, 1] of the grazing specular colour: sin²θd for Cook–Torrance–Fresnel,
-    /// 0 for the models whose specular colour is constant.
-    grazing: f64,
+    /// Weight w ∈ [0, 1] of the specular colour at 90°, see [`Basis::shift_weight`].
+    shift_weight: f64,
 }
 
 impl Basis {
@@ -179,30 +181,31 @@ impl Basis {
         }
     }
 
-    /// Weight x ∈ [0, 1] of the grazing specular colour in F_c = Ks_c·(1 − x) +
-    /// Ks_grazing_c·x: sin²θd (1 − (v·h)²) for Cook–Torrance–Fresnel, 0 for the others.
+    /// Weight w ∈ [0, 1] of the specular colour at 90° in F_c = Ks_c·(1 − w) + Ks_90_c·w:
+    /// min(1, 1 − l·v) = min(1, 2(1 − (v·h)²)) for Cook–Torrance–Fresnel, 0 for the
+    /// models whose specular colour is constant.
     #[inline]
-    pub fn grazing(&self) -> f64 {
-        self.grazing
+    pub fn shift_weight(&self) -> f64 {
+        self.shift_weight
     }
 
     /// β per channel for the given parameters, with a constant specular colour
-    /// (Ks_grazing = Ks: Cook–Torrance–Fresnel then equals Cook–Torrance).
+    /// (Ks_90 = Ks: Cook–Torrance–Fresnel then equals Cook–Torrance).
     pub fn evaluate(&self, params: &Params) -> [f64; 3] {
         self.evaluate_fresnel(params, &params.ks)
     }
 
-    /// β per channel with the specular colour Ks·(1 − x) + `ks_grazing`·x.
-    pub fn evaluate_fresnel(&self, params: &Params, ks_grazing: &[f64; 3]) -> [f64; 3] {
+    /// β per channel with the specular colour Ks·(1 − w) + `ks_90`·w.
+    pub fn evaluate_fresnel(&self, params: &Params, ks_90: &[f64; 3]) -> [f64; 3] {
         let [m0, m1, m2] = params.m;
         let s0 = self.specular(m0);
         // A shared roughness needs one lobe evaluation for all channels.
         let s1 = if m1 == m0 { s0 } else { self.specular(m1) };
         let s2 = if m2 == m0 { s0 } else { self.specular(m2) };
         let s = [s0, s1, s2];
-        let x = self.grazing;
+        let w = self.shift_weight;
         std::array::from_fn(|c| {
-            let colour = params.ks[c] + x * (ks_grazing[c] - params.ks[c]);
+            let colour = params.ks[c] + w * (ks_90[c] - params.ks[c]);
             params.kd[c] * self.diffuse + colour * s[c]
         })
     }
@@ -237,7 +240,7 @@ impl Model {
     /// Every model, in the order figures and tables list them.
     pub const ALL: [Model; 3] = [Model::CookTorrance, Model::Ward, Model::CookTorranceFresnel];
 
-    /// Whether the model has a grazing specular colour (Ks_grazing) besides Ks.
+    /// Whether the model has a specular colour at 90° (Ks_90) besides Ks.
     pub fn has_fresnel_colour(self) -> bool {
         self == Model::CookTorranceFresnel
     }
@@ -261,7 +264,7 @@ impl Model {
                 diffuse: 0.0,
                 tan2_alpha: 0.0,
                 gain: 0.0,
-                grazing: 0.0,
+                shift_weight: 0.0,
             };
         }
         let cos_alpha = if n_dot_h.is_nan() {
@@ -286,8 +289,8 @@ impl Model {
                     diffuse: self.diffuse_weight(),
                     tan2_alpha,
                     gain: g / (PI * cos_alpha2 * cos_alpha2 * cos_i * cos_r),
-                    grazing: if self.has_fresnel_colour() {
-                        (1.0 - v_dot_h * v_dot_h).clamp(0.0, 1.0)
+                    shift_weight: if self.has_fresnel_colour() {
+                        (2.0 * (1.0 - v_dot_h * v_dot_h)).clamp(0.0, 1.0)
                     } else {
                         0.0
                     },
@@ -297,7 +300,7 @@ impl Model {
                 diffuse: self.diffuse_weight(),
                 tan2_alpha,
                 gain: 1.0 / (4.0 * PI * (cos_i * cos_r).sqrt()),
-                grazing: 0.0,
+                shift_weight: 0.0,
             },
         }
     }

@@ -5,7 +5,7 @@
 //!
 //! Two methods:
 //! - [`FitMethod::Robust`] (default): at fixed m the models are linear in Kd, Ks (and
-//!   Ks_grazing) and the loss is convex in them, so it is minimised over them (≥ 0) for each trial m by
+//!   Ks_90) and the loss is convex in them, so it is minimised over them (≥ 0) for each trial m by
 //!   reweighted non-negative least squares (see `linear`; relative tolerance 1e-9, 1e-3
 //!   while scanning the grid; each solve after the first starts from the previous m's
 //!   solution). log m is searched globally: a grid over the whole range
@@ -148,12 +148,12 @@ pub struct FitResult {
     pub model: Model,
     pub roughness: Roughness,
     pub kd: [f64; 3],
-    /// Specular colour (Cook–Torrance–Fresnel: at normal facet incidence, θd = 0).
+    /// Specular colour (Cook–Torrance–Fresnel: with light and camera together, γ = 0).
     pub ks: [f64; 3],
-    /// Cook–Torrance–Fresnel only: the specular colour at θd = 90°; F_c is linear in
-    /// sin²θd between `ks` and this.
+    /// Cook–Torrance–Fresnel only: the specular colour with light and camera 90° apart
+    /// (θd = 45°); F_c is linear in cos γ = l·v between `ks` and this.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub ks_grazing: Option<[f64; 3]>,
+    pub ks_90: Option<[f64; 3]>,
     pub m: FittedRoughness,
     /// Diffuse albedo per channel, on one scale for every model
     /// ([`Model::diffuse_albedo`] of `kd`); `None` only in fit files written before it
@@ -194,10 +194,10 @@ impl FitResult {
         }
     }
 
-    /// The specular colour at grazing facet incidence: `ks_grazing`, or `ks` for the
+    /// The specular colour with light and camera 90° apart: `ks_90`, or `ks` for the
     /// models whose specular colour is constant.
-    pub fn specular_grazing(&self) -> [f64; 3] {
-        self.ks_grazing.unwrap_or(self.ks)
+    pub fn specular_90(&self) -> [f64; 3] {
+        self.ks_90.unwrap_or(self.ks)
     }
 
     /// β the fit predicts at in-plane (θi, θr) in degrees.
@@ -214,7 +214,7 @@ impl FitResult {
     pub fn predict_at(&self, cosines: &Cosines) -> [f64; 3] {
         self.model
             .basis_at(cosines)
-            .evaluate_fresnel(&self.params(), &self.specular_grazing())
+            .evaluate_fresnel(&self.params(), &self.specular_90())
     }
 }
 
@@ -248,9 +248,9 @@ pub(crate) struct Data {
     pub bases: Vec<Basis>,
     /// Diffuse basis per point (copied out of `bases` for the inner loops).
     pub diffuse: Vec<f64>,
-    /// Weight of the grazing specular colour per point (`Basis::grazing`), for the models
+    /// Weight of the specular colour at 90° per point (`Basis::shift_weight`), for the models
     /// that have one, when the samples span several θL (see [`fits_colour_shift`]).
-    pub grazing: Option<Vec<f64>>,
+    pub shift_weight: Option<Vec<f64>>,
     /// Measured β per point; 0 where a channel was dropped.
     pub y: Vec<[f64; 3]>,
     /// Per point and channel 1 (measured) or 0 (dropped: left out of the loss);
@@ -304,8 +304,8 @@ impl Data {
         let mean_norm = zero_loss / y.len() as f64;
         Ok(Data {
             diffuse: bases.iter().map(|b| b.diffuse).collect(),
-            grazing: fits_colour_shift(model, samples)
-                .then(|| bases.iter().map(Basis::grazing).collect()),
+            shift_weight: fits_colour_shift(model, samples)
+                .then(|| bases.iter().map(Basis::shift_weight).collect()),
             bases,
             y,
             keep,
@@ -319,10 +319,10 @@ impl Data {
         self.loss_fresnel(params, &params.ks)
     }
 
-    /// Eq. 10 loss of `params` with the grazing specular colour `ks_grazing`, over the
-    /// measured values.
-    pub fn loss_fresnel(&self, params: &Params, ks_grazing: &[f64; 3]) -> f64 {
-        self.estimates(params, ks_grazing)
+    /// Eq. 10 loss of `params` with the specular colour at 90° `ks_90`, over the measured
+    /// values.
+    pub fn loss_fresnel(&self, params: &Params, ks_90: &[f64; 3]) -> f64 {
+        self.estimates(params, ks_90)
             .iter()
             .zip(&self.y)
             .map(|(estimate, y)| metrics::point_loss(y, estimate))
@@ -331,11 +331,11 @@ impl Data {
 
     /// The model's β at every point, 0 where the measured value was dropped (so dropped
     /// values count in neither the loss nor ΔErr_p).
-    fn estimates(&self, params: &Params, ks_grazing: &[f64; 3]) -> Vec<[f64; 3]> {
+    fn estimates(&self, params: &Params, ks_90: &[f64; 3]) -> Vec<[f64; 3]> {
         let mut estimates: Vec<[f64; 3]> = self
             .bases
             .iter()
-            .map(|b| b.evaluate_fresnel(params, ks_grazing))
+            .map(|b| b.evaluate_fresnel(params, ks_90))
             .collect();
         if let Some(keep) = &self.keep {
             for (estimate, keep) in estimates.iter_mut().zip(keep) {
@@ -354,15 +354,15 @@ pub(crate) struct Found {
     pub evaluations: u64,
 }
 
-/// Significance level of the colour-shift test: Ks_grazing is kept when the Wald test of
-/// Ks_grazing = Ks rejects it at this level.
+/// Significance level of the colour-shift test: Ks_90 is kept when the Wald test of
+/// Ks_90 = Ks rejects it at this level.
 pub const COLOUR_SHIFT_LEVEL: f64 = 0.01;
 
-/// Whether a fit of `model` to `samples` may fit a grazing specular colour apart from Ks:
+/// Whether a fit of `model` to `samples` may fit a specular colour at 90° apart from Ks:
 /// only for Cook–Torrance–Fresnel, and only from two θL or more. One θL sees one facet
 /// incidence θd ≈ |θL|/2 where the lobe is (its spread there is the parallax of the
 /// setup, about 0.1°), which cannot tell a colour changing with θd from the lobe's own
-/// shape; the fit then ties Ks_grazing to Ks, which is Cook–Torrance. From several θL
+/// shape; the fit then ties Ks_90 to Ks, which is Cook–Torrance. From several θL
 /// the shift is kept only when significant ([`COLOUR_SHIFT_LEVEL`]).
 pub fn fits_colour_shift(model: Model, samples: &[Sample]) -> bool {
     model.has_fresnel_colour() && distinct_theta_l(samples).len() >= 2
@@ -394,7 +394,7 @@ pub fn fit(samples: &[Sample], options: &FitOptions) -> Result<FitResult, FitErr
     }
     let parameters = parameter_count(options.model, options.roughness);
     let mut data = Data::new(samples, options.model, parameters)?;
-    let (mut found, mut ks_grazing) = match options.method {
+    let (mut found, mut ks_90) = match options.method {
         FitMethod::Robust => robust::fit(&data, options)?,
         FitMethod::NelderMead => {
             let found = nelder_mead::fit(&data, options)?;
@@ -403,9 +403,9 @@ pub fn fit(samples: &[Sample], options: &FitOptions) -> Result<FitResult, FitErr
         }
     };
     let colour_shift = options.model.has_fresnel_colour().then(|| {
-        let chi2 = data.grazing.as_ref().and_then(|_| {
-            uncertainty::covariance(&data, options, &found.params, &ks_grazing)?
-                .shift_statistic(&found.params, &ks_grazing)
+        let chi2 = data.shift_weight.as_ref().and_then(|_| {
+            uncertainty::covariance(&data, options, &found.params, &ks_90)?
+                .shift_statistic(&found.params, &ks_90)
         });
         let p_value = chi2.map(chi2_3_survival);
         ColourShift {
@@ -414,11 +414,11 @@ pub fn fit(samples: &[Sample], options: &FitOptions) -> Result<FitResult, FitErr
             p_value,
         }
     });
-    if colour_shift.is_some_and(|c| !c.fitted) && data.grazing.is_some() {
-        // Not supported by the data: Ks_grazing tied to Ks, which is Cook–Torrance.
-        data.grazing = None;
+    if colour_shift.is_some_and(|c| !c.fitted) && data.shift_weight.is_some() {
+        // Not supported by the data: Ks_90 tied to Ks, which is Cook–Torrance.
+        data.shift_weight = None;
         let evaluations = found.evaluations;
-        (found, ks_grazing) = robust::fit(&data, options)?;
+        (found, ks_90) = robust::fit(&data, options)?;
         found.evaluations += evaluations;
     }
     let params = found.params;
@@ -426,15 +426,15 @@ pub fn fit(samples: &[Sample], options: &FitOptions) -> Result<FitResult, FitErr
         Roughness::Shared => FittedRoughness::Shared([params.m[0]]),
         Roughness::PerChannel => FittedRoughness::PerChannel(params.m),
     };
-    let err_p = metrics::err_p(&data.y, &data.estimates(&params, &ks_grazing))?;
-    let loss = data.loss_fresnel(&params, &ks_grazing);
+    let err_p = metrics::err_p(&data.y, &data.estimates(&params, &ks_90))?;
+    let loss = data.loss_fresnel(&params, &ks_90);
     // JSON has no NaN or infinity: a fit that overflowed is an error, never `null`.
     let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
     for (what, ok) in [
         ("loss", loss.is_finite()),
         ("kd", finite(&params.kd)),
         ("ks", finite(&params.ks)),
-        ("ks_90", finite(&ks_grazing)),
+        ("ks_90", finite(&ks_90)),
         ("m", finite(&params.m)),
         ("err_p", finite(&err_p)),
     ] {
@@ -442,17 +442,16 @@ pub fn fit(samples: &[Sample], options: &FitOptions) -> Result<FitResult, FitErr
             return Err(FitError::Overflow(what));
         }
     }
-    let (stderr, ci95, correlation) =
-        match uncertainty::estimate(&data, options, &params, &ks_grazing) {
-            Some(s) => (Some(s.stderr), Some(s.ci95), Some(s.correlation)),
-            None => (None, None, None),
-        };
+    let (stderr, ci95, correlation) = match uncertainty::estimate(&data, options, &params, &ks_90) {
+        Some(s) => (Some(s.stderr), Some(s.ci95), Some(s.correlation)),
+        None => (None, None, None),
+    };
     Ok(FitResult {
         model: options.model,
         roughness: options.roughness,
         kd: params.kd,
         ks: params.ks,
-        ks_grazing: options.model.has_fresnel_colour().then_some(ks_grazing),
+        ks_90: options.model.has_fresnel_colour().then_some(ks_90),
         m,
         rho_d: Some(options.model.diffuse_albedo(params.kd)),
         loss,
@@ -472,13 +471,13 @@ pub fn fit(samples: &[Sample], options: &FitOptions) -> Result<FitResult, FitErr
 pub struct RoughnessSolve {
     /// Kd, Ks and the given m.
     pub params: Params,
-    /// The grazing specular colour (equal to Ks for the models without one).
-    pub ks_grazing: [f64; 3],
+    /// The specular colour at 90° (equal to Ks for the models without one).
+    pub ks_90: [f64; 3],
     /// Eq. 10 loss there.
     pub loss: f64,
 }
 
-/// The eq. 10 minimum over Kd, Ks (Ks_grazing) ≥ 0 at the given roughness per channel.
+/// The eq. 10 minimum over Kd, Ks (Ks_90) ≥ 0 at the given roughness per channel.
 /// The robust method's inner solve, exposed for profiles and brute-force checks.
 pub fn solve_at_roughness(
     samples: &[Sample],
@@ -507,7 +506,7 @@ pub fn solve_at_roughness(
             ks: fit.ks,
             m,
         },
-        ks_grazing: fit.kg,
+        ks_90: fit.kg,
         loss: fit.loss,
     })
 }

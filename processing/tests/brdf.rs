@@ -4,7 +4,7 @@ use gonio_processing::brdf::{Model, Params, Roughness};
 use proptest::prelude::*;
 
 /// Independent vector-form evaluation: n = +z, l and v in the x–z plane, h = (l + v)/|l + v|;
-/// `kg` is Cook–Torrance–Fresnel's grazing specular colour.
+/// `kg` is Cook–Torrance–Fresnel's specular colour at 90°.
 fn vector_form(model: Model, p: &Params, kg: &[f64; 3], theta_i: f64, theta_r: f64) -> [f64; 3] {
     let (ti, tr) = (theta_i.to_radians(), theta_r.to_radians());
     // Specular direction at θr = θi: l and v on opposite sides of the normal.
@@ -29,8 +29,9 @@ fn vector_form(model: Model, p: &Params, kg: &[f64; 3], theta_i: f64, theta_r: f
             Model::CookTorranceFresnel => {
                 let d = (-tan2 / m2).exp() / (m2 * nh.powi(4));
                 let g = 1f64.min(2.0 * nh * nv / vh).min(2.0 * nh * nl / vh);
-                let sin2_d = 1.0 - vh * vh;
-                let f = p.ks[c] * (1.0 - sin2_d) + kg[c] * sin2_d;
+                // 1 − l·v = 2 sin²θd, clamped at θd = 45°.
+                let w = (2.0 * (1.0 - vh * vh)).min(1.0);
+                let f = p.ks[c] * (1.0 - w) + kg[c] * w;
                 f * d * g / (PI * nl * nv) + p.kd[c]
             }
         }
@@ -90,24 +91,25 @@ fn specular_peak_hand_values() {
 }
 
 #[test]
-fn fresnel_colour_is_linear_in_sin2_theta_d() {
-    // At the specular peak θi = θr = θ the half vector is the normal and v·h = cos θ, so
-    // F = Ks·cos²θ + Ks_grazing·sin²θ multiplies the Cook–Torrance lobe.
+fn fresnel_colour_is_linear_in_the_cosine_between_light_and_camera() {
+    // At the specular peak θi = θr = θ the light and camera are γ = 2θ apart and
+    // F = Ks·cos γ + Ks_90·(1 − cos γ) up to γ = 90°, Ks_90 beyond; F multiplies the
+    // Cook–Torrance lobe.
     let p = Params::shared([1.0, 2.0, 3.0], [10.0, 20.0, 30.0], 0.2);
     let kg = [40.0, 0.0, 30.0];
-    for theta in [0.0f64, 10.0, 25.0, 60.0] {
-        let (c, s) = (theta.to_radians().cos(), theta.to_radians().sin());
+    for theta in [0.0f64, 10.0, 25.0, 45.0, 60.0] {
+        let w = (1.0 - (2.0 * theta).to_radians().cos()).min(1.0);
         let ct = Model::CookTorrance.evaluate(&p, theta, theta);
         let got = Model::CookTorranceFresnel
             .basis(theta, theta)
             .evaluate_fresnel(&p, &kg);
         for ch in 0..3 {
-            let f = p.ks[ch] * c * c + kg[ch] * s * s;
+            let f = p.ks[ch] * (1.0 - w) + kg[ch] * w;
             let want = p.kd[ch] + (ct[ch] - p.kd[ch]) * f / p.ks[ch];
             assert!(close(got[ch], want, 1e-12), "θ {theta}: {got:?} vs {want}");
         }
     }
-    // A grazing colour equal to Ks is Cook–Torrance itself.
+    // A colour at 90° equal to Ks is Cook–Torrance itself.
     assert_eq!(
         Model::CookTorranceFresnel.evaluate(&p, -10.0, 35.0),
         Model::CookTorrance.evaluate(&p, -10.0, 35.0)

@@ -108,7 +108,7 @@ fn generating_model_scores_near_zero_on_every_combination() {
         let s = r.outcome.as_ref().unwrap();
         let shift = s.fit.colour_shift.unwrap();
         assert!(!shift.fitted, "{:?}: {shift:?}", r.theta_l);
-        assert_eq!(s.fit.ks_grazing, Some(s.fit.ks));
+        assert_eq!(s.fit.ks_90, Some(s.fit.ks));
         assert!(s.err_p.iter().all(|&e| e < 5e-3), "{:?}", r.theta_l);
         assert!(s.nelder_mead_loss.is_none());
     }

@@ -114,8 +114,55 @@ pub fn thin_film_reflectance(
     0.5 * (rs + rp)
 }
 
-/// Entries of the thin-film table over the facet incidence cosine l·h ∈ [0, 1].
+/// Entries of the thin-film and Bragg tables over the facet incidence cosine l·h ∈ [0, 1].
 const FILM_TABLE_STEPS: usize = 1024;
+
+/// The first-order Bragg reflection band of a periodic multilayer (a photonic crystal):
+/// a Gaussian band of unit peak whose centre follows the Bragg–Snell law
+/// λc(θ) = λ0·√(1 − sin²θ/n²) for light at incidence θ on the layers, n the stack's
+/// effective index.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BraggBand {
+    pub wavelength_nm: f64,
+    pub effective_index: f64,
+    pub width_nm: f64,
+}
+
+impl BraggBand {
+    /// Reflectance spectrum at facet incidence cosine `cos0`.
+    pub fn spectrum(&self, cos0: f64) -> Spectrum {
+        let c = cos0.clamp(0.0, 1.0);
+        let n2 = self.effective_index * self.effective_index;
+        let centre = self.wavelength_nm * (1.0 - (1.0 - c * c) / n2).max(0.0).sqrt();
+        std::array::from_fn(|i| {
+            let x = (spectral::wavelength_nm(i) - centre) / self.width_nm;
+            (-0.5 * x * x).exp()
+        })
+    }
+}
+
+/// `scale`·camera RGB of `spectrum(l·h)` at l·h = k/[`FILM_TABLE_STEPS`].
+fn incidence_table(
+    domain: &CameraDomain,
+    scale: f64,
+    spectrum: impl Fn(f64) -> Spectrum,
+) -> Vec<[f64; 3]> {
+    (0..=FILM_TABLE_STEPS)
+        .map(|k| {
+            let rgb = domain.rgb(&spectrum(k as f64 / FILM_TABLE_STEPS as f64));
+            rgb.map(|v| scale * v)
+        })
+        .collect()
+}
+
+/// Linear interpolation of an [`incidence_table`] at l·h = `v_h`.
+fn table_at(table: &[[f64; 3]], v_h: f64) -> [f64; 3] {
+    let x = v_h.clamp(0.0, 1.0) * FILM_TABLE_STEPS as f64;
+    let k = (x as usize).min(FILM_TABLE_STEPS - 1);
+    let t = x - k as f64;
+    let (a, b) = (table[k], table[k + 1]);
+    std::array::from_fn(|c| a[c] + t * (b[c] - a[c]))
+}
 
 /// Film parameters.
 #[derive(Debug, Clone, PartialEq)]
@@ -291,6 +338,17 @@ pub enum Material {
         film: Film,
         table: Vec<[f64; 3]>,
     },
+    /// Bragg-reflecting flakes (see [`BraggBand`]) of slope roughness `m` over a diffuse
+    /// base: ks·R(λ, l·h)·D·G/(π (n·l)(n·v)) + Kd(λ); `table` holds ks·camera RGB of R as
+    /// the thin film's does.
+    BraggFlakes {
+        kd: [f64; 3],
+        kd_spectrum: Box<Spectrum>,
+        ks: f64,
+        m: f64,
+        band: BraggBand,
+        table: Vec<[f64; 3]>,
+    },
     Measured(Table),
 }
 
@@ -331,12 +389,7 @@ impl Material {
                     medium_index: *medium_index,
                     substrate_index: *substrate_index,
                 };
-                let table = (0..=FILM_TABLE_STEPS)
-                    .map(|k| {
-                        let rgb = domain.rgb(&film.spectrum(k as f64 / FILM_TABLE_STEPS as f64));
-                        rgb.map(|v| ks * v)
-                    })
-                    .collect();
+                let table = incidence_table(domain, *ks, |c| film.spectrum(c));
                 Material::ThinFilm {
                     kd: *kd,
                     kd_spectrum: Box::new(domain.spectrum_from_rgb(*kd)),
@@ -344,6 +397,28 @@ impl Material {
                     m: *m,
                     film,
                     table,
+                }
+            }
+            Sample::BraggFlakes {
+                kd,
+                ks,
+                m,
+                wavelength_nm,
+                effective_index,
+                band_width_nm,
+            } => {
+                let band = BraggBand {
+                    wavelength_nm: *wavelength_nm,
+                    effective_index: *effective_index,
+                    width_nm: *band_width_nm,
+                };
+                Material::BraggFlakes {
+                    kd: *kd,
+                    kd_spectrum: Box::new(domain.spectrum_from_rgb(*kd)),
+                    ks: *ks,
+                    m: *m,
+                    table: incidence_table(domain, *ks, |c| band.spectrum(c)),
+                    band,
                 }
             }
             Sample::Measured { path } => Material::Measured(Table::read(path, domain)?),
@@ -362,11 +437,13 @@ impl Material {
             }
             Material::ThinFilm { kd, m, table, .. } => {
                 let lobe = cook_torrance_lobe(g, *m);
-                let x = g.v_h * FILM_TABLE_STEPS as f64;
-                let k = (x as usize).min(FILM_TABLE_STEPS - 1);
-                let t = x - k as f64;
-                let (a, b) = (table[k], table[k + 1]);
-                std::array::from_fn(|c| lobe * (a[c] + t * (b[c] - a[c])) + kd[c])
+                let colour = table_at(table, g.v_h);
+                std::array::from_fn(|c| lobe * colour[c] + kd[c])
+            }
+            Material::BraggFlakes { kd, m, table, .. } => {
+                let lobe = cook_torrance_lobe(g, *m);
+                let colour = table_at(table, g.v_h);
+                std::array::from_fn(|c| lobe * colour[c] + kd[c])
             }
             Material::Measured(table) => table.rgb_at(g.theta_i_deg, g.theta_r_deg),
         }
@@ -387,6 +464,17 @@ impl Material {
                 let lobe = ks * cook_torrance_lobe(g, *m);
                 let film = film.spectrum(g.v_h);
                 std::array::from_fn(|i| lobe * film[i] + kd_spectrum[i])
+            }
+            Material::BraggFlakes {
+                kd_spectrum,
+                ks,
+                m,
+                band,
+                ..
+            } => {
+                let lobe = ks * cook_torrance_lobe(g, *m);
+                let reflectance = band.spectrum(g.v_h);
+                std::array::from_fn(|i| lobe * reflectance[i] + kd_spectrum[i])
             }
             Material::Measured(table) => table.spectrum_at(g.theta_i_deg, g.theta_r_deg),
             _ => domain.spectrum_from_rgb(self.beta(g)),

@@ -1,6 +1,6 @@
-//! Minimisation of the eq. 10 loss over Kd, Ks (and Ks_grazing) ≥ 0 at a fixed roughness.
+//! Minimisation of the eq. 10 loss over Kd, Ks (and Ks_90) ≥ 0 at a fixed roughness.
 //!
-//! At fixed m every model is linear in its coefficients (Kd_c, Ks_c, and Ks_grazing_c for
+//! At fixed m every model is linear in its coefficients (Kd_c, Ks_c, and Ks_90_c for
 //! Cook–Torrance–Fresnel), so eq. 10, Σ_p ‖y_p − ŷ_p‖₂, is a convex function of them. It is
 //! minimised by iteratively reweighted least squares, a majorise–minimise scheme: with
 //! w_p = 1/‖r_p‖ of the current residuals, Σ_p w_p‖r_p‖²/2 + const majorises the loss, and
@@ -29,7 +29,7 @@ const WARM_EPSILON_START: f64 = 1e-4;
 const MAX_EXTRAPOLATION: f64 = 64.0;
 
 /// Coefficients minimising eq. 10 at one roughness, with that loss. `kg` is the grazing
-/// specular colour Ks_grazing; equal to `ks` for the models without one.
+/// specular colour Ks_90; equal to `ks` for the models without one.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct LinearFit {
     pub kd: [f64; 3],
@@ -147,7 +147,7 @@ fn loss_of(
     [kd, ks, kg]: [&[f64; 3]; 3],
     residuals: &mut [f64],
 ) -> f64 {
-    if let Some(x) = &data.grazing {
+    if let Some(x) = &data.shift_weight {
         return fresnel_loss_of(data, spec, x, [kd, ks, kg], residuals);
     }
     let n = data.y.len();
@@ -179,7 +179,8 @@ fn loss_of(
     loss
 }
 
-/// [`loss_of`] for the models with a grazing specular colour: Ks·(1 − x) + kg·x.
+/// [`loss_of`] for the models with a specular colour at 90°, Ks·(1 − w) + kg·w, with the
+/// points' shift weights w in `x`.
 fn fresnel_loss_of(
     data: &Data,
     spec: [&[f64]; 3],
@@ -209,7 +210,7 @@ fn fresnel_loss_of(
 
 /// One reweighted pass: the weighted NNLS solution of each channel, as (kd, ks, kg).
 fn weighted_nnls(data: &Data, spec: [&[f64]; 3], weights: &[f64]) -> [[f64; 3]; 3] {
-    if let Some(x) = &data.grazing {
+    if let Some(x) = &data.shift_weight {
         return fresnel_weighted_nnls(data, spec, x, weights);
     }
     let n = data.y.len();
@@ -271,7 +272,8 @@ fn weighted_nnls(data: &Data, spec: [&[f64]; 3], weights: &[f64]) -> [[f64; 3]; 
     [kd, ks, ks]
 }
 
-/// [`weighted_nnls`] with the bases a, s·(1 − x), s·x of Kd, Ks, Ks_grazing.
+/// [`weighted_nnls`] with the bases a, s·(1 − w), s·w of Kd, Ks, Ks_90, with the points'
+/// shift weights w in `x`.
 fn fresnel_weighted_nnls(
     data: &Data,
     spec: [&[f64]; 3],

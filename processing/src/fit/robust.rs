@@ -48,7 +48,7 @@ struct Profile<'a> {
     spec_m: [f64; 3],
     workspace: linear::Workspace,
     evaluations: u64,
-    /// The best solve so far: its parameters, grazing specular colour and loss.
+    /// The best solve so far: its parameters, specular colour at 90° and loss.
     best: Option<(Params, [f64; 3], f64)>,
 }
 
@@ -230,7 +230,7 @@ fn validate(options: &FitOptions) -> Result<(f64, f64), FitError> {
     Ok((o.m_min.ln(), o.m_max.ln()))
 }
 
-/// The robust fit: the parameters found and the grazing specular colour.
+/// The robust fit: the parameters found and the specular colour at 90°.
 pub(crate) fn fit(data: &Data, options: &FitOptions) -> Result<(Found, [f64; 3]), FitError> {
     let ln_range = validate(options)?;
     let grid_points = options.robust.grid_points;
@@ -260,7 +260,7 @@ pub(crate) fn fit(data: &Data, options: &FitOptions) -> Result<(Found, [f64; 3])
         }
     }
     let profile = profile.into_inner();
-    let (params, ks_grazing, loss) = profile
+    let (params, ks_90, loss) = profile
         .best
         .ok_or_else(|| FitError::Optimizer("no roughness was evaluated".into()))?;
     let mut found = Found {
@@ -275,5 +275,5 @@ pub(crate) fn fit(data: &Data, options: &FitOptions) -> Result<(Found, [f64; 3])
             return Ok((found, polished.params.ks));
         }
     }
-    Ok((found, ks_grazing))
+    Ok((found, ks_90))
 }

@@ -11,7 +11,7 @@
 //! are taken as independent (pixel noise); correlated residuals (model misfit, demosaicing)
 //! make the intervals too narrow.
 //!
-//! Parameters: Kd, Ks (and Ks_grazing) per channel and ln m. Intervals are θ̂ ± 1.96·σ
+//! Parameters: Kd, Ks (and Ks_90) per channel and ln m. Intervals are θ̂ ± 1.96·σ
 //! for the colour coefficients (lower end clipped at 0, their feasible bound) and
 //! m·exp(±1.96·σ_ln m) for the roughness (always positive; its standard uncertainty is
 //! m·σ_ln m). When A is singular (a parameter has no effect on the loss, e.g. m when
@@ -31,13 +31,13 @@ pub const Z95: f64 = 1.959_963_984_540_054;
 const MIN_RELATIVE_EIGENVALUE: f64 = 1e-12;
 
 /// One value per fitted parameter, in the shapes of the fit JSON: `m` holds one value
-/// (shared roughness) or three (per channel); `ks_grazing` only for Cook–Torrance–Fresnel.
+/// (shared roughness) or three (per channel); `ks_90` only for Cook–Torrance–Fresnel.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ParameterSet<T> {
     pub kd: [T; 3],
     pub ks: [T; 3],
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub ks_grazing: Option<[T; 3]>,
+    pub ks_90: Option<[T; 3]>,
     pub m: Vec<T>,
 }
 
@@ -49,12 +49,12 @@ pub struct Correlation {
     pub ks_m: [f64; 3],
 }
 
-/// The Wald test of Cook–Torrance–Fresnel's colour shift, Ks_grazing = Ks in every
-/// channel, with the sandwich covariance: χ² = dᵀ Σ_d⁻¹ d, d = Ks_grazing − Ks, 3
+/// The Wald test of Cook–Torrance–Fresnel's colour shift, Ks_90 = Ks in every
+/// channel, with the sandwich covariance: χ² = dᵀ Σ_d⁻¹ d, d = Ks_90 − Ks, 3
 /// degrees of freedom.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct ColourShift {
-    /// Whether Ks_grazing was fitted (the shift was significant) or tied to Ks.
+    /// Whether Ks_90 was fitted (the shift was significant) or tied to Ks.
     pub fitted: bool,
     /// The test statistic and its p-value; absent when no test was possible (one θL).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -105,30 +105,30 @@ impl Layout {
     }
 }
 
-/// The standard uncertainties and intervals at (`params`, `ks_grazing`); `None` when they
+/// The standard uncertainties and intervals at (`params`, `ks_90`); `None` when they
 /// are not defined (singular A, too few points, non-finite values).
 pub(crate) fn estimate(
     data: &Data,
     options: &FitOptions,
     params: &Params,
-    ks_grazing: &[f64; 3],
+    ks_90: &[f64; 3],
 ) -> Option<Spread> {
-    let covariance = covariance(data, options, params, ks_grazing)?;
-    let mut spread = spread(&covariance.layout, params, ks_grazing, &covariance.matrix)?;
+    let covariance = covariance(data, options, params, ks_90)?;
+    let mut spread = spread(&covariance.layout, params, ks_90, &covariance.matrix)?;
     if options.model.has_fresnel_colour() && !covariance.layout.fresnel {
-        // Ks_grazing tied to Ks: the same parameter.
-        spread.stderr.ks_grazing = Some(spread.stderr.ks);
-        spread.ci95.ks_grazing = Some(spread.ci95.ks);
+        // Ks_90 tied to Ks: the same parameter.
+        spread.stderr.ks_90 = Some(spread.stderr.ks);
+        spread.ci95.ks_90 = Some(spread.ci95.ks);
     }
     Some(spread)
 }
 
 impl Covariance {
-    /// The Wald statistic of Ks_grazing = Ks (χ², 3 degrees of freedom); `None` when the
+    /// The Wald statistic of Ks_90 = Ks (χ², 3 degrees of freedom); `None` when the
     /// fit has no grazing colour or the difference's covariance is singular.
-    pub fn shift_statistic(&self, params: &Params, ks_grazing: &[f64; 3]) -> Option<f64> {
+    pub fn shift_statistic(&self, params: &Params, ks_90: &[f64; 3]) -> Option<f64> {
         let layout = &self.layout;
-        let d = DVector::from_iterator(3, (0..3).map(|c| ks_grazing[c] - params.ks[c]));
+        let d = DVector::from_iterator(3, (0..3).map(|c| ks_90[c] - params.ks[c]));
         let mut sigma = DMatrix::<f64>::zeros(3, 3);
         for i in 0..3 {
             for j in 0..3 {
@@ -167,16 +167,16 @@ fn erfc(x: f64) -> f64 {
     t * poly.exp()
 }
 
-/// The sandwich covariance of the parameters at (`params`, `ks_grazing`); `None` when it
+/// The sandwich covariance of the parameters at (`params`, `ks_90`); `None` when it
 /// is not defined (singular A, too few points).
 pub(crate) fn covariance(
     data: &Data,
     options: &FitOptions,
     params: &Params,
-    ks_grazing: &[f64; 3],
+    ks_90: &[f64; 3],
 ) -> Option<Covariance> {
     let layout = Layout {
-        fresnel: data.grazing.is_some(),
+        fresnel: data.shift_weight.is_some(),
         shared: options.roughness == Roughness::Shared,
     };
     let n = data.y.len();
@@ -188,7 +188,7 @@ pub(crate) fn covariance(
         .bases
         .iter()
         .zip(&data.y)
-        .map(|(b, y)| crate::metrics::point_loss(y, &b.evaluate_fresnel(params, ks_grazing)))
+        .map(|(b, y)| crate::metrics::point_loss(y, &b.evaluate_fresnel(params, ks_90)))
         .collect();
     let mut sorted = norms.clone();
     sorted.sort_by(f64::total_cmp);
@@ -199,11 +199,11 @@ pub(crate) fn covariance(
     let mut jacobian = DMatrix::<f64>::zeros(3, p);
     for ((basis, y), &norm) in data.bases.iter().zip(&data.y).zip(&norms) {
         jacobian.fill(0.0);
-        let x = basis.grazing();
-        let predicted = basis.evaluate_fresnel(params, ks_grazing);
+        let x = basis.shift_weight();
+        let predicted = basis.evaluate_fresnel(params, ks_90);
         for c in 0..3 {
             let (s, slope) = basis.specular_and_slope(params.m[c]);
-            let colour = params.ks[c] + x * (ks_grazing[c] - params.ks[c]);
+            let colour = params.ks[c] + x * (ks_90[c] - params.ks[c]);
             jacobian[(c, layout.kd(c))] = basis.diffuse;
             match layout.kg(c) {
                 Some(kg) => {
@@ -259,7 +259,7 @@ fn inverse_if_identifiable(a: &DMatrix<f64>) -> Option<DMatrix<f64>> {
 fn spread(
     layout: &Layout,
     params: &Params,
-    ks_grazing: &[f64; 3],
+    ks_90: &[f64; 3],
     covariance: &DMatrix<f64>,
 ) -> Option<Spread> {
     let sigma = |i: usize| covariance[(i, i)].max(0.0).sqrt();
@@ -271,7 +271,7 @@ fn spread(
     let stderr = ParameterSet {
         kd: std::array::from_fn(|c| sigma(layout.kd(c))),
         ks: std::array::from_fn(|c| sigma(layout.ks(c))),
-        ks_grazing: layout
+        ks_90: layout
             .fresnel
             .then(|| std::array::from_fn(|c| sigma(layout.kg(c).unwrap_or_default()))),
         m: (0..m_count)
@@ -281,9 +281,9 @@ fn spread(
     let ci95 = ParameterSet {
         kd: std::array::from_fn(|c| colour(params.kd[c], layout.kd(c))),
         ks: std::array::from_fn(|c| colour(params.ks[c], layout.ks(c))),
-        ks_grazing: layout.fresnel.then(|| {
-            std::array::from_fn(|c| colour(ks_grazing[c], layout.kg(c).unwrap_or_default()))
-        }),
+        ks_90: layout
+            .fresnel
+            .then(|| std::array::from_fn(|c| colour(ks_90[c], layout.kg(c).unwrap_or_default()))),
         m: (0..m_count)
             .map(|c| {
                 let half = Z95 * sigma(layout.ln_m(c));
@@ -306,7 +306,7 @@ fn spread(
         .kd
         .iter()
         .chain(&stderr.ks)
-        .chain(stderr.ks_grazing.iter().flatten())
+        .chain(stderr.ks_90.iter().flatten())
         .chain(&stderr.m)
         .chain(ci95.m.iter().flatten())
         .chain(&correlation.ks_m)

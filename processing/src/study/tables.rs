@@ -65,7 +65,7 @@ fn per_channel(
 }
 
 /// Scores' columns: errors on all points and on the held-out ones, parameters (m per
-/// channel; `ks_grazing` empty for models without it), their standard uncertainties, the
+/// channel; `ks_90` empty for models without it), their standard uncertainties, the
 /// 95 % interval of m and the Ks–m correlation.
 fn score_columns() -> Vec<Column> {
     let mut columns = vec![column("loss", |s| Some(s.fit.loss))];
@@ -79,9 +79,7 @@ fn score_columns() -> Vec<Column> {
     }));
     columns.extend(per_channel("kd", |s, c| Some(s.fit.kd[c])));
     columns.extend(per_channel("ks", |s, c| Some(s.fit.ks[c])));
-    columns.extend(per_channel("ks_grazing", |s, c| {
-        s.fit.ks_grazing.map(|k| k[c])
-    }));
+    columns.extend(per_channel("ks_90", |s, c| s.fit.ks_90.map(|k| k[c])));
     columns.extend(per_channel("m", |s, c| Some(s.fit.params().m[c])));
     columns.extend(per_channel("kd_stderr", |s, c| {
         stderr_of(s).map(|e| e.kd[c])
@@ -89,8 +87,8 @@ fn score_columns() -> Vec<Column> {
     columns.extend(per_channel("ks_stderr", |s, c| {
         stderr_of(s).map(|e| e.ks[c])
     }));
-    columns.extend(per_channel("ks_grazing_stderr", |s, c| {
-        stderr_of(s).and_then(|e| e.ks_grazing).map(|k| k[c])
+    columns.extend(per_channel("ks_90_stderr", |s, c| {
+        stderr_of(s).and_then(|e| e.ks_90).map(|k| k[c])
     }));
     columns.extend(per_channel("m_stderr", |s, c| {
         stderr_of(s).map(|e| channel_m(&e.m, c))
