@@ -368,6 +368,55 @@ pub fn fits_colour_shift(model: Model, samples: &[Sample]) -> bool {
     model.has_fresnel_colour() && distinct_theta_l(samples).len() >= 2
 }
 
+/// Decides whether a Cook–Torrance–Fresnel fit keeps its colour shift: by the Wald test
+/// of Ks_90 = Ks at [`COLOUR_SHIFT_LEVEL`]; when the test is undefined (residuals without
+/// noise leave the covariance singular), by whether the shift lowers the loss by more than
+/// 1e-6 of the data's scale Σ‖y‖.
+/// When it is dropped, `data` loses its shift weights and the fit is redone with
+/// Ks_90 = Ks (`found`, `ks_90` replaced).
+fn test_colour_shift(
+    data: &mut Data,
+    options: &FitOptions,
+    found: &mut Found,
+    ks_90: &mut [f64; 3],
+) -> Result<ColourShift, FitError> {
+    if data.shift_weight.is_none() {
+        return Ok(ColourShift {
+            fitted: false,
+            chi2: None,
+            p_value: None,
+        });
+    }
+    let chi2 = uncertainty::covariance(data, options, &found.params, ks_90)
+        .and_then(|c| c.shift_statistic(&found.params, ks_90));
+    let p_value = chi2.map(chi2_3_survival);
+    if p_value.is_some_and(|p| p < COLOUR_SHIFT_LEVEL) {
+        return Ok(ColourShift {
+            fitted: true,
+            chi2,
+            p_value,
+        });
+    }
+    let shifted_loss = data.loss_fresnel(&found.params, ks_90);
+    let weights = data.shift_weight.take();
+    let (mut tied, tied_90) = robust::fit(data, options)?;
+    tied.evaluations += found.evaluations;
+    // Without a test (no noise), a real decrease of the loss keeps the shift.
+    let fitted =
+        p_value.is_none() && data.loss(&tied.params) - shifted_loss > 1e-6 * data.zero_loss;
+    if fitted {
+        data.shift_weight = weights;
+        found.evaluations = tied.evaluations;
+    } else {
+        (*found, *ks_90) = (tied, tied_90);
+    }
+    Ok(ColourShift {
+        fitted,
+        chi2,
+        p_value,
+    })
+}
+
 /// Number of fitted parameters of `model` with `roughness`.
 pub fn parameter_count(model: Model, roughness: Roughness) -> usize {
     let colours = if model.has_fresnel_colour() { 9 } else { 6 };
@@ -402,25 +451,13 @@ pub fn fit(samples: &[Sample], options: &FitOptions) -> Result<FitResult, FitErr
             (found, ks)
         }
     };
-    let colour_shift = options.model.has_fresnel_colour().then(|| {
-        let chi2 = data.shift_weight.as_ref().and_then(|_| {
-            uncertainty::covariance(&data, options, &found.params, &ks_90)?
-                .shift_statistic(&found.params, &ks_90)
-        });
-        let p_value = chi2.map(chi2_3_survival);
-        ColourShift {
-            fitted: p_value.is_some_and(|p| p < COLOUR_SHIFT_LEVEL),
-            chi2,
-            p_value,
-        }
-    });
-    if colour_shift.is_some_and(|c| !c.fitted) && data.shift_weight.is_some() {
-        // Not supported by the data: Ks_90 tied to Ks, which is Cook–Torrance.
-        data.shift_weight = None;
-        let evaluations = found.evaluations;
-        (found, ks_90) = robust::fit(&data, options)?;
-        found.evaluations += evaluations;
-    }
+    let colour_shift = if options.model.has_fresnel_colour() {
+        Some(test_colour_shift(
+            &mut data, options, &mut found, &mut ks_90,
+        )?)
+    } else {
+        None
+    };
     let params = found.params;
     let m = match options.roughness {
         Roughness::Shared => FittedRoughness::Shared([params.m[0]]),

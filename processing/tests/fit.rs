@@ -13,33 +13,38 @@ use gonio_processing::samples::Sample;
 
 mod common;
 use common::Rng;
+mod synthetic;
+use synthetic::Noise;
 
 const ALL_THETA_L: [f64; 6] = [-20.0, -25.0, -30.0, -35.0, -40.0, -45.0];
 
-/// Samples of the distant-source geometry (θi = θL − φ, θr = φ), φ every 0.5°, both
-/// angles within ±85°, with multiplicative Gaussian noise of relative size `noise`.
+/// Samples of the distant-source geometry, φ every 0.5°, both angles within ±85°, with
+/// multiplicative Gaussian noise of relative size `noise` (the same draws every call).
 fn synthetic(model: Model, p: &Params, theta_ls: &[f64], noise: f64) -> Vec<Sample> {
-    let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
-    let mut out = Vec::new();
-    for &theta_l in theta_ls {
-        for k in -170..=170 {
-            let phi = f64::from(k) * 0.5;
-            let (theta_i, theta_r) = (theta_l - phi, phi);
-            if theta_i.abs() > 85.0 || theta_r.abs() > 85.0 {
-                continue;
-            }
-            let clean = model.evaluate(p, theta_i, theta_r);
-            let rgb = clean.map(|b| b * (1.0 + noise * rng.normal()));
-            out.push(Sample {
-                theta_l,
-                theta_i,
-                theta_r,
-                rgb,
-                ..Sample::default()
-            });
-        }
-    }
-    out
+    synthetic_fresnel(model, p, &p.ks, theta_ls, noise)
+}
+
+/// [`synthetic`] with the specular colour at 90° `ks_90` (Cook–Torrance–Fresnel).
+fn synthetic_fresnel(
+    model: Model,
+    p: &Params,
+    ks_90: &[f64; 3],
+    theta_ls: &[f64],
+    noise: f64,
+) -> Vec<Sample> {
+    let noise = Noise {
+        relative: noise,
+        absolute: 0.0,
+    };
+    synthetic::scan(
+        model,
+        p,
+        ks_90,
+        theta_ls,
+        0.5,
+        noise,
+        &mut Rng(0x9e37_79b9_7f4a_7c15),
+    )
 }
 
 fn options(model: Model, roughness: Roughness, method: FitMethod) -> FitOptions {
@@ -491,4 +496,146 @@ fn dropped_channels_are_left_out_of_the_fit() {
         (clipped.ks[1] - truth.ks[1]).abs() > 0.05 * truth.ks[1],
         "{clipped:?}"
     );
+}
+
+/// A blue-green-like goniochromatic truth: the specular colour turns from red-green at
+/// γ = 0 to green-blue at γ = 90°.
+fn fresnel_truth() -> (Params, [f64; 3]) {
+    (
+        Params::shared([4.0, 12.0, 14.0], [54.0, 72.0, 29.0], 0.12),
+        [2.0, 60.0, 45.0],
+    )
+}
+
+#[test]
+fn fresnel_colour_shift_is_recovered_globally() {
+    let (truth, ks_90) = fresnel_truth();
+    let model = Model::CookTorranceFresnel;
+    let samples = synthetic_fresnel(model, &truth, &ks_90, &ALL_THETA_L, 0.0);
+    let r = fit(
+        &samples,
+        &options(model, Roughness::Shared, FitMethod::Robust),
+    )
+    .unwrap();
+    assert_recovers(&r, &truth, 1e-4, 0.0, true);
+    let fitted_90 = r.ks_90.unwrap();
+    for c in 0..3 {
+        assert_close("ks_90", fitted_90[c], ks_90[c], 1e-4, 0.0);
+    }
+    // Global in m: no roughness of a dense scan does better.
+    let brute = (0..400)
+        .map(|k| {
+            let m = (1e-3f64.ln() + 2000f64.ln() * f64::from(k) / 399.0).exp();
+            solve_at_roughness(&samples, model, [m; 3]).unwrap().loss
+        })
+        .fold(f64::INFINITY, f64::min);
+    assert!(
+        r.loss <= brute * (1.0 + 1e-9) + 1e-9,
+        "{} > {brute}",
+        r.loss
+    );
+}
+
+#[test]
+fn fresnel_inner_solve_is_optimal_in_every_coefficient() {
+    // Convex at fixed m: no single coefficient moved either way (within ≥ 0) lowers eq. 10.
+    let (truth, ks_90) = fresnel_truth();
+    let model = Model::CookTorranceFresnel;
+    let samples = synthetic_fresnel(model, &truth, &ks_90, &[-20.0, -35.0], 0.02);
+    let solved = solve_at_roughness(&samples, model, [0.1; 3]).unwrap();
+    let loss = |p: &Params, k90: &[f64; 3]| {
+        let measured: Vec<[f64; 3]> = samples.iter().map(|s| s.rgb).collect();
+        let estimated: Vec<[f64; 3]> = samples
+            .iter()
+            .map(|s| model.basis(s.theta_i, s.theta_r).evaluate_fresnel(p, k90))
+            .collect();
+        metrics::loss(&measured, &estimated).unwrap()
+    };
+    let base = loss(&solved.params, &solved.ks_90);
+    assert!((base - solved.loss).abs() <= 1e-9 * base);
+    for k in 0..9 {
+        for step in [1e-3, -1e-3] {
+            let (mut p, mut k90) = (solved.params, solved.ks_90);
+            let value = match k / 3 {
+                0 => &mut p.kd[k % 3],
+                1 => &mut p.ks[k % 3],
+                _ => &mut k90[k % 3],
+            };
+            *value = (*value + step * value.abs().max(1.0)).max(0.0);
+            assert!(
+                loss(&p, &k90) >= base * (1.0 - 1e-7),
+                "coefficient {k} moved by {step}: {} < {base}",
+                loss(&p, &k90)
+            );
+        }
+    }
+}
+
+#[test]
+fn fresnel_with_noise_keeps_a_significant_shift() {
+    let (truth, ks_90) = fresnel_truth();
+    let model = Model::CookTorranceFresnel;
+    let samples = synthetic_fresnel(model, &truth, &ks_90, &[-20.0, -30.0, -45.0], 0.01);
+    let r = fit(
+        &samples,
+        &options(model, Roughness::Shared, FitMethod::Robust),
+    )
+    .unwrap();
+    let shift = r.colour_shift.unwrap();
+    assert!(shift.fitted && shift.p_value.unwrap() < 1e-6, "{shift:?}");
+    assert_close("m", r.params().m[0], 0.12, 0.02, 0.0);
+    let fitted_90 = r.ks_90.unwrap();
+    for c in 0..3 {
+        assert_close("kd", r.kd[c], truth.kd[c], 0.05, 0.0);
+        assert_close("ks", r.ks[c], truth.ks[c], 0.05, 0.0);
+        // Ks_90 is extrapolated from γ ≤ 45°: a looser bound.
+        assert_close("ks_90", fitted_90[c], ks_90[c], 0.1, 1.0);
+    }
+}
+
+#[test]
+fn fresnel_from_one_theta_l_is_cook_torrance() {
+    // One θL sees one facet incidence: the colour shift is tied, the fit is Cook–Torrance's.
+    let (truth, ks_90) = fresnel_truth();
+    let samples = synthetic_fresnel(Model::CookTorranceFresnel, &truth, &ks_90, &[-30.0], 0.01);
+    let fresnel = fit(
+        &samples,
+        &options(
+            Model::CookTorranceFresnel,
+            Roughness::Shared,
+            FitMethod::Robust,
+        ),
+    )
+    .unwrap();
+    let ct = fit(
+        &samples,
+        &options(Model::CookTorrance, Roughness::Shared, FitMethod::Robust),
+    )
+    .unwrap();
+    let shift = fresnel.colour_shift.unwrap();
+    assert!(!shift.fitted && shift.chi2.is_none(), "{shift:?}");
+    assert_eq!(fresnel.ks_90, Some(fresnel.ks));
+    assert_close("loss", fresnel.loss, ct.loss, 1e-9, 0.0);
+    assert_eq!(fresnel.params(), ct.params());
+    // Its Ks_90 is Ks: the same uncertainty.
+    let se = fresnel.stderr.unwrap();
+    assert_eq!(se.ks_90, Some(se.ks));
+}
+
+#[test]
+fn fresnel_is_fitted_by_the_robust_method_only() {
+    let (truth, ks_90) = fresnel_truth();
+    let model = Model::CookTorranceFresnel;
+    let samples = synthetic_fresnel(model, &truth, &ks_90, &[-20.0, -40.0], 0.0);
+    let nm = options(model, Roughness::Shared, FitMethod::NelderMead);
+    assert!(matches!(
+        fit(&samples, &nm),
+        Err(FitError::InvalidOptions(_))
+    ));
+    let mut polish = options(model, Roughness::Shared, FitMethod::Robust);
+    polish.robust.polish = true;
+    assert!(matches!(
+        fit(&samples, &polish),
+        Err(FitError::InvalidOptions(_))
+    ));
 }
