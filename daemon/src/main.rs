@@ -35,6 +35,8 @@ enum Command {
     Tradeoff(commands::tradeoff::Args),
     /// Serve the GRBL 1.1h emulator alone on a pseudo-terminal, until interrupted.
     EmulateArm(commands::emulate_arm::Args),
+    /// Write a fit for a renderer (Mitsuba 3 BSDF) or as a BRDF table.
+    Export(commands::export::Args),
 }
 
 fn main() {
@@ -58,6 +60,7 @@ fn main() {
         Command::Study(args) => commands::study::run(args),
         Command::Tradeoff(args) => commands::tradeoff::run(args),
         Command::EmulateArm(args) => commands::emulate_arm::run(args),
+        Command::Export(args) => commands::export::run(args),
     })
     .unwrap_or_else(|panic| {
         Err(anyhow::anyhow!(

@@ -22,4 +22,5 @@ pub mod guard;
 pub mod hdr;
 pub mod reference;
 
+pub mod export;
 pub mod study;

@@ -2,6 +2,7 @@
 
 pub mod calibrate;
 pub mod emulate_arm;
+pub mod export;
 pub mod extract;
 pub mod fit;
 pub mod hdr;

@@ -1,0 +1,71 @@
+//! `gonio export`: a fit JSON → a Mitsuba 3 BSDF (XML) or a BRDF table on a (θi, θr)
+//! grid (CSV or JSON by the output's extension); see `gonio_processing::export`.
+
+use std::path::PathBuf;
+
+use anyhow::{bail, Context};
+use gonio_drivers::atomic_file::write_atomically;
+use gonio_processing::color::CameraModel;
+use gonio_processing::export;
+use gonio_processing::fit::FitResult;
+
+/// What to write.
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum Format {
+    /// Mitsuba 3 scene file with the fit's BSDF (id `gonio-fit`); Cook–Torrance and Ward.
+    Mitsuba,
+    /// The fitted BRDF on an in-plane (θi, θr) grid: `.csv` or `.json` by the extension.
+    Table,
+}
+
+/// Arguments of `gonio export`.
+#[derive(clap::Args)]
+pub struct Args {
+    /// Fit JSON written by `gonio fit` (or a scan's fit-*.json).
+    fit: PathBuf,
+    /// Output format.
+    #[arg(long, value_enum)]
+    format: Format,
+    /// Output file.
+    #[arg(long)]
+    out: PathBuf,
+    /// Table: grid step in degrees.
+    #[arg(long, default_value_t = 1.0)]
+    step: f64,
+    /// Table: the grid spans −MAX…MAX degrees in θi and θr.
+    #[arg(long, default_value_t = 85.0)]
+    max_angle: f64,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let text = std::fs::read_to_string(&args.fit)
+        .with_context(|| format!("reading {}", args.fit.display()))?;
+    let fit: FitResult = serde_json::from_str(&text)
+        .with_context(|| format!("{} is not a fit JSON", args.fit.display()))?;
+    let white = CameraModel::builtin().white_rgb();
+    let written = match args.format {
+        Format::Mitsuba => export::mitsuba_xml(&fit, white)?,
+        Format::Table => {
+            let rows = export::table(&fit, white, args.step, args.max_angle)?;
+            match args.out.extension().and_then(|e| e.to_str()) {
+                Some("csv") => export::table_csv(&rows),
+                Some("json") => {
+                    serde_json::to_string_pretty(&export::table_json(&fit, white, &rows))? + "\n"
+                }
+                _ => bail!(
+                    "--out {}: a table is written as .csv or .json",
+                    args.out.display()
+                ),
+            }
+        }
+    };
+    write_atomically(&args.out, written.as_bytes())
+        .with_context(|| format!("writing {}", args.out.display()))?;
+    println!(
+        "{} fit ({}) -> {}",
+        fit.model,
+        fit.roughness,
+        args.out.display()
+    );
+    Ok(())
+}
