@@ -115,6 +115,18 @@ fn six_angle_scan_completes_and_its_fit_recovers_the_scene() {
     assert_eq!(fit.status, 200);
     let fit = fit.json;
     assert!(scan["results"]["fits"]["ward"].is_string());
+    // Every fit carries its parameters' 95 % intervals; the goniochromatic model is fitted
+    // too (on this Cook–Torrance scene without a significant colour shift).
+    for c in 0..3 {
+        let [lo, hi] = [0, 1].map(|k| fit["ci95"]["ks"][c][k].as_f64().unwrap());
+        assert!(lo <= fit["ks"][c].as_f64().unwrap() && fit["ks"][c].as_f64().unwrap() <= hi);
+    }
+    let fresnel = daemon.get(
+        scan["results"]["fits"]["cook-torrance-fresnel"]
+            .as_str()
+            .unwrap(),
+    );
+    assert_eq!(fresnel.json["model"], "cook-torrance-fresnel");
     let truth = Scene::from_toml_str(SMALL_GOLD_SCENE).unwrap().truth_json();
     // Tolerances: the strips are noise-free here; what remains is HDR quantisation and
     // the finite-distance geometry, a few percent at most.

@@ -15,10 +15,11 @@
 //!   fitted model is the truth's.
 //!
 //! Settings are ranked by the worst channel's ΔErr_p. Outputs in OUT: `tradeoff.csv`
-//! (one row per setting), `pareto.svg` (total time against worst-channel ΔErr_p, the
-//! Pareto front drawn), `tradeoff.json` (the recommended setting: the cheapest whose
-//! worst-channel ΔErr_p is within 10 % of the best reached, or within `--tolerance` of
-//! it; and the extraction times).
+//! (one row per setting, with the 95 % intervals of m and Ks_G), `pareto.svg` (total time
+//! against worst-channel ΔErr_p, the Pareto front drawn), `tradeoff.json` (the recommended
+//! setting: the cheapest whose worst-channel ΔErr_p is within 10 % of the best reached, or
+//! within `--tolerance` of it, with its fit and the fit's uncertainty; and the extraction
+//! times).
 
 mod scan;
 mod timing;
@@ -65,7 +66,7 @@ pub struct Args {
     #[arg(long, default_value_t = 1, conflicts_with = "scan")]
     pub binning: u32,
     /// Model to fit; default: the scene's own when it is cook-torrance or ward, else
-    /// cook-torrance.
+    /// (a goniochromatic or measured sample) cook-torrance-fresnel.
     #[arg(long)]
     pub model: Option<Model>,
     /// Roughness form to fit; default: the scene's own, else shared.
@@ -195,11 +196,24 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let model = args
         .model
         .or(truth.model.map(|(m, _, _)| m))
-        .unwrap_or(Model::CookTorrance);
+        .unwrap_or(Model::CookTorranceFresnel);
     let roughness = args
         .roughness
         .or(truth.model.map(|(_, r, _)| r))
         .unwrap_or(Roughness::Shared);
+    // Nelder–Mead is the baseline of the paper's two models only.
+    let methods: Vec<FitMethod> = args
+        .methods
+        .iter()
+        .copied()
+        .filter(|&m| !(model.has_fresnel_colour() && m == FitMethod::NelderMead))
+        .collect();
+    if methods.len() < args.methods.len() {
+        eprintln!("nelder-mead skipped: {model} is fitted by the robust method only");
+    }
+    if methods.is_empty() {
+        anyhow::bail!("--methods: {model} is fitted by the robust method only");
+    }
 
     let extracted = extract_all(&scan_dir, &args.out, &positions, bracket_len)?;
     let full: Vec<Sample> = extracted[bracket_len - 1]
@@ -229,7 +243,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     .iter()
                     .flat_map(|&i| subsample(&extracted[b - 1][i].samples, stride))
                     .collect();
-                for &method in &args.methods {
+                for &method in &methods {
                     let mut options = FitOptions::new(model);
                     options.roughness = roughness;
                     options.method = method;
@@ -269,6 +283,24 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         tolerance: args.tolerance,
     };
     write_outputs(&args.out, &fitted, &rows, &extracted, &positions)
+}
+
+/// m (G channel's) and Ks_G with their 95 % intervals, formatted; empty intervals when
+/// the fit has none.
+fn intervals(fit: &FitResult) -> [String; 6] {
+    let m = fit.params().m[1];
+    let ci = fit.ci95.as_ref();
+    let m_ci = ci.map(|c| c.m[1.min(c.m.len() - 1)]);
+    let ks_ci = ci.map(|c| c.ks[1]);
+    let bound = |b: Option<f64>| b.map_or(String::new(), |v| format!("{v:.5}"));
+    [
+        format!("{m:.5}"),
+        bound(m_ci.map(|c| c[0])),
+        bound(m_ci.map(|c| c[1])),
+        format!("{:.4}", fit.ks[1]),
+        bound(ks_ci.map(|c| c[0])),
+        bound(ks_ci.map(|c| c[1])),
+    ]
 }
 
 /// What was fitted, against what, and the recommendation tolerance.
@@ -345,7 +377,7 @@ fn write_outputs(
     let mut csv = String::from(
         "n_theta_l,theta_l,bracket,shutters_s,stride,method,points,acquisition_s,travel_s,capture_s,\
          processing_s,extract_s,fit_s,total_s,err_p_r,err_p_g,err_p_b,kd_rel_err,ks_rel_err,m_rel_err,\
-         pareto,recommended,status\n",
+         m,m_ci95_lo,m_ci95_hi,ks_g,ks_g_ci95_lo,ks_g_ci95_hi,pareto,recommended,status\n",
     );
     for (i, r) in rows.iter().enumerate() {
         let head = format!(
@@ -371,15 +403,19 @@ fn write_outputs(
                     format!("{:.5},{:.5},{:.5}", p[0], p[1], p[2])
                 });
                 format!(
-                    "{:.5},{:.5},{:.5},{p},{},{},ok",
+                    "{:.5},{:.5},{:.5},{p},{},{},{},ok",
                     a.err_p[0],
                     a.err_p[1],
                     a.err_p[2],
+                    intervals(&a.fit).join(","),
                     front.contains(&i),
                     recommended == Some(i)
                 )
             }
-            Err(e) => format!(",,,,,,false,false,\"failed: {}\"", e.replace('"', "'")),
+            Err(e) => format!(
+                ",,,,,,,,,,,,false,false,\"failed: {}\"",
+                e.replace('"', "'")
+            ),
         };
         let _ = writeln!(csv, "{head},{scores}");
     }
@@ -470,11 +506,20 @@ fn write_outputs(
         rows.len(),
         rows.iter().filter(|r| r.outcome.is_err()).count()
     );
-    println!("  total s  acquisition s  processing s  ΔErr_p(worst)  setting");
+    println!(
+        "  total s  acquisition s  processing s  ΔErr_p(worst)  m [95 %]  Ks_G [95 %]  setting"
+    );
     for &i in &front {
         let r = &rows[i];
+        let spread = r.outcome.as_ref().ok().map_or(String::new(), |a| {
+            let v = intervals(&a.fit);
+            format!(
+                "{} [{}, {}]  {} [{}, {}]",
+                v[0], v[1], v[2], v[3], v[4], v[5]
+            )
+        });
         println!(
-            "  {:>7.2}  {:>13.2}  {:>12.3}  {:>13.4}  {}{}",
+            "  {:>7.2}  {:>13.2}  {:>12.3}  {:>13.4}  {spread}  {}{}",
             r.total_s(),
             r.acquisition.total_s(),
             r.processing_s(),

@@ -4,7 +4,11 @@
 //! - `fig7_err_p_g.svg`: box plots of ΔErr_p (G) per number of θL and variant;
 //! - `fig8_uv_chart.svg`: u′v′ of the reference and of each variant fitted on the single
 //!   θL nearest −45° (the paper's choice);
-//! - `fig9_delta_e_uv.svg`: box plots of ΔE_u′v′ per number of θL and variant.
+//! - `fig9_delta_e_uv.svg`: box plots of ΔE_u′v′ per number of θL and variant;
+//! - `fig10_uv_held_out.svg`: u′v′ of the reference at the θL a two-θL fit did not see
+//!   (the pair nearest −20°, −30°) and of each variant's prediction there;
+//! - `fig11_held_out_delta_e_uv.svg`, `fig12_held_out_err_p_r.svg`: box plots of ΔE_u′v′
+//!   and of the R channel's ΔErr_p on the held-out points (the θL a fit did not see).
 
 use std::path::{Path, PathBuf};
 
@@ -21,6 +25,8 @@ const MAX_LINE_POINTS: usize = 600;
 const FIG6_THETA_L: f64 = -25.0;
 /// θL of the single-direction fit shown in Fig. 8 (paper: −45°).
 const FIG8_THETA_L: f64 = -45.0;
+/// θL pair of the two-direction fit whose held-out predictions Fig. 10 shows.
+const FIG10_THETA_L: [f64; 2] = [-20.0, -30.0];
 
 /// Writes the four figures into `dir`, titles prefixed by `name` when it is not empty;
 /// returns their paths.
@@ -59,7 +65,25 @@ pub fn write_figures(
         "mean ΔE_u′v′",
         &box_series(report, &summary, |g| g.delta_e_uv.clone()),
     )?;
-    Ok(vec![fig6, fig7, fig8, fig9])
+    let fig10 = dir.join("fig10_uv_held_out.svg");
+    let mut plot = held_out_uv_plot(report);
+    plot.title = titled(plot.title);
+    xy_svg(&fig10, &plot)?;
+    let fig11 = dir.join("fig11_held_out_delta_e_uv.svg");
+    box_plot_svg(
+        &fig11,
+        &titled("ΔE_u′v′ at the θL the fit did not see".into()),
+        "mean ΔE_u′v′, held out",
+        &box_series(report, &summary, |g| g.held_out_delta_e_uv.clone()),
+    )?;
+    let fig12 = dir.join("fig12_held_out_err_p_r.svg");
+    box_plot_svg(
+        &fig12,
+        &titled("ΔErr_p of the R channel at the θL the fit did not see".into()),
+        "ΔErr_p (R), held out",
+        &box_series(report, &summary, |g| g.held_out_err_p[0].clone()),
+    )?;
+    Ok(vec![fig6, fig7, fig8, fig9, fig10, fig11, fig12])
 }
 
 fn box_series(
@@ -181,6 +205,75 @@ fn uv_plot(report: &StudyReport) -> XyPlot {
         title: match fitted_on {
             Some(t) => format!("CIE 1976 u′v′: reference and models fitted on θL = {t}°"),
             None => "CIE 1976 u′v′: reference (no single-θL fit succeeded)".into(),
+        },
+        x_label: "u′".into(),
+        y_label: "v′".into(),
+        log_x: false,
+        log_y: false,
+        series,
+    }
+}
+
+/// The θL of the report nearest each of `wanted`, if they are distinct.
+fn nearest_theta_l(report: &StudyReport, wanted: &[f64]) -> Option<Vec<f64>> {
+    let mut chosen: Vec<f64> = wanted
+        .iter()
+        .filter_map(|&w| {
+            report
+                .theta_l
+                .iter()
+                .copied()
+                .min_by(|a, b| (a - w).abs().total_cmp(&(b - w).abs()))
+        })
+        .collect();
+    chosen.dedup();
+    (chosen.len() == wanted.len()).then_some(chosen)
+}
+
+fn held_out_uv_plot(report: &StudyReport) -> XyPlot {
+    let uv = |xyz: [f64; 3]| metrics::uv_prime(xyz).map(|[u, v]| (u, v));
+    let pair = nearest_theta_l(report, &FIG10_THETA_L);
+    let held_out: Vec<&EvalPoint> = report
+        .points
+        .iter()
+        .filter(|p| pair.as_ref().is_some_and(|t| !t.contains(&p.theta_l)))
+        .collect();
+    let mut series = vec![XySeries {
+        name: "reference".into(),
+        mark: Mark::Points,
+        segments: vec![thin(
+            held_out.iter().filter_map(|p| uv(p.reference_xyz)),
+            MAX_MARKERS,
+        )],
+    }];
+    for &v in &report.options.variants {
+        let fitted = report.results.iter().find(|r| {
+            r.variant == v
+                && pair.as_ref().is_some_and(|t| {
+                    r.theta_l.len() == 2 && r.theta_l.iter().all(|x| t.contains(x))
+                })
+        });
+        let Some(Ok(scores)) = fitted.map(|r| &r.outcome) else {
+            continue;
+        };
+        series.push(XySeries {
+            name: v.label(),
+            mark: Mark::Points,
+            segments: vec![thin(
+                held_out.iter().filter_map(|p| {
+                    uv(report.camera.xyz(scores.fit.predict(p.theta_i, p.theta_r)))
+                }),
+                MAX_MARKERS,
+            )],
+        });
+    }
+    XyPlot {
+        title: match &pair {
+            Some(t) => format!(
+                "CIE 1976 u′v′ at the θL not fitted: models fitted on θL = {}°, {}°",
+                t[0], t[1]
+            ),
+            None => "CIE 1976 u′v′: fewer than two θL, no held-out prediction".into(),
         },
         x_label: "u′".into(),
         y_label: "v′".into(),

@@ -18,9 +18,10 @@ pub struct ScanPlan {
 }
 
 /// The reflection models fitted at the end of every scan, with their result file names.
-pub const FIT_MODELS: [(&str, &str); 2] = [
+pub const FIT_MODELS: [(&str, &str); 3] = [
     ("cook-torrance", "fit-cook-torrance.json"),
     ("ward", "fit-ward.json"),
+    ("cook-torrance-fresnel", "fit-cook-torrance-fresnel.json"),
 ];
 
 /// One unit of work of a scan. Hardware steps are idempotent on resume: a capture whose
