@@ -142,10 +142,34 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         rgb(&result.ks, 3),
         rgb(&m[..options.roughness.count()], 4)
     );
+    if let Some(ks_90) = &result.ks_90 {
+        println!("  Ks at 90° between light and camera {}", rgb(ks_90, 3));
+    }
     let albedo = result.model.diffuse_albedo(result.kd);
     println!(
         "  ρd {}  (diffuse albedo on one scale: Kd/100 for Cook–Torrance, Kd/(100π) for Ward)",
         rgb(&albedo, 4)
     );
+    if let Some(ci) = &result.ci95 {
+        let interval =
+            |[lo, hi]: [f64; 2], digits: usize| format!("[{lo:.digits$}, {hi:.digits$}]");
+        println!(
+            "  95 % intervals: m {}, Ks {}",
+            ci.m.iter()
+                .map(|&b| interval(b, 5))
+                .collect::<Vec<_>>()
+                .join(" "),
+            ci.ks.map(|b| interval(b, 3)).join(" ")
+        );
+    }
+    if let Some(shift) = result.colour_shift {
+        match (shift.fitted, shift.p_value) {
+            (true, Some(p)) if p < 1e-16 => println!("  colour shift fitted (Wald p < 1e-16)"),
+            (true, Some(p)) => println!("  colour shift fitted (Wald p = {p:.1e})"),
+            (true, None) => println!("  colour shift fitted (noise-free data)"),
+            (false, Some(p)) => println!("  no significant colour shift (p = {p:.2}): Ks_90 = Ks"),
+            (false, None) => println!("  one θL: colour shift not observable, Ks_90 = Ks"),
+        }
+    }
     Ok(())
 }
