@@ -181,6 +181,10 @@ pub struct GroupSummary {
     /// The same on the held-out points (combinations that left some θL out).
     pub held_out_err_p: [Option<BoxStats>; 3],
     pub held_out_delta_e_uv: Option<BoxStats>,
+    /// Half-widths of the fits' 95 % intervals of Ks_G and of G's m, relative to the
+    /// value: the error bars of a group's parameters.
+    pub ks_g_ci95_relative: Option<BoxStats>,
+    pub m_ci95_relative: Option<BoxStats>,
     /// Nelder–Mead fits compared, and those ending above the robust loss.
     pub nelder_mead_compared: usize,
     pub nelder_mead_above: usize,
@@ -399,6 +403,19 @@ fn score_combination(
     })
 }
 
+/// Half the widths of a fit's 95 % intervals of Ks_G and of G's m, relative to their
+/// values; `None` without intervals or at a zero value.
+fn relative_half_widths(scores: &Scores) -> [Option<f64>; 2] {
+    let Some(ci) = scores.fit.ci95.as_ref() else {
+        return [None, None];
+    };
+    let half = |[lo, hi]: [f64; 2], value: f64| (value > 0.0).then(|| (hi - lo) / (2.0 * value));
+    [
+        half(ci.ks[1], scores.fit.ks[1]),
+        half(ci.m[1.min(ci.m.len() - 1)], scores.fit.params().m[1]),
+    ]
+}
+
 /// ΔErr_p and mean ΔE_u′v′ of `estimated` against the reference on the points `keep`
 /// selects.
 fn errors(
@@ -478,6 +495,18 @@ impl StudyReport {
                         &held_out
                             .iter()
                             .filter_map(|e| e.delta_e_uv)
+                            .collect::<Vec<_>>(),
+                    ),
+                    ks_g_ci95_relative: BoxStats::from_values(
+                        &scores
+                            .iter()
+                            .filter_map(|s| relative_half_widths(s)[0])
+                            .collect::<Vec<_>>(),
+                    ),
+                    m_ci95_relative: BoxStats::from_values(
+                        &scores
+                            .iter()
+                            .filter_map(|s| relative_half_widths(s)[1])
                             .collect::<Vec<_>>(),
                     ),
                     nelder_mead_compared: above.len(),

@@ -126,7 +126,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         report.seconds
     );
     println!(
-        "variant  n_θL  median ΔErr_p(G)  median ΔE_u′v′  held out: median ΔErr_p(R, G, B)  median ΔE_u′v′  NM above robust"
+        "variant  n_θL  median ΔErr_p(G)  median ΔE_u′v′  held out: median ΔErr_p(R, G, B)  median ΔE_u′v′  \
+         95 % half-width (median, relative): Ks_G  m  NM above robust"
     );
     for g in report.summary() {
         let median = |b: &Option<study::boxplot::BoxStats>| {
@@ -134,7 +135,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 .map_or("-".to_string(), |b| format!("{:.4}", b.median))
         };
         println!(
-            "{:<33} {:>2}  {:>8}  {:>8}  {:>8} {:>8} {:>8}  {:>8}  {}/{}{}",
+            "{:<33} {:>2}  {:>8}  {:>8}  {:>8} {:>8} {:>8}  {:>8}  {:>8} {:>8}  {}/{}{}",
             g.variant.label(),
             g.size,
             median(&g.err_p[1]),
@@ -143,6 +144,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             median(&g.held_out_err_p[1]),
             median(&g.held_out_err_p[2]),
             median(&g.held_out_delta_e_uv),
+            median(&g.ks_g_ci95_relative),
+            median(&g.m_ci95_relative),
             g.nelder_mead_above,
             g.nelder_mead_compared,
             if g.failed > 0 {

@@ -4,8 +4,9 @@
 //!   uncertainty, its scores on all points and on the held-out ones, and the Nelder–Mead
 //!   loss; θL joined by `;`; empty cells where undefined.
 //! - `boxplots.csv`: per variant, number of θL and metric (`err_p_r|g|b`,
-//!   `delta_e_uv`, and the same on held-out points, `held_out_…`): count, min,
-//!   quartiles, max, whiskers, outliers (`;`-joined).
+//!   `delta_e_uv`, and the same on held-out points, `held_out_…`; the relative half-widths
+//!   of the 95 % intervals of Ks_G and m, `ks_g_ci95_relative`, `m_ci95_relative`): count,
+//!   min, quartiles, max, whiskers, outliers (`;`-joined).
 //! - `local_minima.csv`: per variant and number of θL, Nelder–Mead fits compared and how
 //!   many ended above the robust loss.
 //! - `study.json`: totals, timing, and per variant the medians of the held-out errors over
@@ -155,7 +156,7 @@ fn boxplots_csv(report: &StudyReport) -> String {
         "model,roughness,n_theta_l,metric,count,min,q1,median,q3,max,whisker_low,whisker_high,outliers\n",
     );
     for g in report.summary() {
-        let metrics: [(&str, &Option<BoxStats>); 8] = [
+        let metrics: [(&str, &Option<BoxStats>); 10] = [
             ("err_p_r", &g.err_p[0]),
             ("err_p_g", &g.err_p[1]),
             ("err_p_b", &g.err_p[2]),
@@ -164,6 +165,8 @@ fn boxplots_csv(report: &StudyReport) -> String {
             ("held_out_err_p_g", &g.held_out_err_p[1]),
             ("held_out_err_p_b", &g.held_out_err_p[2]),
             ("held_out_delta_e_uv", &g.held_out_delta_e_uv),
+            ("ks_g_ci95_relative", &g.ks_g_ci95_relative),
+            ("m_ci95_relative", &g.m_ci95_relative),
         ];
         for (name, stats) in metrics {
             let Some(b) = stats else { continue };
@@ -230,6 +233,8 @@ fn summary_json(report: &StudyReport) -> String {
                 "roughness": v.roughness,
                 "median_err_p_g_by_n_theta_l": medians(&|g| g.err_p[1].as_ref().map(|b| b.median)),
                 "median_delta_e_uv_by_n_theta_l": medians(&|g| g.delta_e_uv.as_ref().map(|b| b.median)),
+                "median_ks_g_ci95_relative_by_n_theta_l": medians(&|g| g.ks_g_ci95_relative.as_ref().map(|b| b.median)),
+                "median_m_ci95_relative_by_n_theta_l": medians(&|g| g.m_ci95_relative.as_ref().map(|b| b.median)),
                 "fitted": groups.iter().map(|g| g.fitted).sum::<usize>(),
                 "failed": groups.iter().map(|g| g.failed).sum::<usize>(),
                 "nelder_mead_compared": groups.iter().map(|g| g.nelder_mead_compared).sum::<usize>(),
