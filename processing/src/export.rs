@@ -65,11 +65,13 @@ fn check_white(white: [f64; 3]) -> Result<(), ExportError> {
 /// of camera RGB `white`.
 pub fn mitsuba_bsdf(fit: &FitResult, white: [f64; 3]) -> Result<MitsubaBsdf, ExportError> {
     check_white(white)?;
-    let (diffuse_scale, specular_scale) = match fit.model {
-        Model::CookTorrance => (1.0, 4.0 / PI),
-        Model::Ward => (1.0 / PI, 1.0 / PI),
+    let specular_scale = match fit.model {
+        Model::CookTorrance => 4.0 / PI,
+        Model::Ward => 1.0 / PI,
         model @ Model::CookTorranceFresnel => return Err(ExportError::NoMitsubaForm { model }),
     };
+    // The diffuse radiance factor Kd·a (a = `Model::diffuse_weight`) over the white's.
+    let diffuse_scale = fit.model.diffuse_weight();
     // The blend of weight ½ halves each lobe.
     let diffuse: [f64; 3] = std::array::from_fn(|c| 2.0 * diffuse_scale * fit.kd[c] / white[c]);
     let specular: [f64; 3] = std::array::from_fn(|c| 2.0 * specular_scale * fit.ks[c] / white[c]);

@@ -24,6 +24,7 @@ fn fit_of(model: Model, kd: [f64; 3], ks: [f64; 3], m: f64) -> FitResult {
         ks,
         ks_90: None,
         m: FittedRoughness::Shared([m]),
+        rho_d: Some(model.diffuse_albedo(kd)),
         loss: 0.0,
         err_p: [0.0; 3],
         method: FitMethod::Robust,
