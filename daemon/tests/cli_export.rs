@@ -12,16 +12,8 @@ use gonio_processing::color::CameraModel;
 use gonio_processing::fit::FitResult;
 use gonio_processing::samples::{write_csv, Sample};
 
-fn gonio(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_gonio"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn text(bytes: &[u8]) -> String {
-    String::from_utf8_lossy(bytes).into_owned()
-}
+mod common;
+use common::{gonio, text};
 
 /// A gold-like Cook–Torrance scan at two θL, fitted with `model` into `dir/fit.json`.
 fn fitted(dir: &Path, model: &str) -> FitResult {

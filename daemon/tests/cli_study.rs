@@ -1,22 +1,13 @@
 //! `gonio study` and `gonio tradeoff` end to end: the built binary on small inputs.
 
 use std::path::Path;
-use std::process::{Command, Output};
 
 use gonio_processing::brdf::{Model, Params};
 use gonio_processing::color::CameraModel;
 use gonio_processing::samples::{write_csv, Sample};
 
-fn gonio(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_gonio"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn text(bytes: &[u8]) -> String {
-    String::from_utf8_lossy(bytes).into_owned()
-}
+mod common;
+use common::{gonio, text};
 
 /// A neutral Cook–Torrance material (coefficients ∝ the white's camera RGB), so a flat
 /// spectral reference reproduces it.
@@ -86,7 +77,7 @@ fn study_writes_tables_and_figures_with_near_zero_error_for_the_true_model() {
     assert!(result.status.success(), "{}", text(&result.stderr));
     let stdout = text(&result.stdout);
     assert!(
-        stdout.contains("2 θL, 3 combinations × 2 variants = 6 fits"),
+        stdout.contains("2 θL, 3 combinations × 3 variants = 9 fits"),
         "{stdout}"
     );
     for name in [
@@ -102,22 +93,28 @@ fn study_writes_tables_and_figures_with_near_zero_error_for_the_true_model() {
         "fig7_err_p_g",
         "fig8_uv_chart",
         "fig9_delta_e_uv",
+        "fig10_uv_held_out",
+        "fig11_held_out_delta_e_uv",
+        "fig12_held_out_err_p_r",
     ] {
         let svg = std::fs::read_to_string(out.join(format!("{name}.svg"))).unwrap();
         assert!(svg.starts_with("<svg"), "{name}");
     }
-    // The generating model's ΔErr_p (G) is near zero for every combination.
+    // The generating model's ΔErr_p (G) is near zero for every combination, and so is
+    // Cook–Torrance–Fresnel's, which holds it.
     let table = std::fs::read_to_string(out.join("combinations.csv")).unwrap();
     let header: Vec<&str> = table.lines().next().unwrap().split(',').collect();
     let g = header.iter().position(|h| *h == "err_p_g").unwrap();
-    let ct: Vec<f64> = table
-        .lines()
-        .skip(1)
-        .filter(|l| l.starts_with("cook-torrance,"))
-        .map(|l| l.split(',').nth(g).unwrap().parse().unwrap())
-        .collect();
-    assert_eq!(ct.len(), 3);
-    assert!(ct.iter().all(|&e| e < 5e-3), "{ct:?}");
+    for model in ["cook-torrance,", "cook-torrance-fresnel,"] {
+        let err: Vec<f64> = table
+            .lines()
+            .skip(1)
+            .filter(|l| l.starts_with(model))
+            .map(|l| l.split(',').nth(g).unwrap().parse().unwrap())
+            .collect();
+        assert_eq!(err.len(), 3, "{model}");
+        assert!(err.iter().all(|&e| e < 5e-3), "{model} {err:?}");
+    }
 }
 
 #[test]
