@@ -875,21 +875,17 @@ impl Scene {
                 film_index,
                 medium_index,
                 substrate_index,
-            } => {
-                put("roughness", "shared".into());
-                put("kd", serde_json::json!(kd));
-                put("m", serde_json::json!([m]));
-                put("ks_scale", serde_json::json!(ks));
-                put(
-                    "film",
-                    serde_json::json!({
-                        "thickness_nm": film_thickness_nm,
-                        "film_index": film_index,
-                        "medium_index": medium_index,
-                        "substrate_index": substrate_index,
-                    }),
-                );
-            }
+            } => spectral_lobe(
+                &mut put,
+                (kd, *ks, *m),
+                "film",
+                serde_json::json!({
+                    "thickness_nm": film_thickness_nm,
+                    "film_index": film_index,
+                    "medium_index": medium_index,
+                    "substrate_index": substrate_index,
+                }),
+            ),
             Sample::BraggFlakes {
                 kd,
                 ks,
@@ -897,20 +893,16 @@ impl Scene {
                 wavelength_nm,
                 effective_index,
                 band_width_nm,
-            } => {
-                put("roughness", "shared".into());
-                put("kd", serde_json::json!(kd));
-                put("m", serde_json::json!([m]));
-                put("ks_scale", serde_json::json!(ks));
-                put(
-                    "flakes",
-                    serde_json::json!({
-                        "bragg_wavelength_nm": wavelength_nm,
-                        "effective_index": effective_index,
-                        "band_width_nm": band_width_nm,
-                    }),
-                );
-            }
+            } => spectral_lobe(
+                &mut put,
+                (kd, *ks, *m),
+                "flakes",
+                serde_json::json!({
+                    "bragg_wavelength_nm": wavelength_nm,
+                    "effective_index": effective_index,
+                    "band_width_nm": band_width_nm,
+                }),
+            ),
             Sample::Measured { path } => put("table", path.display().to_string().into()),
         }
         if let Some(retro) = &self.effects.retro_reflection {
@@ -921,4 +913,19 @@ impl Scene {
         }
         truth
     }
+}
+
+/// `truth.json`'s keys of a lobe whose colour a spectral mechanism sets: Kd, one m, the
+/// scale of the specular term, and the mechanism's parameters under `key`.
+fn spectral_lobe(
+    put: &mut impl FnMut(&str, serde_json::Value),
+    (kd, ks_scale, m): (&[f64; 3], f64, f64),
+    key: &str,
+    mechanism: serde_json::Value,
+) {
+    put("roughness", "shared".into());
+    put("kd", serde_json::json!(kd));
+    put("m", serde_json::json!([m]));
+    put("ks_scale", serde_json::json!(ks_scale));
+    put(key, mechanism);
 }

@@ -189,6 +189,25 @@ impl Film {
     }
 }
 
+/// What sets the colour of a [`Material::SpectralLobe`]'s facets.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Reflector {
+    /// A thin film on the facets (thin-film interference).
+    Film(Film),
+    /// Flakes of a periodic multilayer (first-order Bragg reflection).
+    Bragg(BraggBand),
+}
+
+impl Reflector {
+    /// Reflectance spectrum at facet incidence cosine `cos0`.
+    pub fn spectrum(&self, cos0: f64) -> Spectrum {
+        match self {
+            Reflector::Film(film) => film.spectrum(cos0),
+            Reflector::Bragg(band) => band.spectrum(cos0),
+        }
+    }
+}
+
 /// A measured table on a regular (θi, θr) grid, spectral and as camera RGB.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Table {
@@ -326,27 +345,18 @@ pub enum Material {
         ks: [f64; 3],
         m: [f64; 3],
     },
-    /// The film's spectral reflectance enters camera RGB linearly, so it is integrated
-    /// once into `table`: ks·camera-RGB of R_film(λ, l·h) at l·h = k/(steps), linear
+    /// A Cook–Torrance lobe of slope roughness `m` whose facets reflect the spectrum
+    /// R(λ, l·h) of `reflector`, over a diffuse base:
+    /// ks·R(λ, l·h)·D·G/(π (n·l)(n·v)) + Kd(λ). R enters camera RGB linearly, so it is
+    /// integrated once into `table`: ks·camera-RGB of R at l·h = k/(steps), linear
     /// interpolation in between (below 1e-4 relative error for the built-in 156 nm film,
     /// checked by the tests; thicker films oscillate faster in l·h).
-    ThinFilm {
+    SpectralLobe {
         kd: [f64; 3],
         kd_spectrum: Box<Spectrum>,
         ks: f64,
         m: f64,
-        film: Film,
-        table: Vec<[f64; 3]>,
-    },
-    /// Bragg-reflecting flakes (see [`BraggBand`]) of slope roughness `m` over a diffuse
-    /// base: ks·R(λ, l·h)·D·G/(π (n·l)(n·v)) + Kd(λ); `table` holds ks·camera RGB of R as
-    /// the thin film's does.
-    BraggFlakes {
-        kd: [f64; 3],
-        kd_spectrum: Box<Spectrum>,
-        ks: f64,
-        m: f64,
-        band: BraggBand,
+        reflector: Reflector,
         table: Vec<[f64; 3]>,
     },
     Measured(Table),
@@ -382,23 +392,16 @@ impl Material {
                 film_index,
                 medium_index,
                 substrate_index,
-            } => {
-                let film = Film {
+            } => Material::spectral_lobe(
+                domain,
+                (*kd, *ks, *m),
+                Reflector::Film(Film {
                     thickness_nm: *film_thickness_nm,
                     index: *film_index,
                     medium_index: *medium_index,
                     substrate_index: *substrate_index,
-                };
-                let table = incidence_table(domain, *ks, |c| film.spectrum(c));
-                Material::ThinFilm {
-                    kd: *kd,
-                    kd_spectrum: Box::new(domain.spectrum_from_rgb(*kd)),
-                    ks: *ks,
-                    m: *m,
-                    film,
-                    table,
-                }
-            }
+                }),
+            ),
             Sample::BraggFlakes {
                 kd,
                 ks,
@@ -406,23 +409,34 @@ impl Material {
                 wavelength_nm,
                 effective_index,
                 band_width_nm,
-            } => {
-                let band = BraggBand {
+            } => Material::spectral_lobe(
+                domain,
+                (*kd, *ks, *m),
+                Reflector::Bragg(BraggBand {
                     wavelength_nm: *wavelength_nm,
                     effective_index: *effective_index,
                     width_nm: *band_width_nm,
-                };
-                Material::BraggFlakes {
-                    kd: *kd,
-                    kd_spectrum: Box::new(domain.spectrum_from_rgb(*kd)),
-                    ks: *ks,
-                    m: *m,
-                    table: incidence_table(domain, *ks, |c| band.spectrum(c)),
-                    band,
-                }
-            }
+                }),
+            ),
             Sample::Measured { path } => Material::Measured(Table::read(path, domain)?),
         })
+    }
+
+    /// A [`Material::SpectralLobe`] of diffuse camera RGB `kd`, scale `ks` and
+    /// roughness `m`, its camera-RGB table integrated once.
+    fn spectral_lobe(
+        domain: &CameraDomain,
+        (kd, ks, m): ([f64; 3], f64, f64),
+        reflector: Reflector,
+    ) -> Self {
+        Material::SpectralLobe {
+            kd,
+            kd_spectrum: Box::new(domain.spectrum_from_rgb(kd)),
+            ks,
+            m,
+            table: incidence_table(domain, ks, |c| reflector.spectrum(c)),
+            reflector,
+        }
     }
 
     /// β per camera channel at `g`.
@@ -435,12 +449,7 @@ impl Material {
             Material::Ward { kd, ks, m } => {
                 std::array::from_fn(|c| kd[c] / std::f64::consts::PI + ks[c] * ward_lobe(g, m[c]))
             }
-            Material::ThinFilm { kd, m, table, .. } => {
-                let lobe = cook_torrance_lobe(g, *m);
-                let colour = table_at(table, g.v_h);
-                std::array::from_fn(|c| lobe * colour[c] + kd[c])
-            }
-            Material::BraggFlakes { kd, m, table, .. } => {
+            Material::SpectralLobe { kd, m, table, .. } => {
                 let lobe = cook_torrance_lobe(g, *m);
                 let colour = table_at(table, g.v_h);
                 std::array::from_fn(|c| lobe * colour[c] + kd[c])
@@ -454,26 +463,15 @@ impl Material {
     /// camera RGB equals [`Material::beta`].
     pub fn beta_spectrum(&self, g: &Geom, domain: &CameraDomain) -> Spectrum {
         match self {
-            Material::ThinFilm {
+            Material::SpectralLobe {
                 kd_spectrum,
                 ks,
                 m,
-                film,
+                reflector,
                 ..
             } => {
                 let lobe = ks * cook_torrance_lobe(g, *m);
-                let film = film.spectrum(g.v_h);
-                std::array::from_fn(|i| lobe * film[i] + kd_spectrum[i])
-            }
-            Material::BraggFlakes {
-                kd_spectrum,
-                ks,
-                m,
-                band,
-                ..
-            } => {
-                let lobe = ks * cook_torrance_lobe(g, *m);
-                let reflectance = band.spectrum(g.v_h);
+                let reflectance = reflector.spectrum(g.v_h);
                 std::array::from_fn(|i| lobe * reflectance[i] + kd_spectrum[i])
             }
             Material::Measured(table) => table.spectrum_at(g.theta_i_deg, g.theta_r_deg),
