@@ -129,11 +129,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "variant  n_θL  median ΔErr_p(G)  median ΔE_u′v′  held out: median ΔErr_p(R, G, B)  median ΔE_u′v′  \
          95 % half-width (median, relative): Ks_G  m  NM above robust"
     );
+    let median = |b: &Option<study::boxplot::BoxStats>| {
+        b.as_ref()
+            .map_or("-".to_string(), |b| format!("{:.4}", b.median))
+    };
     for g in report.summary() {
-        let median = |b: &Option<study::boxplot::BoxStats>| {
-            b.as_ref()
-                .map_or("-".to_string(), |b| format!("{:.4}", b.median))
-        };
         println!(
             "{:<33} {:>2}  {:>8}  {:>8}  {:>8} {:>8} {:>8}  {:>8}  {:>8} {:>8}  {}/{}{}",
             g.variant.label(),
@@ -159,10 +159,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "held out, every combination that leaves a θL out: median ΔErr_p (R, G, B), median ΔE_u′v′"
     );
     for h in report.held_out_summary() {
-        let median = |b: &Option<study::boxplot::BoxStats>| {
-            b.as_ref()
-                .map_or("-".to_string(), |b| format!("{:.4}", b.median))
-        };
         println!(
             "{:<33} {:>2} fits  {:>8} {:>8} {:>8}  {:>8}",
             h.variant.label(),
