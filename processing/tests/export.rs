@@ -192,8 +192,8 @@ fn table_holds_the_predictions_on_the_grid() {
     assert_eq!((rows[34].theta_i, rows[34].theta_r), (-75.0, -75.0));
     for r in &rows {
         assert_eq!(r.beta, fit.predict(r.theta_i, r.theta_r));
-        for c in 0..3 {
-            assert!((r.brdf[c] - r.beta[c] / (PI * white[c])).abs() <= 1e-15 * r.brdf[c].max(1.0));
+        for ((&brdf, &beta), &w) in r.brdf.iter().zip(&r.beta).zip(&white) {
+            assert!((brdf - beta / (PI * w)).abs() <= 1e-15 * brdf.max(1.0));
         }
     }
     let csv = table_csv(&rows);

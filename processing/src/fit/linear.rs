@@ -113,10 +113,11 @@ fn solve_block(g: &[[f64; 3]; 3], r: &[f64; 3], index: &[usize]) -> Option<[f64;
             return None;
         }
         a.swap(col, pivot);
-        for row in col + 1..n {
-            let f = a[row][col] / a[col][col];
-            for k in col..=n {
-                a[row][k] -= f * a[col][k];
+        let pivot_row = a[col];
+        for row in a.iter_mut().take(n).skip(col + 1) {
+            let f = row[col] / pivot_row[col];
+            for (v, p) in row[col..=n].iter_mut().zip(&pivot_row[col..=n]) {
+                *v -= f * p;
             }
         }
     }
@@ -297,11 +298,8 @@ fn fresnel_weighted_nnls(
                 }
             }
         }
-        for j in 0..3 {
-            for k in 0..j {
-                g[j][k] = g[k][j];
-            }
-        }
+        let upper = *g;
+        *g = std::array::from_fn(|j| std::array::from_fn(|k| upper[j.min(k)][j.max(k)]));
     }
     let z: [[f64; 3]; 3] = std::array::from_fn(|c| nnls3(&gram[c], &rhs[c]));
     std::array::from_fn(|k| std::array::from_fn(|c| z[c][k]))

@@ -159,7 +159,7 @@ impl Covariance {
 
 /// P(X > x) for X ~ χ² with 3 degrees of freedom: erfc(√(x/2)) + √(2x/π)·e^(−x/2).
 pub fn chi2_3_survival(x: f64) -> f64 {
-    if !(x > 0.0) {
+    if x.is_nan() || x <= 0.0 {
         return 1.0;
     }
     let p = erfc((x / 2.0).sqrt()) + (2.0 * x / std::f64::consts::PI).sqrt() * (-x / 2.0).exp();
@@ -273,7 +273,7 @@ fn inverse_if_identifiable(a: &DMatrix<f64>) -> Option<DMatrix<f64>> {
     if eigen
         .eigenvalues
         .iter()
-        .any(|&l| !(l > MIN_RELATIVE_EIGENVALUE))
+        .any(|&l| l.is_nan() || l <= MIN_RELATIVE_EIGENVALUE)
     {
         return None;
     }
