@@ -1,6 +1,7 @@
 //! `gonio study` and `gonio tradeoff` end to end: the built binary on small inputs.
 
 use std::path::Path;
+use std::process::Output;
 
 use gonio_processing::brdf::{Model, Params};
 use gonio_processing::color::CameraModel;
