@@ -59,7 +59,7 @@ RUSTUP_HOME="${RUSTUP_HOME:-$HOME/.rustup}" CARGO_HOME="${CARGO_HOME:-$HOME/.car
 # ---- Mitsuba 3 loads and evaluates `gonio export --format mitsuba` output ----
 # The PyPI wheel mitsuba==3.9.1 (with drjit) runs its scalar variants on the CPU; it is
 # installed beside the other downloads, only for this test.
-python3 -m pip install --quiet --disable-pip-version-check --target "$work/mitsuba" \
-    mitsuba==3.9.1 </dev/null
+python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore \
+    --target "$work/mitsuba" mitsuba==3.9.1 </dev/null
 GONIO_MITSUBA_PYTHONPATH="$work/mitsuba" \
     cargo test -p gonio-daemon --test cli_export --locked -- --ignored
