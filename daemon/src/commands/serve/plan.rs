@@ -129,7 +129,7 @@ mod tests {
             auto_bracket: false,
         };
         let steps = plan.steps();
-        assert_eq!(steps.len(), 1 + 2 * (1 + 3 + 1) + 1 + 2);
+        assert_eq!(steps.len(), 1 + 2 * (1 + 3 + 1) + 1 + 3);
         assert_eq!(steps[0], Step::Home);
         assert_eq!(steps[1], Step::Move { theta_l: -20.0 });
         assert_eq!(
@@ -143,6 +143,7 @@ mod tests {
         assert_eq!(steps[5], Step::Hdr { theta_l: -20.0 });
         assert_eq!(steps[11], Step::Extract);
         assert!(matches!(&steps[13], Step::Fit { model } if model == "ward"));
+        assert!(matches!(&steps[14], Step::Fit { model } if model == "cook-torrance-fresnel"));
     }
 
     #[test]
@@ -163,7 +164,7 @@ mod tests {
                 Step::Hdr { theta_l: -20.0 }
             ]
         );
-        assert_eq!(steps.len(), 1 + 2 * 3 + 3);
+        assert_eq!(steps.len(), 1 + 2 * 3 + 1 + 3);
     }
 
     #[test]

@@ -785,7 +785,7 @@ mod tests {
         let scan = store.next_runnable(now_unix()).unwrap().unwrap();
         assert_eq!(
             (scan.id, scan.state, scan.done, scan.total),
-            (id, ScanState::Queued, 0, 8)
+            (id, ScanState::Queued, 0, 9)
         );
         assert!(store
             .transition(id, &[ScanState::Queued], ScanState::Running, None)
@@ -807,13 +807,13 @@ mod tests {
             )
             .unwrap();
         let steps = store.steps(id).unwrap();
-        assert_eq!((steps.len(), &steps[1].step), (9, &extra));
+        assert_eq!((steps.len(), &steps[1].step), (10, &extra));
         for step in &steps[1..steps.len() - 1] {
             store.step_started(id, step.index).unwrap();
             store.step_done(id, step.index, &Value::Null, &[]).unwrap();
         }
         assert_eq!(store.scan(id).unwrap().unwrap().state, ScanState::Running);
-        let last = steps[8].index;
+        let last = steps[9].index;
         store.step_started(id, last).unwrap();
         drop(store);
         // Reopened after a crash: the started step is not done and the scan resumes.
@@ -821,14 +821,14 @@ mod tests {
         let scan = store.next_runnable(now_unix()).unwrap().unwrap();
         assert_eq!(
             (scan.id, scan.state, scan.done),
-            (id, ScanState::Running, 8)
+            (id, ScanState::Running, 9)
         );
-        assert_eq!(store.steps(id).unwrap()[8].state, StepState::Started);
+        assert_eq!(store.steps(id).unwrap()[9].state, StepState::Started);
         store
             .step_done(id, last, &serde_json::json!({"ok": true}), &[])
             .unwrap();
         let scan = store.scan(id).unwrap().unwrap();
-        assert_eq!((scan.state, scan.done), (ScanState::Done, 9));
+        assert_eq!((scan.state, scan.done), (ScanState::Done, 10));
         assert!(scan.finished.is_some());
         assert!(store.next_runnable(now_unix()).unwrap().is_none());
         std::fs::remove_dir_all(dir).unwrap();
