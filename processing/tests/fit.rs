@@ -457,18 +457,13 @@ fn bad_input_is_reported() {
     ));
 }
 
-#[test]
-fn dropped_channels_are_left_out_of_the_fit() {
-    // Clipped peaks: where the noise-free G exceeds a ceiling it is dropped, and the
-    // value left in its place is garbage. The fit must recover the truth from the rest;
-    // fitting the garbage instead is far off.
-    let truth = Params::shared([9.0, 6.5, 2.0], [25.0, 20.0, 7.0], 0.07);
-    let clean = synthetic(Model::CookTorrance, &truth, &ALL_THETA_L, 0.0);
-    let ceiling = 60.0;
-    let mut garbage = clean.clone();
-    let mut dropped = clean.clone();
+/// Clipped peaks: each value of `clean` above `ceiling` as a clipped reading (the ceiling)
+/// and as a dropped one (garbage in its place, marked dropped), with their count.
+fn clip_and_drop(clean: &[Sample], ceiling: f64) -> (Vec<Sample>, Vec<Sample>, usize) {
+    let mut clipped = clean.to_vec();
+    let mut dropped = clean.to_vec();
     let mut count = 0;
-    for (g, d) in garbage.iter_mut().zip(dropped.iter_mut()) {
+    for (g, d) in clipped.iter_mut().zip(dropped.iter_mut()) {
         for c in 0..3 {
             if g.rgb[c] > ceiling {
                 g.rgb[c] = ceiling;
@@ -478,6 +473,17 @@ fn dropped_channels_are_left_out_of_the_fit() {
             }
         }
     }
+    (clipped, dropped, count)
+}
+
+#[test]
+fn dropped_channels_are_left_out_of_the_fit() {
+    // Where the noise-free value exceeds a ceiling it is dropped, and the value left in
+    // its place is garbage. The fit must recover the truth from the rest; fitting the
+    // clipped values instead is far off.
+    let truth = Params::shared([9.0, 6.5, 2.0], [25.0, 20.0, 7.0], 0.07);
+    let clean = synthetic(Model::CookTorrance, &truth, &ALL_THETA_L, 0.0);
+    let (garbage, dropped, count) = clip_and_drop(&clean, 60.0);
     assert!(count > 20, "{count} values above the ceiling");
     for method in [FitMethod::Robust, FitMethod::NelderMead] {
         let o = options(Model::CookTorrance, Roughness::Shared, method);
@@ -492,6 +498,37 @@ fn dropped_channels_are_left_out_of_the_fit() {
         &options(Model::CookTorrance, Roughness::Shared, FitMethod::Robust),
     )
     .unwrap();
+    assert!(
+        (clipped.ks[1] - truth.ks[1]).abs() > 0.05 * truth.ks[1],
+        "{clipped:?}"
+    );
+}
+
+#[test]
+fn dropped_channels_are_left_out_of_the_fresnel_fit() {
+    // The same for Cook–Torrance–Fresnel's three-coefficient solve and colour-shift test.
+    let (truth, ks_90) = fresnel_truth();
+    let model = Model::CookTorranceFresnel;
+    let o = options(model, Roughness::Shared, FitMethod::Robust);
+    let clean = synthetic_fresnel(model, &truth, &ks_90, &ALL_THETA_L, 0.0);
+    let (garbage, dropped, count) = clip_and_drop(&clean, 150.0);
+    assert!(count > 20, "{count} values above the ceiling");
+    let fitted = fit(&dropped, &o).unwrap();
+    assert!(fitted.colour_shift.unwrap().fitted, "{fitted:?}");
+    assert_recovers(&fitted, &truth, 1e-4, 0.0, true);
+    for c in 0..3 {
+        assert_close("ks_90", fitted.ks_90.unwrap()[c], ks_90[c], 1e-4, 0.0);
+    }
+    assert!(fitted.err_p.iter().all(|e| e.is_finite()), "{fitted:?}");
+    // Its uncertainty too: with 1 % noise, Ks stays known to a few per cent without the
+    // peak values (their garbage, 1e9, would make it unbounded).
+    let noisy = synthetic_fresnel(model, &truth, &ks_90, &ALL_THETA_L, 0.01);
+    let (_, noisy_dropped, _) = clip_and_drop(&noisy, 150.0);
+    let se = fit(&noisy_dropped, &o).unwrap().stderr.unwrap();
+    for c in 0..3 {
+        assert!(se.ks[c] > 0.0 && se.ks[c] < 0.05 * truth.ks[c], "{se:?}");
+    }
+    let clipped = fit(&garbage, &o).unwrap();
     assert!(
         (clipped.ks[1] - truth.ks[1]).abs() > 0.05 * truth.ks[1],
         "{clipped:?}"

@@ -200,8 +200,11 @@ fn fresnel_loss_of(
     let shift: [f64; 3] = std::array::from_fn(|c| kg[c] - ks[c]);
     let mut loss = 0.0;
     for p in 0..n {
-        let r: [f64; 3] =
-            std::array::from_fn(|c| y[p][c] - kd[c] * a[p] - (ks[c] + x[p] * shift[c]) * s[c][p]);
+        // Dropped values (y = 0, keep = 0) leave no residual.
+        let keep = data.keep.as_ref().map_or([1.0; 3], |keep| keep[p]);
+        let r: [f64; 3] = std::array::from_fn(|c| {
+            y[p][c] - keep[c] * (kd[c] * a[p] + (ks[c] + x[p] * shift[c]) * s[c][p])
+        });
         let norm = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
         out[p] = norm;
         loss += norm;
@@ -289,9 +292,11 @@ fn fresnel_weighted_nnls(
         let s = &spec[c][..n];
         let (g, r) = (&mut gram[c], &mut rhs[c]);
         for p in 0..n {
+            // Each channel's sums over its measured values only.
+            let wk = w[p] * data.keep.as_ref().map_or(1.0, |keep| keep[p][c]);
             let b = [a[p], s[p] * (1.0 - x[p]), s[p] * x[p]];
             for j in 0..3 {
-                let wb = w[p] * b[j];
+                let wb = wk * b[j];
                 r[j] += wb * y[p][c];
                 for k in j..3 {
                     g[j][k] += wb * b[k];

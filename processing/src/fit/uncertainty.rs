@@ -9,7 +9,8 @@
 //! with the small-sample factor of HC1). Both come from the residuals at the optimum, so
 //! the noise level, its differences between channels and its growth with β need no model.
 //! Points are taken as independent (pixel noise); correlated residuals (model misfit,
-//! demosaicing) make the intervals too narrow.
+//! demosaicing) make the intervals too narrow. A dropped channel of a point (`Data::keep`)
+//! has no residual and no row in J_p.
 //!
 //! The colour-shift test uses the HC3 form instead, B = Σ_p g_p g_pᵀ/(1 − h_p)² with the
 //! leverage h_p = tr(M_p J_p A⁻¹ J_pᵀ) (MacKinnon and White 1985): the shift is decided by
@@ -198,27 +199,30 @@ pub(crate) fn covariance(
     if n <= p {
         return None;
     }
-    let norms: Vec<f64> = data
-        .bases
+    // Dropped values (y = 0, estimate 0) leave no residual.
+    let estimates = data.estimates(params, ks_90);
+    let norms: Vec<f64> = estimates
         .iter()
         .zip(&data.y)
-        .map(|(b, y)| crate::metrics::point_loss(y, &b.evaluate_fresnel(params, ks_90)))
+        .map(|(estimate, y)| crate::metrics::point_loss(y, estimate))
         .collect();
     let mut sorted = norms.clone();
     sorted.sort_by(f64::total_cmp);
     let floor = 1e-6 * sorted[n / 2] + data.residual_floor;
 
-    // Per point: its Jacobian J_p, its curvature M_p and its gradient g_p.
+    // Per point: its Jacobian J_p (no row for a dropped channel), its curvature M_p and
+    // its gradient g_p.
     let terms: Vec<(DMatrix<f64>, DMatrix<f64>, DVector<f64>)> = data
         .bases
         .iter()
-        .zip(&data.y)
+        .enumerate()
+        .zip(data.y.iter().zip(&estimates))
         .zip(&norms)
-        .map(|((basis, y), &norm)| {
+        .map(|(((point, basis), (y, predicted)), &norm)| {
             let mut jacobian = DMatrix::<f64>::zeros(3, p);
             let x = basis.shift_weight();
-            let predicted = basis.evaluate_fresnel(params, ks_90);
-            for c in 0..3 {
+            let keep = data.keep.as_ref().map_or([1.0; 3], |keep| keep[point]);
+            for c in (0..3).filter(|&c| keep[c] > 0.0) {
                 let (s, slope) = basis.specular_and_slope(params.m[c]);
                 let colour = params.ks[c] + x * (ks_90[c] - params.ks[c]);
                 jacobian[(c, layout.kd(c))] = basis.diffuse;
