@@ -516,8 +516,8 @@ fn dropped_channels_are_left_out_of_the_fresnel_fit() {
     let fitted = fit(&dropped, &o).unwrap();
     assert!(fitted.colour_shift.unwrap().fitted, "{fitted:?}");
     assert_recovers(&fitted, &truth, 1e-4, 0.0, true);
-    for c in 0..3 {
-        assert_close("ks_90", fitted.ks_90.unwrap()[c], ks_90[c], 1e-4, 0.0);
+    for (&got, &want) in fitted.ks_90.unwrap().iter().zip(&ks_90) {
+        assert_close("ks_90", got, want, 1e-4, 0.0);
     }
     assert!(fitted.err_p.iter().all(|e| e.is_finite()), "{fitted:?}");
     // Its uncertainty too: with 1 % noise, Ks stays known to a few per cent without the
