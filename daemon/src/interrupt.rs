@@ -5,6 +5,7 @@
 
 use std::path::{Path, PathBuf};
 use std::sync::{Mutex, PoisonError};
+use std::time::Duration;
 
 /// Temporary directories to remove if the command is interrupted.
 static TEMPORARY: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
@@ -57,10 +58,25 @@ pub async fn wait_for_signal() -> &'static str {
     "Ctrl-C (SIGINT)"
 }
 
+/// Removal attempts per directory: the command's threads may still be writing into
+/// it (and re-creating it) until the process exits.
+const REMOVE_ATTEMPTS: usize = 10;
+/// Pause between removal attempts.
+const REMOVE_PAUSE: Duration = Duration::from_millis(20);
+
+/// Removes every registered directory, holding the registry so none is added meanwhile;
+/// returns how many are gone.
 fn remove_registered() -> usize {
-    let dirs = std::mem::take(&mut *TEMPORARY.lock().unwrap_or_else(PoisonError::into_inner));
-    dirs.iter()
-        .filter(|dir| std::fs::remove_dir_all(dir).is_ok())
+    let registry = TEMPORARY.lock().unwrap_or_else(PoisonError::into_inner);
+    registry
+        .iter()
+        .filter(|dir| {
+            (0..REMOVE_ATTEMPTS).any(|_| {
+                let _ = std::fs::remove_dir_all(dir);
+                std::thread::sleep(REMOVE_PAUSE);
+                !dir.exists()
+            })
+        })
         .count()
 }
 
@@ -68,12 +84,17 @@ fn remove_registered() -> usize {
 pub struct RemoveOnInterrupt(PathBuf);
 
 impl RemoveOnInterrupt {
-    pub fn new(dir: &Path) -> Self {
-        TEMPORARY
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner)
-            .push(dir.to_path_buf());
-        Self(dir.to_path_buf())
+    /// Creates a temporary directory in `parent` as `builder` names it, registered
+    /// while the registry is held, so an interruption never finds it unregistered.
+    pub fn tempdir_in(
+        builder: &tempfile::Builder,
+        parent: &Path,
+    ) -> std::io::Result<(tempfile::TempDir, Self)> {
+        let mut registry = TEMPORARY.lock().unwrap_or_else(PoisonError::into_inner);
+        let dir = builder.tempdir_in(parent)?;
+        registry.push(dir.path().to_path_buf());
+        let guard = Self(dir.path().to_path_buf());
+        Ok((dir, guard))
     }
 }
 

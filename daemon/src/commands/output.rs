@@ -39,12 +39,13 @@ pub fn write_output_files(
     write: impl FnOnce(&Path) -> anyhow::Result<Vec<PathBuf>>,
 ) -> anyhow::Result<Vec<PathBuf>> {
     fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let work = tempfile::Builder::new()
-        .prefix(".gonio-output-")
-        .suffix(".partial")
-        .tempdir_in(out)
-        .with_context(|| format!("creating a temporary directory in {}", out.display()))?;
-    let _removed_on_interrupt = RemoveOnInterrupt::new(work.path());
+    let (work, _removed_on_interrupt) = RemoveOnInterrupt::tempdir_in(
+        tempfile::Builder::new()
+            .prefix(".gonio-output-")
+            .suffix(".partial"),
+        out,
+    )
+    .with_context(|| format!("creating a temporary directory in {}", out.display()))?;
     let written = write(work.path())?;
     written
         .iter()

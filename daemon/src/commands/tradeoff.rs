@@ -160,11 +160,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let scan_dir: PathBuf = match &args.scan {
         Some(dir) => dir.clone(),
         None => {
-            let dir = tempfile::Builder::new()
-                .prefix(".scan-")
-                .tempdir_in(&args.out)
-                .context("creating a scan directory")?;
-            let guard = RemoveOnInterrupt::new(dir.path());
+            let (dir, guard) =
+                RemoveOnInterrupt::tempdir_in(tempfile::Builder::new().prefix(".scan-"), &args.out)
+                    .context("creating a scan directory")?;
             let (count, _) = super::simulate::render_scan(super::simulate::Args {
                 scene: args.scene.clone(),
                 out: dir.path().to_path_buf(),
@@ -318,13 +316,11 @@ fn extract_all(
     positions: &[Position],
     bracket_len: usize,
 ) -> anyhow::Result<Vec<Vec<scan::Extracted>>> {
-    let work = tempfile::Builder::new()
-        .prefix(".extract-")
-        .tempdir_in(out)
-        .context("creating a work directory")?;
+    let (work, _guard) =
+        RemoveOnInterrupt::tempdir_in(tempfile::Builder::new().prefix(".extract-"), out)
+            .context("creating a work directory")?;
     // The scan's setup.json carries the white reflectance.
     let options = ExtractOptions::default();
-    let _guard = RemoveOnInterrupt::new(work.path());
     let bar = progress::bar((bracket_len * positions.len()) as u64, "extractions");
     let mut all = Vec::new();
     for b in 1..=bracket_len {

@@ -149,9 +149,44 @@ pub fn router(shared: Arc<Shared>) -> Router {
         .merge(mutating)
         .fallback(|| async { ApiError::not_found("no such route:") })
         .layer(DefaultBodyLimit::max(shared.config.max_body_bytes))
+        .layer(middleware::from_fn_with_state(
+            shared.clone(),
+            refuse_oversized,
+        ))
         .layer(middleware::from_fn(json_errors))
         .layer(middleware::from_fn_with_state(shared.clone(), check_host))
         .with_state(shared)
+}
+
+/// Most bytes of an oversized body read and discarded before its 413: a client still
+/// sending it then reads the answer instead of a reset connection. Larger bodies are
+/// answered at once.
+const DRAIN_CAP: u64 = 1 << 20;
+
+/// 413 for a body whose declared length is over `max_body_bytes`, after draining it
+/// (up to [`DRAIN_CAP`]); the connection closes after the answer.
+async fn refuse_oversized(State(shared): AppState, request: Request, next: Next) -> Response {
+    let limit = shared.config.max_body_bytes as u64;
+    let declared = request
+        .headers()
+        .get(header::CONTENT_LENGTH)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.parse::<u64>().ok());
+    let Some(length) = declared.filter(|&n| n > limit) else {
+        return next.run(request).await;
+    };
+    if length <= DRAIN_CAP {
+        let _ = axum::body::to_bytes(request.into_body(), DRAIN_CAP as usize).await;
+    }
+    let mut answer = ApiError::new(
+        StatusCode::PAYLOAD_TOO_LARGE,
+        format!("request body of {length} bytes is over max_body_bytes ({limit})"),
+    )
+    .into_response();
+    answer
+        .headers_mut()
+        .insert(header::CONNECTION, HeaderValue::from_static("close"));
+    answer
 }
 
 /// Whether read routes need the token: bound beyond loopback without `public_read`.
