@@ -738,10 +738,24 @@ fn decode_raw(path: &Path) -> Result<Decoded, CaptureError> {
         path: path.to_path_buf(),
         reason: e.to_string(),
     })?;
+    // None of the formats above is a JPEG; rawler's JPEG (JFIF/Exif) reader, meant for
+    // one old Minolta format, can spin without end on a damaged file.
+    if bytes.starts_with(&[0xFF, 0xD8]) {
+        return Err(CaptureError::Image {
+            path: path.to_path_buf(),
+            reason: "a JPEG file, not camera raw data".into(),
+        });
+    }
     // The largest image and the largest entry the file's directories claim, checked
     // before rawler allocates for them.
     if let Some(claim) = tiff_ifd::largest_claim(&bytes) {
         let file_len = bytes.len() as u64;
+        if let Some(offset) = claim.revisited {
+            return Err(CaptureError::Layout {
+                path: path.to_path_buf(),
+                reason: format!("the TIFF directory at offset {offset} is reached twice (a loop)"),
+            });
+        }
         let (entry_bytes, tag) = claim.largest_entry;
         if entry_bytes > file_len {
             return Err(too_large(

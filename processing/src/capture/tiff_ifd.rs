@@ -5,7 +5,8 @@
 //! into a buffer of that size, so a count beyond the file is refused here).
 //! Reads at most [`MAX_IFDS`] directories of at most [`MAX_ENTRIES`] entries each,
 //! follows the next-IFD chain, SubIFDs, the Exif IFD and the TIFF structure embedded in
-//! a Nikon maker note, and never loops.
+//! a Nikon maker note, and never loops; it reports an IFD reached twice, since a decoder
+//! that follows the same pointers would go round that loop without end.
 
 /// Most IFDs visited in one file.
 const MAX_IFDS: usize = 256;
@@ -48,6 +49,8 @@ pub struct Claim {
     pub samples: u64,
     /// The largest value any entry claims (count × bytes per value), and its tag.
     pub largest_entry: (u64, u16),
+    /// The offset of the first IFD reached a second time, if any.
+    pub revisited: Option<usize>,
 }
 
 impl Claim {
@@ -133,8 +136,13 @@ fn walk(bytes: &[u8], nesting: usize) -> Option<Claim> {
     let mut visited = Vec::new();
     let mut largest = Claim::default();
     let mut largest_entry = (0, 0);
+    let mut revisited = None;
     while let Some(offset) = queue.pop() {
-        if offset == 0 || visited.contains(&offset) || visited.len() >= MAX_IFDS {
+        if visited.contains(&offset) {
+            revisited.get_or_insert(offset);
+            continue;
+        }
+        if offset == 0 || visited.len() >= MAX_IFDS {
             continue;
         }
         visited.push(offset);
@@ -179,6 +187,7 @@ fn walk(bytes: &[u8], nesting: usize) -> Option<Claim> {
                         if inner.largest_entry.0 > largest_entry.0 {
                             largest_entry = inner.largest_entry;
                         }
+                        revisited = revisited.or(inner.revisited);
                         if inner.values() > largest.values() {
                             largest = inner;
                         }
@@ -196,6 +205,7 @@ fn walk(bytes: &[u8], nesting: usize) -> Option<Claim> {
     }
     Some(Claim {
         largest_entry,
+        revisited,
         ..largest
     })
 }
@@ -231,6 +241,7 @@ mod tests {
             (70_000, 60_000, 1)
         );
         assert_eq!(claim.largest_entry, (4, 330));
+        assert_eq!(claim.revisited, Some(8));
         assert_eq!(largest_claim(b"not a tiff"), None);
         // Truncated anywhere: still an answer, never a panic.
         let full = nested(5, 5);
