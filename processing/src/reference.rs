@@ -240,11 +240,12 @@ impl Reference {
     /// row (plus one for a header) of a duplicate node.
     fn from_points(points: Vec<ReferencePoint>) -> Result<Self, (usize, String)> {
         let mut order: Vec<usize> = (0..points.len()).collect();
+        // Angles are finite; −0 and 0 are one angle (a total order would split them
+        // and leave a row's θr unsorted).
+        let angle = |a: f64, b: f64| a.partial_cmp(&b).unwrap_or(std::cmp::Ordering::Equal);
         order.sort_by(|&a, &b| {
-            points[a]
-                .theta_i
-                .total_cmp(&points[b].theta_i)
-                .then(points[a].theta_r.total_cmp(&points[b].theta_r))
+            angle(points[a].theta_i, points[b].theta_i)
+                .then(angle(points[a].theta_r, points[b].theta_r))
         });
         let mut rows: Vec<(f64, Spline)> = Vec::new();
         let mut start = 0;
@@ -316,5 +317,31 @@ mod tests {
         assert!(
             (v[0] - 5.4).abs() < 1e-12 && (v[1] + 2.2).abs() < 1e-12 && (v[2] - 5.0).abs() < 1e-12
         );
+    }
+
+    /// −0 and 0 are one angle: a node given under both is a duplicate.
+    #[test]
+    fn signed_zeros_are_one_angle() {
+        let camera = CameraModel::builtin();
+        let wavelengths: Vec<String> = (390..=730).step_by(10).map(|w| w.to_string()).collect();
+        let csv = |rows: &[(&str, &str, f64)]| {
+            let mut text = format!("theta_i,theta_r,{}\n", wavelengths.join(","));
+            for (ti, tr, v) in rows {
+                let values = vec![v.to_string(); wavelengths.len()].join(",");
+                text += &format!("{ti},{tr},{values}\n");
+            }
+            text
+        };
+        // Sorted with −0 before 0, the row θi = 0 would read θr 0, 10, 0: its
+        // duplicate node missed, its spline unsorted.
+        let dup = csv(&[
+            ("-10", "-10", 0.5),
+            ("-0", "0", 0.5),
+            ("-0", "10", 0.5),
+            ("0", "0", 0.5),
+            ("10", "10", 0.5),
+        ]);
+        let err = Reference::from_reader(dup.as_bytes(), "dup", &camera).unwrap_err();
+        assert!(err.to_string().contains("duplicate node"), "{err}");
     }
 }
