@@ -86,11 +86,35 @@ impl Reader<'_> {
         })
     }
 
-    /// The first value of an entry of type SHORT (3) or LONG (4) at `entry`.
+    /// Where the values of the entry at `entry` are: in its 4-byte field when they fit,
+    /// else at the offset that field holds.
+    fn values_at(&self, entry: usize) -> Option<usize> {
+        let count = u64::from(self.u32(entry + 4)?);
+        if count.saturating_mul(type_size(self.u16(entry + 2)?)) <= 4 {
+            Some(entry + 8)
+        } else {
+            self.u32(entry + 8).map(|o| o as usize)
+        }
+    }
+
+    /// The first value of an integer entry at `entry`, wherever it is stored, as a
+    /// decoder reads it: signed values widened from their two's complement, so a
+    /// negative size counts as a huge one.
     fn scalar(&self, entry: usize) -> Option<u64> {
+        let at = self.values_at(entry)?;
+        let u64_at = |at: usize| -> Option<u64> {
+            let (lo, hi) = (self.u32(at)?, self.u32(at + 4)?);
+            let (lo, hi) = if self.little { (lo, hi) } else { (hi, lo) };
+            Some(u64::from(lo) | (u64::from(hi) << 32))
+        };
         match self.u16(entry + 2)? {
-            3 => self.u16(entry + 8).map(u64::from),
-            4 | 13 => self.u32(entry + 8).map(u64::from),
+            1 => self.bytes.get(at).map(|&b| u64::from(b)),
+            6 => self.bytes.get(at).map(|&b| i64::from(b as i8) as u64),
+            3 => self.u16(at).map(u64::from),
+            8 => self.u16(at).map(|v| i64::from(v as i16) as u64),
+            4 | 13 => self.u32(at).map(u64::from),
+            9 => self.u32(at).map(|v| i64::from(v as i32) as u64),
+            16..=18 => u64_at(at),
             _ => None,
         }
     }
@@ -275,5 +299,22 @@ mod tests {
             largest_claim(&nested).unwrap().largest_entry,
             (8 << 30, 0x0097)
         );
+    }
+
+    /// A size stored out of line (count above one) is read where the decoder reads it.
+    #[test]
+    fn sizes_stored_out_of_line_are_read_at_their_offset() {
+        // IFD0 at 8 with 2 entries: width as 2 LONGs at offset 38 (70 000, 1), height 1.
+        let mut b = b"II*\0\x08\0\0\0\x02\0".to_vec();
+        b.extend([0, 1, 4, 0, 2, 0, 0, 0, 38, 0, 0, 0]);
+        b.extend([1, 1, 8, 0, 1, 0, 0, 0, 0xff, 0xff, 0, 0]);
+        b.extend([0, 0, 0, 0]);
+        assert_eq!(b.len(), 38);
+        b.extend(70_000u32.to_le_bytes());
+        b.extend(1u32.to_le_bytes());
+        let claim = largest_claim(&b).unwrap();
+        assert_eq!(claim.width, 70_000);
+        // A height of −1 (SSHORT) is as large as a decoder taking it unsigned would make it.
+        assert_eq!(claim.height, u64::MAX);
     }
 }
