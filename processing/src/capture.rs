@@ -738,12 +738,16 @@ fn decode_raw(path: &Path) -> Result<Decoded, CaptureError> {
         path: path.to_path_buf(),
         reason: e.to_string(),
     })?;
-    // None of the formats above is a JPEG; rawler's JPEG (JFIF/Exif) reader, meant for
-    // one old Minolta format, can spin without end on a damaged file.
-    if bytes.starts_with(&[0xFF, 0xD8]) {
+    // Only the containers of the formats above reach rawler: TIFF-structured files
+    // (checked below), CR3 (ISO BMFF) and RAF. rawler's other readers (JPEG/Exif, MRW,
+    // X3F, CRW…) are for formats not listed, and some allocate or spin on a damaged file.
+    let tiff = bytes.starts_with(b"II") || bytes.starts_with(b"MM");
+    let bmff = bytes.get(4..8) == Some(&b"ftyp"[..]);
+    let raf = bytes.starts_with(b"FUJIFILM");
+    if !(tiff || bmff || raf) {
         return Err(CaptureError::Image {
             path: path.to_path_buf(),
-            reason: "a JPEG file, not camera raw data".into(),
+            reason: "not a TIFF-based, CR3 or RAF camera raw file".into(),
         });
     }
     // The largest image and the largest entry the file's directories claim, checked
