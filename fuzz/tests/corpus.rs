@@ -21,7 +21,7 @@ fn seeds(name: &str) -> Vec<(String, Vec<u8>)> {
 
 /// Seeds named `valid*` are accepted; every other seed is refused with a message,
 /// `regression_*` ones (the hostile files that once crashed or aborted) by the size
-/// checks that run before anything is allocated.
+/// checks that run before anything is allocated, and named by the check that refuses them.
 #[test]
 fn every_seed_of_every_target_gets_its_expected_answer() {
     gonio_processing::guard::install_quiet_panic_hook();
@@ -45,6 +45,13 @@ fn every_seed_of_every_target_gets_its_expected_answer() {
                         ["allowed", "need", "too large"]
                             .iter()
                             .any(|w| message.contains(w)),
+                        "{}/{name}: {message}",
+                        target.name
+                    );
+                }
+                if name.starts_with("regression_samples_per_pixel") {
+                    assert!(
+                        message.contains("samples per pixel"),
                         "{}/{name}: {message}",
                         target.name
                     );

@@ -33,6 +33,9 @@ static MAX_PIXELS: AtomicU64 = AtomicU64::new(DEFAULT_MAX_PIXELS);
 const MAX_COMPRESSION_RATIO: u64 = 1032;
 /// A camera raw file spends at least one bit per pixel of its largest image.
 const RAW_PIXELS_PER_BYTE: u64 = 8;
+/// Most samples per pixel a camera raw's directory may state (a mosaic has 1, a linear
+/// DNG 3 or 4); rawler sizes per-sample levels by it before reading any pixel.
+const MAX_RAW_SAMPLES: u64 = 4;
 /// Bytes a file may have beyond its pixel data (previews, metadata).
 const FILE_OVERHEAD_BYTES: u64 = 64 << 20;
 
@@ -758,6 +761,16 @@ fn decode_raw(path: &Path) -> Result<Decoded, CaptureError> {
             return Err(CaptureError::Layout {
                 path: path.to_path_buf(),
                 reason: format!("the TIFF directory at offset {offset} is reached twice (a loop)"),
+            });
+        }
+        if claim.max_samples > MAX_RAW_SAMPLES {
+            return Err(CaptureError::Layout {
+                path: path.to_path_buf(),
+                reason: format!(
+                    "a TIFF directory gives {} samples per pixel; a camera raw has at most \
+                     {MAX_RAW_SAMPLES}",
+                    claim.max_samples
+                ),
             });
         }
         let (entry_bytes, tag) = claim.largest_entry;

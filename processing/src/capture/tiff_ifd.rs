@@ -51,6 +51,9 @@ pub struct Claim {
     pub largest_entry: (u64, u16),
     /// The offset of the first IFD reached a second time, if any.
     pub revisited: Option<usize>,
+    /// The largest SamplesPerPixel any entry states, in any IFD (a decoder sizes its
+    /// per-sample levels by it, whatever image it belongs to).
+    pub max_samples: u64,
 }
 
 impl Claim {
@@ -161,6 +164,7 @@ fn walk(bytes: &[u8], nesting: usize) -> Option<Claim> {
     let mut largest = Claim::default();
     let mut largest_entry = (0, 0);
     let mut revisited = None;
+    let mut max_samples = 0;
     while let Some(offset) = queue.pop() {
         if visited.contains(&offset) {
             revisited.get_or_insert(offset);
@@ -196,7 +200,13 @@ fn walk(bytes: &[u8], nesting: usize) -> Option<Claim> {
                 RW2_SENSOR_HEIGHT if magic == RW2_MAGIC => {
                     claim.height = r.scalar(entry).unwrap_or(0)
                 }
-                SAMPLES_PER_PIXEL => claim.samples = r.scalar(entry).unwrap_or(1),
+                SAMPLES_PER_PIXEL => {
+                    // An unknown type counts as its raw 4-byte field, the largest reading.
+                    claim.samples = r
+                        .scalar(entry)
+                        .unwrap_or_else(|| u64::from(r.u32(entry + 8).unwrap_or(1)));
+                    max_samples = max_samples.max(claim.samples);
+                }
                 SUB_IFDS | EXIF_IFD => queue.extend(r.offsets(entry)),
                 MAKER_NOTE if nesting < MAX_NESTING => {
                     let note = r
@@ -212,6 +222,7 @@ fn walk(bytes: &[u8], nesting: usize) -> Option<Claim> {
                             largest_entry = inner.largest_entry;
                         }
                         revisited = revisited.or(inner.revisited);
+                        max_samples = max_samples.max(inner.max_samples);
                         if inner.values() > largest.values() {
                             largest = inner;
                         }
@@ -230,6 +241,7 @@ fn walk(bytes: &[u8], nesting: usize) -> Option<Claim> {
     Some(Claim {
         largest_entry,
         revisited,
+        max_samples,
         ..largest
     })
 }
@@ -299,6 +311,20 @@ mod tests {
             largest_claim(&nested).unwrap().largest_entry,
             (8 << 30, 0x0097)
         );
+    }
+
+    /// Every SamplesPerPixel entry counts, a repeated one and one of an unknown type too.
+    #[test]
+    fn the_largest_samples_per_pixel_of_any_entry_is_kept() {
+        // IFD0 at 8 with 3 entries: SamplesPerPixel as SHORT 3, as LONG 4 294 901 766,
+        // and as an unknown type 99 whose field holds 70 000.
+        let mut b = b"II*\0\x08\0\0\0\x03\0".to_vec();
+        b.extend([0x15, 1, 3, 0, 1, 0, 0, 0, 3, 0, 0, 0]);
+        b.extend([0x15, 1, 4, 0, 1, 0, 0, 0, 6, 0, 0xff, 0xff]);
+        b.extend([0x15, 1, 99, 0, 1, 0, 0, 0, 0x70, 0x11, 1, 0]);
+        b.extend([0, 0, 0, 0]);
+        assert_eq!(largest_claim(&b).unwrap().max_samples, 0xFFFF_0006);
+        assert_eq!(largest_claim(&nested(5, 5)).unwrap().max_samples, 0);
     }
 
     /// A size stored out of line (count above one) is read where the decoder reads it.
