@@ -118,7 +118,34 @@ impl Reader<'_> {
             4 | 13 => self.u32(at).map(u64::from),
             9 => self.u32(at).map(|v| i64::from(v as i32) as u64),
             16..=18 => u64_at(at),
+            // Rationals and floats as rawler converts them: through f32 (f64 for a
+            // DOUBLE), saturating, so n/0 reads as the largest size.
+            5 => Some((self.u32(at)? as f32 / self.u32(at + 4)? as f32) as u64),
+            10 => Some((self.u32(at)? as i32 as f32 / self.u32(at + 4)? as i32 as f32) as u64),
+            11 => Some(f32::from_bits(self.u32(at)?) as u64),
+            12 => Some(f64::from_bits(u64_at(at)?) as u64),
             _ => None,
+        }
+    }
+
+    /// Where rawler looks for an IFD when a pointer entry has another type than LONG,
+    /// reading its values as bytes (inline when at most 4): at the values of an
+    /// UNDEFINED entry, at the value of the first byte of one of an unknown type (0, or
+    /// above 12, the IFD type 13 included).
+    fn odd_pointer(&self, entry: usize) -> Option<usize> {
+        let field_type = self.u16(entry + 2)?;
+        if !(field_type == 0 || field_type == 7 || field_type > 12) {
+            return None;
+        }
+        let at = if self.u32(entry + 4)? <= 4 {
+            entry + 8
+        } else {
+            self.u32(entry + 8)? as usize
+        };
+        if field_type == 7 {
+            Some(at)
+        } else {
+            self.bytes.get(at).map(|&b| usize::from(b))
         }
     }
 
@@ -170,7 +197,7 @@ fn walk(bytes: &[u8], nesting: usize) -> Option<Claim> {
             revisited.get_or_insert(offset);
             continue;
         }
-        if offset == 0 || visited.len() >= MAX_IFDS {
+        if visited.len() >= MAX_IFDS {
             continue;
         }
         visited.push(offset);
@@ -192,22 +219,28 @@ fn walk(bytes: &[u8], nesting: usize) -> Option<Claim> {
                 largest_entry = (size, tag);
             }
             match tag {
-                IMAGE_WIDTH => claim.width = r.scalar(entry).unwrap_or(0),
-                IMAGE_LENGTH => claim.height = r.scalar(entry).unwrap_or(0),
+                // A size given twice counts with its larger value; one whose value
+                // cannot be read counts as nothing.
+                IMAGE_WIDTH => claim.width = claim.width.max(r.scalar(entry).unwrap_or(0)),
+                IMAGE_LENGTH => claim.height = claim.height.max(r.scalar(entry).unwrap_or(0)),
                 RW2_SENSOR_WIDTH if magic == RW2_MAGIC => {
-                    claim.width = r.scalar(entry).unwrap_or(0)
+                    claim.width = claim.width.max(r.scalar(entry).unwrap_or(0))
                 }
                 RW2_SENSOR_HEIGHT if magic == RW2_MAGIC => {
-                    claim.height = r.scalar(entry).unwrap_or(0)
+                    claim.height = claim.height.max(r.scalar(entry).unwrap_or(0))
                 }
                 SAMPLES_PER_PIXEL => {
                     // An unknown type counts as its raw 4-byte field, the largest reading.
-                    claim.samples = r
+                    let samples = r
                         .scalar(entry)
                         .unwrap_or_else(|| u64::from(r.u32(entry + 8).unwrap_or(1)));
-                    max_samples = max_samples.max(claim.samples);
+                    claim.samples = claim.samples.max(samples);
+                    max_samples = max_samples.max(samples);
                 }
-                SUB_IFDS | EXIF_IFD => queue.extend(r.offsets(entry)),
+                SUB_IFDS | EXIF_IFD => {
+                    queue.extend(r.offsets(entry));
+                    queue.extend(r.odd_pointer(entry));
+                }
                 MAKER_NOTE if nesting < MAX_NESTING => {
                     let note = r
                         .u32(entry + 8)
@@ -234,7 +267,12 @@ fn walk(bytes: &[u8], nesting: usize) -> Option<Claim> {
         if claim.values() > largest.values() {
             largest = claim;
         }
-        if let Some(next) = r.u32(offset + 2 + 12 * usize::from(count)) {
+        // A next-IFD pointer of 0 ends the chain; a sub-IFD pointer of 0 is followed,
+        // as a decoder follows it.
+        if let Some(next) = r
+            .u32(offset + 2 + 12 * usize::from(count))
+            .filter(|&n| n != 0)
+        {
             queue.push(next as usize);
         }
     }
@@ -325,6 +363,43 @@ mod tests {
         b.extend([0, 0, 0, 0]);
         assert_eq!(largest_claim(&b).unwrap().max_samples, 0xFFFF_0006);
         assert_eq!(largest_claim(&nested(5, 5)).unwrap().max_samples, 0);
+    }
+
+    /// Sub-IFD pointers of other types are followed where rawler follows them, and
+    /// sizes given as rationals or floats are read as it converts them.
+    #[test]
+    fn odd_pointers_and_sizes_are_read_as_rawler_reads_them() {
+        // IFD0 at 8 with 2 entries: SubIFDs of type 99 (its first byte, 0, is where
+        // rawler reads an IFD: the header, 18 761 entries, cut at 4096), SamplesPerPixel
+        // as the SRATIONAL 3/0 at offset 38.
+        let mut b = b"II*\0\x08\0\0\0\x02\0".to_vec();
+        b.extend([0x4a, 1, 99, 0, 1, 0, 0, 0, 0, 1, 1, 0]);
+        b.extend([0x15, 1, 10, 0, 1, 0, 0, 0, 38, 0, 0, 0]);
+        b.extend([0, 0, 0, 0]);
+        b.extend([3, 0, 0, 0, 0, 0, 0, 0]);
+        let claim = largest_claim(&b).unwrap();
+        assert_eq!(claim.max_samples, u64::MAX);
+        // The header read as an entry: tag 0x2a, type 8 (SSHORT), count 0x0002_0000.
+        assert_eq!(claim.largest_entry, (2 * 0x0002_0000, 0x2a));
+        // An UNDEFINED pointer leads to its own value field: an IFD of 0 entries.
+        let mut u = b"II*\0\x08\0\0\0\x01\0".to_vec();
+        u.extend([0x4a, 1, 7, 0, 4, 0, 0, 0, 0, 0, 0, 0]);
+        u.extend([0, 0, 0, 0]);
+        assert_eq!(
+            Reader {
+                bytes: &u,
+                little: true
+            }
+            .odd_pointer(10),
+            Some(18)
+        );
+        // A FLOAT width of 1e30 saturates (height 1).
+        let mut f = b"II*\0\x08\0\0\0\x02\0".to_vec();
+        f.extend([0, 1, 11, 0, 1, 0, 0, 0]);
+        f.extend(1e30f32.to_bits().to_le_bytes());
+        f.extend([1, 1, 3, 0, 1, 0, 0, 0, 1, 0, 0, 0]);
+        f.extend([0, 0, 0, 0]);
+        assert_eq!(largest_claim(&f).unwrap().width, u64::MAX);
     }
 
     /// A size stored out of line (count above one) is read where the decoder reads it.
