@@ -231,35 +231,10 @@ pub enum Sample {
         ks: [f64; 3],
         m: Vec<f64>,
     },
-    /// A thin dielectric film (interference) on facets of slope roughness `m` over a
-    /// diffuse base: β(λ) = ks·R_film(λ, l·h)·D·G/(π (n·l)(n·v)) + Kd(λ), R_film the
-    /// unpolarised Airy reflectance of medium | film | substrate; Kd(λ) the smooth
-    /// spectrum whose camera RGB is `kd`.
-    ThinFilm {
-        kd: [f64; 3],
-        ks: f64,
-        m: f64,
-        film_thickness_nm: f64,
-        film_index: f64,
-        #[serde(default = "default_medium_index")]
-        medium_index: f64,
-        substrate_index: f64,
-    },
-    /// Flakes of a photonic crystal (a periodic multilayer) in a clear binder over a
-    /// diffuse base, a goniochromatic mechanism other than the thin film's: each flake
-    /// reflects a Gaussian band of unit peak and width `band_width_nm` centred at
-    /// λc = `wavelength_nm`·√(1 − sin²θd/n²) (Bragg–Snell, n = `effective_index`, θd the
-    /// incidence on the flake), flake slopes of roughness `m` as the thin film's facets:
-    /// β(λ) = ks·R(λ, θd)·D·G/(π (n·l)(n·v)) + Kd(λ), Kd(λ) the smooth spectrum whose
-    /// camera RGB is `kd`.
-    BraggFlakes {
-        kd: [f64; 3],
-        ks: f64,
-        m: f64,
-        wavelength_nm: f64,
-        effective_index: f64,
-        band_width_nm: f64,
-    },
+    /// A thin dielectric film on rough facets over a diffuse base ([`ThinFilm`]).
+    ThinFilm(ThinFilm),
+    /// Photonic-crystal flakes in a clear binder over a diffuse base ([`BraggFlakes`]).
+    BraggFlakes(BraggFlakes),
     /// A measured table in the reference CSV format (`theta_i,theta_r,390,…,730`, a
     /// full regular grid of spectral radiance factor).
     Measured { path: PathBuf },
@@ -269,6 +244,103 @@ fn default_medium_index() -> f64 {
     1.5
 }
 
+/// A thin dielectric film (interference) on facets of slope roughness `m` over a diffuse
+/// base: β(λ) = ks·R_film(λ, l·h)·D·G/(π (n·l)(n·v)) + Kd(λ), R_film the unpolarised Airy
+/// reflectance of medium | film | substrate; Kd(λ) the smooth spectrum whose camera RGB
+/// is `kd`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ThinFilm {
+    pub kd: [f64; 3],
+    pub ks: f64,
+    pub m: f64,
+    pub film_thickness_nm: f64,
+    pub film_index: f64,
+    #[serde(default = "default_medium_index")]
+    pub medium_index: f64,
+    pub substrate_index: f64,
+}
+
+impl ThinFilm {
+    fn validate(&self) -> Result<(), SceneError> {
+        check_lobe(&self.kd, self.ks, self.m)?;
+        check_positive("sample.film_thickness_nm", self.film_thickness_nm)?;
+        check_index("sample.medium_index", self.medium_index, 1.0)?;
+        check_index("sample.film_index", self.film_index, self.medium_index)?;
+        check_index(
+            "sample.substrate_index",
+            self.substrate_index,
+            self.medium_index,
+        )
+    }
+
+    /// `truth.json`'s `film` object.
+    fn truth(&self) -> serde_json::Value {
+        serde_json::json!({
+            "thickness_nm": self.film_thickness_nm,
+            "film_index": self.film_index,
+            "medium_index": self.medium_index,
+            "substrate_index": self.substrate_index,
+        })
+    }
+}
+
+/// Flakes of a photonic crystal (a periodic multilayer) in a clear binder over a
+/// diffuse base, a goniochromatic mechanism other than the thin film's: each flake
+/// reflects a Gaussian band of unit peak and width `band_width_nm` centred at
+/// λc = `wavelength_nm`·√(1 − sin²θd/n²) (Bragg–Snell, n = `effective_index`, θd the
+/// incidence on the flake), flake slopes of roughness `m` as the thin film's facets:
+/// β(λ) = ks·R(λ, θd)·D·G/(π (n·l)(n·v)) + Kd(λ), Kd(λ) the smooth spectrum whose
+/// camera RGB is `kd`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BraggFlakes {
+    pub kd: [f64; 3],
+    pub ks: f64,
+    pub m: f64,
+    pub wavelength_nm: f64,
+    pub effective_index: f64,
+    pub band_width_nm: f64,
+}
+
+impl BraggFlakes {
+    fn validate(&self) -> Result<(), SceneError> {
+        check_lobe(&self.kd, self.ks, self.m)?;
+        let wavelength_nm = self.wavelength_nm;
+        if !(wavelength_nm.is_finite() && (300.0..=1000.0).contains(&wavelength_nm)) {
+            return Err(invalid(
+                "sample.wavelength_nm",
+                format!("{wavelength_nm} must be in [300, 1000]"),
+            ));
+        }
+        check_index("sample.effective_index", self.effective_index, 1.0)?;
+        let band_width_nm = self.band_width_nm;
+        if !(band_width_nm.is_finite() && (1.0..=500.0).contains(&band_width_nm)) {
+            return Err(invalid(
+                "sample.band_width_nm",
+                format!("{band_width_nm} must be in [1, 500]"),
+            ));
+        }
+        Ok(())
+    }
+
+    /// `truth.json`'s `flakes` object.
+    fn truth(&self) -> serde_json::Value {
+        serde_json::json!({
+            "bragg_wavelength_nm": self.wavelength_nm,
+            "effective_index": self.effective_index,
+            "band_width_nm": self.band_width_nm,
+        })
+    }
+}
+
+/// The lobe a spectral mechanism colours: diffuse camera RGB, specular scale, one m.
+fn check_lobe(kd: &[f64; 3], ks: f64, m: f64) -> Result<(), SceneError> {
+    check_non_negative("sample.kd", kd)?;
+    check_non_negative("sample.ks", &[ks])?;
+    roughness("sample.m", &[m]).map(drop)
+}
+
 impl Sample {
     /// The model name used in `truth.json`.
     pub fn model_name(&self) -> &'static str {
@@ -276,8 +348,8 @@ impl Sample {
             Sample::Lambertian { .. } => "lambertian",
             Sample::CookTorrance { .. } => "cook-torrance",
             Sample::Ward { .. } => "ward",
-            Sample::ThinFilm { .. } => "thin-film",
-            Sample::BraggFlakes { .. } => "bragg-flakes",
+            Sample::ThinFilm(_) => "thin-film",
+            Sample::BraggFlakes(_) => "bragg-flakes",
             Sample::Measured { .. } => "measured",
         }
     }
@@ -286,7 +358,7 @@ impl Sample {
     pub fn is_spectral(&self) -> bool {
         matches!(
             self,
-            Sample::ThinFilm { .. } | Sample::BraggFlakes { .. } | Sample::Measured { .. }
+            Sample::ThinFilm(_) | Sample::BraggFlakes(_) | Sample::Measured { .. }
         )
     }
 
@@ -298,49 +370,8 @@ impl Sample {
                 check_non_negative("sample.ks", ks)?;
                 roughness("sample.m", m).map(drop)
             }
-            Sample::ThinFilm {
-                kd,
-                ks,
-                m,
-                film_thickness_nm,
-                film_index,
-                medium_index,
-                substrate_index,
-            } => {
-                check_non_negative("sample.kd", kd)?;
-                check_non_negative("sample.ks", &[*ks])?;
-                roughness("sample.m", &[*m])?;
-                check_positive("sample.film_thickness_nm", *film_thickness_nm)?;
-                check_index("sample.medium_index", *medium_index, 1.0)?;
-                check_index("sample.film_index", *film_index, *medium_index)?;
-                check_index("sample.substrate_index", *substrate_index, *medium_index)
-            }
-            Sample::BraggFlakes {
-                kd,
-                ks,
-                m,
-                wavelength_nm,
-                effective_index,
-                band_width_nm,
-            } => {
-                check_non_negative("sample.kd", kd)?;
-                check_non_negative("sample.ks", &[*ks])?;
-                roughness("sample.m", &[*m])?;
-                if !(wavelength_nm.is_finite() && (300.0..=1000.0).contains(wavelength_nm)) {
-                    return Err(invalid(
-                        "sample.wavelength_nm",
-                        format!("{wavelength_nm} must be in [300, 1000]"),
-                    ));
-                }
-                check_index("sample.effective_index", *effective_index, 1.0)?;
-                if !(band_width_nm.is_finite() && (1.0..=500.0).contains(band_width_nm)) {
-                    return Err(invalid(
-                        "sample.band_width_nm",
-                        format!("{band_width_nm} must be in [1, 500]"),
-                    ));
-                }
-                Ok(())
-            }
+            Sample::ThinFilm(film) => film.validate(),
+            Sample::BraggFlakes(flakes) => flakes.validate(),
             Sample::Measured { .. } => Ok(()),
         }
     }
@@ -867,41 +898,14 @@ impl Scene {
                 put("ks", serde_json::json!(ks));
                 put("m", serde_json::json!(m));
             }
-            Sample::ThinFilm {
-                kd,
-                ks,
-                m,
-                film_thickness_nm,
-                film_index,
-                medium_index,
-                substrate_index,
-            } => spectral_lobe(
+            Sample::ThinFilm(film) => {
+                spectral_lobe(&mut put, (&film.kd, film.ks, film.m), "film", film.truth())
+            }
+            Sample::BraggFlakes(flakes) => spectral_lobe(
                 &mut put,
-                (kd, *ks, *m),
-                "film",
-                serde_json::json!({
-                    "thickness_nm": film_thickness_nm,
-                    "film_index": film_index,
-                    "medium_index": medium_index,
-                    "substrate_index": substrate_index,
-                }),
-            ),
-            Sample::BraggFlakes {
-                kd,
-                ks,
-                m,
-                wavelength_nm,
-                effective_index,
-                band_width_nm,
-            } => spectral_lobe(
-                &mut put,
-                (kd, *ks, *m),
+                (&flakes.kd, flakes.ks, flakes.m),
                 "flakes",
-                serde_json::json!({
-                    "bragg_wavelength_nm": wavelength_nm,
-                    "effective_index": effective_index,
-                    "band_width_nm": band_width_nm,
-                }),
+                flakes.truth(),
             ),
             Sample::Measured { path } => put("table", path.display().to_string().into()),
         }

@@ -49,7 +49,7 @@ fn builtin_scenes_are_realistic() {
     assert!(Scene::builtin("blue-green").unwrap().sample().is_spectral());
     assert!(matches!(
         Scene::builtin("opal").unwrap().sample(),
-        Sample::BraggFlakes { .. }
+        Sample::BraggFlakes(_)
     ));
 }
 
@@ -192,6 +192,7 @@ fn bad_values_are_named() {
             "sample.band_width_nm",
         ),
         ("m = 0.12", "m = 0.0", "sample.m"),
+        ("ks = 0.5", "ks = 0.5\nshininess = 3", "shininess"),
     ] {
         let err = error_text(&format!("{SMALL}\n{}", flakes.replace(from, to)));
         assert!(err.contains(key), "{to}: {err}");
