@@ -19,6 +19,7 @@ use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
@@ -298,6 +299,11 @@ impl Frame {
         Self::read_rows(path, |_, height| {
             Ok::<_, CaptureError>(std::iter::once(0..height).collect())
         })
+    }
+
+    /// Reads several captures in parallel, in the order given.
+    pub fn read_all(paths: &[PathBuf]) -> Result<Vec<Frame>, CaptureError> {
+        paths.par_iter().map(|path| Frame::read(path)).collect()
     }
 
     /// Reads only some rows of a capture: `select(width, height)` gets the capture's

@@ -64,6 +64,8 @@ pub struct ExtractOptions {
     /// The setup to use instead of the scan's `setup.json` (say, one `gonio calibrate`
     /// wrote).
     pub setup: Option<PathBuf>,
+    /// When set, only the captures of this θL (degrees) are extracted.
+    pub theta_l: Option<f64>,
 }
 
 impl Default for ExtractOptions {
@@ -76,6 +78,7 @@ impl Default for ExtractOptions {
             camera: CameraModel::builtin(),
             hdr_dir: None,
             setup: None,
+            theta_l: None,
         }
     }
 }
@@ -261,9 +264,8 @@ pub fn theta_groups(dir: &Path) -> Result<(ThetaGroups, Vec<PathBuf>), ExtractEr
     let mut groups: BTreeMap<i64, (f64, Vec<PathBuf>)> = BTreeMap::new();
     for path in with_sidecar {
         let theta_l = capture::read_sidecar(&path)?.theta_l;
-        let key = (theta_l * 1e6).round() as i64;
         groups
-            .entry(key)
+            .entry(theta_key(theta_l))
             .or_insert_with(|| (theta_l, Vec::new()))
             .1
             .push(path);
@@ -293,7 +295,15 @@ pub fn extract_scan_with_progress(
             (None, Some(recorded)) => (recorded, WhiteSource::Setup),
             (None, None) => (1.0, WhiteSource::Assumed),
         };
-    let (groups, skipped_without_sidecar) = theta_groups(dir)?;
+    let (mut groups, skipped_without_sidecar) = theta_groups(dir)?;
+    if let Some(wanted) = options.theta_l {
+        groups.retain(|(theta_l, _)| theta_key(*theta_l) == theta_key(wanted));
+        if groups.is_empty() {
+            return Err(ExtractError::NoCaptures {
+                dir: dir.to_path_buf(),
+            });
+        }
+    }
     if let Some(hdr_dir) = &options.hdr_dir {
         fs::create_dir_all(hdr_dir).map_err(|error| ExtractError::Walk {
             path: hdr_dir.clone(),
@@ -352,6 +362,11 @@ pub fn extract_scan_with_progress(
         progress(done + 1, total);
     }
     Ok(extraction)
+}
+
+/// θL in millionths of a degree: captures of one θL share it.
+fn theta_key(theta_l: f64) -> i64 {
+    (theta_l * 1e6).round() as i64
 }
 
 fn check_options(o: &ExtractOptions) -> Result<(), ExtractError> {

@@ -146,6 +146,19 @@ fn synthetic_lambertian_scan_gives_the_known_beta() {
     // Merging only the strip rows (no maps written) gives the same samples.
     let strips_only = extract::extract_scan(dir.path(), &ExtractOptions::default()).unwrap();
     assert_eq!(strips_only.samples, extraction.samples);
+    // One θL alone gives exactly that θL's rows (the daemon extracts θL by θL).
+    let one = ExtractOptions {
+        theta_l: Some(-20.0),
+        ..ExtractOptions::default()
+    };
+    let alone = extract::extract_scan(dir.path(), &one).unwrap();
+    let rows: Vec<&Sample> = extraction
+        .samples
+        .iter()
+        .filter(|s| s.theta_l == -20.0)
+        .collect();
+    assert_eq!(alone.samples.iter().collect::<Vec<_>>(), rows);
+    assert!(!rows.is_empty() && rows.len() < extraction.samples.len());
     assert_eq!(extraction.per_theta.len(), 2);
     assert_eq!(extraction.per_theta[0].theta_l, -45.0);
     assert!(
@@ -182,6 +195,50 @@ fn synthetic_lambertian_scan_gives_the_known_beta() {
         assert!((s.theta_i + s.theta_r - s.theta_l).abs() < 6.0, "{s:?}");
         assert_beta_is_kd(s);
     }
+}
+
+#[test]
+fn one_theta_l_alone_is_its_rows_of_the_whole_scan_with_a_misaligned_setup() {
+    // The 3D geometry of a misaligned setup (given as another setup file) and its
+    // white reflectance apply to one θL alone exactly as to the whole scan.
+    let dir = tempfile::tempdir().unwrap();
+    write_scan(dir.path(), &[-45.0, -30.0, -20.0], &Scene::default());
+    let misaligned = Setup {
+        camera_offset_mm: 2.0,
+        cylinder_tilt_deg: 0.4,
+        arm_zero_offset_deg: 0.3,
+        white_reflectance: Some(0.9),
+        ..setup()
+    };
+    let setup_path = dir.path().join("calibrated.json");
+    fs::write(&setup_path, serde_json::to_string(&misaligned).unwrap()).unwrap();
+    let all_options = ExtractOptions {
+        setup: Some(setup_path),
+        ..ExtractOptions::default()
+    };
+    let all = extract::extract_scan(dir.path(), &all_options).unwrap();
+    assert_eq!(all.white_source, WhiteSource::Setup);
+    let mut pieced = Vec::new();
+    for theta_l in [-45.0, -30.0, -20.0] {
+        let one = ExtractOptions {
+            theta_l: Some(theta_l),
+            ..all_options.clone()
+        };
+        let alone = extract::extract_scan(dir.path(), &one).unwrap();
+        assert_eq!(alone.per_theta.len(), 1);
+        assert!(!alone.samples.is_empty(), "θL {theta_l}");
+        pieced.extend(alone.samples);
+    }
+    assert_eq!(pieced, all.samples);
+    // A θL the scan does not have is a clear error, not an empty result.
+    let missing = ExtractOptions {
+        theta_l: Some(-60.0),
+        ..all_options
+    };
+    assert!(matches!(
+        extract::extract_scan(dir.path(), &missing),
+        Err(ExtractError::NoCaptures { .. })
+    ));
 }
 
 #[test]
