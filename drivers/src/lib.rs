@@ -24,6 +24,7 @@ pub mod supervised_camera;
 pub use error::DeviceError;
 
 use std::path::Path;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
@@ -52,6 +53,36 @@ pub struct ArmStatus {
     pub angle_deg: f64,
 }
 
+/// The arm's angle as its controller last reported it (degrees, machine position),
+/// readable from any thread, also while another thread is inside [`Arm::move_to`]:
+/// drivers report the angle during moves. Cheap to clone; `None` before the first
+/// report.
+#[derive(Debug, Clone)]
+pub struct LiveAngle {
+    bits: Arc<AtomicU64>,
+}
+
+impl Default for LiveAngle {
+    fn default() -> Self {
+        Self {
+            bits: Arc::new(AtomicU64::new(f64::NAN.to_bits())),
+        }
+    }
+}
+
+impl LiveAngle {
+    /// The last reported angle, degrees.
+    pub fn get(&self) -> Option<f64> {
+        let deg = f64::from_bits(self.bits.load(Ordering::Acquire));
+        (!deg.is_nan()).then_some(deg)
+    }
+
+    /// Records a reported angle, degrees.
+    pub fn set(&self, deg: f64) {
+        self.bits.store(deg.to_bits(), Ordering::Release);
+    }
+}
+
 /// Stops the arm at once from any thread, even while another thread is inside
 /// [`Arm::move_to`] (feed hold, then soft reset).
 pub trait EmergencyStop: Send + Sync {
@@ -75,6 +106,8 @@ pub trait Arm: Send {
     fn clear_fault(&mut self) -> Result<(), DeviceError>;
     /// A handle that stops this arm from another thread.
     fn emergency_stop(&self) -> Arc<dyn EmergencyStop>;
+    /// A handle on the angle the arm reports, also during moves.
+    fn live_angle(&self) -> LiveAngle;
 }
 
 /// What a camera says of itself.

@@ -6,6 +6,9 @@
 //! stdin/stdout. Every call has a deadline; on expiry the worker is killed, the call
 //! fails with [`DeviceError::Timeout`], and the next call starts a fresh worker (and
 //! re-applies the last exposure), so one hung capture costs one frame, not the scan.
+//! A worker whose camera reports a lost connection (I/O error, disconnected, not
+//! found) is restarted the same way: the fresh worker looks for the camera again, so
+//! an unplugged camera comes back once it is plugged in.
 //!
 //! Protocol: the worker first writes one [`WorkerReply`] (`ready` with the camera's
 //! [`CameraInfo`], or `error`), then answers each [`WorkerRequest`] line with one reply
@@ -269,7 +272,8 @@ pub struct SupervisedCamera {
     worker: Option<Worker>,
     /// The last exposure set, re-applied after a restart.
     exposure: Option<Exposure>,
-    restarts: u32,
+    /// Workers started so far.
+    spawns: u32,
 }
 
 impl SupervisedCamera {
@@ -278,20 +282,27 @@ impl SupervisedCamera {
         spec: WorkerSpec,
         config: SupervisorConfig,
     ) -> Result<SupervisedCamera, DeviceError> {
-        let mut camera = SupervisedCamera {
-            spec,
-            config,
-            worker: None,
-            exposure: None,
-            restarts: 0,
-        };
+        let mut camera = Self::new(spec, config);
         camera.spawn()?;
         Ok(camera)
     }
 
-    /// How many times the worker was restarted after a timeout or crash.
+    /// A camera whose worker starts with the first call (so that a camera absent now
+    /// is found once it is plugged in).
+    pub fn new(spec: WorkerSpec, config: SupervisorConfig) -> SupervisedCamera {
+        SupervisedCamera {
+            spec,
+            config,
+            worker: None,
+            exposure: None,
+            spawns: 0,
+        }
+    }
+
+    /// How many times the worker was restarted after a timeout, a crash or a lost
+    /// camera.
     pub fn restarts(&self) -> u32 {
-        self.restarts
+        self.spawns.saturating_sub(1)
     }
 
     fn spawn(&mut self) -> Result<CameraInfo, DeviceError> {
@@ -329,7 +340,10 @@ impl SupervisedCamera {
             lines,
         });
         match self.receive(self.config.start_timeout, "camera worker start")? {
-            WorkerReply::Ready(info) => Ok(info),
+            WorkerReply::Ready(info) => {
+                self.spawns += 1;
+                Ok(info)
+            }
             WorkerReply::Error(e) => {
                 self.discard();
                 Err(e.into())
@@ -386,7 +400,6 @@ impl SupervisedCamera {
     ) -> Result<WorkerReply, DeviceError> {
         if self.worker.is_none() {
             self.spawn()?;
-            self.restarts += 1;
             if let Some(exposure) = self.exposure {
                 self.exchange(
                     &WorkerRequest::SetExposure { exposure },
@@ -415,7 +428,18 @@ impl SupervisedCamera {
             )));
         }
         match self.receive(timeout, &format!("camera worker reply to {line}"))? {
-            WorkerReply::Error(e) => Err(e.into()),
+            WorkerReply::Error(e) => {
+                let error = DeviceError::from(e);
+                if matches!(
+                    error,
+                    DeviceError::Io(_) | DeviceError::Disconnected(_) | DeviceError::NotFound(_)
+                ) {
+                    // The worker's camera connection is gone: the next call starts a
+                    // worker that looks for the camera again.
+                    self.discard();
+                }
+                Err(error)
+            }
             reply => Ok(reply),
         }
     }

@@ -4,6 +4,7 @@
 
 use std::collections::VecDeque;
 use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant};
 
@@ -127,9 +128,30 @@ pub enum CameraFault {
 #[derive(Debug, Clone, Default)]
 pub struct FaultInjector {
     queue: Arc<Mutex<VecDeque<CameraFault>>>,
+    unplugged: Arc<AtomicBool>,
 }
 
 impl FaultInjector {
+    /// Pulls the camera's USB cable: every call fails with
+    /// [`DeviceError::Disconnected`] until [`FaultInjector::replug`], and a capture
+    /// under way loses its file.
+    pub fn unplug(&self) {
+        self.unplugged.store(true, Ordering::Release);
+    }
+
+    /// Plugs the cable back in.
+    pub fn replug(&self) {
+        self.unplugged.store(false, Ordering::Release);
+    }
+
+    /// Fails while the cable is out.
+    fn check_plugged(&self) -> Result<(), DeviceError> {
+        if self.unplugged.load(Ordering::Acquire) {
+            return Err(DeviceError::Disconnected("camera unplugged".into()));
+        }
+        Ok(())
+    }
+
     pub fn inject(&self, fault: CameraFault) {
         self.queue
             .lock()
@@ -244,6 +266,7 @@ fn nearest_log(allowed: impl Iterator<Item = f64>, value: f64) -> f64 {
 
 impl Camera for EmulatedCamera {
     fn identify(&mut self) -> Result<CameraInfo, DeviceError> {
+        self.faults.check_plugged()?;
         Ok(CameraInfo {
             model: self.scene.camera().model.clone(),
             port: "emulated".to_string(),
@@ -251,10 +274,12 @@ impl Camera for EmulatedCamera {
     }
 
     fn shutter_speeds(&mut self) -> Result<Vec<f64>, DeviceError> {
+        self.faults.check_plugged()?;
         Ok(SHUTTER_SPEEDS_S.to_vec())
     }
 
     fn set_exposure(&mut self, exposure: Exposure) -> Result<Exposure, DeviceError> {
+        self.faults.check_plugged()?;
         let (lo, hi) = (
             SHUTTER_SPEEDS_S[0],
             SHUTTER_SPEEDS_S[SHUTTER_SPEEDS_S.len() - 1],
@@ -289,6 +314,7 @@ impl Camera for EmulatedCamera {
 
     fn capture_to(&mut self, path: &Path) -> Result<Capture, DeviceError> {
         let started = Instant::now();
+        self.faults.check_plugged()?;
         match self.faults.take() {
             Some(CameraFault::Busy { .. }) => return Err(DeviceError::Busy),
             Some(CameraFault::Timeout) => return Err(self.timeout("capture to complete", started)),
@@ -314,6 +340,7 @@ impl Camera for EmulatedCamera {
         let bytes = frame.encode_tiff()?;
         let duration = wall(self.timing.capture_duration_s(shot.shutter_s));
         std::thread::sleep(duration.saturating_sub(started.elapsed()));
+        self.faults.check_plugged()?;
         write_atomically(&path, &bytes)?;
         Ok(Capture {
             path,

@@ -167,6 +167,39 @@ fn busy_fails_the_next_captures_then_recovers() {
 }
 
 #[test]
+fn unplugged_camera_fails_every_call_until_replugged() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut cam = camera(&World::new(-30.0));
+    let cable = cam.fault_injector();
+    cable.unplug();
+    let err = cam.identify().unwrap_err();
+    assert!(matches!(err, DeviceError::Disconnected(_)), "{err}");
+    assert!(cam.shutter_speeds().is_err());
+    assert!(cam.capture_to(&dir.path().join("x.tiff")).is_err());
+    assert!(entries(dir.path()).is_empty());
+    cable.replug();
+    assert!(cam.identify().is_ok());
+    assert!(cam.capture_to(&dir.path().join("x.tiff")).is_ok());
+    // Pulled while the frame downloads (0.3 s here): the frame is lost.
+    let scene = Scene::from_toml_str(&format!("{SMALL}\n{CT}")).unwrap();
+    let slow = CaptureTiming {
+        time_scale: 1.0,
+        download_latency_s: 0.3,
+        deadline_s: 2.0,
+    };
+    let mut cam = EmulatedCamera::new(scene, World::new(-30.0), slow);
+    let puller = cam.fault_injector();
+    let pull = std::thread::spawn(move || {
+        std::thread::sleep(Duration::from_millis(100));
+        puller.unplug();
+    });
+    let err = cam.capture_to(&dir.path().join("y.tiff")).unwrap_err();
+    pull.join().unwrap();
+    assert!(matches!(err, DeviceError::Disconnected(_)), "{err}");
+    assert_eq!(entries(dir.path()), ["x.tiff"]);
+}
+
+#[test]
 fn io_error_leaves_no_file() {
     let dir = tempfile::tempdir().unwrap();
     let mut cam = camera(&World::new(-30.0));

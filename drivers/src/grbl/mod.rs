@@ -25,7 +25,8 @@
 //!   It never re-sends a line blindly.
 //! - A move is given its trapezoid time × `motion_time_factor` + `motion_margin`;
 //!   past that it stays alive while `?` shows it progressing, up to `motion_patience`
-//!   times that, so a slow controller completes its move.
+//!   times that, so a slow controller completes its move. The reports of those `?`
+//!   (every `status_interval`) also keep [`Arm::live_angle`] current during the move.
 //! - `error:N` → [`DeviceError::Rejected`]; `ALARM:N` → [`DeviceError::Alarm`] with
 //!   GRBL's meaning, or [`DeviceError::HomingFailed`] (ALARM:6–10) with its advice. During
 //!   a hard or soft limit alarm GRBL answers nothing, not even `?`: the driver resets it
@@ -71,9 +72,9 @@ use std::time::Duration;
 
 use serialport::SerialPort;
 
-use crate::{Arm, ArmState, ArmStatus, DeviceError, EmergencyStop};
+use crate::{Arm, ArmState, ArmStatus, DeviceError, EmergencyStop, LiveAngle};
 use link::{Link, POLL_INTERVAL};
-use session::{Patience, Session, FEED_HOLD, SOFT_RESET};
+use session::{AngleWatch, Patience, Session, FEED_HOLD, SOFT_RESET};
 
 /// The largest angle an operator may declare, degrees.
 const MAX_DECLARED_DEG: f64 = 360.0;
@@ -131,6 +132,8 @@ pub struct GrblArm {
     /// A latched `ALARM:N` until [`Arm::clear_fault`].
     alarm: Option<u32>,
     last_angle_deg: f64,
+    /// The last angle reported, for other threads, also during moves.
+    live: LiveAngle,
     /// A resynchronisation is running (its own timeouts do not start another).
     resyncing: bool,
     stop: Arc<GrblStop>,
@@ -154,6 +157,7 @@ impl GrblArm {
             reference: None,
             alarm: None,
             last_angle_deg: 0.0,
+            live: LiveAngle::default(),
             resyncing: false,
             stop: Arc::new(GrblStop {
                 port: Mutex::new(None),
@@ -450,9 +454,15 @@ impl GrblArm {
             other => other?,
         };
         if let Some(angle) = report.work(self.axis(), self.known_wco()) {
-            self.last_angle_deg = angle;
+            self.note_angle(angle);
         }
         Ok(report)
+    }
+
+    /// Records the arm's angle as the controller reported it.
+    fn note_angle(&mut self, angle: f64) {
+        self.last_angle_deg = angle;
+        self.live.set(angle);
     }
 
     /// The work offset in force: the session's last reported one, else the driver's own.
@@ -527,7 +537,7 @@ impl GrblArm {
         let mpos = report
             .machine(self.axis(), self.session.wco())
             .ok_or_else(|| DeviceError::Protocol("no position in the status report".into()))?;
-        self.last_angle_deg = angle;
+        self.note_angle(angle);
         Ok(mpos - angle)
     }
 
@@ -624,9 +634,17 @@ impl Arm for GrblArm {
         let reply = self.config.reply_timeout;
         let line = format!("G90 G0 {}{angle_deg:.3}", self.config.axis.letter());
         self.retrying(|arm| arm.command(&line, Patience::Reply(reply)))?;
-        // `G4 P0` is answered once the planner has finished the move.
+        // `G4 P0` is answered once the planner has finished the move; the status
+        // reports asked for meanwhile keep the live angle current.
         let patience = self.motion_patience(expected);
-        self.retrying(|arm| arm.command("G4 P0", patience))?;
+        self.session.watch(AngleWatch {
+            angle: self.live.clone(),
+            axis: self.axis(),
+            known_wco: self.known_wco(),
+        });
+        let finished = self.retrying(|arm| arm.command("G4 P0", patience));
+        self.session.unwatch();
+        finished?;
         let report = self.query_status()?;
         let at = report
             .work(self.axis(), self.known_wco())
@@ -719,6 +737,10 @@ impl Arm for GrblArm {
 
     fn emergency_stop(&self) -> Arc<dyn EmergencyStop> {
         self.stop.clone()
+    }
+
+    fn live_angle(&self) -> LiveAngle {
+        self.live.clone()
     }
 }
 

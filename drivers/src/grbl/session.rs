@@ -17,7 +17,7 @@ use std::time::{Duration, Instant};
 use super::codes::{alarm_meaning, error_meaning, homing_advice, is_homing_alarm};
 use super::link::{Link, LINE_GRACE};
 use super::protocol::{parse_line, Line, StatusReport};
-use crate::DeviceError;
+use crate::{DeviceError, LiveAngle};
 
 /// GRBL's soft-reset real-time byte (Ctrl-X).
 pub const SOFT_RESET: u8 = 0x18;
@@ -54,6 +54,15 @@ pub struct Seen {
     pub alarm: Option<u32>,
 }
 
+/// Where the status reports of a move publish the arm's angle as they arrive: the live
+/// angle, the arm's axis, and the work offset to use while no report has given one.
+#[derive(Debug, Clone)]
+pub struct AngleWatch {
+    pub angle: LiveAngle,
+    pub axis: usize,
+    pub known_wco: Option<[f64; 3]>,
+}
+
 /// The conversation state.
 pub struct Session {
     link: Option<Link>,
@@ -64,6 +73,8 @@ pub struct Session {
     wco: Option<[f64; 3]>,
     seen: Seen,
     banner_timeout: Duration,
+    /// Publishes the angle from the reports, while a move is watched.
+    watch: Option<AngleWatch>,
 }
 
 impl Session {
@@ -74,7 +85,17 @@ impl Session {
             wco: None,
             seen: Seen::default(),
             banner_timeout,
+            watch: None,
         }
+    }
+
+    /// Publishes the arm's angle from every status report until [`Session::unwatch`].
+    pub fn watch(&mut self, watch: AngleWatch) {
+        self.watch = Some(watch);
+    }
+
+    pub fn unwatch(&mut self) {
+        self.watch = None;
     }
 
     pub fn connected(&self) -> bool {
@@ -158,6 +179,12 @@ impl Session {
             Line::Status(report) => {
                 if let Some(wco) = report.wco {
                     self.wco = Some(wco);
+                }
+                if let Some(watch) = &self.watch {
+                    let known = self.wco.or(watch.known_wco);
+                    if let Some(angle) = report.work(watch.axis, known) {
+                        watch.angle.set(angle);
+                    }
                 }
             }
             Line::Feedback(_) | Line::Setting(..) | Line::Garbled(_) => {}

@@ -57,6 +57,50 @@ fn hung_capture_times_out_and_the_next_one_works() {
     assert_eq!(camera.restarts(), 1);
 }
 
+/// A worker script whose camera is unplugged while `$STATE/unplugged` exists: it is
+/// not found at start then, and a running worker that has seen it gone keeps failing
+/// with I/O errors (as a libgphoto2 session does after the cable is pulled).
+const UNPLUGGABLE: &str = r#"
+if [ -e "$STATE/unplugged" ]; then
+  echo '{"error":{"kind":"not_found","message":"no camera detected"}}'; exit 0
+fi
+echo '{"ready":{"model":"Scripted","port":"usb:001,002"}}'
+lost=""
+while read -r line; do
+  if [ -e "$STATE/unplugged" ]; then lost=1; fi
+  if [ -n "$lost" ]; then echo '{"error":{"kind":"io","message":"USB transfer failed"}}'; continue; fi
+  case "$line" in
+    *identify*) echo '{"info":{"model":"Scripted","port":"usb:001,002"}}' ;;
+    *set_exposure*) echo '{"exposure":{"shutter_s":0.01,"iso":null}}' ;;
+    *capture_to*) echo '{"capture":{"path":"/tmp/x.jpg","exposure":{"shutter_s":0.01,"iso":null}}}' ;;
+  esac
+done
+"#;
+
+#[test]
+fn an_unplugged_camera_restarts_the_worker_and_comes_back() {
+    let state = tempfile::tempdir().unwrap();
+    let unplugged = state.path().join("unplugged");
+    // Started lazily: the first call starts the worker.
+    let mut camera = SupervisedCamera::new(spec(UNPLUGGABLE, state.path()), quick());
+    assert_eq!(camera.identify().unwrap().model, "Scripted");
+    assert_eq!(camera.restarts(), 0);
+    std::fs::write(&unplugged, b"").unwrap();
+    assert!(matches!(
+        camera.capture_to(Path::new("/tmp/x")),
+        Err(DeviceError::Io(_))
+    ));
+    // The worker was dropped: the next one looks for the camera and does not find it.
+    let Err(DeviceError::NotFound(message)) = camera.identify() else {
+        panic!("a missing camera must be reported as not found")
+    };
+    assert_eq!(message, "no camera detected");
+    std::fs::remove_file(&unplugged).unwrap();
+    assert_eq!(camera.identify().unwrap().model, "Scripted");
+    assert_eq!(camera.restarts(), 1);
+    assert!(camera.capture_to(Path::new("/tmp/x")).is_ok());
+}
+
 #[test]
 fn worker_errors_come_back_typed() {
     let state = tempfile::tempdir().unwrap();
