@@ -37,16 +37,11 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let bar = progress::bar(args.frames.len() as u64, "frames");
-    bar.set_message("decoding");
     gonio_processing::capture::set_max_pixels(args.max_frame_pixels);
-    let frames = args
-        .frames
-        .iter()
-        .map(|path| Frame::read(path).inspect(|_| bar.inc(1)))
-        .collect::<Result<Vec<_>, _>>()?;
-    bar.finish_and_clear();
-    let spinner = progress::spinner(format!("merging {} frames", frames.len()));
+    let spinner = progress::spinner(format!("decoding {} frames", args.frames.len()));
+    // Decoding is the slow part of reading: the frames are decoded in parallel.
+    let frames = Frame::read_all(&args.frames)?;
+    spinner.set_message(format!("merging {} frames", frames.len()));
     let options = MergeOptions {
         method: match args.method {
             Method::Auto => MergeMethod::Auto,

@@ -21,13 +21,15 @@ use tokio_stream::wrappers::BroadcastStream;
 
 use super::calibration;
 use super::config::Config;
+use super::devices::InjectedFault;
 use super::files::{is_partial, open_under};
-use super::hardware::InjectedFault;
-use super::plan::{theta_dir_name, Step, FIT_MODELS};
+use super::plan::Step;
 use super::preview;
-use super::shared::{lock, PositionRequest, Shared, EMERGENCY_STOP};
+use super::shared::{PositionRequest, Shared, EMERGENCY_STOP};
 use super::store::{NewScan, ScanRecord, ScanState, StepState, Store, StoreError};
+use super::sync::lock;
 use super::validate::{self, Bounds, FieldError};
+use super::view::{applies_to, rfc3339, scan_view};
 
 /// An error answer: status and `{"error": "...", "field": ...}`.
 pub struct ApiError {
@@ -335,77 +337,6 @@ fn bounds(shared: &Shared) -> Bounds {
     }
 }
 
-fn rfc3339(unix: i64) -> Option<String> {
-    time::OffsetDateTime::from_unix_timestamp(unix)
-        .ok()?
-        .format(&time::format_description::well_known::Rfc3339)
-        .ok()
-}
-
-/// The JSON of a scan: record, progress and links to its results that exist.
-pub fn scan_view(shared: &Shared, scan: &ScanRecord) -> Value {
-    let base = format!("/api/scans/{}", scan.id);
-    let dir = shared.scan_dir(scan.id);
-    let file = |rel: &str| {
-        dir.join(rel)
-            .is_file()
-            .then(|| format!("{base}/files/{rel}"))
-    };
-    let fits: serde_json::Map<String, Value> = FIT_MODELS
-        .iter()
-        .filter_map(|(model, name)| file(name).map(|url| ((*model).to_owned(), json!(url))))
-        .collect();
-    let hdr: Vec<String> = scan
-        .plan
-        .theta_l
-        .iter()
-        .filter_map(|t| file(&format!("hdr/{}.exr", theta_dir_name(*t))))
-        .collect();
-    // A frame to preview once a capture has landed in a θL directory.
-    let has_frame = scan.plan.theta_l.iter().any(|t| {
-        std::fs::read_dir(dir.join(theta_dir_name(*t))).is_ok_and(|entries| {
-            entries
-                .flatten()
-                .any(|e| !e.file_name().to_string_lossy().starts_with('.'))
-        })
-    });
-    json!({
-        "id": scan.id,
-        "sample": scan.plan.sample,
-        "state": scan.state,
-        "error": scan.error,
-        "reason": (scan.state == ScanState::Waiting).then_some(&scan.error),
-        "sweep_id": scan.sweep_id,
-        "theta_l": scan.plan.theta_l,
-        "bracket": { "shutter_s": scan.plan.shutter_s, "auto": scan.plan.auto_bracket },
-        "progress": { "done": scan.done, "total": scan.total },
-        "actions": CONTROLS
-            .iter()
-            .filter(|(_, from)| from.contains(&scan.state))
-            .map(|(verb, _)| *verb)
-            .collect::<Vec<_>>(),
-        "current_step": scan.current_step,
-        "created": scan.created,
-        "started": scan.started,
-        "finished": scan.finished,
-        "not_before": scan.not_before.and_then(rfc3339),
-        "links": {
-            "self": base,
-            "events": format!("{base}/events"),
-            "steps": format!("{base}/steps"),
-            "files": format!("{base}/files"),
-            "thumbnail": format!("{base}/thumbnail.png"),
-            "plot": format!("{base}/plot"),
-        },
-        "results": {
-            "samples": file("samples.csv"),
-            "fits": fits,
-            "hdr": hdr,
-            "thumbnail": has_frame.then(|| format!("{base}/thumbnail.png")),
-        },
-    })
-}
-
 async fn create_scan(State(shared): AppState, body: Bytes) -> ApiResult<impl IntoResponse> {
     let value = parse_json(&body)?;
     let plan = validate::scan_request(&value, &bounds(&shared))?;
@@ -415,7 +346,7 @@ async fn create_scan(State(shared): AppState, body: Bytes) -> ApiResult<impl Int
             sweep_id: None,
             not_before: None,
         }])?[0];
-        shared.publish(store, id)?;
+        shared.changed(id);
         Ok(id)
     })
     .await?;
@@ -428,10 +359,15 @@ async fn create_scan(State(shared): AppState, body: Bytes) -> ApiResult<impl Int
 }
 
 async fn list_scans(State(shared): AppState) -> ApiResult<Json<Value>> {
-    let scans = db(&shared, |_, store| store.scans()).await?;
-    Ok(Json(Value::Array(
-        scans.iter().map(|s| scan_view(&shared, s)).collect(),
-    )))
+    let views = db(&shared, |shared, store| {
+        store
+            .scans()?
+            .iter()
+            .map(|s| scan_view(shared, store, s, false))
+            .collect()
+    })
+    .await?;
+    Ok(Json(Value::Array(views)))
 }
 
 async fn load_scan(shared: &Arc<Shared>, id: i64) -> ApiResult<ScanRecord> {
@@ -440,9 +376,20 @@ async fn load_scan(shared: &Arc<Shared>, id: i64) -> ApiResult<ScanRecord> {
         .ok_or_else(|| ApiError::not_found(format!("scan {id}")))
 }
 
+/// The detailed view of scan `id`.
+async fn load_view(shared: &Arc<Shared>, id: i64) -> ApiResult<Value> {
+    db(shared, move |shared, store| {
+        store
+            .scan(id)?
+            .map(|scan| scan_view(shared, store, &scan, true))
+            .transpose()
+    })
+    .await?
+    .ok_or_else(|| ApiError::not_found(format!("scan {id}")))
+}
+
 async fn get_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
-    let scan = load_scan(&shared, id).await?;
-    Ok(Json(scan_view(&shared, &scan)))
+    Ok(Json(load_view(&shared, id).await?))
 }
 
 async fn scan_steps(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
@@ -464,7 +411,7 @@ async fn control(
     // have changed it since `scan` was loaded).
     let refused_in = db(&shared, move |shared, store| {
         if store.transition(id, from, to, None)? {
-            shared.publish(store, id)?;
+            shared.changed(id);
             Ok(None)
         } else {
             Ok(Some(store.scan(id)?.map_or(scan.state, |s| s.state)))
@@ -479,45 +426,7 @@ async fn control(
     }
     shared.wake();
     tracing::info!("scan {id}: {verb}");
-    let scan = load_scan(&shared, id).await?;
-    Ok(Json(scan_view(&shared, &scan)))
-}
-
-/// The states each control verb applies to; a scan's JSON lists the verbs its state
-/// allows (`actions`), so that the page offers only those.
-const CONTROLS: [(&str, &[ScanState]); 3] = [
-    (
-        "pause",
-        &[
-            ScanState::Queued,
-            ScanState::Running,
-            ScanState::Interrupted,
-            ScanState::Waiting,
-        ],
-    ),
-    // Re-queues a paused or waiting scan, or retries a failed one from its first step
-    // not done.
-    (
-        "resume",
-        &[ScanState::Paused, ScanState::Failed, ScanState::Waiting],
-    ),
-    (
-        "cancel",
-        &[
-            ScanState::Queued,
-            ScanState::Running,
-            ScanState::Paused,
-            ScanState::Interrupted,
-            ScanState::Waiting,
-        ],
-    ),
-];
-
-fn applies_to(verb: &str) -> &'static [ScanState] {
-    CONTROLS
-        .iter()
-        .find(|(name, _)| *name == verb)
-        .map_or(&[], |(_, from)| from)
+    Ok(Json(load_view(&shared, id).await?))
 }
 
 async fn pause_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
@@ -605,7 +514,7 @@ async fn stop_arm(State(shared): AppState) -> ApiResult<Json<Value>> {
             store.transition_all(ScanState::Running, ScanState::Paused, Some(EMERGENCY_STOP))?;
         store.log(shared.boot, None, "stop", "emergency stop")?;
         for id in &ids {
-            shared.publish(store, *id)?;
+            shared.changed(*id);
         }
         Ok(ids)
     })
@@ -615,11 +524,11 @@ async fn stop_arm(State(shared): AppState) -> ApiResult<Json<Value>> {
     Ok(Json(json!({ "stopped": true, "paused": paused })))
 }
 
-/// How long a declared position may wait for the hardware owner (busy with a step).
+/// How long a declared position may wait for the hardware lane (busy with a step).
 const DECLARE_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(30);
 
 /// Declares where the arm is, for controllers without homing (`{"angle": degrees}`);
-/// the hardware owner applies it (`G92`), records it in the hardware log and queues the
+/// the hardware lane applies it (`G92`), records it in the hardware log and queues the
 /// waiting scans again.
 async fn declare_arm_position(State(shared): AppState, body: Bytes) -> ApiResult<Json<Value>> {
     let angle = validate::arm_position(&parse_json(&body)?)?;
@@ -726,7 +635,10 @@ fn sweep_view(shared: &Shared, store: &Store, id: i64) -> Result<Option<Value>, 
         "state": state,
         "progress": { "done": done, "total": total },
         "scans_by_state": states,
-        "scans": scans.iter().map(|s| scan_view(shared, s)).collect::<Vec<_>>(),
+        "scans": scans
+            .iter()
+            .map(|s| scan_view(shared, store, s, false))
+            .collect::<Result<Vec<_>, _>>()?,
     })))
 }
 
@@ -751,9 +663,9 @@ async fn list_sweeps(State(shared): AppState) -> ApiResult<Json<Value>> {
 
 async fn hardware(State(shared): AppState) -> Json<Value> {
     let mut status = lock(&shared.hardware).clone();
-    if let Some(emulators) = &shared.emulators {
-        // The emulated arm's live angle, also while a move is under way.
-        status.arm.angle_deg = Some(emulators.world.arm_deg());
+    if let Some(angle) = lock(&shared.arm_angle).as_ref().and_then(|a| a.get()) {
+        // As the arm reported it, also while a move is under way.
+        status.arm.angle_deg = Some(angle);
     }
     Json(json!({
         "arm": status.arm,
@@ -783,7 +695,7 @@ async fn scan_events(
     State(shared): AppState,
     Path(id): Path<i64>,
 ) -> ApiResult<Sse<impl Stream<Item = Result<Event, Infallible>>>> {
-    let first = load_scan(&shared, id).await?;
+    load_scan(&shared, id).await?;
     let open = EventStreamSlot::take(shared.config.max_event_streams).ok_or_else(|| {
         ApiError::new(
             StatusCode::SERVICE_UNAVAILABLE,
@@ -795,19 +707,20 @@ async fn scan_events(
         )
     })?;
     let updates = BroadcastStream::new(shared.events.subscribe());
-    let view_shared = shared.clone();
-    let stream = futures_util::stream::once(async move { first })
-        .chain(updates.filter_map(move |msg| async move {
-            // A lagging subscriber skips snapshots; the next one is complete anyway.
-            msg.ok().filter(|scan| scan.id == id)
-        }))
-        .scan(false, move |ended, scan| {
+    // The publisher sends the view now: every event of the stream comes from it, in
+    // order.
+    shared.changed(id);
+    let stream = updates
+        .filter_map(move |msg| async move {
+            // A lagging subscriber skips views; the next one is complete anyway.
+            msg.ok().filter(|event| event.id == id)
+        })
+        .scan(false, move |ended, event| {
             // The slot is released with the stream.
             let _open = &open;
             let item = (!*ended).then(|| {
-                *ended = scan.state.is_final();
-                let view = scan_view(&view_shared, &scan);
-                Ok(Event::default().event("progress").data(view.to_string()))
+                *ended = event.state.is_final();
+                Ok(Event::default().event("progress").data(&*event.view))
             });
             async move { item }
         });

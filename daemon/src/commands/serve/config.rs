@@ -44,6 +44,9 @@
 //! attempts = 4
 //! backoff_ms = 200
 //!
+//! [processing]
+//! max_backlog = 2              # captured brackets not yet processed before the arm waits
+//!
 //! [emulator]
 //! fault_injection = false      # test hook: POST /api/emulator/fault
 //! ```
@@ -91,6 +94,7 @@ pub struct Config {
     pub camera: CameraConfig,
     pub limits: Limits,
     pub retry: RetryConfig,
+    pub processing: ProcessingConfig,
     pub emulator: EmulatorConfig,
     /// Reflectance of the white reference strip of the real setup (1 = perfect
     /// reflecting diffuser) where `[setup]` gives none; emulated scans take the scene's.
@@ -120,6 +124,7 @@ impl Default for Config {
             camera: CameraConfig::default(),
             limits: Limits::default(),
             retry: RetryConfig::default(),
+            processing: ProcessingConfig::default(),
             emulator: EmulatorConfig::default(),
             white_reflectance: 1.0,
             setup: None,
@@ -261,6 +266,21 @@ impl Default for RetryConfig {
     }
 }
 
+/// The processing lane.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ProcessingConfig {
+    /// Captured brackets waiting for processing before the hardware lane waits to
+    /// start the next one (back-pressure).
+    pub max_backlog: usize,
+}
+
+impl Default for ProcessingConfig {
+    fn default() -> Self {
+        Self { max_backlog: 2 }
+    }
+}
+
 /// Emulator-only switches.
 #[derive(Debug, Clone, Copy, Default, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -311,6 +331,10 @@ impl Config {
         anyhow::ensure!(
             self.retry.attempts >= 1,
             "retry.attempts must be at least 1"
+        );
+        anyhow::ensure!(
+            self.processing.max_backlog >= 1,
+            "processing.max_backlog must be at least 1"
         );
         anyhow::ensure!(
             self.max_body_bytes >= 1024,

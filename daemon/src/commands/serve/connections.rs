@@ -23,7 +23,7 @@ use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::Notify;
 use tower::ServiceExt;
 
-use super::shared::lock;
+use super::sync::lock;
 
 /// What the server enforces on connections.
 #[derive(Debug, Clone, Copy)]

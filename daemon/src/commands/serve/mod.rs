@@ -1,26 +1,31 @@
 //! `gonio serve`: the measurement daemon. HTTP handlers (tokio + axum) queue scans in
-//! a durable SQLite store; one hardware owner thread runs them step by step.
+//! a durable SQLite store; a hardware lane and a processing lane run their steps
+//! (docs/ARCHITECTURE.md, "Daemon").
 
 mod api;
 mod calibration;
 mod config;
 mod connections;
+mod devices;
 mod files;
-mod hardware;
+mod lanes;
 mod plan;
 mod preview;
 mod process;
-mod runner;
+mod progress;
 mod shared;
 mod step_guard;
 mod store;
+mod sync;
+mod timing;
 mod validate;
+mod view;
 mod web;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicU64;
-use std::sync::{mpsc, Arc, Mutex};
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use anyhow::Context;
@@ -28,8 +33,9 @@ use gonio_drivers::ArmState;
 use tokio::sync::broadcast;
 
 use config::Config;
-use shared::{lock, ArmView, CameraView, HardwareStatus, Shared};
+use shared::{ArmView, CameraView, HardwareStatus, Shared};
 use store::Store;
+use sync::{lock, Mailbox};
 
 /// How long requests in flight may take to finish once a stop is asked for.
 const SHUTDOWN_GRACE: std::time::Duration = std::time::Duration::from_secs(2);
@@ -89,11 +95,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let token = token(&config)?;
 
     let db_path = config.data_dir.join("gonio.sqlite");
-    let mut runner_store =
+    let mut api_store =
         Store::open(&db_path).with_context(|| format!("opening {}", db_path.display()))?;
-    let boot = runner_store.begin_boot()?;
-    let api_store = Store::open(&db_path)?;
-    let devices = hardware::open(&config)?;
+    let boot = api_store.begin_boot()?;
+    let devices = devices::open(&config)?;
     // Listening before the queue runs: a daemon that cannot bind has started no step.
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
@@ -105,14 +110,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         listen(config.bind).with_context(|| format!("binding {}", config.bind))?
     };
 
-    let (wake_tx, wake_rx) = mpsc::channel();
     let (events, _) = broadcast::channel(256);
     let shared = Arc::new(Shared {
         token,
         boot,
         store: Mutex::new(api_store),
         events,
-        wake: Mutex::new(wake_tx),
+        changed: Mailbox::default(),
+        hardware_wake: Mailbox::default(),
+        processing_wake: Mailbox::default(),
         hardware: Mutex::new(HardwareStatus {
             arm: ArmView {
                 state: ArmState::Disconnected,
@@ -131,27 +137,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             },
         }),
         estop: Mutex::new(None),
+        arm_angle: Mutex::new(None),
         stops: AtomicU64::new(0),
         arm_position: Mutex::new(None),
+        timing: devices.timing,
         emulators: devices.emulators.clone(),
         config,
     });
-    step_guard::fail_crash_looping_scans(&shared, &mut runner_store)?;
-    let runner = runner::Runner::new(shared.clone(), runner_store, wake_rx, devices);
-    let owner = std::thread::Builder::new()
-        .name("hardware".into())
-        .spawn(move || runner.run())
-        .context("starting the hardware thread")?;
-    // The hardware owner only ends by panicking: then end the process too, so that a
-    // supervisor restarts it and the queue resumes, rather than serve without hardware.
-    std::thread::Builder::new()
-        .name("hardware-watch".into())
-        .spawn(move || {
-            let _ = owner.join();
-            tracing::error!("the hardware thread stopped; exiting");
-            std::process::exit(2);
-        })
-        .context("starting the hardware watch thread")?;
+    step_guard::fail_crash_looping_scans(&shared, &mut lock(&shared.store))?;
+    view::start_publisher(shared.clone(), &db_path)?;
+    lanes::start(shared.clone(), devices, &db_path)?;
 
     let served = runtime.block_on(serve(shared.clone(), listener));
     // Stopped on a signal: the step the hardware is in is redone at the next start,

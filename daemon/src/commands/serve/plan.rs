@@ -1,5 +1,6 @@
-//! Scans as data: a validated request expands into the ordered steps the hardware
-//! owner executes, stored before anything moves.
+//! Scans as data: a validated request expands into the ordered steps of its journal,
+//! stored before anything moves. Each step belongs to one lane (docs/ARCHITECTURE.md,
+//! "Daemon"): the hardware lane moves and captures, the processing lane computes.
 
 use gonio_drivers::camera_choice::format_shutter;
 use serde::{Deserialize, Serialize};
@@ -24,8 +25,17 @@ pub const FIT_MODELS: [(&str, &str); 3] = [
     ("cook-torrance-fresnel", "fit-cook-torrance-fresnel.json"),
 ];
 
-/// One unit of work of a scan. Hardware steps are idempotent on resume: a capture whose
-/// frame already exists is not taken again.
+/// Which thread runs a step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Lane {
+    /// Owns the arm and the camera: homing, moves, metering, captures.
+    Hardware,
+    /// Turns captures into results: HDR maps, samples, fits.
+    Processing,
+}
+
+/// One unit of work of a scan. Every step is idempotent on resume: a capture whose
+/// frame already exists is not taken again, a processing step rewrites its outputs.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum Step {
@@ -42,9 +52,12 @@ pub enum Step {
         index: usize,
         shutter_s: f64,
     },
+    /// Extract the samples of θL's captures into `samples/theta_l_<θL>.csv` and update
+    /// the live fits with every θL so far.
+    Samples { theta_l: f64 },
     /// Merge the bracket of θL into `hdr/theta_l_<θL>.exr`.
     Hdr { theta_l: f64 },
-    /// Extract the samples of all captures into `samples.csv`.
+    /// Gather the samples of every θL into `samples.csv`.
     Extract,
     /// Fit one model to `samples.csv`.
     Fit { model: String },
@@ -65,9 +78,34 @@ impl Step {
                 "capture θL {theta_l:.1}° exposure {index} ({})",
                 format_shutter(*shutter_s)
             ),
+            Step::Samples { theta_l } => format!("extract θL {theta_l:.1}° and fit"),
             Step::Hdr { theta_l } => format!("HDR merge θL {theta_l:.1}°"),
             Step::Extract => "extract samples".to_owned(),
             Step::Fit { model } => format!("fit {model}"),
+        }
+    }
+
+    /// The lane that runs this step.
+    pub fn lane(&self) -> Lane {
+        match self {
+            Step::Home | Step::Move { .. } | Step::Meter { .. } | Step::Capture { .. } => {
+                Lane::Hardware
+            }
+            Step::Samples { .. } | Step::Hdr { .. } | Step::Extract | Step::Fit { .. } => {
+                Lane::Processing
+            }
+        }
+    }
+
+    /// The θL whose bracket this step captures or processes, if it is one θL's.
+    pub fn theta_l(&self) -> Option<f64> {
+        match self {
+            Step::Move { theta_l }
+            | Step::Meter { theta_l }
+            | Step::Capture { theta_l, .. }
+            | Step::Samples { theta_l }
+            | Step::Hdr { theta_l } => Some(*theta_l),
+            Step::Home | Step::Extract | Step::Fit { .. } => None,
         }
     }
 }
@@ -77,14 +115,19 @@ pub fn theta_dir_name(theta_l: f64) -> String {
     format!("theta_l_{theta_l:.1}")
 }
 
+/// Samples file of one θL inside a scan directory (the rows of `samples.csv` at θL).
+pub fn theta_samples_path(theta_l: f64) -> String {
+    format!("samples/{}.csv", theta_dir_name(theta_l))
+}
+
 /// File stem of bracket exposure `index`.
 pub fn exposure_stem(index: usize) -> String {
     format!("exp_{index:02}")
 }
 
 impl ScanPlan {
-    /// The steps of the plan, in execution order (an automatic bracket adds its
-    /// captures when its metering step is done).
+    /// The steps of the plan in journal order (an automatic bracket adds its captures
+    /// when its metering step is done). A processing step needs the steps before it.
     pub fn steps(&self) -> Vec<Step> {
         let mut steps = vec![Step::Home];
         for &theta_l in &self.theta_l {
@@ -93,6 +136,7 @@ impl ScanPlan {
                 steps.push(Step::Meter { theta_l });
             }
             steps.extend(Self::captures(theta_l, &self.shutter_s));
+            steps.push(Step::Samples { theta_l });
             steps.push(Step::Hdr { theta_l });
         }
         steps.push(Step::Extract);
@@ -129,7 +173,7 @@ mod tests {
             auto_bracket: false,
         };
         let steps = plan.steps();
-        assert_eq!(steps.len(), 1 + 2 * (1 + 3 + 1) + 1 + 3);
+        assert_eq!(steps.len(), 1 + 2 * (1 + 3 + 2) + 1 + 3);
         assert_eq!(steps[0], Step::Home);
         assert_eq!(steps[1], Step::Move { theta_l: -20.0 });
         assert_eq!(
@@ -140,10 +184,18 @@ mod tests {
                 shutter_s: 0.001
             }
         );
-        assert_eq!(steps[5], Step::Hdr { theta_l: -20.0 });
-        assert_eq!(steps[11], Step::Extract);
-        assert!(matches!(&steps[13], Step::Fit { model } if model == "ward"));
-        assert!(matches!(&steps[14], Step::Fit { model } if model == "cook-torrance-fresnel"));
+        assert_eq!(steps[5], Step::Samples { theta_l: -20.0 });
+        assert_eq!(steps[6], Step::Hdr { theta_l: -20.0 });
+        assert_eq!(steps[13], Step::Extract);
+        assert!(matches!(&steps[15], Step::Fit { model } if model == "ward"));
+        assert!(matches!(&steps[16], Step::Fit { model } if model == "cook-torrance-fresnel"));
+        // Hardware steps move and capture; everything after a bracket is processing.
+        let lanes: Vec<Lane> = steps.iter().map(Step::lane).collect();
+        assert_eq!(lanes[..5], [Lane::Hardware; 5]);
+        assert_eq!(lanes[5..7], [Lane::Processing; 2]);
+        assert_eq!(lanes[13..], [Lane::Processing; 4]);
+        assert_eq!(steps[6].theta_l(), Some(-20.0));
+        assert_eq!(steps[13].theta_l(), None);
     }
 
     #[test]
@@ -156,15 +208,16 @@ mod tests {
         };
         let steps = plan.steps();
         assert_eq!(
-            &steps[..4],
+            &steps[..5],
             &[
                 Step::Home,
                 Step::Move { theta_l: -20.0 },
                 Step::Meter { theta_l: -20.0 },
+                Step::Samples { theta_l: -20.0 },
                 Step::Hdr { theta_l: -20.0 }
             ]
         );
-        assert_eq!(steps.len(), 1 + 2 * 3 + 1 + 3);
+        assert_eq!(steps.len(), 1 + 2 * 4 + 4);
     }
 
     #[test]
@@ -172,5 +225,6 @@ mod tests {
         assert_eq!(theta_dir_name(-20.0), "theta_l_-20.0");
         assert_eq!(theta_dir_name(-32.5), "theta_l_-32.5");
         assert_eq!(exposure_stem(3), "exp_03");
+        assert_eq!(theta_samples_path(-20.0), "samples/theta_l_-20.0.csv");
     }
 }

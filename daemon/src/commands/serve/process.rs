@@ -1,25 +1,92 @@
-//! The processing steps of a scan: the HDR map of a θL once its bracket is complete,
-//! then extraction and the model fits. Results are written atomically.
+//! The processing steps of a scan (docs/ARCHITECTURE.md, "Daemon"): once a θL's
+//! bracket is captured, its samples (and the live fits over every θL so far) and its
+//! HDR map; once every bracket is, all samples gathered and the model fits. Outputs
+//! are written atomically; each step returns the result record of its journal row.
+//! Frames may be decoded ahead of their HDR step ([`Prefetched`]).
 
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use gonio_processing::brdf::Model;
-use gonio_processing::capture::{is_capture_path, Frame};
+use gonio_processing::capture::{is_capture_path, CaptureError, Frame};
 use gonio_processing::extract::{extract_scan, ExtractOptions};
-use gonio_processing::fit::{fit, FitOptions};
+use gonio_processing::fit::{fit, FitOptions, FitResult};
 use gonio_processing::hdr::{merge, MergeOptions};
-use gonio_processing::samples::{read_csv, write_csv};
+use gonio_processing::metrics::err_p;
+use gonio_processing::samples::{read_csv, write_csv, Sample};
 use serde_json::{json, Value};
 
 use super::files::{write_atomic, write_atomic_with};
-use super::plan::{theta_dir_name, Step, FIT_MODELS};
+use super::plan::{theta_dir_name, theta_samples_path, ScanPlan, Step, FIT_MODELS};
 
-/// Runs one processing step in scan directory `dir`. Returns the step's result record.
-pub fn run(step: &Step, dir: &Path) -> anyhow::Result<Value> {
+/// Most frames decoded ahead of their HDR step (a full-size 16-bit frame is 60 MB).
+const PREFETCH_FRAMES: usize = 8;
+
+/// Frames decoded ahead of their HDR step, while the rest of their bracket is
+/// captured, so that the merge after a bracket's last capture decodes one frame
+/// rather than all. A cache only: the HDR step decodes whatever is not here.
+#[derive(Debug, Default)]
+pub struct Prefetched {
+    frames: Vec<Frame>,
+    /// Frames that did not decode: the HDR step reports why.
+    failed: Vec<PathBuf>,
+}
+
+impl Prefetched {
+    /// Forgets the frames not in `wanted` (paths of frames awaiting their HDR step),
+    /// then decodes the first one not decoded yet, if there is room; returns whether
+    /// it decoded one.
+    pub fn advance(&mut self, wanted: &[PathBuf]) -> bool {
+        self.frames.retain(|f| wanted.contains(&f.path));
+        self.failed.retain(|p| wanted.contains(p));
+        if self.frames.len() >= PREFETCH_FRAMES {
+            return false;
+        }
+        let Some(path) = wanted
+            .iter()
+            .find(|p| !self.failed.contains(p) && !self.frames.iter().any(|f| &f.path == *p))
+        else {
+            return false;
+        };
+        match Frame::read(path) {
+            Ok(frame) => self.frames.push(frame),
+            Err(_) => self.failed.push(path.clone()),
+        }
+        true
+    }
+
+    /// The frames at `paths`, in order: those decoded ahead taken from here, the
+    /// others decoded now, in parallel.
+    fn take(&mut self, paths: &[PathBuf]) -> Result<Vec<Frame>, CaptureError> {
+        let missing: Vec<PathBuf> = paths
+            .iter()
+            .filter(|p| !self.frames.iter().any(|f| &f.path == *p))
+            .cloned()
+            .collect();
+        let mut decoded = Frame::read_all(&missing)?.into_iter();
+        Ok(paths
+            .iter()
+            .filter_map(|p| match self.frames.iter().position(|f| &f.path == p) {
+                Some(i) => Some(self.frames.swap_remove(i)),
+                None => decoded.next(),
+            })
+            .collect())
+    }
+}
+
+/// Runs one processing step of the scan `plan` in scan directory `dir` (extraction
+/// with setup.json's white reflectance); the HDR step takes the frames decoded ahead
+/// from `prefetched`. Returns the step's result record.
+pub fn run(
+    step: &Step,
+    dir: &Path,
+    plan: &ScanPlan,
+    prefetched: &mut Prefetched,
+) -> anyhow::Result<Value> {
     match step {
-        Step::Hdr { theta_l } => hdr(dir, *theta_l),
-        Step::Extract => extract(dir),
+        Step::Samples { theta_l } => samples(dir, plan, *theta_l),
+        Step::Hdr { theta_l } => hdr(dir, *theta_l, prefetched),
+        Step::Extract => gather(dir, plan),
         Step::Fit { model } => fit_model(dir, model),
         Step::Home | Step::Move { .. } | Step::Meter { .. } | Step::Capture { .. } => {
             anyhow::bail!("{} is not a processing step", step.describe())
@@ -27,7 +94,100 @@ pub fn run(step: &Step, dir: &Path) -> anyhow::Result<Value> {
     }
 }
 
-fn hdr(dir: &Path, theta_l: f64) -> anyhow::Result<Value> {
+/// The samples of θL's captures alone.
+fn extract_theta(dir: &Path, theta_l: f64) -> anyhow::Result<Vec<Sample>> {
+    let options = ExtractOptions {
+        theta_l: Some(theta_l),
+        ..ExtractOptions::default()
+    };
+    Ok(extract_scan(dir, &options)?.samples)
+}
+
+/// The samples of one θL as its samples step wrote them.
+fn read_theta(dir: &Path, theta_l: f64) -> anyhow::Result<Vec<Sample>> {
+    let rel = theta_samples_path(theta_l);
+    read_csv(&dir.join(&rel)).with_context(|| rel)
+}
+
+fn samples(dir: &Path, plan: &ScanPlan, theta_l: f64) -> anyhow::Result<Value> {
+    let samples = extract_theta(dir, theta_l)?;
+    let rel = theta_samples_path(theta_l);
+    write_atomic_with(&dir.join(&rel), |tmp| write_csv(tmp, &samples))
+        .with_context(|| rel.clone())?;
+    let live = live_fits(dir, plan, theta_l, &samples)?;
+    Ok(json!({ "path": rel, "samples": samples.len(), "live": live }))
+}
+
+/// The robust fits over every θL measured so far, `newest` the samples of the last
+/// one, `theta_l`. Beside each fit's parameters and in-sample ΔErr_p (eq. 11):
+/// `held_out_err_p`, the ΔErr_p at the newest θL of the fit made before it was
+/// measured, and `change_p`, how far the fitted β moved at every point with it (the
+/// ΔErr_p between the two fits' predictions); both fall as more θL stop paying.
+fn live_fits(
+    dir: &Path,
+    plan: &ScanPlan,
+    theta_l: f64,
+    newest: &[Sample],
+) -> anyhow::Result<Value> {
+    let position = plan
+        .theta_l
+        .iter()
+        .position(|t| *t == theta_l)
+        .with_context(|| format!("θL {theta_l}° is not in the scan's plan"))?;
+    let mut earlier = Vec::new();
+    for &t in &plan.theta_l[..position] {
+        earlier.extend(read_theta(dir, t)?);
+    }
+    let mut all = earlier.clone();
+    all.extend_from_slice(newest);
+    let mut fits = serde_json::Map::new();
+    for (model, _) in FIT_MODELS {
+        let options = FitOptions::new(model.parse::<Model>()?);
+        let entry = match fit(&all, &options) {
+            Ok(now) => {
+                let before = if earlier.is_empty() {
+                    None
+                } else {
+                    fit(&earlier, &options).ok()
+                };
+                live_entry(&now, before.as_ref(), newest, &all)
+            }
+            Err(err) => json!({ "error": err.to_string() }),
+        };
+        fits.insert(model.to_owned(), entry);
+    }
+    Ok(json!({
+        "theta_l": plan.theta_l[..=position],
+        "samples": all.len(),
+        "fits": fits,
+    }))
+}
+
+fn predictions(fit: &FitResult, samples: &[Sample]) -> Vec<[f64; 3]> {
+    samples.iter().map(|s| fit.predict_sample(s)).collect()
+}
+
+fn live_entry(
+    now: &FitResult,
+    before: Option<&FitResult>,
+    newest: &[Sample],
+    all: &[Sample],
+) -> Value {
+    let measured: Vec<[f64; 3]> = newest.iter().map(|s| s.rgb).collect();
+    let held_out = before.and_then(|b| err_p(&measured, &predictions(b, newest)).ok());
+    let change = before.and_then(|b| err_p(&predictions(now, all), &predictions(b, all)).ok());
+    json!({
+        "kd": now.kd,
+        "ks": now.ks,
+        "m": now.m,
+        "loss": now.loss,
+        "err_p": now.err_p,
+        "held_out_err_p": held_out,
+        "change_p": change,
+    })
+}
+
+fn hdr(dir: &Path, theta_l: f64, prefetched: &mut Prefetched) -> anyhow::Result<Value> {
     let frame_dir = dir.join(theta_dir_name(theta_l));
     let mut paths: Vec<PathBuf> = std::fs::read_dir(&frame_dir)
         .with_context(|| frame_dir.display().to_string())?
@@ -36,28 +196,35 @@ fn hdr(dir: &Path, theta_l: f64) -> anyhow::Result<Value> {
         .filter(|p| is_capture_path(p))
         .collect();
     paths.sort();
-    let frames = paths
-        .iter()
-        .map(|p| Frame::read(p))
-        .collect::<Result<Vec<_>, _>>()?;
+    let frames = prefetched.take(&paths)?;
     let image = merge(&frames, &MergeOptions::default())?;
     let rel = format!("hdr/{}.exr", theta_dir_name(theta_l));
     write_atomic_with(&dir.join(&rel), |tmp| image.write_exr(tmp))?;
     Ok(json!({ "path": rel, "frames": frames.len() }))
 }
 
-/// Extracts with setup.json's white reflectance.
-fn extract(dir: &Path) -> anyhow::Result<Value> {
-    let extraction = extract_scan(dir, &ExtractOptions::default())?;
-    anyhow::ensure!(
-        !extraction.samples.is_empty(),
-        "{}",
-        extraction.dropped.explain_empty()
-    );
-    write_atomic_with(&dir.join("samples.csv"), |tmp| {
-        write_csv(tmp, &extraction.samples)
-    })?;
-    Ok(json!({ "path": "samples.csv", "samples": extraction.samples.len() }))
+/// `samples.csv`: the samples of every θL in ascending θL, as `gonio extract` orders
+/// them; a θL without its samples file (a scan planned before samples steps existed)
+/// is extracted here.
+fn gather(dir: &Path, plan: &ScanPlan) -> anyhow::Result<Value> {
+    let mut theta_ls = plan.theta_l.clone();
+    theta_ls.sort_by(f64::total_cmp);
+    let mut samples = Vec::new();
+    for theta_l in theta_ls {
+        if dir.join(theta_samples_path(theta_l)).is_file() {
+            samples.extend(read_theta(dir, theta_l)?);
+        } else {
+            samples.extend(extract_theta(dir, theta_l)?);
+        }
+    }
+    if samples.is_empty() {
+        // Say why, as `gonio extract` does: extracting the whole scan counts what it
+        // dropped.
+        let extraction = extract_scan(dir, &ExtractOptions::default())?;
+        anyhow::bail!("{}", extraction.dropped.explain_empty());
+    }
+    write_atomic_with(&dir.join("samples.csv"), |tmp| write_csv(tmp, &samples))?;
+    Ok(json!({ "path": "samples.csv", "samples": samples.len() }))
 }
 
 fn fit_model(dir: &Path, model: &str) -> anyhow::Result<Value> {
@@ -71,4 +238,58 @@ fn fit_model(dir: &Path, model: &str) -> anyhow::Result<Value> {
     write_atomic(&dir.join(name), &serde_json::to_vec_pretty(&result)?)
         .with_context(|| name.to_owned())?;
     Ok(json!({ "path": name, "loss": result.loss }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use gonio_processing::capture::{write_tiff_capture, Response, Sidecar};
+
+    fn write_frames(dir: &Path, count: usize) -> Vec<PathBuf> {
+        (0..count)
+            .map(|n| {
+                let path = dir.join(format!("exp_{n:02}.tiff"));
+                let sidecar = Sidecar {
+                    shutter_s: 0.1 / (n + 1) as f64,
+                    iso: Some(100.0),
+                    theta_l: -20.0,
+                    camera: "test".into(),
+                    time: "2026-01-01T00:00:00Z".into(),
+                    black_level: Some(0.0),
+                    white_level: Some(4095.0),
+                    response: Response::Linear,
+                    significant_bits: Some(12),
+                    width: None,
+                    height: None,
+                };
+                let counts: Vec<u16> = (0..4 * 3 * 3).map(|v| (v * 100 + n) as u16).collect();
+                write_tiff_capture(&path, 4, 3, &counts, &sidecar).unwrap();
+                path
+            })
+            .collect()
+    }
+
+    #[test]
+    fn frames_decoded_ahead_are_the_frames_the_hdr_step_would_decode() {
+        let dir = tempfile::tempdir().unwrap();
+        let paths = write_frames(dir.path(), 3);
+        let fresh = Frame::read_all(&paths).unwrap();
+        let mut prefetched = Prefetched::default();
+        // Two of three frames captured so far: both are decoded ahead, one at a time.
+        assert!(prefetched.advance(&paths[..2]));
+        assert!(prefetched.advance(&paths[..2]));
+        assert!(!prefetched.advance(&paths[..2]));
+        assert_eq!(prefetched.frames.len(), 2);
+        assert_eq!(prefetched.take(&paths).unwrap(), fresh);
+        assert!(prefetched.frames.is_empty());
+        // Frames no longer awaited are forgotten; one that does not decode is not
+        // tried again, and the HDR step reports it.
+        assert!(prefetched.advance(&paths[..1]));
+        let broken = dir.path().join("exp_09.tiff");
+        std::fs::write(&broken, b"not a TIFF").unwrap();
+        assert!(prefetched.advance(std::slice::from_ref(&broken)));
+        assert!(prefetched.frames.is_empty());
+        assert!(!prefetched.advance(std::slice::from_ref(&broken)));
+        assert!(prefetched.take(&[broken]).is_err());
+    }
 }

@@ -1,21 +1,25 @@
-//! State shared by the HTTP handlers and the hardware owner thread.
+//! State shared by the HTTP handlers and the daemon's threads (docs/ARCHITECTURE.md,
+//! "Daemon").
 
-use std::path::PathBuf;
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicU64;
-use std::sync::{mpsc, Arc, Mutex, MutexGuard};
+use std::sync::{mpsc, Arc, Mutex};
 
-use gonio_drivers::{ArmState, DeviceError, EmergencyStop};
+use gonio_drivers::{ArmState, DeviceError, EmergencyStop, LiveAngle};
 use serde::Serialize;
 use tokio::sync::broadcast;
 
 use super::config::Config;
-use super::hardware::Emulators;
-use super::store::{ScanRecord, Store, StoreError};
+use super::devices::Emulators;
+use super::store::{ScanState, Store};
+use super::sync::Mailbox;
+use super::timing::Timing;
 
 /// Why a scan is paused after `POST /api/arm/stop`.
 pub const EMERGENCY_STOP: &str = "emergency stop by the operator";
 
-/// A live view of the devices, updated by the hardware owner.
+/// A live view of the devices, updated by the hardware lane.
 #[derive(Debug, Clone, Serialize)]
 pub struct HardwareStatus {
     pub arm: ArmView,
@@ -37,7 +41,7 @@ pub struct ArmView {
 pub struct CameraView {
     pub model: Option<String>,
     pub port: Option<String>,
-    /// `idle`, `capturing` or `error`.
+    /// `idle`, `capturing`, `error` or `disconnected` (looked for again with backoff).
     pub state: &'static str,
     /// Allowed shutter range, seconds.
     pub shutter_min_s: f64,
@@ -45,43 +49,52 @@ pub struct CameraView {
     pub error: Option<String>,
 }
 
-/// An operator's declaration of where the arm is, for the hardware owner to apply; the
+/// An operator's declaration of where the arm is, for the hardware lane to apply; the
 /// outcome goes back on `reply`.
 pub struct PositionRequest {
     pub angle_deg: f64,
     pub reply: mpsc::SyncSender<Result<(), DeviceError>>,
 }
 
-/// Everything the handlers and the hardware owner share.
+/// A scan's view as it changed, for event subscribers.
+#[derive(Debug, Clone)]
+pub struct ScanEvent {
+    pub id: i64,
+    pub state: ScanState,
+    /// The scan's JSON view.
+    pub view: Arc<str>,
+}
+
+/// Everything the handlers and the daemon's threads share.
 pub struct Shared {
     pub config: Config,
     pub token: String,
     /// Daemon start counter of this data directory.
     pub boot: i64,
-    /// The handlers' database connection (the hardware owner has its own).
+    /// The handlers' database connection (each thread has its own).
     pub store: Mutex<Store>,
-    /// Progress of scans as they change.
-    pub events: broadcast::Sender<ScanRecord>,
-    /// Nudges the hardware owner to look at the queue now.
-    pub wake: Mutex<mpsc::Sender<()>>,
+    /// Scan views as they change.
+    pub events: broadcast::Sender<ScanEvent>,
+    /// Scans whose view changed, for the publisher thread.
+    pub changed: Mailbox<BTreeSet<i64>>,
+    /// Nudges the hardware lane to look at the queue and the devices now.
+    pub hardware_wake: Mailbox<bool>,
+    /// Nudges the processing lane to look for ready steps now.
+    pub processing_wake: Mailbox<bool>,
     pub hardware: Mutex<HardwareStatus>,
     /// Stops the arm from any thread; replaced whenever the arm is reopened.
     pub estop: Mutex<Option<Arc<dyn EmergencyStop>>>,
+    /// The angle the connected arm reports, also during moves.
+    pub arm_angle: Mutex<Option<LiveAngle>>,
     /// Emergency stops so far: an arm operation that fails after this changed does
     /// not retry.
     pub stops: AtomicU64,
-    /// A declared arm position waiting for the hardware owner (one at a time).
+    /// A declared arm position waiting for the hardware lane (one at a time).
     pub arm_position: Mutex<Option<PositionRequest>>,
+    /// What the devices' steps are expected to take.
+    pub timing: Timing,
     /// Present when the devices are emulated.
     pub emulators: Option<Arc<Emulators>>,
-}
-
-/// Locks a mutex, recovering the data of a poisoned one (a panicked holder leaves
-/// plain data that is still consistent for these uses).
-pub fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
-    mutex
-        .lock()
-        .unwrap_or_else(|poisoned| poisoned.into_inner())
 }
 
 impl Shared {
@@ -90,23 +103,21 @@ impl Shared {
         scan_dir(&self.config.data_dir, id)
     }
 
-    /// Wakes the hardware owner.
+    /// Wakes both lanes (the queue or a scan's state changed).
     pub fn wake(&self) {
-        // The owner only stops with the process, so a failed send changes nothing.
-        let _ = lock(&self.wake).send(());
+        self.hardware_wake.post(|wake| *wake = true);
+        self.processing_wake.post(|wake| *wake = true);
     }
 
-    /// Broadcasts the current record of scan `id` to event subscribers.
-    pub fn publish(&self, store: &Store, id: i64) -> Result<(), StoreError> {
-        if let Some(scan) = store.scan(id)? {
-            // No subscriber is not an error.
-            let _ = self.events.send(scan);
-        }
-        Ok(())
+    /// Announces that scan `id` changed: its view is published to event subscribers.
+    pub fn changed(&self, id: i64) {
+        self.changed.post(|ids| {
+            ids.insert(id);
+        });
     }
 }
 
 /// Directory of scan `id` under the data directory.
-pub fn scan_dir(data_dir: &std::path::Path, id: i64) -> PathBuf {
+pub fn scan_dir(data_dir: &Path, id: i64) -> PathBuf {
     data_dir.join("scans").join(id.to_string())
 }

@@ -8,7 +8,7 @@ use rusqlite::{params, Connection, OptionalExtension, Transaction, TransactionBe
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
-use super::plan::{ScanPlan, Step};
+use super::plan::{Lane, ScanPlan, Step};
 
 /// Errors of the store.
 #[derive(Debug, thiserror::Error)]
@@ -35,6 +35,14 @@ impl From<rusqlite::Error> for StoreError {
         StoreError::Sql(error)
     }
 }
+
+/// States in which a scan's captured brackets are processed: running, or waiting for a
+/// device or the operator (processing needs neither).
+pub const PROCESSABLE: [ScanState; 3] = [
+    ScanState::Running,
+    ScanState::Interrupted,
+    ScanState::Waiting,
+];
 
 fn json_err(what: &'static str) -> impl FnOnce(serde_json::Error) -> StoreError {
     move |error| StoreError::Json { what, error }
@@ -138,9 +146,14 @@ pub struct ScanRecord {
     pub created: String,
     pub started: Option<String>,
     pub finished: Option<String>,
+    /// Progress in the steps planned at creation: fixed from the start, a metering
+    /// step counting as done once the bracket it planned is captured.
     pub done: u32,
     pub total: u32,
-    /// The step being executed or next in line.
+    /// Progress in journal rows (the total grows as metering plans captures).
+    pub steps_done: u32,
+    pub steps_total: u32,
+    /// The hardware step being executed or next in line, else the processing one.
     pub current_step: Option<String>,
 }
 
@@ -156,7 +169,7 @@ pub struct StepRecord {
     pub result: Option<Value>,
 }
 
-/// One entry of the hardware log: what the hardware owner did, in which daemon run.
+/// One entry of the hardware log: what the hardware lane did, in which daemon run.
 #[derive(Debug, Clone, Serialize)]
 pub struct LogEntry {
     pub id: i64,
@@ -237,11 +250,27 @@ CREATE TABLE IF NOT EXISTS hardware_log (
 );
 ";
 
-const SCAN_COLUMNS: &str =
-    "id, plan, state, error, sweep_id, not_before, created, started, finished,
-    (SELECT COUNT(*) FROM steps WHERE scan_id = scans.id AND state = 'done'),
-    (SELECT COUNT(*) FROM steps WHERE scan_id = scans.id),
-    (SELECT step FROM steps WHERE scan_id = scans.id AND state != 'done' ORDER BY idx LIMIT 1)";
+/// Marks scan `?1` done at time `?2` if it is running and every step is done.
+const COMPLETE_SCAN: &str = "UPDATE scans SET state = 'done', finished = ?2, error = NULL
+    WHERE id = ?1 AND state = 'running'
+      AND NOT EXISTS (SELECT 1 FROM steps WHERE scan_id = ?1 AND state != 'done')";
+
+/// The columns of a [`ScanRecord`], counts and current step included.
+fn scan_columns() -> String {
+    format!(
+        "id, plan, state, error, sweep_id, not_before, created, started, finished,
+        (SELECT COUNT(*) FROM steps s WHERE s.scan_id = scans.id AND s.idx % {STEP_SPACING} = 0
+            AND s.state = 'done'
+            AND NOT EXISTS (SELECT 1 FROM steps f WHERE f.scan_id = s.scan_id
+                AND f.idx > s.idx AND f.idx < s.idx + {STEP_SPACING} AND f.state != 'done')),
+        (SELECT COUNT(*) FROM steps WHERE scan_id = scans.id AND idx % {STEP_SPACING} = 0),
+        (SELECT COUNT(*) FROM steps WHERE scan_id = scans.id AND state = 'done'),
+        (SELECT COUNT(*) FROM steps WHERE scan_id = scans.id),
+        (SELECT step FROM steps WHERE scan_id = scans.id AND state != 'done'
+            ORDER BY json_extract(step, '$.kind') NOT IN ('home', 'move', 'meter', 'capture'), idx
+            LIMIT 1)"
+    )
+}
 
 /// A connection to the store. Each thread opens its own.
 pub struct Store {
@@ -447,7 +476,7 @@ impl Store {
         filter: &str,
         args: impl rusqlite::Params,
     ) -> Result<Vec<ScanRecord>, StoreError> {
-        let sql = format!("SELECT {SCAN_COLUMNS} FROM scans {filter}");
+        let sql = format!("SELECT {} FROM scans {filter}", scan_columns());
         let mut stmt = self.conn.prepare(&sql)?;
         let rows = stmt
             .query_map(args, |r| {
@@ -461,9 +490,13 @@ impl Store {
                     r.get::<_, String>(6)?,
                     r.get::<_, Option<String>>(7)?,
                     r.get::<_, Option<String>>(8)?,
-                    r.get::<_, u32>(9)?,
-                    r.get::<_, u32>(10)?,
-                    r.get::<_, Option<String>>(11)?,
+                    [
+                        r.get::<_, u32>(9)?,
+                        r.get::<_, u32>(10)?,
+                        r.get::<_, u32>(11)?,
+                        r.get::<_, u32>(12)?,
+                    ],
+                    r.get::<_, Option<String>>(13)?,
                 ))
             })?
             .collect::<Result<Vec<_>, _>>()?;
@@ -479,8 +512,7 @@ impl Store {
                     created,
                     started,
                     finished,
-                    done,
-                    total,
+                    [done, total, steps_done, steps_total],
                     current,
                 )| {
                     let current_step = current
@@ -499,6 +531,8 @@ impl Store {
                         finished,
                         done,
                         total,
+                        steps_done,
+                        steps_total,
                         current_step,
                     })
                 },
@@ -518,16 +552,64 @@ impl Store {
         Ok(self.query_scans("WHERE id = ?1", [id])?.into_iter().next())
     }
 
-    /// The scan the hardware owner should work on: one left running (resume after a
-    /// crash) first, else the oldest queued scan whose start time has come.
-    pub fn next_runnable(&self, now: i64) -> Result<Option<ScanRecord>, StoreError> {
-        let mut scans = self.query_scans(
-            "WHERE state = 'running'
-                OR (state = 'queued' AND (not_before IS NULL OR not_before <= ?1))
-             ORDER BY state = 'running' DESC, id LIMIT 1",
-            [now],
-        )?;
-        Ok(scans.pop())
+    /// The scan the hardware lane works on next: a running scan with hardware steps
+    /// left (resumed after a crash or a reconnect), oldest first, else the oldest queued
+    /// scan whose start time has come.
+    pub fn next_for_hardware(&self, now: i64) -> Result<Option<ScanRecord>, StoreError> {
+        for scan in self.query_scans("WHERE state = 'running' ORDER BY id", [])? {
+            if ready_step(&self.steps(scan.id)?, Lane::Hardware).is_some() {
+                return Ok(Some(scan));
+            }
+        }
+        Ok(self
+            .query_scans(
+                "WHERE state = 'queued' AND (not_before IS NULL OR not_before <= ?1)
+                 ORDER BY id LIMIT 1",
+                [now],
+            )?
+            .pop())
+    }
+
+    /// Ids of the scans whose captured brackets are processed now, oldest first.
+    fn processable_ids(&self) -> Result<Vec<i64>, StoreError> {
+        let mut stmt = self
+            .conn
+            .prepare("SELECT id FROM scans WHERE state IN (?1, ?2, ?3) ORDER BY id")?;
+        let ids = stmt
+            .query_map(PROCESSABLE.map(ScanState::as_str), |r| r.get(0))?
+            .collect::<Result<_, _>>()?;
+        Ok(ids)
+    }
+
+    /// The processing step to run next: the first one ready ([`ready_step`]) in the
+    /// oldest scan that has one, with that scan's id.
+    pub fn next_for_processing(&self) -> Result<Option<(i64, StepRecord)>, StoreError> {
+        for id in self.processable_ids()? {
+            if let Some(step) = ready_step(&self.steps(id)?, Lane::Processing) {
+                return Ok(Some((id, step.clone())));
+            }
+        }
+        Ok(None)
+    }
+
+    /// The frames captured for HDR maps not made yet, in the scans being processed,
+    /// oldest first: (scan id, frame path relative to the scan directory).
+    pub fn frames_awaiting_hdr(&self) -> Result<Vec<(i64, String)>, StoreError> {
+        let mut frames = Vec::new();
+        for id in self.processable_ids()? {
+            let steps = self.steps(id)?;
+            frames.extend(frames_awaiting_hdr(&steps).into_iter().map(|p| (id, p)));
+        }
+        Ok(frames)
+    }
+
+    /// Brackets captured but not processed yet, over every scan being processed.
+    pub fn unprocessed_brackets(&self) -> Result<usize, StoreError> {
+        let mut count = 0;
+        for id in self.processable_ids()? {
+            count += unprocessed_brackets(&self.steps(id)?);
+        }
+        Ok(count)
     }
 
     /// Sets the state of a scan if it is currently one of `from`; returns whether it
@@ -591,14 +673,9 @@ impl Store {
         self.query_steps("WHERE scan_id = ?1 ORDER BY idx", scan_id)
     }
 
-    /// The first step of a scan not done yet.
-    pub fn next_step(&self, scan_id: i64) -> Result<Option<StepRecord>, StoreError> {
-        Ok(self
-            .query_steps(
-                "WHERE scan_id = ?1 AND state != 'done' ORDER BY idx LIMIT 1",
-                scan_id,
-            )?
-            .pop())
+    /// The step of a scan that `lane` runs next, if it has one ready.
+    pub fn next_step(&self, scan_id: i64, lane: Lane) -> Result<Option<StepRecord>, StoreError> {
+        Ok(ready_step(&self.steps(scan_id)?, lane).cloned())
     }
 
     fn query_steps(&self, filter: &str, scan_id: i64) -> Result<Vec<StepRecord>, StoreError> {
@@ -648,14 +725,15 @@ impl Store {
 
     /// Records a step as done with its result and inserts the steps it planned
     /// (`followers`, right after it), in one transaction; when it was the last step of
-    /// a still running scan, the scan becomes done in the same transaction.
+    /// a still running scan, the scan becomes done in the same transaction. Returns
+    /// whether it did.
     pub fn step_done(
         &mut self,
         scan_id: i64,
         index: u32,
         result: &Value,
         followers: &[Step],
-    ) -> Result<(), StoreError> {
+    ) -> Result<bool, StoreError> {
         if followers.len() >= STEP_SPACING as usize {
             return Err(StoreError::TooManySteps(followers.len()));
         }
@@ -679,14 +757,18 @@ impl Store {
                 result.to_string()
             ],
         )?;
-        tx.execute(
-            "UPDATE scans SET state = 'done', finished = ?2, error = NULL
-             WHERE id = ?1 AND state = 'running'
-               AND NOT EXISTS (SELECT 1 FROM steps WHERE scan_id = ?1 AND state != 'done')",
-            params![scan_id, now],
-        )?;
+        let completed = tx.execute(COMPLETE_SCAN, params![scan_id, now])? > 0;
         tx.commit()?;
-        Ok(())
+        Ok(completed)
+    }
+
+    /// Marks a running scan with every step done as done (its last step was done
+    /// while it was paused); returns whether it was.
+    pub fn complete_if_done(&mut self, scan_id: i64) -> Result<bool, StoreError> {
+        Ok(self
+            .conn
+            .execute(COMPLETE_SCAN, params![scan_id, now_rfc3339()])?
+            > 0)
     }
 
     /// Appends to the hardware log.
@@ -725,6 +807,60 @@ impl Store {
             .collect::<Result<_, _>>()?;
         Ok(rows)
     }
+}
+
+/// The step `lane` runs next in a scan's journal (`steps` in index order): for the
+/// hardware lane its first step not done; for the processing lane its first step not
+/// done once every step before it is done (its inputs exist), which is then the first
+/// step of the scan not done. `None` when the lane has nothing to do in this scan now.
+pub fn ready_step(steps: &[StepRecord], lane: Lane) -> Option<&StepRecord> {
+    let mut pending = steps.iter().filter(|s| s.state != StepState::Done);
+    match lane {
+        Lane::Hardware => pending.find(|s| s.step.lane() == Lane::Hardware),
+        Lane::Processing => pending.next().filter(|s| s.step.lane() == Lane::Processing),
+    }
+}
+
+/// θL whose bracket is captured (every hardware step before its processing is done)
+/// but not processed yet, in a scan's journal.
+pub fn unprocessed_brackets(steps: &[StepRecord]) -> usize {
+    let mut count = 0;
+    let mut counted = None;
+    for record in steps {
+        if record.state == StepState::Done {
+            continue;
+        }
+        match (record.step.lane(), record.step.theta_l()) {
+            (Lane::Hardware, _) => break,
+            (Lane::Processing, Some(theta_l)) if counted != Some(theta_l) => {
+                count += 1;
+                counted = Some(theta_l);
+            }
+            (Lane::Processing, _) => {}
+        }
+    }
+    count
+}
+
+/// The frames (paths relative to the scan directory, as capture steps record them) of
+/// the θL whose HDR step is not done, in a scan's journal.
+pub fn frames_awaiting_hdr(steps: &[StepRecord]) -> Vec<String> {
+    let pending: Vec<f64> = steps
+        .iter()
+        .filter(|s| s.state != StepState::Done)
+        .filter_map(|s| match s.step {
+            Step::Hdr { theta_l } => Some(theta_l),
+            _ => None,
+        })
+        .collect();
+    steps
+        .iter()
+        .filter(|s| {
+            s.state == StepState::Done
+                && matches!(s.step, Step::Capture { theta_l, .. } if pending.contains(&theta_l))
+        })
+        .filter_map(|s| s.result.as_ref()?.get("path")?.as_str().map(str::to_owned))
+        .collect()
 }
 
 fn insert_scans_tx(tx: &Transaction<'_>, scans: &[NewScan]) -> Result<Vec<i64>, StoreError> {
@@ -771,66 +907,179 @@ mod tests {
         (dir, store)
     }
 
+    fn done(store: &mut Store, id: i64, step: &StepRecord, followers: &[Step]) {
+        store.step_started(id, step.index).unwrap();
+        store
+            .step_done(id, step.index, &Value::Null, followers)
+            .unwrap();
+    }
+
+    fn next(store: &Store, id: i64, lane: Lane) -> Option<Step> {
+        store.next_step(id, lane).unwrap().map(|s| s.step)
+    }
+
     #[test]
-    fn scan_completes_when_its_last_step_is_done_and_survives_reopen() {
-        let (dir, mut store) = temp_store("done");
-        let ids = store
+    fn lanes_take_their_own_steps_and_the_scan_is_done_when_both_are() {
+        let (dir, mut store) = temp_store("lanes");
+        let auto = ScanPlan {
+            theta_l: vec![-20.0, -25.0],
+            shutter_s: vec![],
+            auto_bracket: true,
+            ..plan()
+        };
+        let id = store
+            .insert_scans(&[NewScan {
+                plan: auto,
+                sweep_id: None,
+                not_before: None,
+            }])
+            .unwrap()[0];
+        let scan = store.next_for_hardware(now_unix()).unwrap().unwrap();
+        // Home, then per θL move, meter, samples, HDR; extract and two fits.
+        assert_eq!(
+            (scan.id, scan.state, scan.done, scan.total),
+            (id, ScanState::Queued, 0, 12)
+        );
+        assert!(store
+            .transition(id, &[ScanState::Queued], ScanState::Running, None)
+            .unwrap());
+        assert_eq!(next(&store, id, Lane::Hardware), Some(Step::Home));
+        assert_eq!(next(&store, id, Lane::Processing), None);
+        let steps = store.steps(id).unwrap();
+        done(&mut store, id, &steps[0], &[]);
+        done(&mut store, id, &steps[1], &[]);
+        // Metering plans two captures after itself: the step total grows, the planned
+        // total does not, and the metering counts once its bracket is captured.
+        let bracket = ScanPlan::captures(-20.0, &[0.1, 0.01]);
+        done(&mut store, id, &steps[2], &bracket);
+        let scan = store.scan(id).unwrap().unwrap();
+        assert_eq!(
+            (scan.done, scan.total, scan.steps_done, scan.steps_total),
+            (2, 12, 3, 14)
+        );
+        assert_eq!(scan.current_step.as_deref(), Some(&*bracket[0].describe()));
+        assert_eq!(next(&store, id, Lane::Processing), None);
+        assert_eq!(store.unprocessed_brackets().unwrap(), 0);
+        let steps = store.steps(id).unwrap();
+        done(&mut store, id, &steps[3], &[]);
+        done(&mut store, id, &steps[4], &[]);
+        assert_eq!(store.scan(id).unwrap().unwrap().done, 3);
+        // The bracket is captured: processing may start while the arm moves on.
+        assert_eq!(store.unprocessed_brackets().unwrap(), 1);
+        assert_eq!(
+            next(&store, id, Lane::Processing),
+            Some(Step::Samples { theta_l: -20.0 })
+        );
+        assert_eq!(
+            next(&store, id, Lane::Hardware),
+            Some(Step::Move { theta_l: -25.0 })
+        );
+        let (processing_scan, samples) = store.next_for_processing().unwrap().unwrap();
+        assert_eq!(processing_scan, id);
+        store.step_started(id, samples.index).unwrap();
+        drop(store);
+        // Reopened after a crash: the processing step that was running runs again.
+        let mut store = Store::open(&dir.join("gonio.sqlite")).unwrap();
+        let (_, again) = store.next_for_processing().unwrap().unwrap();
+        assert_eq!(
+            (again.index, again.state),
+            (samples.index, StepState::Started)
+        );
+        assert_eq!(store.next_for_hardware(now_unix()).unwrap().unwrap().id, id);
+        // The hardware lane finishes first; the scan is done with the last processing
+        // step, whichever lane ends last.
+        while let Some(step) = store.next_step(id, Lane::Hardware).unwrap() {
+            let followers = if matches!(step.step, Step::Meter { .. }) {
+                ScanPlan::captures(-25.0, &[0.1])
+            } else {
+                Vec::new()
+            };
+            done(&mut store, id, &step, &followers);
+        }
+        assert!(store.next_for_hardware(now_unix()).unwrap().is_none());
+        assert_eq!(store.unprocessed_brackets().unwrap(), 2);
+        while let Some((_, step)) = store.next_for_processing().unwrap() {
+            assert_eq!(store.scan(id).unwrap().unwrap().state, ScanState::Running);
+            done(&mut store, id, &step, &[]);
+        }
+        let scan = store.scan(id).unwrap().unwrap();
+        assert_eq!(
+            (scan.state, scan.done, scan.total, scan.steps_done),
+            (ScanState::Done, 12, 12, 15)
+        );
+        assert!(scan.finished.is_some() && scan.current_step.is_none());
+        std::fs::remove_dir_all(dir).unwrap();
+    }
+
+    #[test]
+    fn frames_awaiting_hdr_are_the_captures_of_brackets_not_merged() {
+        let record = |index: u32, step: Step, done: bool, path: Option<&str>| StepRecord {
+            index,
+            step,
+            state: if done {
+                StepState::Done
+            } else {
+                StepState::Pending
+            },
+            started: None,
+            finished: None,
+            result: path.map(|p| serde_json::json!({ "path": p })),
+        };
+        let capture = |theta_l: f64, index: usize| Step::Capture {
+            theta_l,
+            index,
+            shutter_s: 0.1,
+        };
+        let steps = [
+            record(
+                0,
+                capture(-20.0, 0),
+                true,
+                Some("theta_l_-20.0/exp_00.tiff"),
+            ),
+            record(1, Step::Hdr { theta_l: -20.0 }, true, None),
+            record(
+                2,
+                capture(-25.0, 0),
+                true,
+                Some("theta_l_-25.0/exp_00.tiff"),
+            ),
+            record(3, capture(-25.0, 1), false, None),
+            record(4, Step::Hdr { theta_l: -25.0 }, false, None),
+        ];
+        assert_eq!(
+            frames_awaiting_hdr(&steps),
+            vec!["theta_l_-25.0/exp_00.tiff".to_owned()]
+        );
+    }
+
+    #[test]
+    fn processing_goes_on_while_a_device_is_away_but_not_when_paused() {
+        let (dir, mut store) = temp_store("processable");
+        let id = store
             .insert_scans(&[NewScan {
                 plan: plan(),
                 sweep_id: None,
                 not_before: None,
             }])
-            .unwrap();
-        let id = ids[0];
-        let scan = store.next_runnable(now_unix()).unwrap().unwrap();
-        assert_eq!(
-            (scan.id, scan.state, scan.done, scan.total),
-            (id, ScanState::Queued, 0, 9)
-        );
-        assert!(store
+            .unwrap()[0];
+        store
             .transition(id, &[ScanState::Queued], ScanState::Running, None)
-            .unwrap());
-        let steps = store.steps(id).unwrap();
-        // The first step plans one more right after itself.
-        let extra = Step::Capture {
-            theta_l: -20.0,
-            index: 2,
-            shutter_s: 0.001,
-        };
-        store.step_started(id, steps[0].index).unwrap();
-        store
-            .step_done(
-                id,
-                steps[0].index,
-                &Value::Null,
-                std::slice::from_ref(&extra),
-            )
             .unwrap();
-        let steps = store.steps(id).unwrap();
-        assert_eq!((steps.len(), &steps[1].step), (10, &extra));
-        for step in &steps[1..steps.len() - 1] {
-            store.step_started(id, step.index).unwrap();
-            store.step_done(id, step.index, &Value::Null, &[]).unwrap();
+        for step in &store.steps(id).unwrap()[..4] {
+            done(&mut store, id, step, &[]);
         }
-        assert_eq!(store.scan(id).unwrap().unwrap().state, ScanState::Running);
-        let last = steps[9].index;
-        store.step_started(id, last).unwrap();
-        drop(store);
-        // Reopened after a crash: the started step is not done and the scan resumes.
-        let mut store = Store::open(&dir.join("gonio.sqlite")).unwrap();
-        let scan = store.next_runnable(now_unix()).unwrap().unwrap();
-        assert_eq!(
-            (scan.id, scan.state, scan.done),
-            (id, ScanState::Running, 9)
-        );
-        assert_eq!(store.steps(id).unwrap()[9].state, StepState::Started);
+        assert!(store.next_for_processing().unwrap().is_some());
         store
-            .step_done(id, last, &serde_json::json!({"ok": true}), &[])
+            .transition(id, &[ScanState::Running], ScanState::Interrupted, None)
             .unwrap();
-        let scan = store.scan(id).unwrap().unwrap();
-        assert_eq!((scan.state, scan.done), (ScanState::Done, 10));
-        assert!(scan.finished.is_some());
-        assert!(store.next_runnable(now_unix()).unwrap().is_none());
+        assert!(store.next_for_processing().unwrap().is_some());
+        assert!(store.next_for_hardware(now_unix()).unwrap().is_none());
+        store
+            .transition(id, &[ScanState::Interrupted], ScanState::Paused, None)
+            .unwrap();
+        assert!(store.next_for_processing().unwrap().is_none());
+        assert_eq!(store.unprocessed_brackets().unwrap(), 0);
         std::fs::remove_dir_all(dir).unwrap();
     }
 
@@ -873,7 +1122,10 @@ mod tests {
             if death < 3 {
                 assert!(failed.is_empty());
                 assert_eq!(scan.state, ScanState::Running);
-                assert_eq!(store.next_runnable(now_unix()).unwrap().unwrap().id, ids[0]);
+                assert_eq!(
+                    store.next_for_hardware(now_unix()).unwrap().unwrap().id,
+                    ids[0]
+                );
             } else {
                 assert_eq!(failed, vec![ids[0]]);
                 assert_eq!(scan.state, ScanState::Failed);
@@ -885,7 +1137,10 @@ mod tests {
             }
         }
         // The queue goes on with the next scan; a further start counts nothing more.
-        assert_eq!(store.next_runnable(now_unix()).unwrap().unwrap().id, ids[1]);
+        assert_eq!(
+            store.next_for_hardware(now_unix()).unwrap().unwrap().id,
+            ids[1]
+        );
         drop(store);
         assert!(restart(&dir).2.is_empty());
         std::fs::remove_dir_all(dir).unwrap();
@@ -935,15 +1190,15 @@ mod tests {
             .insert_sweep(&serde_json::json!({}), Some(later), vec![plan(), plan()])
             .unwrap();
         assert_eq!(store.scans_of_sweep(sweep).unwrap().len(), 2);
-        assert!(store.next_runnable(now_unix()).unwrap().is_none());
-        assert_eq!(store.next_runnable(later).unwrap().unwrap().id, ids[0]);
+        assert!(store.next_for_hardware(now_unix()).unwrap().is_none());
+        assert_eq!(store.next_for_hardware(later).unwrap().unwrap().id, ids[0]);
         assert!(!store
             .transition(ids[0], &[ScanState::Running], ScanState::Paused, None)
             .unwrap());
         assert!(store
             .transition(ids[0], &[ScanState::Queued], ScanState::Cancelled, None)
             .unwrap());
-        assert_eq!(store.next_runnable(later).unwrap().unwrap().id, ids[1]);
+        assert_eq!(store.next_for_hardware(later).unwrap().unwrap().id, ids[1]);
         assert_eq!(store.begin_boot().unwrap(), 1);
         assert_eq!(store.begin_boot().unwrap(), 2);
         std::fs::remove_dir_all(dir).unwrap();

@@ -1,12 +1,13 @@
-//! The hardware owner: one thread that owns the arm and the camera and works through
-//! the queue, one step at a time. A step is recorded as started before the hardware is
-//! touched and as done, with its result, in one transaction afterwards, so a restart
-//! resumes at the first step not done (after re-homing: the position is unknown then).
+//! The hardware lane: one thread that owns the arm and the camera and only moves and
+//! captures (docs/ARCHITECTURE.md, "Daemon"). It works through the hardware steps of
+//! one scan at a time, recording each as started before the hardware is touched and
+//! as done, with its result, afterwards; it waits before a new bracket while the
+//! processing lane is too far behind.
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::Ordering;
-use std::sync::{mpsc, Arc};
-use std::time::Duration;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
 
 use gonio_drivers::bracket::{auto_bracket, BracketError, BracketRegion, MeteringFrame};
 use gonio_drivers::{Arm, ArmState, Camera, DeviceError, Exposure};
@@ -14,87 +15,71 @@ use gonio_processing::capture::{sidecar_path, Frame, Sidecar};
 use gonio_processing::geometry::{column_angles, Setup};
 use serde_json::{json, Value};
 
-use super::calibration;
-use super::files::{remove_partials, write_atomic};
-use super::hardware::{ArmOpener, Devices, SidecarDefaults};
-use super::plan::{exposure_stem, theta_dir_name, ScanPlan, Step};
-use super::process;
-use super::shared::{lock, scan_dir, Shared, EMERGENCY_STOP};
-use super::step_guard;
-use super::store::{now_rfc3339, now_unix, ScanRecord, ScanState, Store, StoreError};
+use super::step::{self, Flow, Outcome, StepError};
+use crate::commands::serve::calibration;
+use crate::commands::serve::devices::{ArmOpener, Devices, SidecarDefaults};
+use crate::commands::serve::files::write_atomic;
+use crate::commands::serve::plan::{exposure_stem, theta_dir_name, Lane, ScanPlan, Step};
+use crate::commands::serve::shared::{Shared, EMERGENCY_STOP};
+use crate::commands::serve::store::{
+    now_rfc3339, now_unix, ScanRecord, ScanState, Store, StoreError,
+};
+use crate::commands::serve::sync::lock;
+use crate::commands::serve::timing::METER_START_S;
 
-/// Why a step did not complete.
-enum StepError {
-    /// The operator paused, cancelled or stopped the scan: leave it as they set it.
-    Halted,
-    /// The arm went away: the scan waits until it is back.
-    Interrupted(String),
-    /// The arm is refused, unhomed or its position undeclared: the scan waits for that
-    /// to change (no retries meanwhile).
-    Waiting(String),
-    /// The scan cannot complete.
-    Failed(String),
-    Store(StoreError),
-}
-
-impl From<StoreError> for StepError {
-    fn from(err: StoreError) -> Self {
-        StepError::Store(err)
-    }
-}
-
-/// How often the owner looks at the queue and the devices when nothing wakes it.
+/// How often the lane looks at the queue and the devices when nothing wakes it.
 const IDLE_POLL: Duration = Duration::from_millis(500);
-/// Reopening the arm after a failure waits this long, doubling up to the cap: opening
-/// resets an Arduino-based board, so failed opens must not come in a storm.
+/// Looking for a lost device (arm or camera) again after a failure waits this long,
+/// doubling up to the cap: opening resets an Arduino-based board, so failed opens must
+/// not come in a storm.
 const RECONNECT_BACKOFF: Duration = Duration::from_secs(1);
 const RECONNECT_BACKOFF_MAX: Duration = Duration::from_secs(60);
 
-/// The hardware owner thread's state.
-pub struct Runner {
+/// The scan states the hardware lane works in.
+const RUNNING: &[ScanState] = &[ScanState::Running];
+
+/// The hardware lane's state.
+pub struct HardwareLane {
     shared: Arc<Shared>,
     store: Store,
-    wake: mpsc::Receiver<()>,
     opener: ArmOpener,
     arm: Option<Box<dyn Arm>>,
     camera: Box<dyn Camera>,
     camera_model: String,
     /// Shutter times the camera allows, seconds.
     allowed_s: Vec<f64>,
+    /// When to look for the camera again while it is not ready (`None`: it is).
+    camera_retry: Option<Reconnect>,
+    /// A device came back: interrupted scans resume once both are ready.
+    resume: bool,
     homed: bool,
     /// Where the arm was last sent (degrees), if it got there.
     at_deg: Option<f64>,
     /// Why the arm could not be opened, when it could not; and when to try again.
     arm_error: Option<String>,
-    reconnect_backoff: Duration,
-    next_connect: std::time::Instant,
+    arm_retry: Reconnect,
     setup: Option<Setup>,
     truth: Option<Value>,
     sidecar: SidecarDefaults,
     iso: Option<u32>,
 }
 
-impl Runner {
-    pub fn new(
-        shared: Arc<Shared>,
-        store: Store,
-        wake: mpsc::Receiver<()>,
-        devices: Devices,
-    ) -> Self {
+impl HardwareLane {
+    pub fn new(shared: Arc<Shared>, store: Store, devices: Devices) -> Self {
         Self {
             shared,
             store,
-            wake,
             opener: devices.arm,
             arm: None,
             camera: devices.camera,
             camera_model: String::new(),
             allowed_s: Vec::new(),
+            camera_retry: Some(Reconnect::now()),
+            resume: true,
             homed: false,
             at_deg: None,
             arm_error: None,
-            reconnect_backoff: RECONNECT_BACKOFF,
-            next_connect: std::time::Instant::now(),
+            arm_retry: Reconnect::now(),
             setup: devices.setup,
             truth: devices.truth,
             sidecar: devices.sidecar,
@@ -104,21 +89,24 @@ impl Runner {
 
     /// Runs forever on the calling thread.
     pub fn run(mut self) {
-        self.identify_camera();
         loop {
             if let Err(err) = self.tick() {
-                tracing::error!("queue: {err}");
+                tracing::error!("hardware lane: {err}");
                 std::thread::sleep(Duration::from_secs(1));
             }
         }
     }
 
-    fn identify_camera(&mut self) {
-        let info = self.camera.identify();
-        let speeds = self.camera.shutter_speeds();
+    /// Asks the camera who it is and which shutter times it allows; returns whether
+    /// it answered.
+    fn identify_camera(&mut self) -> bool {
+        let answer = self
+            .camera
+            .identify()
+            .and_then(|info| Ok((info, self.camera.shutter_speeds()?)));
         let mut status = lock(&self.shared.hardware);
-        match (info, speeds) {
-            (Ok(info), Ok(speeds)) => {
+        match answer {
+            Ok((info, speeds)) => {
                 self.camera_model = info.model.clone();
                 status.camera.model = Some(info.model);
                 status.camera.port = Some(info.port);
@@ -129,33 +117,64 @@ impl Runner {
                 self.allowed_s = speeds;
                 status.camera.state = "idle";
                 status.camera.error = None;
+                true
             }
-            (Err(err), _) | (_, Err(err)) => {
-                tracing::warn!("camera: {err}");
-                status.camera.state = "error";
+            Err(err) => {
+                if status.camera.error.is_none() {
+                    tracing::warn!("camera: {err}");
+                }
+                status.camera.state = camera_state_after(&err);
                 status.camera.error = Some(err.to_string());
+                false
             }
         }
     }
 
-    /// One pass: (re)connect the arm if needed, apply a declared position, then run
-    /// the next scan or wait.
+    /// Looks for the camera if it is not ready and its next try is due; returns
+    /// whether it is ready. Once it is back, interrupted scans resume (at the next
+    /// pass) and waiting ones go back to the queue.
+    fn connect_camera(&mut self) -> Result<bool, StoreError> {
+        let Some(retry) = self.camera_retry else {
+            return Ok(true);
+        };
+        if !retry.due() {
+            return Ok(false);
+        }
+        if self.identify_camera() {
+            self.camera_retry = None;
+            self.resume = true;
+            let model = self.camera_model.clone();
+            self.log(None, "camera", &model)?;
+            self.requeue_waiting("camera connected")?;
+            return Ok(true);
+        }
+        self.camera_retry = Some(retry.later());
+        Ok(false)
+    }
+
+    /// One pass: (re)connect the devices if needed, apply a declared position, resume
+    /// the scans the devices interrupted once both are ready, then run the next scan's
+    /// hardware steps or wait.
     fn tick(&mut self) -> Result<(), StoreError> {
-        if self.arm.is_none() && !self.connect_arm()? {
-            self.answer_position_request()?;
-            self.wait_for_arm()?;
+        let arm_ready = self.arm.is_some() || self.connect_arm()?;
+        let camera_ready = self.connect_camera()?;
+        self.answer_position_request()?;
+        if !(arm_ready && camera_ready) {
+            self.wait_for_devices()?;
             self.idle();
             return Ok(());
         }
-        self.answer_position_request()?;
-        match self.store.next_runnable(now_unix())? {
-            Some(scan) => {
-                if self.allowed_s.is_empty() {
-                    // The camera was not ready at start: ask again before using it.
-                    self.identify_camera();
-                }
-                self.run_scan(scan)
+        if std::mem::take(&mut self.resume) {
+            for id in self
+                .store
+                .transition_all(ScanState::Interrupted, ScanState::Running, None)?
+            {
+                tracing::info!("scan {id}: devices back, resuming");
+                self.shared.changed(id);
             }
+        }
+        match self.store.next_for_hardware(now_unix())? {
+            Some(scan) => self.run_scan(scan),
             None => {
                 self.refresh_arm_status();
                 self.idle();
@@ -166,25 +185,26 @@ impl Runner {
 
     fn idle(&self) {
         // A timeout and a wake-up both mean: look again.
-        let _ = self.wake.recv_timeout(IDLE_POLL);
+        self.shared.hardware_wake.take(IDLE_POLL);
     }
 
     /// Opens the arm, at most once per backoff period; on success, interrupted scans go
-    /// back to running and waiting ones to the queue. Returns whether the arm is
-    /// connected.
+    /// back to running (at the next pass) and waiting ones to the queue. Returns
+    /// whether the arm is connected.
     fn connect_arm(&mut self) -> Result<bool, StoreError> {
-        if std::time::Instant::now() < self.next_connect {
+        if !self.arm_retry.due() {
             return Ok(false);
         }
         match self.opener.open() {
             Ok(mut arm) => {
                 *lock(&self.shared.estop) = Some(arm.emergency_stop());
+                *lock(&self.shared.arm_angle) = Some(arm.live_angle());
                 let state = arm.status().map_or(ArmState::NeedsHoming, |s| s.state);
                 self.arm = Some(arm);
                 self.homed = false;
                 self.at_deg = None;
                 self.arm_error = None;
-                self.reconnect_backoff = RECONNECT_BACKOFF;
+                self.arm_retry = Reconnect::now();
                 self.log(None, "connect", &self.opener.path().display().to_string())?;
                 {
                     let mut status = lock(&self.shared.hardware);
@@ -192,13 +212,7 @@ impl Runner {
                     status.arm.homed = false;
                     status.arm.error = None;
                 }
-                for id in
-                    self.store
-                        .transition_all(ScanState::Interrupted, ScanState::Running, None)?
-                {
-                    tracing::info!("scan {id}: arm back, resuming");
-                    self.shared.publish(&self.store, id)?;
-                }
+                self.resume = true;
                 self.requeue_waiting("arm connected")?;
                 Ok(true)
             }
@@ -208,8 +222,7 @@ impl Runner {
                     tracing::warn!("arm {}: {err}", self.opener.path().display());
                 }
                 self.log(None, "connect failed", &reason)?;
-                self.next_connect = std::time::Instant::now() + self.reconnect_backoff;
-                self.reconnect_backoff = (self.reconnect_backoff * 2).min(RECONNECT_BACKOFF_MAX);
+                self.arm_retry = self.arm_retry.later();
                 let mut status = lock(&self.shared.hardware);
                 status.arm.state = ArmState::Disconnected;
                 status.arm.error = Some(reason.clone());
@@ -219,15 +232,23 @@ impl Runner {
         }
     }
 
-    /// Without an arm, the scan next in line waits, with the reason.
-    fn wait_for_arm(&mut self) -> Result<(), StoreError> {
-        let Some(scan) = self.store.next_runnable(now_unix())? else {
+    /// Without an arm or a camera, the scan next in line waits, with the reason.
+    fn wait_for_devices(&mut self) -> Result<(), StoreError> {
+        let Some(scan) = self.store.next_for_hardware(now_unix())? else {
             return Ok(());
         };
-        let reason = format!(
-            "arm not available: {}",
-            self.arm_error.as_deref().unwrap_or("not connected")
-        );
+        let reason = if self.arm.is_none() {
+            format!(
+                "arm not available: {}",
+                self.arm_error.as_deref().unwrap_or("not connected")
+            )
+        } else {
+            let camera = lock(&self.shared.hardware).camera.error.clone();
+            format!(
+                "camera not available: {}",
+                camera.as_deref().unwrap_or("not connected")
+            )
+        };
         if scan.state == ScanState::Queued
             && self.store.transition(
                 scan.id,
@@ -237,7 +258,7 @@ impl Runner {
             )?
         {
             tracing::info!("scan {}: waiting: {reason}", scan.id);
-            self.shared.publish(&self.store, scan.id)?;
+            self.shared.changed(scan.id);
         }
         Ok(())
     }
@@ -249,7 +270,7 @@ impl Runner {
             .transition_all(ScanState::Waiting, ScanState::Queued, None)?
         {
             tracing::info!("scan {id}: {why}, queued again");
-            self.shared.publish(&self.store, id)?;
+            self.shared.changed(id);
         }
         Ok(())
     }
@@ -319,6 +340,7 @@ impl Runner {
         self.homed = false;
         self.at_deg = None;
         *lock(&self.shared.estop) = None;
+        *lock(&self.shared.arm_angle) = None;
         let mut status = lock(&self.shared.hardware);
         status.arm.state = ArmState::Disconnected;
         status.arm.homed = false;
@@ -336,6 +358,7 @@ impl Runner {
             .is_some_and(|s| s.state == ScanState::Running))
     }
 
+    /// Runs the hardware steps of `scan` until none is left or the scan stops.
     fn run_scan(&mut self, scan: ScanRecord) -> Result<(), StoreError> {
         let id = scan.id;
         if scan.state == ScanState::Queued
@@ -346,59 +369,70 @@ impl Runner {
             return Ok(());
         }
         tracing::info!("scan {id} ({}): running", scan.plan.sample);
-        self.shared.publish(&self.store, id)?;
-        let dir = scan_dir(&self.shared.config.data_dir, id);
+        self.shared.changed(id);
+        let dir = self.shared.scan_dir(id);
         if let Err(err) = self.prepare_dir(&dir) {
             let reason = format!("preparing {}: {err}", dir.display());
-            return self.finish_with(id, ScanState::Failed, &reason);
+            self.store
+                .transition(id, RUNNING, ScanState::Failed, Some(&reason))?;
+            self.shared.changed(id);
+            return Ok(());
         }
         while self.still_running(id)? {
-            // Re-read each time: a step may have planned further steps.
-            let Some(step) = self.store.next_step(id)? else {
-                // Every step done (the last one while the scan was paused).
-                self.store
-                    .transition(id, &[ScanState::Running], ScanState::Done, None)?;
+            // Re-read each time: a metering step plans the captures after it.
+            let Some(step) = self.store.next_step(id, Lane::Hardware)? else {
+                // The processing lane finishes the scan (or every step was done
+                // already, the last while the scan was paused).
+                if self.store.complete_if_done(id)? {
+                    self.shared.changed(id);
+                }
                 break;
             };
-            self.store.step_started(id, step.index)?;
-            self.shared.publish(&self.store, id)?;
-            match self.execute(id, &dir, &step.step) {
-                Ok((result, followers)) => {
-                    self.store.step_done(id, step.index, &result, &followers)?;
-                }
-                Err(StepError::Halted) => break,
-                Err(StepError::Interrupted(reason)) => {
-                    tracing::warn!("scan {id} interrupted: {reason}");
-                    self.disconnect_arm(&reason);
-                    return self.finish_with(id, ScanState::Interrupted, &reason);
-                }
-                Err(StepError::Waiting(reason)) => {
-                    tracing::warn!("scan {id} waiting: {reason}");
-                    self.log(Some(id), "wait", &reason)?;
-                    lock(&self.shared.hardware).arm.error = Some(reason.clone());
-                    return self.finish_with(id, ScanState::Waiting, &reason);
-                }
-                Err(StepError::Failed(reason)) => {
-                    tracing::error!("scan {id} failed: {reason}");
-                    return self.finish_with(id, ScanState::Failed, &reason);
-                }
-                Err(StepError::Store(err)) => return Err(err),
+            if matches!(step.step, Step::Move { .. }) && !self.wait_for_processing(id)? {
+                break;
             }
-            self.shared.publish(&self.store, id)?;
-        }
-        self.shared.publish(&self.store, id)?;
-        if let Some(scan) = self.store.scan(id)? {
-            tracing::info!("scan {id}: {}", scan.state.as_str());
+            step::begin(&self.shared, &mut self.store, id, step.index)?;
+            let outcome = self.execute(id, &dir, &step.step);
+            if let Err(StepError::Waiting(reason)) = &outcome {
+                lock(&self.shared.hardware).arm.error = Some(reason.clone());
+            }
+            let flow = step::finish(
+                &self.shared,
+                &mut self.store,
+                id,
+                step.index,
+                RUNNING,
+                outcome,
+            )?;
+            // A captured bracket may be ready for processing.
+            self.shared.processing_wake.post(|wake| *wake = true);
+            if flow == Flow::Stop {
+                break;
+            }
         }
         Ok(())
     }
 
-    /// Moves a running scan to `state` with `reason` (a no-op if the operator changed
-    /// it meanwhile).
-    fn finish_with(&mut self, id: i64, state: ScanState, reason: &str) -> Result<(), StoreError> {
-        self.store
-            .transition(id, &[ScanState::Running], state, Some(reason))?;
-        self.shared.publish(&self.store, id)
+    /// Before a new bracket: waits while the processing lane has as many captured
+    /// brackets left as the configuration allows (back-pressure), so a slow disk or
+    /// CPU never lets them pile up. Returns whether scan `id` is still running.
+    fn wait_for_processing(&mut self, id: i64) -> Result<bool, StoreError> {
+        let limit = self.shared.config.processing.max_backlog;
+        let mut noted = false;
+        loop {
+            let behind = self.store.unprocessed_brackets()?;
+            if behind < limit {
+                return Ok(true);
+            }
+            if !self.still_running(id)? {
+                return Ok(false);
+            }
+            if !noted {
+                tracing::info!("scan {id}: waiting for processing ({behind} brackets behind)");
+                noted = true;
+            }
+            self.shared.hardware_wake.take(IDLE_POLL);
+        }
     }
 
     /// The setup of a scan starting now: the calibrated one, else the configured one.
@@ -406,14 +440,9 @@ impl Runner {
         calibration::current_setup(&self.shared.config.data_dir, self.setup.as_ref())
     }
 
-    /// Creates the scan directory with setup.json (and truth.json for emulated scans),
-    /// and removes temporary files a crash left behind.
+    /// Creates the scan directory with setup.json (and truth.json for emulated scans).
     fn prepare_dir(&self, dir: &Path) -> std::io::Result<()> {
         std::fs::create_dir_all(dir)?;
-        let removed = remove_partials(dir)?;
-        if removed > 0 {
-            tracing::info!("{}: removed {removed} partial file(s)", dir.display());
-        }
         let files = [
             ("setup.json", self.setup().map(|s| json!(s))),
             ("truth.json", self.truth.clone()),
@@ -428,13 +457,9 @@ impl Runner {
         Ok(())
     }
 
-    /// Executes one step; returns its result and the steps it adds after itself.
-    fn execute(
-        &mut self,
-        id: i64,
-        dir: &Path,
-        step: &Step,
-    ) -> Result<(Value, Vec<Step>), StepError> {
+    /// Executes one hardware step; returns its result and the steps it adds after
+    /// itself.
+    fn execute(&mut self, id: i64, dir: &Path, step: &Step) -> Outcome {
         let result = match step {
             Step::Home => {
                 self.home(id)?;
@@ -450,9 +475,11 @@ impl Runner {
                 index,
                 shutter_s,
             } => self.capture(id, dir, *theta_l, *index, *shutter_s)?,
-            Step::Hdr { .. } | Step::Extract | Step::Fit { .. } => {
-                step_guard::run_processing(&step.describe(), || process::run(step, dir))
-                    .map_err(StepError::Failed)?
+            Step::Samples { .. } | Step::Hdr { .. } | Step::Extract | Step::Fit { .. } => {
+                return Err(StepError::Failed(format!(
+                    "{} is not a hardware step",
+                    step.describe()
+                )))
             }
         };
         Ok((result, Vec::new()))
@@ -461,7 +488,7 @@ impl Runner {
     /// Meters θL and plans its bracket: a capture at a middle shutter (shortened while
     /// the strips clip), then the fewest allowed shutters that expose every strip pixel
     /// well ([`auto_bracket`]).
-    fn meter(&mut self, id: i64, theta_l: f64) -> Result<(Value, Vec<Step>), StepError> {
+    fn meter(&mut self, id: i64, theta_l: f64) -> Outcome {
         // The scan's own setup (written when it started), whatever was calibrated since.
         let own =
             gonio_processing::extract::read_setup(&self.shared.scan_dir(id).join("setup.json"));
@@ -543,10 +570,25 @@ impl Runner {
     /// Runs `op` on the arm with bounded retries. Transient faults back off and retry;
     /// a reset or alarm is cleared and the arm re-homed before the next try; a stop
     /// by the operator halts at once. A dead connection after the last try interrupts
-    /// the scan, anything else fails it.
+    /// the scan (the arm is reopened and re-homed once it answers), anything else
+    /// fails it.
     ///
     /// With `home_first`, an arm whose position is unknown is homed before `op`.
     fn arm_op(
+        &mut self,
+        id: i64,
+        what: &str,
+        home_first: bool,
+        op: impl FnMut(&mut dyn Arm) -> Result<(), DeviceError>,
+    ) -> Result<(), StepError> {
+        let result = self.try_arm(id, what, home_first, op);
+        if let Err(StepError::Interrupted(reason)) = &result {
+            self.disconnect_arm(reason);
+        }
+        result
+    }
+
+    fn try_arm(
         &mut self,
         id: i64,
         what: &str,
@@ -689,7 +731,9 @@ impl Runner {
         status.arm.angle_deg = angle.or(Some(0.0));
     }
 
-    /// Runs `op` on the camera with bounded retries of transient faults (busy, timeout).
+    /// Runs `op` on the camera with bounded retries of transient faults (busy, timeout,
+    /// I/O). A camera that is gone (disconnected, not found) interrupts the scan until
+    /// it is back.
     fn camera_op<T>(
         &mut self,
         id: i64,
@@ -716,8 +760,14 @@ impl Runner {
                 }
                 Err(err) => {
                     tracing::warn!("scan {id}: camera {what} (try {}): {err}", attempt + 1);
-                    status.camera.state = "error";
+                    status.camera.state = camera_state_after(&err);
                     status.camera.error = Some(err.to_string());
+                    if is_camera_gone(&err) {
+                        self.camera_retry = Some(Reconnect::now());
+                        return Err(StepError::Interrupted(format!(
+                            "camera {what}: {err}; waiting for the camera to come back"
+                        )));
+                    }
                     if !err.is_transient() {
                         return Err(StepError::Failed(format!("camera {what}: {err}")));
                     }
@@ -801,8 +851,6 @@ impl Runner {
     }
 }
 
-/// First metering shutter, seconds (the allowed one at or below it).
-const METER_START_S: f64 = 1.0 / 60.0;
 /// Metering captures before giving up on a scene that clips.
 const METER_ATTEMPTS: u32 = 4;
 
@@ -854,6 +902,50 @@ fn strip_region(setup: &Setup, theta_l: f64, frame: &Frame) -> BracketRegion {
 /// Backoff before try `attempt` (1-based after the first): base · 2^(attempt−1).
 fn backoff(base_ms: u64, attempt: u32) -> Duration {
     Duration::from_millis(base_ms.saturating_mul(1 << (attempt - 1).min(10)))
+}
+
+/// When to look for a lost device again: at once, then after [`RECONNECT_BACKOFF`],
+/// doubling after each failure up to [`RECONNECT_BACKOFF_MAX`].
+#[derive(Debug, Clone, Copy)]
+struct Reconnect {
+    at: Instant,
+    delay: Duration,
+}
+
+impl Reconnect {
+    fn now() -> Self {
+        Self {
+            at: Instant::now(),
+            delay: Duration::ZERO,
+        }
+    }
+
+    fn due(&self) -> bool {
+        Instant::now() >= self.at
+    }
+
+    /// The next try after a failed one.
+    fn later(self) -> Self {
+        let delay = (self.delay * 2).clamp(RECONNECT_BACKOFF, RECONNECT_BACKOFF_MAX);
+        Self {
+            at: Instant::now() + delay,
+            delay,
+        }
+    }
+}
+
+/// Whether a camera error means the camera is gone (unplugged, switched off).
+fn is_camera_gone(err: &DeviceError) -> bool {
+    matches!(err, DeviceError::Disconnected(_) | DeviceError::NotFound(_))
+}
+
+/// The camera state shown after `err`.
+fn camera_state_after(err: &DeviceError) -> &'static str {
+    if is_camera_gone(err) {
+        "disconnected"
+    } else {
+        "error"
+    }
 }
 
 /// Whether an arm error that outlasted the retries means the connection is gone

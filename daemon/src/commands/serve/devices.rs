@@ -18,7 +18,8 @@ use gonio_processing::geometry::Setup;
 use serde_json::Value;
 
 use super::config::{ArmConfig, ArmKind, CameraConfig, Config, HomingMode, Limits};
-use super::shared::lock;
+use super::sync::lock;
+use super::timing::Timing;
 
 /// What every capture sidecar says besides the exposure (`None`: the camera's own).
 #[derive(Debug, Clone, Copy, Default)]
@@ -51,7 +52,6 @@ impl ArmOpener {
 pub struct Emulators {
     pub grbl: std::sync::Mutex<GrblEmulator>,
     pub camera_faults: FaultInjector,
-    pub world: World,
 }
 
 /// What the daemon knows of its devices besides the devices themselves.
@@ -66,6 +66,8 @@ pub struct Devices {
     pub sidecar: SidecarDefaults,
     /// ISO set for every exposure, where the body has one.
     pub iso: Option<u32>,
+    /// What the devices' steps are expected to take.
+    pub timing: Timing,
     pub emulators: Option<Arc<Emulators>>,
 }
 
@@ -138,15 +140,18 @@ fn load_scene(name_or_path: &str) -> anyhow::Result<Scene> {
 /// Opens the devices of `config`.
 pub fn open(config: &Config) -> anyhow::Result<Devices> {
     let world = World::new(0.0);
-    let (grbl, arm) = match config.arm.kind {
+    let real = Timing::real();
+    let (grbl, arm, timing) = match config.arm.kind {
         ArmKind::Emulator => {
-            let emulator = GrblEmulator::start(emulated_board(&config.arm)?, world.clone())
-                .context("starting the GRBL emulator")?;
+            let board = emulated_board(&config.arm)?;
+            let timing = Timing::emulated(&board, real.capture);
+            let emulator =
+                GrblEmulator::start(board, world.clone()).context("starting the GRBL emulator")?;
             let arm = ArmOpener {
                 path: emulator.device_path().to_path_buf(),
                 config: grbl_arm_config(&config.arm, config.limits),
             };
-            (Some(emulator), arm)
+            (Some(emulator), arm, timing)
         }
         ArmKind::Grbl => (
             None,
@@ -154,16 +159,17 @@ pub fn open(config: &Config) -> anyhow::Result<Devices> {
                 path: config.arm.path.clone().context("arm.path is not set")?,
                 config: grbl_arm_config(&config.arm, config.limits),
             },
+            real,
         ),
     };
     match &config.camera {
         CameraConfig::Emulator { scene, time_scale } => {
             let scene = load_scene(scene)?;
-            let timing = CaptureTiming {
+            let capture = CaptureTiming {
                 time_scale: *time_scale,
                 ..CaptureTiming::default()
             };
-            let camera = EmulatedCamera::new(scene.clone(), world.clone(), timing);
+            let camera = EmulatedCamera::new(scene.clone(), world.clone(), capture);
             let setup: Setup =
                 serde_json::from_value(scene.setup_json()).context("converting the scene setup")?;
             let body = scene.camera();
@@ -182,7 +188,6 @@ pub fn open(config: &Config) -> anyhow::Result<Devices> {
                 Arc::new(Emulators {
                     grbl: std::sync::Mutex::new(grbl),
                     camera_faults: camera.fault_injector(),
-                    world,
                 })
             });
             Ok(Devices {
@@ -192,6 +197,7 @@ pub fn open(config: &Config) -> anyhow::Result<Devices> {
                 truth: Some(scene.truth_json()),
                 sidecar,
                 iso: Some(body.iso),
+                timing: Timing { capture, ..timing },
                 emulators,
             })
         }
@@ -202,6 +208,7 @@ pub fn open(config: &Config) -> anyhow::Result<Devices> {
             truth: None,
             sidecar: SidecarDefaults::default(),
             iso: Some(*iso),
+            timing,
             emulators: None,
         }),
     }
@@ -217,9 +224,12 @@ fn open_gphoto2(model: Option<&str>, port: Option<&str>) -> anyhow::Result<Box<d
         }
     }
     let spec = WorkerSpec::beside_current_exe(args).context("locating gonio-camera-worker")?;
-    let camera = SupervisedCamera::start(spec, SupervisorConfig::default())
-        .context("starting the gphoto2 camera worker (gonio-camera-worker)")?;
-    Ok(Box::new(camera))
+    // The worker starts with the first call, so the daemon starts without the camera
+    // and finds it once it is plugged in.
+    Ok(Box::new(SupervisedCamera::new(
+        spec,
+        SupervisorConfig::default(),
+    )))
 }
 
 /// A fault the test hook injects into an emulator.
@@ -234,6 +244,10 @@ pub enum InjectedFault {
     CameraBusy { count: u32 },
     /// The next `count` captures never complete (time out).
     CameraTimeout { count: u32 },
+    /// Pull the camera's USB cable: every camera call fails until it is plugged back.
+    CameraUnplug,
+    /// Plug the camera back in.
+    CameraReplug,
 }
 
 impl Emulators {
@@ -253,6 +267,8 @@ impl Emulators {
                     self.camera_faults.inject(CameraFault::Timeout);
                 }
             }
+            InjectedFault::CameraUnplug => self.camera_faults.unplug(),
+            InjectedFault::CameraReplug => self.camera_faults.replug(),
         }
         Ok(())
     }

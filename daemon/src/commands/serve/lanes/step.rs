@@ -1,0 +1,88 @@
+//! What both lanes do around one step of the journal: record it as started before
+//! anything happens, then record its outcome, the step done with its result (and the
+//! steps it planned after itself) or the scan failed, interrupted or waiting, in one
+//! transaction each, and announce the change.
+
+use serde_json::Value;
+
+use crate::commands::serve::plan::Step;
+use crate::commands::serve::shared::Shared;
+use crate::commands::serve::store::{ScanState, Store, StoreError};
+
+/// Why a step did not complete.
+pub enum StepError {
+    /// The operator paused, cancelled or stopped the scan: leave it as they set it.
+    Halted,
+    /// A device went away: the scan waits until it is back.
+    Interrupted(String),
+    /// The arm is refused, unhomed or its position undeclared: the scan waits for the
+    /// operator to change that (no retries meanwhile), with the reason.
+    Waiting(String),
+    /// The scan cannot complete.
+    Failed(String),
+    Store(StoreError),
+}
+
+impl From<StoreError> for StepError {
+    fn from(err: StoreError) -> Self {
+        StepError::Store(err)
+    }
+}
+
+/// A step's result record and the steps it adds after itself.
+pub type Outcome = Result<(Value, Vec<Step>), StepError>;
+
+/// Whether a lane goes on with the scan after a step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Flow {
+    Next,
+    Stop,
+}
+
+/// Records that step `index` of scan `id` begins (committed before it runs).
+pub fn begin(shared: &Shared, store: &mut Store, id: i64, index: u32) -> Result<(), StoreError> {
+    store.step_started(id, index)?;
+    shared.changed(id);
+    Ok(())
+}
+
+/// Records the outcome of step `index` of scan `id`. A failure or an interruption
+/// moves the scan out of `from` (a scan the operator changed meanwhile stays as they
+/// set it).
+pub fn finish(
+    shared: &Shared,
+    store: &mut Store,
+    id: i64,
+    index: u32,
+    from: &[ScanState],
+    outcome: Outcome,
+) -> Result<Flow, StoreError> {
+    let flow = match outcome {
+        Ok((result, followers)) => {
+            if store.step_done(id, index, &result, &followers)? {
+                tracing::info!("scan {id}: done");
+            }
+            Flow::Next
+        }
+        Err(StepError::Halted) => Flow::Stop,
+        Err(StepError::Interrupted(reason)) => {
+            tracing::warn!("scan {id} interrupted: {reason}");
+            store.transition(id, from, ScanState::Interrupted, Some(&reason))?;
+            Flow::Stop
+        }
+        Err(StepError::Waiting(reason)) => {
+            tracing::warn!("scan {id} waiting: {reason}");
+            store.log(shared.boot, Some(id), "wait", &reason)?;
+            store.transition(id, from, ScanState::Waiting, Some(&reason))?;
+            Flow::Stop
+        }
+        Err(StepError::Failed(reason)) => {
+            tracing::error!("scan {id} failed: {reason}");
+            store.transition(id, from, ScanState::Failed, Some(&reason))?;
+            Flow::Stop
+        }
+        Err(StepError::Store(err)) => return Err(err),
+    };
+    shared.changed(id);
+    Ok(flow)
+}
