@@ -1,8 +1,11 @@
 //! Hardware faults on the emulators, injected through the daemon's test hook
 //! (`emulator.fault_injection = true`): a serial unplug during a move interrupts the
-//! scan with a clear state and it resumes after the reconnect; the emergency stop
-//! pauses a scan mid-move; a busy or timing-out camera is retried a bounded number of
-//! times, then the scan fails with a clear error (and can be retried later).
+//! scan with a clear state and it resumes after the reconnect; a camera unplugged
+//! mid-scan does the same, the scan completing by itself once it is back; the
+//! emergency stop pauses a scan mid-move; a busy or timing-out camera is retried a
+//! bounded number of times, then the scan fails with a clear error (and can be retried
+//! later). `/api/hardware` follows the arm during a move (the driver polls the
+//! controller), which the mid-move faults rely on.
 
 use std::time::{Duration, Instant};
 
@@ -25,6 +28,33 @@ fn wait_mid_move(daemon: &Daemon) {
     }
 }
 
+#[test]
+fn hardware_view_follows_the_arm_during_a_move() {
+    let dir = temp_dir("live-angle");
+    let daemon = Daemon::start(&dir, &emulator_config(0.4));
+    let id = post_scan(&daemon, &[-50.0]);
+    let mut seen = Vec::new();
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while seen.last().is_none_or(|a: &f64| *a > -49.9) {
+        assert!(
+            Instant::now() < deadline,
+            "the arm never got there: {seen:?}"
+        );
+        if let Some(angle) = daemon.get("/api/hardware").json["arm"]["angle_deg"].as_f64() {
+            seen.push(angle);
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let mut between: Vec<f64> = seen
+        .into_iter()
+        .filter(|a| *a < -2.0 && *a > -48.0)
+        .collect();
+    between.dedup();
+    assert!(between.len() >= 3, "angles seen mid-move: {between:?}");
+    daemon.wait_state(id, &["done", "failed"], Duration::from_secs(60));
+    std::fs::remove_dir_all(dir).ok();
+}
+
 fn post_scan(daemon: &Daemon, theta_l: &[f64]) -> i64 {
     let answer = daemon.post(
         "/api/scans",
@@ -32,6 +62,26 @@ fn post_scan(daemon: &Daemon, theta_l: &[f64]) -> i64 {
     );
     assert_eq!(answer.status, 201, "{:?}", answer.json);
     answer.json["id"].as_i64().unwrap()
+}
+
+/// Waits until scan `id` is interrupted; returns why.
+fn wait_interrupted(daemon: &Daemon, id: i64) -> String {
+    let scan = daemon.wait_state(
+        id,
+        &["interrupted", "failed", "done"],
+        Duration::from_secs(60),
+    );
+    assert_eq!(scan["state"], "interrupted", "{scan}");
+    scan["error"].as_str().unwrap().to_owned()
+}
+
+/// Scan `id` is still interrupted after `wait` (no hang, no busy failure meanwhile).
+fn stays_interrupted(daemon: &Daemon, id: i64, wait: Duration) {
+    std::thread::sleep(wait);
+    assert_eq!(
+        daemon.get(&format!("/api/scans/{id}")).json["state"],
+        "interrupted"
+    );
 }
 
 fn inject(daemon: &Daemon, fault: Value) {
@@ -47,23 +97,12 @@ fn serial_unplug_mid_move_interrupts_then_resumes_after_reconnect() {
     let id = post_scan(&daemon, &[-50.0, -45.0]);
     wait_mid_move(&daemon);
     inject(&daemon, json!({"fault": "unplug"}));
-
-    let scan = daemon.wait_state(
-        id,
-        &["interrupted", "failed", "done"],
-        Duration::from_secs(60),
-    );
-    assert_eq!(scan["state"], "interrupted", "{scan}");
-    let reason = scan["error"].as_str().unwrap();
+    let reason = wait_interrupted(&daemon, id);
     assert!(reason.contains("move to θL -50.0°"), "{reason}");
     let hardware = daemon.get("/api/hardware").json;
     assert_eq!(hardware["arm"]["state"], "disconnected", "{hardware}");
-    // It stays interrupted (no hang, no busy failure) while the cable is out.
-    std::thread::sleep(Duration::from_millis(500));
-    assert_eq!(
-        daemon.get(&format!("/api/scans/{id}")).json["state"],
-        "interrupted"
-    );
+    // It stays interrupted while the cable is out.
+    stays_interrupted(&daemon, id, Duration::from_millis(500));
 
     let log_before = daemon
         .get("/api/hardware/log")
@@ -91,6 +130,76 @@ fn serial_unplug_mid_move_interrupts_then_resumes_after_reconnect() {
         .position(|a| *a == "connect")
         .expect("reconnected");
     assert_eq!(actions.get(connect + 1), Some(&"home"), "{actions:?}");
+    std::fs::remove_dir_all(dir).ok();
+}
+
+#[test]
+fn camera_unplugged_mid_scan_interrupts_and_the_scan_completes_once_it_is_back() {
+    let dir = temp_dir("fault-camera-unplug");
+    let daemon = Daemon::start(&dir, &emulator_config(0.05));
+    let answer = daemon.post(
+        "/api/scans",
+        &json!({"sample": "s", "theta_l": [-20, -25, -30],
+                "bracket": {"shutter_s": [0.5, 0.1, 0.02]}}),
+    );
+    assert_eq!(answer.status, 201, "{:?}", answer.json);
+    let id = answer.json["id"].as_i64().unwrap();
+    // Pull the cable once the first frame has landed.
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while !daemon
+        .get("/api/hardware/log")
+        .json
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|e| e["action"] == "capture")
+    {
+        assert!(Instant::now() < deadline, "no capture");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    inject(&daemon, json!({"fault": "camera_unplug"}));
+    let reason = wait_interrupted(&daemon, id);
+    assert!(
+        reason.contains("camera") && reason.contains("waiting for the camera to come back"),
+        "{reason}"
+    );
+    let hardware = daemon.get("/api/hardware").json;
+    assert_eq!(hardware["camera"]["state"], "disconnected", "{hardware}");
+    // It waits while the camera is away (looking for it with backoff).
+    stays_interrupted(&daemon, id, Duration::from_millis(700));
+    // A scan queued meanwhile waits for the camera, with the reason.
+    let next = daemon.post(
+        "/api/scans",
+        &json!({"sample": "t", "theta_l": [-20], "bracket": {"shutter_s": [0.02]}}),
+    );
+    assert_eq!(next.status, 201, "{:?}", next.json);
+    let next = next.json["id"].as_i64().unwrap();
+    let waiting = daemon.wait_state(next, &["waiting"], Duration::from_secs(30));
+    let reason = waiting["reason"].as_str().unwrap_or_default();
+    assert!(reason.starts_with("camera not available"), "{waiting}");
+
+    inject(&daemon, json!({"fault": "camera_replug"}));
+    let scan = daemon.wait_state(id, &["done", "failed"], Duration::from_secs(90));
+    assert_eq!(scan["state"], "done", "{scan}");
+    assert_eq!(scan["error"], Value::Null);
+    // The waiting scan was queued again once the camera was back, and ran.
+    let queued = daemon.wait_state(next, &["done", "failed"], Duration::from_secs(90));
+    assert_eq!(queued["state"], "done", "{queued}");
+    assert_eq!(daemon.get("/api/hardware").json["camera"]["state"], "idle");
+    // Every frame was captured once, the one lost with the cable included.
+    let log = daemon.get("/api/hardware/log").json;
+    let captures: Vec<&str> = log
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|e| e["action"] == "capture" && e["scan_id"] == id)
+        .map(|e| e["detail"].as_str().unwrap())
+        .collect();
+    assert_eq!(captures.len(), 9, "{captures:?}");
+    let mut unique = captures.clone();
+    unique.sort();
+    unique.dedup();
+    assert_eq!(unique.len(), 9, "{captures:?}");
     std::fs::remove_dir_all(dir).ok();
 }
 

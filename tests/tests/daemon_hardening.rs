@@ -237,9 +237,9 @@ fn end_three_times_during_the_move(
     daemon
 }
 
-/// A capture overwritten by one whose header claims 4 billion × 5 pixels: the HDR step
-/// fails with a clear error (no panic, no abort, no wedged queue) and the next scan
-/// runs.
+/// A capture overwritten by one whose header claims 4 billion × 5 pixels: the first
+/// processing step that reads it (θL's samples, journaled before its HDR merge) fails
+/// with a clear error (no panic, no abort, no wedged queue) and the next scan runs.
 #[test]
 fn a_corrupt_frame_fails_its_step_and_the_queue_goes_on() {
     let dir = temp_dir("harden-corrupt");
@@ -289,7 +289,7 @@ fn a_corrupt_frame_fails_its_step_and_the_queue_goes_on() {
     assert_eq!(scan["state"], "failed", "{scan}");
     let error = scan["error"].as_str().unwrap();
     assert!(
-        error.contains("HDR merge") && error.contains("allowed"),
+        error.starts_with("extract θL -20.0°") && error.contains("allowed"),
         "{error}"
     );
     let next = daemon.wait_state(second, &["done", "failed"], Duration::from_secs(60));

@@ -64,6 +64,40 @@ fn six_angle_scan_completes_and_its_fit_recovers_the_scene() {
     let last = events.last().unwrap();
     assert_eq!(last["state"], "done");
     assert_eq!(last["progress"]["done"], last["progress"]["total"]);
+    // The total stays what was planned while metering adds capture steps; the time
+    // left is estimated while the scan runs.
+    let first = &events[0];
+    assert!(events
+        .iter()
+        .all(|e| e["progress"]["total"] == first["progress"]["total"]));
+    assert!(
+        last["progress"]["steps"]["total"].as_u64() > first["progress"]["steps"]["total"].as_u64()
+    );
+    let running: Vec<&Value> = events.iter().filter(|e| e["state"] == "running").collect();
+    assert!(running
+        .iter()
+        .all(|e| e["progress"]["eta_s"].as_f64().is_some_and(|t| t >= 0.0)));
+    assert!(running
+        .iter()
+        .any(|e| e["progress"]["eta_s"].as_f64() > Some(0.0)));
+    assert_eq!(last["progress"]["eta_s"], Value::Null);
+    assert_eq!(
+        last["progress"]["theta_l"],
+        json!({"captured": 6, "processed": 6, "total": 6})
+    );
+    // Live fits arrive while the scan runs, one per θL, each on every θL so far.
+    assert!(running
+        .iter()
+        .any(|e| e["live"].as_array().is_some_and(|l| !l.is_empty())));
+    let live = last["live"].as_array().unwrap();
+    assert_eq!(live.len(), 6, "{live:?}");
+    for (k, entry) in live.iter().enumerate() {
+        assert_eq!(entry["theta_l"].as_array().unwrap().len(), k + 1);
+        let ct = &entry["fits"]["cook-torrance"];
+        assert!(ct["ks"][1].as_f64().is_some(), "{entry}");
+        assert_eq!(ct["held_out_err_p"].is_null(), k == 0, "{entry}");
+        assert_eq!(ct["change_p"].is_null(), k == 0, "{entry}");
+    }
 
     // The automatic bracket metered every θL and planned its captures; every frame
     // exists with its sidecar.
@@ -150,6 +184,18 @@ fn six_angle_scan_completes_and_its_fit_recovers_the_scene() {
     }
     let m = truth["m"][0].as_f64().unwrap();
     assert_close("m", fit["m"][0].as_f64().unwrap(), m, 0.05, 0.0);
+    // The live fit on all six θL is the final fit (same samples, another order).
+    let live_ct = &live[5]["fits"]["cook-torrance"];
+    for c in 0..3 {
+        let final_ks = fit["ks"][c].as_f64().unwrap();
+        assert_close(
+            "live ks",
+            live_ct["ks"][c].as_f64().unwrap(),
+            final_ks,
+            1e-6,
+            0.0,
+        );
+    }
 
     // The page's views of the scan.
     let thumbnail = daemon.get(&format!("/api/scans/{id}/thumbnail.png"));

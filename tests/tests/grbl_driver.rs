@@ -13,6 +13,7 @@
 //!   refused) until `clear_fault`, then re-home; a hard-limit lock is reset at once.
 //! - unexpected reset banner: the position is unknown until re-homed.
 //! - emergency stop mid-move: the move fails, the arm stops short of its target.
+//! - during a move the driver's live angle follows the arm (status polled).
 //! - stock settings: each difference listed, or written with `apply_settings`; with
 //!   homing off the operator declares the position.
 //! - homing failure: a typed error with GRBL's meaning and advice, not retried.
@@ -464,4 +465,52 @@ fn slow_controller_late_ok_is_paired_with_its_own_line() {
     assert!(stopped.angle_deg > -80.0 && stopped.angle_deg < -1.0);
     // Still referenced: moves go on from there, no homing needed.
     assert!(arm.referenced());
+}
+
+#[test]
+fn live_angle_follows_the_arm_during_a_move() {
+    // Half real time: a 59° move takes about 1.7 s; a report is asked for every 200 ms.
+    let world = World::new(-7.5);
+    let board = GrblConfig {
+        time_scale: 0.5,
+        ..board(EXTRAS)
+    };
+    let emulator = GrblEmulator::start(board, world.clone()).unwrap();
+    let config = GrblArmConfig {
+        motion_time_factor: 0.75,
+        status_interval: Duration::from_millis(200),
+        ..driver_config()
+    };
+    let mut arm = GrblArm::open(emulator.device_path(), config).unwrap();
+    arm.home().unwrap();
+    let live = arm.live_angle();
+    let homed = arm.status().unwrap().angle_deg;
+    assert_eq!(live.get(), Some(homed));
+    let mover = thread::spawn(move || {
+        arm.move_to(-60.0).unwrap();
+        arm
+    });
+    let mut seen = Vec::new();
+    while !mover.is_finished() {
+        if let Some(angle) = live.get() {
+            // Never further from the physical arm than one report interval's travel.
+            assert!(
+                (angle - world.arm_deg()).abs() < 10.0,
+                "{angle} vs {}",
+                world.arm_deg()
+            );
+            seen.push(angle);
+        }
+        thread::sleep(Duration::from_millis(50));
+    }
+    let mut arm = mover.join().unwrap();
+    let mut between: Vec<f64> = seen
+        .into_iter()
+        .filter(|a| *a < homed - 1.0 && *a > -59.0)
+        .collect();
+    between.dedup();
+    assert!(between.len() >= 5, "angles seen mid-move: {between:?}");
+    assert!(between.windows(2).all(|w| w[1] <= w[0]), "{between:?}");
+    assert!((live.get().unwrap() + 60.0).abs() < 0.01);
+    assert!((arm.status().unwrap().angle_deg + 60.0).abs() < 0.01);
 }

@@ -1,0 +1,86 @@
+//! `gonio hdr` as a whole process against the merge alone, on the same bracket: the
+//! builtin `gold` scene's frames at θL −20° (full size), rendered by `gonio simulate`.
+//! The command decodes its frames in parallel; its target is a whole-process time
+//! within 1.5× of the merge alone. Decoding and writing the EXR are timed alone too.
+//!
+//!     cargo bench -p gonio-daemon --bench hdr_command [-- --runs N]
+
+use std::path::PathBuf;
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+use gonio_processing::capture::{is_capture_path, Frame};
+use gonio_processing::hdr::{merge, MergeOptions};
+
+fn median(mut values: Vec<Duration>) -> f64 {
+    values.sort();
+    values[values.len() / 2].as_secs_f64()
+}
+
+fn timed<T>(f: impl FnOnce() -> T) -> (T, Duration) {
+    let started = Instant::now();
+    let value = f();
+    (value, started.elapsed())
+}
+
+fn main() {
+    let mut runs = 5;
+    let mut args = std::env::args().skip(1);
+    while let Some(arg) = args.next() {
+        match arg.as_str() {
+            "--runs" => runs = args.next().and_then(|n| n.parse().ok()).expect("--runs N"),
+            "--bench" => {}
+            other => panic!("unknown argument {other}"),
+        }
+    }
+    let gonio = env!("CARGO_BIN_EXE_gonio");
+    let dir = tempfile::tempdir().expect("temp dir");
+    let status = Command::new(gonio)
+        .args(["simulate", "--scene", "gold", "--theta-l", "-20", "--out"])
+        .arg(dir.path())
+        .output()
+        .expect("running gonio simulate");
+    assert!(status.status.success(), "{status:?}");
+    let mut frames: Vec<PathBuf> = std::fs::read_dir(dir.path().join("theta_l_-20.0"))
+        .expect("frames")
+        .map(|e| e.expect("entry").path())
+        .filter(|p| is_capture_path(p))
+        .collect();
+    frames.sort();
+    let out = dir.path().join("map.exr");
+    let command = || {
+        let output = Command::new(gonio)
+            .arg("hdr")
+            .arg("--out")
+            .arg(&out)
+            .args(&frames)
+            .output()
+            .expect("running gonio hdr");
+        assert!(output.status.success(), "{output:?}");
+    };
+    // Warm the page cache.
+    command();
+    let mut whole = Vec::new();
+    let mut decode = Vec::new();
+    let mut merged = Vec::new();
+    let mut write = Vec::new();
+    for _ in 0..runs {
+        whole.push(timed(command).1);
+        let (decoded, took) = timed(|| Frame::read_all(&frames).expect("decoding"));
+        decode.push(took);
+        let (map, took) = timed(|| merge(&decoded, &MergeOptions::default()).expect("merging"));
+        merged.push(took);
+        drop(decoded);
+        write.push(timed(|| map.write_exr(&out).expect("writing")).1);
+    }
+    let (whole, merge_s) = (median(whole), median(merged));
+    println!(
+        "gonio hdr, {} frames of the gold scene at θL −20°, median of {runs}:",
+        frames.len()
+    );
+    println!("  whole process {whole:.3} s");
+    println!("  decode alone  {:.3} s (parallel)", median(decode));
+    println!("  merge alone   {merge_s:.3} s");
+    println!("  EXR write     {:.3} s", median(write));
+    println!("  whole / merge {:.2} (target ≤ 1.5)", whole / merge_s);
+}
