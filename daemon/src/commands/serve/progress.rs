@@ -188,7 +188,7 @@ fn theta_progress(steps: &[StepRecord]) -> ThetaProgress {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::commands::serve::plan::ScanPlan;
+    use crate::commands::serve::plan::{ScanPlan, FIT_MODELS};
     use serde_json::json;
     use time::Duration;
 
@@ -267,13 +267,17 @@ mod tests {
         let tail = timing.prior_s(&Step::Samples { theta_l: 0.0 }, 0.0)
             + timing.prior_s(&Step::Hdr { theta_l: 0.0 }, 0.0)
             + timing.prior_s(&Step::Extract, 0.0)
-            + 2.0
-                * timing.prior_s(
-                    &Step::Fit {
-                        model: "ward".into(),
-                    },
-                    0.0,
-                );
+            + FIT_MODELS
+                .iter()
+                .map(|(model, _)| {
+                    timing.prior_s(
+                        &Step::Fit {
+                            model: (*model).into(),
+                        },
+                        0.0,
+                    )
+                })
+                .sum::<f64>();
         assert!((full.eta_s - (hardware + tail)).abs() < 1e-9, "{full:?}");
         assert_eq!(
             full.theta_l,

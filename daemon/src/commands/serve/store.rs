@@ -935,10 +935,10 @@ mod tests {
             }])
             .unwrap()[0];
         let scan = store.next_for_hardware(now_unix()).unwrap().unwrap();
-        // Home, then per θL move, meter, samples, HDR; extract and two fits.
+        // Home, then per θL move, meter, samples, HDR; extract and three fits.
         assert_eq!(
             (scan.id, scan.state, scan.done, scan.total),
-            (id, ScanState::Queued, 0, 12)
+            (id, ScanState::Queued, 0, 13)
         );
         assert!(store
             .transition(id, &[ScanState::Queued], ScanState::Running, None)
@@ -955,7 +955,7 @@ mod tests {
         let scan = store.scan(id).unwrap().unwrap();
         assert_eq!(
             (scan.done, scan.total, scan.steps_done, scan.steps_total),
-            (2, 12, 3, 14)
+            (2, 13, 3, 15)
         );
         assert_eq!(scan.current_step.as_deref(), Some(&*bracket[0].describe()));
         assert_eq!(next(&store, id, Lane::Processing), None);
@@ -1005,7 +1005,7 @@ mod tests {
         let scan = store.scan(id).unwrap().unwrap();
         assert_eq!(
             (scan.state, scan.done, scan.total, scan.steps_done),
-            (ScanState::Done, 12, 12, 15)
+            (ScanState::Done, 13, 13, 16)
         );
         assert!(scan.finished.is_some() && scan.current_step.is_none());
         std::fs::remove_dir_all(dir).unwrap();
