@@ -18,6 +18,9 @@ const IMAGE_LENGTH: u16 = 257;
 const SAMPLES_PER_PIXEL: u16 = 277;
 const SUB_IFDS: u16 = 330;
 const EXIF_IFD: u16 = 34665;
+/// GPS and ICC-profile tags, which rawler's TIFF reader also follows as IFD pointers.
+const GPS_IFD: u16 = 34853;
+const ICC_PROFILE: u16 = 34675;
 /// Panasonic RW2 sensor size tags (IFD0 of a file with magic 0x55).
 const RW2_SENSOR_WIDTH: u16 = 2;
 const RW2_SENSOR_HEIGHT: u16 = 3;
@@ -237,7 +240,7 @@ fn walk(bytes: &[u8], nesting: usize) -> Option<Claim> {
                     claim.samples = claim.samples.max(samples);
                     max_samples = max_samples.max(samples);
                 }
-                SUB_IFDS | EXIF_IFD => {
+                SUB_IFDS | EXIF_IFD | GPS_IFD | ICC_PROFILE => {
                     queue.extend(r.offsets(entry));
                     queue.extend(r.odd_pointer(entry));
                 }
@@ -400,6 +403,13 @@ mod tests {
         f.extend([1, 1, 3, 0, 1, 0, 0, 0, 1, 0, 0, 0]);
         f.extend([0, 0, 0, 0]);
         assert_eq!(largest_claim(&f).unwrap().width, u64::MAX);
+        // A GPS IFD pointer (LONG) is followed like a SubIFDs one.
+        let mut g = b"II*\0\x08\0\0\0\x01\0".to_vec();
+        g.extend([0x25, 0x88, 4, 0, 1, 0, 0, 0, 26, 0, 0, 0]);
+        g.extend([0, 0, 0, 0]);
+        g.extend([1, 0, 0x97, 0, 5, 0, 0, 0, 0, 0x40, 0, 0, 0, 0]);
+        g.extend([0, 0, 0, 0]);
+        assert_eq!(largest_claim(&g).unwrap().largest_entry, (8 << 30, 0x0097));
     }
 
     /// A size stored out of line (count above one) is read where the decoder reads it.
