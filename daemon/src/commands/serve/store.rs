@@ -582,10 +582,16 @@ impl Store {
     }
 
     /// The processing step to run next: the first one ready ([`ready_step`]) in the
-    /// oldest scan that has one, with that scan's id.
-    pub fn next_for_processing(&self) -> Result<Option<(i64, StepRecord)>, StoreError> {
+    /// oldest scan that has one, with that scan's id. `running` (scan id, step index),
+    /// a step the lane runs in the background, counts as done here.
+    pub fn next_for_processing(
+        &self,
+        running: Option<(i64, u32)>,
+    ) -> Result<Option<(i64, StepRecord)>, StoreError> {
         for id in self.processable_ids()? {
-            if let Some(step) = ready_step(&self.steps(id)?, Lane::Processing) {
+            let mut steps = self.steps(id)?;
+            steps.retain(|s| running != Some((id, s.index)));
+            if let Some(step) = ready_step(&steps, Lane::Processing) {
                 return Ok(Some((id, step.clone())));
             }
         }
@@ -974,13 +980,19 @@ mod tests {
             next(&store, id, Lane::Hardware),
             Some(Step::Move { theta_l: -25.0 })
         );
-        let (processing_scan, samples) = store.next_for_processing().unwrap().unwrap();
+        let (processing_scan, samples) = store.next_for_processing(None).unwrap().unwrap();
         assert_eq!(processing_scan, id);
+        // With the samples step running in the background, the HDR step is next.
+        let (_, beside) = store
+            .next_for_processing(Some((id, samples.index)))
+            .unwrap()
+            .unwrap();
+        assert_eq!(beside.step, Step::Hdr { theta_l: -20.0 });
         store.step_started(id, samples.index).unwrap();
         drop(store);
         // Reopened after a crash: the processing step that was running runs again.
         let mut store = Store::open(&dir.join("gonio.sqlite")).unwrap();
-        let (_, again) = store.next_for_processing().unwrap().unwrap();
+        let (_, again) = store.next_for_processing(None).unwrap().unwrap();
         assert_eq!(
             (again.index, again.state),
             (samples.index, StepState::Started)
@@ -998,7 +1010,7 @@ mod tests {
         }
         assert!(store.next_for_hardware(now_unix()).unwrap().is_none());
         assert_eq!(store.unprocessed_brackets().unwrap(), 2);
-        while let Some((_, step)) = store.next_for_processing().unwrap() {
+        while let Some((_, step)) = store.next_for_processing(None).unwrap() {
             assert_eq!(store.scan(id).unwrap().unwrap().state, ScanState::Running);
             done(&mut store, id, &step, &[]);
         }
@@ -1069,16 +1081,16 @@ mod tests {
         for step in &store.steps(id).unwrap()[..4] {
             done(&mut store, id, step, &[]);
         }
-        assert!(store.next_for_processing().unwrap().is_some());
+        assert!(store.next_for_processing(None).unwrap().is_some());
         store
             .transition(id, &[ScanState::Running], ScanState::Interrupted, None)
             .unwrap();
-        assert!(store.next_for_processing().unwrap().is_some());
+        assert!(store.next_for_processing(None).unwrap().is_some());
         assert!(store.next_for_hardware(now_unix()).unwrap().is_none());
         store
             .transition(id, &[ScanState::Interrupted], ScanState::Paused, None)
             .unwrap();
-        assert!(store.next_for_processing().unwrap().is_none());
+        assert!(store.next_for_processing(None).unwrap().is_none());
         assert_eq!(store.unprocessed_brackets().unwrap(), 0);
         std::fs::remove_dir_all(dir).unwrap();
     }

@@ -1,18 +1,20 @@
 //! The processing lane: one thread that runs the processing steps of every scan as
 //! soon as their inputs exist (docs/ARCHITECTURE.md, "Daemon"), in journal order,
-//! while the hardware lane goes on capturing. A step that was running when the daemon
-//! stopped is run again. With nothing to run, it decodes the frames of the bracket
-//! being captured ahead of their HDR step.
+//! while the hardware lane goes on capturing. An HDR step runs in the background
+//! beside the steps after it (a θL's map is an input of no other step), one at a time.
+//! A step that was running when the daemon stopped is run again. With nothing to run,
+//! it decodes the frames of the bracket being captured ahead of their HDR step.
 //!
 //! Its parallel work runs on its own thread pool at a lower priority than the rest of
 //! the daemon, so the hardware lane (and an emulated camera's rendering, on the
 //! global pool) never waits for it.
 
 use std::path::PathBuf;
-use std::sync::Arc;
+use std::sync::{mpsc, Arc};
 use std::time::Duration;
 
 use super::step::{self, Outcome, StepError};
+use crate::commands::serve::plan::Step;
 use crate::commands::serve::process::{self, Prefetched};
 use crate::commands::serve::shared::Shared;
 use crate::commands::serve::step_guard;
@@ -21,11 +23,20 @@ use crate::commands::serve::store::{StepRecord, Store, StoreError, PROCESSABLE};
 /// How often the lane looks for ready steps when nothing wakes it.
 const IDLE_POLL: Duration = Duration::from_millis(500);
 
+/// An HDR step running on the lane's pool, with the frames decoded ahead, which it
+/// hands back with its outcome.
+struct Background {
+    id: i64,
+    index: u32,
+    outcome: mpsc::Receiver<(Outcome, Prefetched)>,
+}
+
 /// The processing lane's state.
 pub struct ProcessingLane {
     shared: Arc<Shared>,
     store: Store,
     prefetched: Prefetched,
+    background: Option<Background>,
 }
 
 impl ProcessingLane {
@@ -34,12 +45,16 @@ impl ProcessingLane {
             shared,
             store,
             prefetched: Prefetched::default(),
+            background: None,
         }
     }
 
-    /// Runs forever on a thread pool of its own, at a lower priority.
+    /// Runs forever on a thread pool of its own, at a lower priority, with at least two
+    /// threads: the lane's own and one for the background step.
     pub fn run(self) {
+        let threads = std::thread::available_parallelism().map_or(2, |n| n.get().max(2));
         let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
             .thread_name(|n| format!("processing-{n}"))
             .start_handler(|_| lower_priority())
             .build();
@@ -54,9 +69,28 @@ impl ProcessingLane {
 
     fn work(mut self) {
         loop {
-            match self.store.next_for_processing() {
+            if let Err(err) = self.collect(false) {
+                tracing::error!("processing lane: {err}");
+                std::thread::sleep(Duration::from_secs(1));
+                continue;
+            }
+            let running = self.background.as_ref().map(|b| (b.id, b.index));
+            match self.store.next_for_processing(running) {
                 Ok(Some((id, step))) => {
-                    if let Err(err) = self.run_step(id, &step) {
+                    let done = match step.step {
+                        // One HDR step at a time: the next waits for the running one.
+                        Step::Hdr { .. } if self.background.is_some() => self.collect(true),
+                        Step::Hdr { .. } => self.start_background(id, &step),
+                        _ => self.run_step(id, &step),
+                    };
+                    if let Err(err) = done {
+                        tracing::error!("processing lane: {err}");
+                        std::thread::sleep(Duration::from_secs(1));
+                    }
+                }
+                // Nothing else to do: wait for the background step.
+                Ok(None) if self.background.is_some() => {
+                    if let Err(err) = self.collect(true) {
                         tracing::error!("processing lane: {err}");
                         std::thread::sleep(Duration::from_secs(1));
                     }
@@ -91,6 +125,64 @@ impl ProcessingLane {
         Ok(self.prefetched.advance(&wanted))
     }
 
+    /// Starts the HDR step `record` of scan `id` in the background, with the frames
+    /// decoded ahead.
+    fn start_background(&mut self, id: i64, record: &StepRecord) -> Result<(), StoreError> {
+        let Some(scan) = self.store.scan(id)? else {
+            return Ok(());
+        };
+        step::begin(&self.shared, &mut self.store, id, record.index)?;
+        let dir = self.shared.scan_dir(id);
+        let mut prefetched = std::mem::take(&mut self.prefetched);
+        let step = record.step.clone();
+        let (sender, outcome) = mpsc::channel();
+        rayon::spawn(move || {
+            let outcome = step_guard::run_processing(&step.describe(), || {
+                process::run(&step, &dir, &scan.plan, &mut prefetched)
+            })
+            .map(|result| (result, Vec::new()))
+            .map_err(StepError::Failed);
+            // The lane only drops the receiver when it stops.
+            let _ = sender.send((outcome, prefetched));
+        });
+        self.background = Some(Background {
+            id,
+            index: record.index,
+            outcome,
+        });
+        Ok(())
+    }
+
+    /// Records the background step's outcome once it has one (waiting for it if
+    /// `wait`), and takes back the frames decoded ahead.
+    fn collect(&mut self, wait: bool) -> Result<(), StoreError> {
+        let Some(background) = &self.background else {
+            return Ok(());
+        };
+        let (outcome, prefetched) = match background.outcome.try_recv() {
+            Ok(received) => received,
+            Err(mpsc::TryRecvError::Empty) if !wait => return Ok(()),
+            Err(mpsc::TryRecvError::Empty) => match background.outcome.recv() {
+                Ok(received) => received,
+                Err(mpsc::RecvError) => lost(),
+            },
+            Err(mpsc::TryRecvError::Disconnected) => lost(),
+        };
+        let (id, index) = (background.id, background.index);
+        self.background = None;
+        self.prefetched = prefetched;
+        step::finish(
+            &self.shared,
+            &mut self.store,
+            id,
+            index,
+            &PROCESSABLE,
+            outcome,
+        )?;
+        self.shared.hardware_wake.post(|wake| *wake = true);
+        Ok(())
+    }
+
     fn run_step(&mut self, id: i64, record: &StepRecord) -> Result<(), StoreError> {
         let Some(scan) = self.store.scan(id)? else {
             return Ok(());
@@ -115,6 +207,12 @@ impl ProcessingLane {
         self.shared.hardware_wake.post(|wake| *wake = true);
         Ok(())
     }
+}
+
+/// The outcome of a background step whose worker ended without one.
+fn lost() -> (Outcome, Prefetched) {
+    let reason = "the background worker stopped without an outcome".to_owned();
+    (Err(StepError::Failed(reason)), Prefetched::default())
 }
 
 /// How much less urgent the processing threads are than the others (nice levels).
