@@ -310,6 +310,19 @@ mod tests {
         b
     }
 
+    /// A little-endian TIFF whose only IFD, at 8, holds `entries` (next IFD 0), followed
+    /// by `tail` (at offset 14 + 12 × entries).
+    fn little_tiff(entries: &[[u8; 12]], tail: &[u8]) -> Vec<u8> {
+        let mut b = b"II*\0\x08\0\0\0".to_vec();
+        b.extend((entries.len() as u16).to_le_bytes());
+        for entry in entries {
+            b.extend(entry);
+        }
+        b.extend([0, 0, 0, 0]);
+        b.extend(tail);
+        b
+    }
+
     #[test]
     fn finds_the_largest_claim_in_sub_ifds_and_survives_loops() {
         let claim = largest_claim(&nested(70_000, 60_000)).unwrap();
@@ -359,11 +372,14 @@ mod tests {
     fn the_largest_samples_per_pixel_of_any_entry_is_kept() {
         // IFD0 at 8 with 3 entries: SamplesPerPixel as SHORT 3, as LONG 4 294 901 766,
         // and as an unknown type 99 whose field holds 70 000.
-        let mut b = b"II*\0\x08\0\0\0\x03\0".to_vec();
-        b.extend([0x15, 1, 3, 0, 1, 0, 0, 0, 3, 0, 0, 0]);
-        b.extend([0x15, 1, 4, 0, 1, 0, 0, 0, 6, 0, 0xff, 0xff]);
-        b.extend([0x15, 1, 99, 0, 1, 0, 0, 0, 0x70, 0x11, 1, 0]);
-        b.extend([0, 0, 0, 0]);
+        let b = little_tiff(
+            &[
+                [0x15, 1, 3, 0, 1, 0, 0, 0, 3, 0, 0, 0],
+                [0x15, 1, 4, 0, 1, 0, 0, 0, 6, 0, 0xff, 0xff],
+                [0x15, 1, 99, 0, 1, 0, 0, 0, 0x70, 0x11, 1, 0],
+            ],
+            &[],
+        );
         assert_eq!(largest_claim(&b).unwrap().max_samples, 0xFFFF_0006);
         assert_eq!(largest_claim(&nested(5, 5)).unwrap().max_samples, 0);
     }
@@ -375,40 +391,33 @@ mod tests {
         // IFD0 at 8 with 2 entries: SubIFDs of type 99 (its first byte, 0, is where
         // rawler reads an IFD: the header, 18 761 entries, cut at 4096), SamplesPerPixel
         // as the SRATIONAL 3/0 at offset 38.
-        let mut b = b"II*\0\x08\0\0\0\x02\0".to_vec();
-        b.extend([0x4a, 1, 99, 0, 1, 0, 0, 0, 0, 1, 1, 0]);
-        b.extend([0x15, 1, 10, 0, 1, 0, 0, 0, 38, 0, 0, 0]);
-        b.extend([0, 0, 0, 0]);
-        b.extend([3, 0, 0, 0, 0, 0, 0, 0]);
+        let b = little_tiff(
+            &[
+                [0x4a, 1, 99, 0, 1, 0, 0, 0, 0, 1, 1, 0],
+                [0x15, 1, 10, 0, 1, 0, 0, 0, 38, 0, 0, 0],
+            ],
+            &[3, 0, 0, 0, 0, 0, 0, 0],
+        );
         let claim = largest_claim(&b).unwrap();
         assert_eq!(claim.max_samples, u64::MAX);
         // The header read as an entry: tag 0x2a, type 8 (SSHORT), count 0x0002_0000.
         assert_eq!(claim.largest_entry, (2 * 0x0002_0000, 0x2a));
         // An UNDEFINED pointer leads to its own value field: an IFD of 0 entries.
-        let mut u = b"II*\0\x08\0\0\0\x01\0".to_vec();
-        u.extend([0x4a, 1, 7, 0, 4, 0, 0, 0, 0, 0, 0, 0]);
-        u.extend([0, 0, 0, 0]);
-        assert_eq!(
-            Reader {
-                bytes: &u,
-                little: true
-            }
-            .odd_pointer(10),
-            Some(18)
-        );
+        let u = little_tiff(&[[0x4a, 1, 7, 0, 4, 0, 0, 0, 0, 0, 0, 0]], &[]);
+        let reader = Reader {
+            bytes: &u,
+            little: true,
+        };
+        assert_eq!(reader.odd_pointer(10), Some(18));
         // A FLOAT width of 1e30 saturates (height 1).
-        let mut f = b"II*\0\x08\0\0\0\x02\0".to_vec();
-        f.extend([0, 1, 11, 0, 1, 0, 0, 0]);
-        f.extend(1e30f32.to_bits().to_le_bytes());
-        f.extend([1, 1, 3, 0, 1, 0, 0, 0, 1, 0, 0, 0]);
-        f.extend([0, 0, 0, 0]);
+        let mut width = [0, 1, 11, 0, 1, 0, 0, 0, 0, 0, 0, 0];
+        width[8..].copy_from_slice(&1e30f32.to_bits().to_le_bytes());
+        let f = little_tiff(&[width, [1, 1, 3, 0, 1, 0, 0, 0, 1, 0, 0, 0]], &[]);
         assert_eq!(largest_claim(&f).unwrap().width, u64::MAX);
-        // A GPS IFD pointer (LONG) is followed like a SubIFDs one.
-        let mut g = b"II*\0\x08\0\0\0\x01\0".to_vec();
-        g.extend([0x25, 0x88, 4, 0, 1, 0, 0, 0, 26, 0, 0, 0]);
-        g.extend([0, 0, 0, 0]);
-        g.extend([1, 0, 0x97, 0, 5, 0, 0, 0, 0, 0x40, 0, 0, 0, 0]);
-        g.extend([0, 0, 0, 0]);
+        // A GPS IFD pointer (LONG, to 26) is followed like a SubIFDs one.
+        let mut gps_ifd = vec![1, 0, 0x97, 0, 5, 0, 0, 0, 0, 0x40, 0, 0, 0, 0];
+        gps_ifd.extend([0, 0, 0, 0]);
+        let g = little_tiff(&[[0x25, 0x88, 4, 0, 1, 0, 0, 0, 26, 0, 0, 0]], &gps_ifd);
         assert_eq!(largest_claim(&g).unwrap().largest_entry, (8 << 30, 0x0097));
     }
 
