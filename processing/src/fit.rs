@@ -20,109 +20,28 @@
 //!
 //! β are in the camera-RGB domain (a white gives G = 100), so Kd is typically 0–100.
 
+mod data;
+mod error;
 mod linear;
 mod nelder_mead;
+mod options;
 mod robust;
 mod simplex;
 mod uncertainty;
 
-use std::fmt;
-use std::str::FromStr;
 use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
-use crate::brdf::{Basis, Cosines, Model, Params, Roughness, UnknownName};
+use crate::brdf::{Cosines, Model, Params, Roughness};
 use crate::metrics;
-use crate::samples::{distinct_theta_l, Sample};
+use crate::samples::Sample;
+use data::{Data, Found};
 
+pub use data::fits_colour_shift;
+pub use error::FitError;
+pub use options::{FitMethod, FitOptions, NelderMeadOptions, RobustOptions};
 pub use uncertainty::{chi2_3_survival, ColourShift, Correlation, ParameterSet, Z95};
-
-/// How to minimise the loss.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum FitMethod {
-    /// Kd, Ks solved at each m (a convex problem) plus a global search over log m.
-    #[default]
-    Robust,
-    /// Downhill simplex over all parameters (the paper's method).
-    NelderMead,
-}
-
-/// Settings of the robust method.
-#[derive(Debug, Clone, PartialEq)]
-pub struct RobustOptions {
-    /// Roughness search range [m_min, m_max], searched in log m.
-    pub m_min: f64,
-    pub m_max: f64,
-    /// Grid points over the log m range before Brent refinement (at least 3).
-    pub grid_points: usize,
-    /// Polish all parameters with Nelder–Mead afterwards (kept only if it lowers the loss).
-    pub polish: bool,
-}
-
-impl Default for RobustOptions {
-    fn default() -> Self {
-        RobustOptions {
-            m_min: 1e-3,
-            m_max: 2.0,
-            grid_points: 24,
-            polish: false,
-        }
-    }
-}
-
-/// Settings of the Nelder–Mead method: fminsearch's, with its defaults.
-#[derive(Debug, Clone, PartialEq)]
-pub struct NelderMeadOptions {
-    /// Starting roughness; Kd and Ks start from the data (lowest and peak β).
-    pub initial_m: f64,
-    /// TolX: stop when no vertex is farther than this from the best in any parameter
-    /// (absolute) and TolFun also holds.
-    pub tol_x: f64,
-    /// TolFun: stop when no vertex's loss exceeds the best by more than this (absolute)
-    /// and TolX also holds.
-    pub tol_fun: f64,
-    /// MaxIter; `None` for fminsearch's 200 × the number of parameters.
-    pub max_iter: Option<usize>,
-    /// MaxFunEvals; `None` for fminsearch's 200 × the number of parameters.
-    pub max_fun_evals: Option<usize>,
-}
-
-impl Default for NelderMeadOptions {
-    fn default() -> Self {
-        NelderMeadOptions {
-            initial_m: 0.3,
-            tol_x: 1e-4,
-            tol_fun: 1e-4,
-            max_iter: None,
-            max_fun_evals: None,
-        }
-    }
-}
-
-/// What to fit and how.
-#[derive(Debug, Clone, PartialEq)]
-pub struct FitOptions {
-    pub model: Model,
-    pub roughness: Roughness,
-    pub method: FitMethod,
-    pub robust: RobustOptions,
-    pub nelder_mead: NelderMeadOptions,
-}
-
-impl FitOptions {
-    /// Default options for `model`: shared roughness, robust method.
-    pub fn new(model: Model) -> Self {
-        FitOptions {
-            model,
-            roughness: Roughness::Shared,
-            method: FitMethod::Robust,
-            robust: RobustOptions::default(),
-            nelder_mead: NelderMeadOptions::default(),
-        }
-    }
-}
 
 /// Fitted roughness as written in the fit JSON: `[m]` or `[mr, mg, mb]`.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -218,155 +137,9 @@ impl FitResult {
     }
 }
 
-/// Why a fit could not be made.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum FitError {
-    #[error("{points} sample points but the model has {parameters} parameters")]
-    TooFewPoints { points: usize, parameters: usize },
-    #[error("sample {index}: {field} is not finite")]
-    NonFinite { index: usize, field: &'static str },
-    #[error("sample {index}: direction at or past grazing (θi = {theta_i}°, θr = {theta_r}°)")]
-    Grazing {
-        index: usize,
-        theta_i: f64,
-        theta_r: f64,
-    },
-    #[error("channel {channel} has no signal (sum of β ≤ 0)")]
-    NoSignal { channel: char },
-    #[error("invalid fit options: {0}")]
-    InvalidOptions(String),
-    #[error("optimiser failed: {0}")]
-    Optimizer(String),
-    #[error("the fit's {0} is not finite: the β values are too large to fit")]
-    Overflow(&'static str),
-    #[error(transparent)]
-    Metric(#[from] metrics::MetricsError),
-}
-
-/// Samples prepared for fitting.
-pub(crate) struct Data {
-    pub bases: Vec<Basis>,
-    /// Diffuse basis per point (copied out of `bases` for the inner loops).
-    pub diffuse: Vec<f64>,
-    /// Weight of the specular colour at 90° per point (`Basis::shift_weight`), for the models
-    /// that have one, when the samples span several θL (see [`fits_colour_shift`]).
-    pub shift_weight: Option<Vec<f64>>,
-    /// Measured β per point; 0 where a channel was dropped.
-    pub y: Vec<[f64; 3]>,
-    /// Per point and channel 1 (measured) or 0 (dropped: left out of the loss);
-    /// `None` when no value was dropped.
-    pub keep: Option<Vec<[f64; 3]>>,
-    /// Residual norms below this count as this in reweighting.
-    pub residual_floor: f64,
-    /// Eq. 10 loss of the all-zero model, Σ_p ‖y_p‖: the scale of the data.
-    pub zero_loss: f64,
-}
-
-impl Data {
-    fn new(samples: &[Sample], model: Model, parameters: usize) -> Result<Data, FitError> {
-        if samples.len() < parameters {
-            return Err(FitError::TooFewPoints {
-                points: samples.len(),
-                parameters,
-            });
-        }
-        let mut bases = Vec::with_capacity(samples.len());
-        for (index, s) in samples.iter().enumerate() {
-            if let Some(field) = s.non_finite_field() {
-                return Err(FitError::NonFinite { index, field });
-            }
-            let basis = model.basis_at(&s.cosines());
-            if basis.diffuse == 0.0 {
-                return Err(FitError::Grazing {
-                    index,
-                    theta_i: s.theta_i,
-                    theta_r: s.theta_r,
-                });
-            }
-            bases.push(basis);
-        }
-        let y: Vec<[f64; 3]> = samples
-            .iter()
-            .map(|s| [0, 1, 2].map(|c| s.channel(c).unwrap_or(0.0)))
-            .collect();
-        let keep = samples.iter().any(|s| s.dropped.contains(&true)).then(|| {
-            samples
-                .iter()
-                .map(|s| s.dropped.map(|d| if d { 0.0 } else { 1.0 }))
-                .collect()
-        });
-        for (c, channel) in ['R', 'G', 'B'].into_iter().enumerate() {
-            if y.iter().map(|v| v[c]).sum::<f64>() <= 0.0 {
-                return Err(FitError::NoSignal { channel });
-            }
-        }
-        let zero_loss: f64 = y.iter().map(|v| metrics::point_loss(v, &[0.0; 3])).sum();
-        let mean_norm = zero_loss / y.len() as f64;
-        Ok(Data {
-            diffuse: bases.iter().map(|b| b.diffuse).collect(),
-            shift_weight: fits_colour_shift(model, samples)
-                .then(|| bases.iter().map(Basis::shift_weight).collect()),
-            bases,
-            y,
-            keep,
-            residual_floor: 1e-12 * mean_norm + f64::MIN_POSITIVE,
-            zero_loss,
-        })
-    }
-
-    /// Eq. 10 loss of `params` (specular colour constant) over the measured values.
-    pub fn loss(&self, params: &Params) -> f64 {
-        self.loss_fresnel(params, &params.ks)
-    }
-
-    /// Eq. 10 loss of `params` with the specular colour at 90° `ks_90`, over the measured
-    /// values.
-    pub fn loss_fresnel(&self, params: &Params, ks_90: &[f64; 3]) -> f64 {
-        self.estimates(params, ks_90)
-            .iter()
-            .zip(&self.y)
-            .map(|(estimate, y)| metrics::point_loss(y, estimate))
-            .sum()
-    }
-
-    /// The model's β at every point, 0 where the measured value was dropped (so dropped
-    /// values count in neither the loss nor ΔErr_p).
-    fn estimates(&self, params: &Params, ks_90: &[f64; 3]) -> Vec<[f64; 3]> {
-        let mut estimates: Vec<[f64; 3]> = self
-            .bases
-            .iter()
-            .map(|b| b.evaluate_fresnel(params, ks_90))
-            .collect();
-        if let Some(keep) = &self.keep {
-            for (estimate, keep) in estimates.iter_mut().zip(keep) {
-                for (e, k) in estimate.iter_mut().zip(keep) {
-                    *e *= k;
-                }
-            }
-        }
-        estimates
-    }
-}
-
-/// Parameters found by a method, before the result is assembled.
-pub(crate) struct Found {
-    pub params: Params,
-    pub evaluations: u64,
-}
-
 /// Significance level of the colour-shift test: Ks_90 is kept when the Wald test of
 /// Ks_90 = Ks rejects it at this level.
 pub const COLOUR_SHIFT_LEVEL: f64 = 0.01;
-
-/// Whether a fit of `model` to `samples` may fit a specular colour at 90° apart from Ks:
-/// only for Cook–Torrance–Fresnel, and only from two θL or more. One θL sees one facet
-/// incidence θd ≈ |θL|/2 where the lobe is (its spread there is the parallax of the
-/// setup, about 0.1°), which cannot tell a colour changing with θd from the lobe's own
-/// shape; the fit then ties Ks_90 to Ks, which is Cook–Torrance. From several θL
-/// the shift is kept only when significant ([`COLOUR_SHIFT_LEVEL`]).
-pub fn fits_colour_shift(model: Model, samples: &[Sample]) -> bool {
-    model.has_fresnel_colour() && distinct_theta_l(samples).len() >= 2
-}
 
 /// Decides whether a Cook–Torrance–Fresnel fit keeps its colour shift: by the Wald test
 /// of Ks_90 = Ks at [`COLOUR_SHIFT_LEVEL`]; when the test is undefined (residuals without
@@ -546,35 +319,4 @@ pub fn solve_at_roughness(
         ks_90: fit.kg,
         loss: fit.loss,
     })
-}
-
-impl FitMethod {
-    /// Name used in files and on the command line.
-    pub fn name(self) -> &'static str {
-        match self {
-            FitMethod::Robust => "robust",
-            FitMethod::NelderMead => "nelder-mead",
-        }
-    }
-}
-
-impl FromStr for FitMethod {
-    type Err = UnknownName;
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        match s {
-            "robust" => Ok(FitMethod::Robust),
-            "nelder-mead" => Ok(FitMethod::NelderMead),
-            _ => Err(UnknownName {
-                what: "fit method",
-                name: s.to_owned(),
-                expected: "robust or nelder-mead",
-            }),
-        }
-    }
-}
-
-impl fmt::Display for FitMethod {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
-    }
 }

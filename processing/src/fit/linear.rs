@@ -10,7 +10,7 @@
 //! a smoothing ε that shrinks to the requested tolerance, so the result is within that
 //! relative tolerance of the exact minimum; the best iterate is kept.
 
-use super::Data;
+use super::data::Data;
 
 /// Relative loss decrease at which a solve counts as converged.
 pub(crate) const FINE_TOLERANCE: f64 = 1e-9;

@@ -4,8 +4,10 @@
 //! evaluations). Kd, Ks ≥ 0 and M_MIN ≤ m ≤ M_MAX hold because every trial point is
 //! clipped onto those bounds; the loss itself is never altered.
 
+use super::data::{Data, Found};
+use super::error::FitError;
+use super::options::FitOptions;
 use super::simplex::{self, Settings};
-use super::{Data, FitError, FitOptions, Found};
 use crate::brdf::{Params, Roughness, M_MAX, M_MIN};
 
 fn pack(params: &Params, roughness: Roughness) -> Vec<f64> {

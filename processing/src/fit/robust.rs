@@ -6,7 +6,11 @@ use std::cell::{Cell, RefCell};
 use argmin::core::{CostFunction, Error as ArgminError, Executor};
 use argmin::solver::brent::BrentOpt;
 
-use super::{linear, nelder_mead, Data, FitError, FitOptions, Found};
+use super::data::{Data, Found};
+use super::error::FitError;
+use super::linear;
+use super::nelder_mead;
+use super::options::FitOptions;
 use crate::brdf::{Params, Roughness};
 
 /// Grid local minima within this fraction of the best grid value are refined too.

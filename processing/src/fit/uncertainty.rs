@@ -28,7 +28,8 @@
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
-use super::{Data, FitOptions};
+use super::data::Data;
+use super::options::FitOptions;
 use crate::brdf::{Params, Roughness};
 
 /// The two-sided 95 % quantile of the standard normal distribution.

@@ -1,0 +1,28 @@
+//! The error of a fit: what in the samples or the options prevents it.
+
+use crate::metrics;
+
+/// Why a fit could not be made.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FitError {
+    #[error("{points} sample points but the model has {parameters} parameters")]
+    TooFewPoints { points: usize, parameters: usize },
+    #[error("sample {index}: {field} is not finite")]
+    NonFinite { index: usize, field: &'static str },
+    #[error("sample {index}: direction at or past grazing (θi = {theta_i}°, θr = {theta_r}°)")]
+    Grazing {
+        index: usize,
+        theta_i: f64,
+        theta_r: f64,
+    },
+    #[error("channel {channel} has no signal (sum of β ≤ 0)")]
+    NoSignal { channel: char },
+    #[error("invalid fit options: {0}")]
+    InvalidOptions(String),
+    #[error("optimiser failed: {0}")]
+    Optimizer(String),
+    #[error("the fit's {0} is not finite: the β values are too large to fit")]
+    Overflow(&'static str),
+    #[error(transparent)]
+    Metric(#[from] metrics::MetricsError),
+}
