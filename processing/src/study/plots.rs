@@ -12,8 +12,10 @@
 
 use std::path::{Path, PathBuf};
 
+use super::boxplot::BoxStats;
+use super::error::StudyError;
 use super::figures::{box_plot_svg, xy_svg, BoxSeries, Mark, XyPlot, XySeries};
-use super::{EvalPoint, GroupSummary, StudyError, StudyReport};
+use super::report::{EvalPoint, GroupSummary, StudyReport};
 use crate::metrics;
 
 /// Most points drawn per point series and per polyline (evenly thinned beyond), to keep
@@ -89,7 +91,7 @@ pub fn write_figures(
 fn box_series(
     report: &StudyReport,
     summary: &[GroupSummary],
-    stats: impl Fn(&GroupSummary) -> Option<super::BoxStats>,
+    stats: impl Fn(&GroupSummary) -> Option<BoxStats>,
 ) -> Vec<BoxSeries> {
     report
         .options

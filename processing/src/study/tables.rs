@@ -16,7 +16,8 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use super::boxplot::BoxStats;
-use super::{Scores, StudyError, StudyReport};
+use super::error::StudyError;
+use super::report::{GroupSummary, Scores, StudyReport};
 use crate::fit::ParameterSet;
 
 fn write_file(path: PathBuf, text: &str) -> Result<PathBuf, StudyError> {
@@ -225,7 +226,7 @@ fn summary_json(report: &StudyReport) -> String {
         .iter()
         .map(|v| {
             let groups: Vec<_> = summary.iter().filter(|g| g.variant == *v).collect();
-            let medians = |f: &dyn Fn(&super::GroupSummary) -> Option<f64>| {
+            let medians = |f: &dyn Fn(&GroupSummary) -> Option<f64>| {
                 groups.iter().map(|g| f(g)).collect::<Vec<_>>()
             };
             serde_json::json!({
