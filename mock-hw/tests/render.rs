@@ -1,8 +1,8 @@
 //! Rendering: radiometry against the white reference, geometry against an independent
 //! angle-form computation, determinism, noise statistics and each effect.
 
-use gonio_mock_hw::render::brdf::thin_film_reflectance;
 use gonio_mock_hw::render::{self, reference, render_frame, Frame16, Shot};
+use gonio_mock_hw::scene::material::thin_film_reflectance;
 use gonio_mock_hw::scene::Scene;
 
 const SMALL: &str = include_str!("scene_small.toml");
@@ -465,7 +465,8 @@ fn measured_table_renders_like_its_model() {
 
 #[test]
 fn incidence_tables_match_spectral_integration() {
-    use gonio_mock_hw::render::brdf::{Geom, Material};
+    use gonio_mock_hw::render::brdf::Geom;
+    use gonio_mock_hw::scene::material::Material;
     for name in ["blue-green", "opal"] {
         let scene = Scene::builtin(name).unwrap();
         let domain = scene.camera_domain();
@@ -487,7 +488,8 @@ fn incidence_tables_match_spectral_integration() {
 
 #[test]
 fn bragg_flakes_rotate_the_hue_with_the_facet_incidence() {
-    use gonio_mock_hw::render::brdf::{BraggBand, Geom, Material};
+    use gonio_mock_hw::render::brdf::Geom;
+    use gonio_mock_hw::scene::material::{BraggBand, Material};
     // Bragg–Snell: the band centre λ0·√(1 − sin²θ/n²), hand values at θ = 0 and 45°.
     let band = BraggBand {
         wavelength_nm: 600.0,

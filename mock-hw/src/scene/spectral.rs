@@ -7,7 +7,7 @@
 
 use std::path::Path;
 
-use super::SceneError;
+use super::error::SceneError;
 
 /// Number of bands: 390, 400, …, 730 nm.
 pub const BANDS: usize = 35;
