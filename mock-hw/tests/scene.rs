@@ -221,6 +221,21 @@ fn bad_tables_name_file_and_line() {
         err.contains("measured.csv") && err.contains("line 2"),
         "{err}"
     );
+    // An endless file is read only up to the cap, for the measured table and for a
+    // spectral one alike.
+    for (from, to) in [
+        ("path = \"measured.csv\"", "path = \"/dev/zero\""),
+        ("\"nikon-d5100\"", "\"/dev/zero\""),
+    ] {
+        let text = format!("{SMALL}\n[sample]\nmodel = \"measured\"\npath = \"measured.csv\"\n")
+            .replace(from, to);
+        std::fs::write(&scene, text).unwrap();
+        let err = Scene::load(&scene).unwrap_err().to_string();
+        assert!(
+            err.contains("/dev/zero") && err.contains("bytes: not a"),
+            "{err}"
+        );
+    }
 }
 
 #[test]

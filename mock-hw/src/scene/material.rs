@@ -131,6 +131,10 @@ impl Reflector {
     }
 }
 
+/// Largest measured table file read: a 1° grid over ±90° (181² rows of 35 values) is
+/// about 15 MB; a scene may name any path (even `/dev/zero`).
+const MAX_MEASURED_BYTES: u64 = 64 << 20;
+
 /// A measured table on a regular (θi, θr) grid, spectral and as camera RGB.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Table {
@@ -143,10 +147,7 @@ pub struct Table {
 
 impl Table {
     fn read(path: &Path, domain: &CameraDomain) -> Result<Self, SceneError> {
-        let text = std::fs::read_to_string(path).map_err(|error| SceneError::Io {
-            path: path.to_path_buf(),
-            error,
-        })?;
+        let text = spectral::read_capped(path, MAX_MEASURED_BYTES, "a measured table")?;
         let what = path.display().to_string();
         let bad = |line: usize, reason: String| SceneError::Table {
             what: what.clone(),
