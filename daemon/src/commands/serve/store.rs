@@ -598,6 +598,24 @@ impl Store {
         Ok(None)
     }
 
+    /// The first HDR step whose bracket is captured (no hardware step pending before it)
+    /// in the oldest scan being processed that has one, with that scan's id: the step
+    /// the processing lane starts in the background ahead of the steps before it.
+    pub fn next_hdr(&self) -> Result<Option<(i64, StepRecord)>, StoreError> {
+        for id in self.processable_ids()? {
+            let hdr = self
+                .steps(id)?
+                .into_iter()
+                .filter(|s| s.state != StepState::Done)
+                .take_while(|s| s.step.lane() == Lane::Processing)
+                .find(|s| matches!(s.step, Step::Hdr { .. }));
+            if let Some(step) = hdr {
+                return Ok(Some((id, step)));
+            }
+        }
+        Ok(None)
+    }
+
     /// The frames captured for HDR maps not made yet, in the scans being processed,
     /// oldest first: (scan id, frame path relative to the scan directory).
     pub fn frames_awaiting_hdr(&self) -> Result<Vec<(i64, String)>, StoreError> {
@@ -982,12 +1000,15 @@ mod tests {
         );
         let (processing_scan, samples) = store.next_for_processing(None).unwrap().unwrap();
         assert_eq!(processing_scan, id);
-        // With the samples step running in the background, the HDR step is next.
+        // With the samples step running in the background, the HDR step is next; it is
+        // also the HDR step ready to start ahead of the samples.
         let (_, beside) = store
             .next_for_processing(Some((id, samples.index)))
             .unwrap()
             .unwrap();
         assert_eq!(beside.step, Step::Hdr { theta_l: -20.0 });
+        let (_, ahead) = store.next_hdr().unwrap().unwrap();
+        assert_eq!(ahead.index, beside.index);
         store.step_started(id, samples.index).unwrap();
         drop(store);
         // Reopened after a crash: the processing step that was running runs again.

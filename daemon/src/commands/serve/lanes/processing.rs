@@ -1,7 +1,8 @@
 //! The processing lane: one thread that runs the processing steps of every scan as
 //! soon as their inputs exist (docs/ARCHITECTURE.md, "Daemon"), in journal order,
-//! while the hardware lane goes on capturing. An HDR step runs in the background
-//! beside the steps after it (a θL's map is an input of no other step), one at a time.
+//! while the hardware lane goes on capturing. An HDR step runs in the background as
+//! soon as its bracket is captured, beside the other steps (a θL's map is an input of
+//! no other step), one at a time.
 //! A step that was running when the daemon stopped is run again. With nothing to run,
 //! it decodes the frames of the bracket being captured ahead of their HDR step.
 //!
@@ -73,6 +74,19 @@ impl ProcessingLane {
                 tracing::error!("processing lane: {err}");
                 std::thread::sleep(Duration::from_secs(1));
                 continue;
+            }
+            // The longest step first: a captured bracket's map, in the background.
+            if self.background.is_none() {
+                let started = match self.store.next_hdr() {
+                    Ok(Some((id, step))) => self.start_background(id, &step),
+                    Ok(None) => Ok(()),
+                    Err(err) => Err(err),
+                };
+                if let Err(err) = started {
+                    tracing::error!("processing lane: {err}");
+                    std::thread::sleep(Duration::from_secs(1));
+                    continue;
+                }
             }
             let running = self.background.as_ref().map(|b| (b.id, b.index));
             match self.store.next_for_processing(running) {
