@@ -10,12 +10,12 @@
 //! the daemon, so the hardware lane (and an emulated camera's rendering, on the
 //! global pool) never waits for it.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::{mpsc, Arc};
 use std::time::Duration;
 
 use super::step::{self, Outcome, StepError};
-use crate::commands::serve::plan::Step;
+use crate::commands::serve::plan::{ScanPlan, Step};
 use crate::commands::serve::process::{self, Prefetched};
 use crate::commands::serve::shared::Shared;
 use crate::commands::serve::step_guard;
@@ -70,60 +70,36 @@ impl ProcessingLane {
 
     fn work(mut self) {
         loop {
-            if let Err(err) = self.collect(false) {
+            if let Err(err) = self.turn() {
                 tracing::error!("processing lane: {err}");
                 std::thread::sleep(Duration::from_secs(1));
-                continue;
             }
-            // The longest step first: a captured bracket's map, in the background.
-            if self.background.is_none() {
-                let started = match self.store.next_hdr() {
-                    Ok(Some((id, step))) => self.start_background(id, &step),
-                    Ok(None) => Ok(()),
-                    Err(err) => Err(err),
-                };
-                if let Err(err) = started {
-                    tracing::error!("processing lane: {err}");
-                    std::thread::sleep(Duration::from_secs(1));
-                    continue;
-                }
+        }
+    }
+
+    /// One turn of the lane: records a finished background step, starts the next
+    /// captured bracket's map in the background (the longest step, so first), then runs
+    /// the next other step, or waits for the background one, or decodes ahead.
+    fn turn(&mut self) -> Result<(), StoreError> {
+        self.collect(false)?;
+        if self.background.is_none() {
+            if let Some((id, step)) = self.store.next_hdr()? {
+                self.start_background(id, &step)?;
             }
-            let running = self.background.as_ref().map(|b| (b.id, b.index));
-            match self.store.next_for_processing(running) {
-                Ok(Some((id, step))) => {
-                    let done = match step.step {
-                        // One HDR step at a time: the next waits for the running one.
-                        Step::Hdr { .. } if self.background.is_some() => self.collect(true),
-                        Step::Hdr { .. } => self.start_background(id, &step),
-                        _ => self.run_step(id, &step),
-                    };
-                    if let Err(err) = done {
-                        tracing::error!("processing lane: {err}");
-                        std::thread::sleep(Duration::from_secs(1));
-                    }
-                }
-                // Nothing else to do: wait for the background step.
-                Ok(None) if self.background.is_some() => {
-                    if let Err(err) = self.collect(true) {
-                        tracing::error!("processing lane: {err}");
-                        std::thread::sleep(Duration::from_secs(1));
-                    }
-                }
-                Ok(None) => match self.prefetch() {
-                    Ok(true) => {}
+        }
+        let running = self.background.as_ref().map(|b| (b.id, b.index));
+        match self.store.next_for_processing(running)? {
+            // One HDR step at a time: the next waits for the running one.
+            Some((_, record)) if matches!(record.step, Step::Hdr { .. }) => self.collect(true),
+            Some((id, record)) => self.run_step(id, &record),
+            // Nothing else to do: wait for the background step.
+            None if self.background.is_some() => self.collect(true),
+            None => {
+                if !self.prefetch()? {
                     // A timeout and a wake-up both mean: look again.
-                    Ok(false) => {
-                        self.shared.processing_wake.take(IDLE_POLL);
-                    }
-                    Err(err) => {
-                        tracing::error!("processing lane: {err}");
-                        std::thread::sleep(Duration::from_secs(1));
-                    }
-                },
-                Err(err) => {
-                    tracing::error!("processing lane: {err}");
-                    std::thread::sleep(Duration::from_secs(1));
+                    self.shared.processing_wake.take(IDLE_POLL);
                 }
+                Ok(())
             }
         }
     }
@@ -151,11 +127,7 @@ impl ProcessingLane {
         let step = record.step.clone();
         let (sender, outcome) = mpsc::channel();
         rayon::spawn(move || {
-            let outcome = step_guard::run_processing(&step.describe(), || {
-                process::run(&step, &dir, &scan.plan, &mut prefetched)
-            })
-            .map(|result| (result, Vec::new()))
-            .map_err(StepError::Failed);
+            let outcome = run(&step, &dir, &scan.plan, &mut prefetched);
             // The lane only drops the receiver when it stops.
             let _ = sender.send((outcome, prefetched));
         });
@@ -185,16 +157,7 @@ impl ProcessingLane {
         let (id, index) = (background.id, background.index);
         self.background = None;
         self.prefetched = prefetched;
-        step::finish(
-            &self.shared,
-            &mut self.store,
-            id,
-            index,
-            &PROCESSABLE,
-            outcome,
-        )?;
-        self.shared.hardware_wake.post(|wake| *wake = true);
-        Ok(())
+        self.finish(id, index, outcome)
     }
 
     fn run_step(&mut self, id: i64, record: &StepRecord) -> Result<(), StoreError> {
@@ -203,17 +166,17 @@ impl ProcessingLane {
         };
         step::begin(&self.shared, &mut self.store, id, record.index)?;
         let dir = self.shared.scan_dir(id);
-        // A panic fails the step, not the daemon.
-        let outcome: Outcome = step_guard::run_processing(&record.step.describe(), || {
-            process::run(&record.step, &dir, &scan.plan, &mut self.prefetched)
-        })
-        .map(|result| (result, Vec::new()))
-        .map_err(StepError::Failed);
+        let outcome = run(&record.step, &dir, &scan.plan, &mut self.prefetched);
+        self.finish(id, record.index, outcome)
+    }
+
+    /// Records the outcome of step `index` of scan `id`.
+    fn finish(&mut self, id: i64, index: u32, outcome: Outcome) -> Result<(), StoreError> {
         step::finish(
             &self.shared,
             &mut self.store,
             id,
-            record.index,
+            index,
             &PROCESSABLE,
             outcome,
         )?;
@@ -221,6 +184,16 @@ impl ProcessingLane {
         self.shared.hardware_wake.post(|wake| *wake = true);
         Ok(())
     }
+}
+
+/// Runs processing step `step` of a scan planned as `plan` in `dir`; a panic fails
+/// the step, not the daemon.
+fn run(step: &Step, dir: &Path, plan: &ScanPlan, prefetched: &mut Prefetched) -> Outcome {
+    step_guard::run_processing(&step.describe(), || {
+        process::run(step, dir, plan, prefetched)
+    })
+    .map(|result| (result, Vec::new()))
+    .map_err(StepError::Failed)
 }
 
 /// The outcome of a background step whose worker ended without one.
