@@ -565,7 +565,8 @@ fn check_claim(path: &Path, file_len: u64, stored: Stored, ratio: u64) -> Result
 }
 
 /// Decodes only the strips holding the selected rows of a chunky, striped, 16-bit RGB
-/// TIFF. `Ok(Err(select))` hands the selector back when the file has another layout.
+/// TIFF, the rows split in contiguous parts decoded in parallel (a decoder per part).
+/// `Ok(Err(select))` hands the selector back when the file has another layout.
 fn decode_tiff_rows<
     E: From<CaptureError>,
     S: FnOnce(usize, usize) -> Result<Vec<Range<usize>>, E>,
@@ -574,22 +575,14 @@ fn decode_tiff_rows<
     file_len: u64,
     select: S,
 ) -> Result<Result<Decoded, S>, E> {
-    use tiff::decoder::{ChunkType, Decoder, DecodingResult};
+    use tiff::decoder::ChunkType;
     use tiff::tags::{CompressionMethod, PlanarConfiguration, Tag};
     use tiff::ColorType;
-    let image_error = |e: tiff::TiffError| CaptureError::Image {
-        path: path.to_path_buf(),
-        reason: e.to_string(),
-    };
-    let file = fs::File::open(path).map_err(|e| CaptureError::Image {
-        path: path.to_path_buf(),
-        reason: e.to_string(),
-    })?;
-    let Ok(decoder) = Decoder::new(std::io::BufReader::new(file)) else {
+    let image_error = |e: tiff::TiffError| tiff_error(path, e);
+    let Ok(mut decoder) = open_tiff(path) else {
         // Let the full decoder report what is wrong with the file.
         return Ok(Err(select));
     };
-    let mut decoder = decoder.with_limits(tiff_limits());
     let (width, height) = decoder.dimensions().map_err(image_error)?;
     // Check the claimed size before anything is allocated for it.
     let (samples, bits) = match decoder.colortype() {
@@ -629,45 +622,82 @@ fn decode_tiff_rows<
         .map_or(height, |r| (r as usize).clamp(1, height.max(1)));
     let bands = select(width, height)?;
     check_bands(path, &bands, height)?;
+    let rows: Vec<usize> = bands.iter().flat_map(Range::clone).collect();
     let row_len = 3 * width;
-    let mut data = Vec::with_capacity(bands.iter().map(|b| b.len()).sum::<usize>() * row_len);
-    let mut cached: Option<(usize, Vec<u16>)> = None;
-    for band in &bands {
-        for row in band.clone() {
-            let strip = row / rows_per_strip;
-            if cached.as_ref().is_none_or(|(index, _)| *index != strip) {
-                let values = match decoder.read_chunk(strip as u32).map_err(image_error)? {
-                    DecodingResult::U16(values) => values,
-                    _ => {
-                        return Err(CaptureError::Layout {
-                            path: path.to_path_buf(),
-                            reason: "strip is not 16-bit".into(),
-                        }
-                        .into())
-                    }
-                };
-                cached = Some((strip, values));
-            }
-            let values = cached.as_ref().map_or(&[][..], |(_, v)| v.as_slice());
-            let start = (row - strip * rows_per_strip) * row_len;
-            let line = values
-                .get(start..start + row_len)
-                .ok_or_else(|| CaptureError::Layout {
-                    path: path.to_path_buf(),
-                    reason: format!("strip {strip} is too short for row {row}"),
-                })?;
-            data.extend_from_slice(line);
-        }
-    }
+    let mut data = vec![0u16; rows.len() * row_len];
+    let per_part = rows.len().div_ceil(rayon::current_num_threads().max(1));
+    data.par_chunks_mut(per_part * row_len)
+        .zip(rows.par_chunks(per_part))
+        .try_for_each(|(out, rows)| {
+            let mut decoder = open_tiff(path).map_err(image_error)?;
+            decode_strip_rows(&mut decoder, path, rows, rows_per_strip, out)
+        })?;
     Ok(Ok(Decoded {
         width,
-        height: data.len() / row_len,
+        height: rows.len(),
         stored: (width, height),
         data,
         black_level: 0.0,
         white_level: f64::from(u16::MAX),
         max_count: f64::from(u16::MAX),
     }))
+}
+
+type TiffDecoder = tiff::decoder::Decoder<std::io::BufReader<fs::File>>;
+
+/// A TIFF decoder on `path` with [`tiff_limits`].
+fn open_tiff(path: &Path) -> Result<TiffDecoder, tiff::TiffError> {
+    let file = fs::File::open(path)?;
+    Ok(tiff::decoder::Decoder::new(std::io::BufReader::new(file))?.with_limits(tiff_limits()))
+}
+
+fn tiff_error(path: &Path, e: tiff::TiffError) -> CaptureError {
+    CaptureError::Image {
+        path: path.to_path_buf(),
+        reason: e.to_string(),
+    }
+}
+
+/// Decodes `rows` of a chunky 16-bit RGB TIFF striped `rows_per_strip` rows at a time
+/// into `out`, a row after another; a strip is decoded once for its consecutive rows.
+fn decode_strip_rows(
+    decoder: &mut TiffDecoder,
+    path: &Path,
+    rows: &[usize],
+    rows_per_strip: usize,
+    out: &mut [u16],
+) -> Result<(), CaptureError> {
+    use tiff::decoder::DecodingResult;
+    let row_len = out.len() / rows.len().max(1);
+    let mut cached: Option<(usize, Vec<u16>)> = None;
+    for (&row, line) in rows.iter().zip(out.chunks_exact_mut(row_len)) {
+        let strip = row / rows_per_strip;
+        if cached.as_ref().is_none_or(|(index, _)| *index != strip) {
+            let values = match decoder
+                .read_chunk(strip as u32)
+                .map_err(|e| tiff_error(path, e))?
+            {
+                DecodingResult::U16(values) => values,
+                _ => {
+                    return Err(CaptureError::Layout {
+                        path: path.to_path_buf(),
+                        reason: "strip is not 16-bit".into(),
+                    })
+                }
+            };
+            cached = Some((strip, values));
+        }
+        let values = cached.as_ref().map_or(&[][..], |(_, v)| v.as_slice());
+        let start = (row - strip * rows_per_strip) * row_len;
+        let values = values
+            .get(start..start + row_len)
+            .ok_or_else(|| CaptureError::Layout {
+                path: path.to_path_buf(),
+                reason: format!("strip {strip} is too short for row {row}"),
+            })?;
+        line.copy_from_slice(values);
+    }
+    Ok(())
 }
 
 fn decode_tiff(path: &Path) -> Result<Decoded, CaptureError> {

@@ -193,9 +193,15 @@ impl HdrImage {
     /// Writes float32 RGB OpenEXR. Attributes: `exposure` 1 s and `isoSpeed` 100 (the
     /// units of the values), `capDate`, and `gonio.*` custom attributes with the merge
     /// method, θL, the frames' shutter times and ISOs, and the flagged pixel counts.
+    /// RLE-compressed 64×64 tiles, which are laid out and compressed in parallel on
+    /// the current thread pool.
     pub fn write_exr(&self, path: &Path) -> Result<(), HdrError> {
-        use exr::meta::attribute::{AttributeValue, Text};
-        use exr::prelude::*;
+        use exr::meta::attribute::{AttributeValue, ChannelDescription, SampleType, Text};
+        use exr::meta::header::{Header, LayerAttributes};
+        let exr_error = |reason: String| HdrError::Exr {
+            path: path.to_path_buf(),
+            reason,
+        };
         let text = |s: &str| Text::new_or_none(s).unwrap_or_else(|| Text::from("?"));
         let list = |v: &[f64]| {
             v.iter()
@@ -239,32 +245,119 @@ impl HdrImage {
         for (name, value) in custom {
             attributes.other.insert(text(name), value);
         }
-        let width = self.width;
-        let rgb = &self.rgb;
-        let layer = Layer::new(
+        // Channels in the file's (alphabetical) order, each with its offset in a pixel.
+        const CHANNELS: [(&str, usize); 3] = [("B", 2), ("G", 1), ("R", 0)];
+        let header = Header::new(
+            text("radiance"),
             (self.width, self.height),
-            attributes,
-            Encoding::FAST_LOSSLESS,
-            SpecificChannels::rgb(|position: Vec2<usize>| {
-                let i = 3 * (position.y() * width + position.x());
-                (rgb[i], rgb[i + 1], rgb[i + 2])
-            }),
-        );
-        let exr_error = |reason: String| HdrError::Exr {
-            path: path.to_path_buf(),
-            reason,
+            CHANNELS
+                .iter()
+                .map(|(name, _)| ChannelDescription::named(*name, SampleType::F32))
+                .collect(),
+        )
+        .with_attributes(attributes);
+        // A tile's bytes: each of its rows, channel after channel, little-endian.
+        let tile_bytes = |block: &exr::block::BlockIndex| {
+            let (x0, y0) = (block.pixel_position.x(), block.pixel_position.y());
+            let (w, h) = (block.pixel_size.width(), block.pixel_size.height());
+            let mut data = Vec::with_capacity(w * h * 4 * CHANNELS.len());
+            for y in y0..y0 + h {
+                let row = &self.rgb[3 * (y * self.width + x0)..3 * (y * self.width + x0 + w)];
+                for (_, offset) in CHANNELS {
+                    for pixel in row.chunks_exact(3) {
+                        data.extend_from_slice(&pixel[offset].to_le_bytes());
+                    }
+                }
+            }
+            data
+        };
+        let tile_is_zero = |block: &exr::block::BlockIndex| {
+            let (x0, y0) = (block.pixel_position.x(), block.pixel_position.y());
+            let w = block.pixel_size.width();
+            (y0..y0 + block.pixel_size.height()).all(|y| {
+                self.rgb[3 * (y * self.width + x0)..3 * (y * self.width + x0 + w)]
+                    .iter()
+                    .all(|v| v.to_bits() == 0)
+            })
         };
         // Written through our own handle: on failure the path is left as it is (the
         // exr crate's `to_file` would remove it, whatever it was).
         let file = std::fs::File::create(path).map_err(|e| exr_error(e.to_string()))?;
         let mut out = std::io::BufWriter::new(file);
-        Image::from_layer(layer)
-            .write()
-            .to_buffered(&mut out)
-            .map_err(|e| exr_error(e.to_string()))?;
+        exr::block::write(
+            &mut out,
+            std::iter::once(header).collect(),
+            true,
+            |meta, writer| {
+                use exr::block::chunk::{
+                    Chunk, CompressedBlock, CompressedTileBlock, TileCoordinates,
+                };
+                use exr::block::writer::ChunksWriter;
+                use exr::block::UncompressedBlock;
+                let blocks: Vec<_> =
+                    exr::block::enumerate_ordered_header_block_indices(&meta.headers).collect();
+                let tile_size = meta.headers[0].max_block_pixel_size();
+                // Most of a map is black (0 radiance): a full tile of zeros is compressed
+                // once, and its bytes stand for every other.
+                let zero_tile = match blocks.iter().find(|(_, b)| b.pixel_size == tile_size) {
+                    Some((_, block)) => {
+                        let zeros = UncompressedBlock {
+                            index: *block,
+                            data: vec![0; tile_size.area() * 4 * CHANNELS.len()],
+                        };
+                        match zeros.compress_to_chunk(&meta.headers)?.compressed_block {
+                            CompressedBlock::Tile(tile) => Some(tile.compressed_pixels_le),
+                            _ => None,
+                        }
+                    }
+                    None => None,
+                };
+                // A bounded number of compressed tiles in memory at once.
+                for batch in blocks.chunks(EXR_TILES_PER_BATCH) {
+                    let chunks = batch
+                        .par_iter()
+                        .map(|(index, block)| {
+                            let chunk = match &zero_tile {
+                                Some(zeros)
+                                    if block.pixel_size == tile_size && tile_is_zero(block) =>
+                                {
+                                    Chunk {
+                                        layer_index: block.layer,
+                                        compressed_block: CompressedBlock::Tile(
+                                            CompressedTileBlock {
+                                                coordinates: TileCoordinates {
+                                                    tile_index: block.pixel_position / tile_size,
+                                                    level_index: block.level,
+                                                },
+                                                compressed_pixels_le: zeros.clone(),
+                                            },
+                                        ),
+                                    }
+                                }
+                                _ => UncompressedBlock {
+                                    index: *block,
+                                    data: tile_bytes(block),
+                                }
+                                .compress_to_chunk(&meta.headers)?,
+                            };
+                            Ok((*index, chunk))
+                        })
+                        .collect::<exr::error::Result<Vec<_>>>()?;
+                    for (index, chunk) in chunks {
+                        writer.write_chunk(index, chunk)?;
+                    }
+                }
+                Ok(())
+            },
+        )
+        .map_err(|e| exr_error(e.to_string()))?;
         out.flush().map_err(|e| exr_error(e.to_string()))
     }
 }
+
+/// Tiles compressed in parallel before they are written: 1024 tiles of 64×64 RGB
+/// float32 pixels are 48 MB uncompressed.
+const EXR_TILES_PER_BATCH: usize = 1024;
 
 /// Reads the RGB channels of an OpenEXR radiance map (as [`HdrImage::write_exr`]
 /// writes it): width, height and `rgb[3 * (y * width + x) + c]`. The size every layer
@@ -422,71 +515,114 @@ struct LinearFrame<'a> {
     exposure: f64,
     /// Shot variance per unit signal: (ISO/100) / full well.
     shot: f64,
+    /// The smallest count whose signal reaches `min_signal` (65536 when none does).
+    usable_from: u32,
 }
 
 fn merge_linear(frames: &[Frame], options: &MergeOptions) -> (Vec<f32>, Vec<u8>) {
+    let (lo, hi) = (options.min_signal, options.max_signal);
     let mut sorted: Vec<LinearFrame> = frames
         .iter()
-        .map(|f| LinearFrame {
-            data: &f.data,
-            black: f.black_level,
-            inv_range: 1.0 / (f.white_level - f.black_level),
-            exposure: f.sidecar.exposure(),
-            shot: f.sidecar.iso.unwrap_or(100.0) / 100.0 / options.noise.full_well_electrons,
+        .map(|f| {
+            let inv_range = 1.0 / (f.white_level - f.black_level);
+            // The signal grows with the count (white > black).
+            let signal = |count: u32| (f64::from(count) - f.black_level) * inv_range;
+            LinearFrame {
+                data: &f.data,
+                black: f.black_level,
+                inv_range,
+                exposure: f.sidecar.exposure(),
+                shot: f.sidecar.iso.unwrap_or(100.0) / 100.0 / options.noise.full_well_electrons,
+                usable_from: (0..=u32::from(u16::MAX))
+                    .find(|&c| signal(c) >= lo)
+                    .unwrap_or(1 << 16),
+            }
         })
         .collect();
     // Longest exposure first: the first valid sample is the best single estimate.
     sorted.sort_by(|a, b| b.exposure.total_cmp(&a.exposure));
     let read_var = options.noise.read_noise * options.noise.read_noise;
-    let (lo, hi) = (options.min_signal, options.max_signal);
     let width = frames[0].width;
     let mut rgb = vec![0f32; frames[0].data.len()];
     let mut mask = vec![0u8; frames[0].width * frames[0].height];
     rgb.par_chunks_mut(3 * width)
         .zip(mask.par_chunks_mut(width))
         .enumerate()
-        .for_each(|(y, (row_rgb, row_mask))| {
+        .for_each_init(Vec::new, |dark, (y, (row_rgb, row_mask))| {
             let offset = 3 * width * y;
-            for (i, value) in row_rgb.iter_mut().enumerate() {
-                let index = offset + i;
-                let signal = |f: &LinearFrame| (f64::from(f.data[index]) - f.black) * f.inv_range;
-                let reference = sorted.iter().find_map(|f| {
-                    let s = signal(f);
-                    (s >= lo && s <= hi).then(|| s / f.exposure)
-                });
-                // The weighted mean over the frames whose signal predicted from
-                // `estimate` is in range (and whose own reading is not clipped).
-                let weighted = |estimate: f64| {
-                    let (mut sum, mut weights) = (0.0, 0.0);
-                    for f in &sorted {
-                        let predicted = estimate * f.exposure;
-                        let s = signal(f);
-                        if predicted >= lo && predicted <= hi && s <= hi {
-                            // w = H²/σ², and w·(s/H) = H·s/σ².
-                            let inv_var = 1.0 / (f.shot * predicted + read_var);
-                            sum += f.exposure * s * inv_var;
-                            weights += f.exposure * f.exposure * inv_var;
-                        }
-                    }
-                    (weights > 0.0).then(|| sum / weights)
-                };
-                let (radiance, flag) = match reference {
-                    Some(l0) => {
-                        // The reference frame itself always qualifies in the first pass.
-                        let first = weighted(l0).unwrap_or(l0);
-                        (weighted(first).unwrap_or(first).max(0.0), 0)
-                    }
-                    // Sorted longest first, so the last clipped frame is the shortest.
-                    None => match sorted.iter().rev().find(|f| signal(f) > hi) {
-                        Some(f) => (hi / f.exposure, SATURATED),
-                        None => (0.0, UNDEREXPOSED),
-                    },
-                };
-                *value = radiance as f32;
-                row_mask[i / 3] |= channel_mask(flag, i % 3);
+            // The samples too dark in every frame (most of a frame, usually), found
+            // over the whole row at once: no frame's signal is in range or clipped.
+            dark.clear();
+            dark.resize(row_rgb.len(), true);
+            for f in &sorted {
+                let counts = &f.data[offset..offset + row_rgb.len()];
+                for (d, &count) in dark.iter_mut().zip(counts) {
+                    *d &= u32::from(count) < f.usable_from;
+                }
+            }
+            // A pixel's flags are gathered before they are stored.
+            for (p, (pixel, pixel_mask)) in row_rgb
+                .chunks_exact_mut(3)
+                .zip(row_mask.iter_mut())
+                .enumerate()
+            {
+                for (c, value) in pixel.iter_mut().enumerate() {
+                    let i = 3 * p + c;
+                    let (radiance, flag) = if dark[i] {
+                        (0.0, UNDEREXPOSED)
+                    } else {
+                        merge_sample(&sorted, offset + i, lo, hi, read_var)
+                    };
+                    *value = radiance as f32;
+                    *pixel_mask |= channel_mask(flag, c);
+                }
             }
         });
     (rgb, mask)
+}
+
+/// The linear merge of sample `index` of `sorted` (longest exposure first): its
+/// radiance and flag.
+fn merge_sample(
+    sorted: &[LinearFrame],
+    index: usize,
+    lo: f64,
+    hi: f64,
+    read_var: f64,
+) -> (f64, u8) {
+    let signal = |f: &LinearFrame| (f64::from(f.data[index]) - f.black) * f.inv_range;
+    let reference = sorted.iter().find_map(|f| {
+        let s = signal(f);
+        (s >= lo && s <= hi).then(|| s / f.exposure)
+    });
+    // The weighted mean over the frames whose signal predicted from `estimate` is in
+    // range (and whose own reading is not clipped).
+    let weighted = |estimate: f64| {
+        let (mut sum, mut weights) = (0.0, 0.0);
+        for f in sorted {
+            let predicted = estimate * f.exposure;
+            let s = signal(f);
+            if predicted >= lo && predicted <= hi && s <= hi {
+                // w = H²/σ², and w·(s/H) = H·s/σ².
+                let inv_var = 1.0 / (f.shot * predicted + read_var);
+                sum += f.exposure * s * inv_var;
+                weights += f.exposure * f.exposure * inv_var;
+            }
+        }
+        (weights > 0.0).then(|| sum / weights)
+    };
+    match reference {
+        Some(l0) => {
+            // The reference frame itself always qualifies in the first pass.
+            let first = weighted(l0).unwrap_or(l0);
+            (weighted(first).unwrap_or(first).max(0.0), 0)
+        }
+        // Sorted longest first, so the last clipped frame is the shortest.
+        None => match sorted.iter().rev().find(|f| signal(f) > hi) {
+            Some(f) => (hi / f.exposure, SATURATED),
+            None => (0.0, UNDEREXPOSED),
+        },
+    }
 }
 
 /// Per-frame table from count to the quantised level 0..=255 of its normalised signal.

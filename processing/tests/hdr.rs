@@ -73,15 +73,14 @@ fn linear_frame(
             }
         }
     }
-    Frame::from_counts(
-        PathBuf::from(format!("t{shutter_s}.tiff")),
-        sidecar(shutter_s, Response::Linear),
-        W,
-        H,
-        data,
-        65_535.0,
-    )
-    .unwrap()
+    counts_frame(W, H, shutter_s, data)
+}
+
+/// A linear 16-bit frame of w × h pixels of `data` at `shutter_s`.
+fn counts_frame(w: usize, h: usize, shutter_s: f64, data: Vec<u16>) -> Frame {
+    let path = PathBuf::from(format!("t{shutter_s}.tiff"));
+    let sidecar = sidecar(shutter_s, Response::Linear);
+    Frame::from_counts(path, sidecar, w, h, data, 65_535.0).unwrap()
 }
 
 fn bracket(shutters: &[f64], scene: impl Fn(usize, usize, usize) -> f64 + Copy) -> Vec<Frame> {
@@ -367,15 +366,7 @@ fn frames_near_the_black_threshold_do_not_bias_the_linear_merge() {
                         count.round().clamp(0.0, 65_535.0) as u16
                     })
                     .collect();
-                Frame::from_counts(
-                    PathBuf::from(format!("flat{shutter_s}.tiff")),
-                    sidecar(shutter_s, Response::Linear),
-                    w,
-                    h,
-                    data,
-                    65_535.0,
-                )
-                .unwrap()
+                counts_frame(w, h, shutter_s, data)
             })
             .collect();
         let merged = hdr::merge(&frames, &options).unwrap();
@@ -391,4 +382,84 @@ fn frames_near_the_black_threshold_do_not_bias_the_linear_merge() {
         let bias = mean / radiance - 1.0;
         assert!(bias.abs() < 1e-3, "radiance {radiance}: bias {bias}");
     }
+}
+
+/// A noise-free linear frame of `scene` (w × h) at `shutter_s`.
+fn clean_frame(
+    w: usize,
+    h: usize,
+    shutter_s: f64,
+    scene: impl Fn(usize, usize, usize) -> f64,
+) -> Frame {
+    let data = (0..w * h * 3)
+        .map(|i| {
+            let count = BLACK + scene(i / 3 % w, i / 3 / w, i % 3) * shutter_s * (WHITE - BLACK);
+            count.round().clamp(0.0, 65_535.0) as u16
+        })
+        .collect();
+    counts_frame(w, h, shutter_s, data)
+}
+
+#[test]
+fn the_darkest_usable_count_is_merged_and_the_count_below_it_is_not() {
+    let options = MergeOptions::default();
+    let signal = |count: u16| (f64::from(count) - BLACK) / (WHITE - BLACK);
+    let usable = (0..=u16::MAX)
+        .find(|&c| signal(c) >= options.min_signal)
+        .unwrap();
+    // Pixel 0 reads the smallest usable count in the long frame, pixel 1 one count
+    // less; the short frame is black.
+    let counts = |first: u16, second: u16| [[first; 3], [second; 3]].concat();
+    let frames: Vec<Frame> = [(0.5, counts(usable, usable - 1)), (0.05, counts(0, 0))]
+        .into_iter()
+        .map(|(shutter_s, data)| counts_frame(2, 1, shutter_s, data))
+        .collect();
+    let merged = hdr::merge(&frames, &options).unwrap();
+    let expected = signal(usable) / frames[0].sidecar.exposure();
+    assert!(expected > 0.0);
+    for value in merged.pixel(0, 0) {
+        assert!(
+            (f64::from(value) / expected - 1.0).abs() < 1e-6,
+            "{value} {expected}"
+        );
+    }
+    assert_eq!(merged.mask[0], 0);
+    assert_eq!(merged.pixel(1, 0), [0.0; 3]);
+    assert_eq!(
+        merged.mask[1],
+        (0..3).fold(0, |m, c| m | hdr::channel_mask(UNDEREXPOSED, c))
+    );
+}
+
+#[test]
+fn a_mostly_black_map_reads_back_exactly_from_its_exr() {
+    // 150×140 pixels: whole 64×64 tiles that are black, tiles with light, edge tiles.
+    let (w, h) = (150, 140);
+    let scene = |x: usize, y: usize, c: usize| {
+        if (70..90).contains(&x) && (10..130).contains(&y) {
+            0.05 * (1 + x + y + c) as f64
+        } else {
+            0.0
+        }
+    };
+    let frames = [0.5, 0.05].map(|t| clean_frame(w, h, t, scene));
+    let merged = hdr::merge(&frames, &MergeOptions::default()).unwrap();
+    assert!(merged.pixel(0, 0) == [0.0; 3] && merged.pixel(80, 80)[0] > 0.0);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("map.exr");
+    merged.write_exr(&path).unwrap();
+    assert_eq!(
+        hdr::read_exr_rgb(&path).unwrap(),
+        (w, h, merged.rgb.clone())
+    );
+    let image = exr::prelude::read_first_rgba_layer_from_file(
+        &path,
+        |size, _| vec![[0f32; 3]; size.width() * size.height()],
+        move |pixels, position, (r, g, b, _): (f32, f32, f32, f32)| {
+            pixels[position.y() * w + position.x()] = [r, g, b]
+        },
+    )
+    .unwrap();
+    let pixels = &image.layer_data.channel_data.pixels;
+    assert!((0..w * h).all(|p| pixels[p] == merged.pixel(p % w, p / w)));
 }

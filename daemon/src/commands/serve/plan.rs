@@ -120,6 +120,12 @@ pub fn theta_samples_path(theta_l: f64) -> String {
     format!("samples/{}.csv", theta_dir_name(theta_l))
 }
 
+/// The live fits saved by one θL's samples step: the [`FIT_MODELS`] fitted to every θL
+/// up to it, a JSON object of fit results by model.
+pub fn theta_fits_path(theta_l: f64) -> String {
+    format!("samples/{}.fits.json", theta_dir_name(theta_l))
+}
+
 /// File stem of bracket exposure `index`.
 pub fn exposure_stem(index: usize) -> String {
     format!("exp_{index:02}")

@@ -4,6 +4,7 @@
 //! are written atomically; each step returns the result record of its journal row.
 //! Frames may be decoded ahead of their HDR step ([`Prefetched`]).
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
@@ -14,10 +15,13 @@ use gonio_processing::fit::{fit, FitOptions, FitResult};
 use gonio_processing::hdr::{merge, MergeOptions};
 use gonio_processing::metrics::err_p;
 use gonio_processing::samples::{read_csv, write_csv, Sample};
+use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
 
 use super::files::{write_atomic, write_atomic_with};
-use super::plan::{theta_dir_name, theta_samples_path, ScanPlan, Step, FIT_MODELS};
+use super::plan::{
+    theta_dir_name, theta_fits_path, theta_samples_path, ScanPlan, Step, FIT_MODELS,
+};
 
 /// Most frames decoded ahead of their HDR step (a full-size 16-bit frame is 60 MB).
 const PREFETCH_FRAMES: usize = 8;
@@ -87,7 +91,7 @@ pub fn run(
         Step::Samples { theta_l } => samples(dir, plan, *theta_l),
         Step::Hdr { theta_l } => hdr(dir, *theta_l, prefetched),
         Step::Extract => gather(dir, plan),
-        Step::Fit { model } => fit_model(dir, model),
+        Step::Fit { model } => fit_model(dir, plan, model),
         Step::Home | Step::Move { .. } | Step::Meter { .. } | Step::Capture { .. } => {
             anyhow::bail!("{} is not a processing step", step.describe())
         }
@@ -123,6 +127,11 @@ fn samples(dir: &Path, plan: &ScanPlan, theta_l: f64) -> anyhow::Result<Value> {
 /// `held_out_err_p`, the ΔErr_p at the newest θL of the fit made before it was
 /// measured, and `change_p`, how far the fitted β moved at every point with it (the
 /// ΔErr_p between the two fits' predictions); both fall as more θL stop paying.
+///
+/// The samples are fitted in ascending θL, the order of `samples.csv`, and the fits
+/// are saved ([`SavedFits`]): the next θL's fits before are these, and the last θL's
+/// are the scan's fits once `samples.csv` is gathered. Fits that cannot be read are
+/// made again.
 fn live_fits(
     dir: &Path,
     plan: &ScanPlan,
@@ -134,33 +143,86 @@ fn live_fits(
         .iter()
         .position(|t| *t == theta_l)
         .with_context(|| format!("θL {theta_l}° is not in the scan's plan"))?;
-    let mut earlier = Vec::new();
+    let mut by_theta = Vec::new();
     for &t in &plan.theta_l[..position] {
-        earlier.extend(read_theta(dir, t)?);
+        by_theta.push((t, read_theta(dir, t)?));
     }
-    let mut all = earlier.clone();
-    all.extend_from_slice(newest);
+    by_theta.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let earlier: Vec<Sample> = by_theta
+        .iter()
+        .flat_map(|(_, s)| s.iter().copied())
+        .collect();
+    let at = by_theta.partition_point(|(t, _)| t.total_cmp(&theta_l).is_lt());
+    by_theta.insert(at, (theta_l, newest.to_vec()));
+    let all: Vec<Sample> = by_theta.into_iter().flat_map(|(_, s)| s).collect();
+    let saved = position
+        .checked_sub(1)
+        .and_then(|previous| SavedFits::read(dir, plan.theta_l[previous]));
     let mut fits = serde_json::Map::new();
+    let mut to_save = SavedFits {
+        samples: fingerprint(&all),
+        fits: BTreeMap::new(),
+    };
+    let earlier_fingerprint = fingerprint(&earlier);
     for (model, _) in FIT_MODELS {
         let options = FitOptions::new(model.parse::<Model>()?);
         let entry = match fit(&all, &options) {
             Ok(now) => {
-                let before = if earlier.is_empty() {
-                    None
-                } else {
-                    fit(&earlier, &options).ok()
+                let before = match saved
+                    .as_ref()
+                    .and_then(|s| s.of(model, &earlier_fingerprint))
+                {
+                    Some(before) => Some(before.clone()),
+                    None if earlier.is_empty() => None,
+                    None => fit(&earlier, &options).ok(),
                 };
-                live_entry(&now, before.as_ref(), newest, &all)
+                let entry = live_entry(&now, before.as_ref(), newest, &all);
+                to_save.fits.insert(model.to_owned(), now);
+                entry
             }
             Err(err) => json!({ "error": err.to_string() }),
         };
         fits.insert(model.to_owned(), entry);
     }
+    let rel = theta_fits_path(theta_l);
+    write_atomic(&dir.join(&rel), &serde_json::to_vec(&to_save)?).with_context(|| rel)?;
     Ok(json!({
         "theta_l": plan.theta_l[..=position],
         "samples": all.len(),
         "fits": fits,
     }))
+}
+
+/// The live fits a θL's samples step saved (`samples/theta_l_<θL>.fits.json`): the fit
+/// of each model to every θL up to it, and the [`fingerprint`] of the samples fitted.
+#[derive(Serialize, Deserialize)]
+struct SavedFits {
+    samples: String,
+    fits: BTreeMap<String, FitResult>,
+}
+
+impl SavedFits {
+    /// The fits θL's samples step saved; none when they cannot be read.
+    fn read(dir: &Path, theta_l: f64) -> Option<SavedFits> {
+        let bytes = std::fs::read(dir.join(theta_fits_path(theta_l))).ok()?;
+        serde_json::from_slice(&bytes).ok()
+    }
+
+    /// The saved fit of `model`, if it was made on exactly the samples of `fingerprint`.
+    fn of(&self, model: &str, fingerprint: &str) -> Option<&FitResult> {
+        (self.samples == fingerprint)
+            .then(|| self.fits.get(model))
+            .flatten()
+    }
+}
+
+/// A fingerprint of samples in their order: every field, as serialised exactly (to
+/// JSON, which cannot fail for samples).
+fn fingerprint(samples: &[Sample]) -> String {
+    use std::hash::{DefaultHasher, Hasher};
+    let mut hasher = DefaultHasher::new();
+    hasher.write(&serde_json::to_vec(samples).unwrap_or_default());
+    format!("{}:{:016x}", samples.len(), hasher.finish())
 }
 
 fn predictions(fit: &FitResult, samples: &[Sample]) -> Vec<[f64; 3]> {
@@ -227,14 +289,24 @@ fn gather(dir: &Path, plan: &ScanPlan) -> anyhow::Result<Value> {
     Ok(json!({ "path": "samples.csv", "samples": samples.len() }))
 }
 
-fn fit_model(dir: &Path, model: &str) -> anyhow::Result<Value> {
+/// Fits `model` to `samples.csv`; the last θL's live fit is taken as it is when it
+/// was made on exactly those samples (as it is once every θL is processed).
+fn fit_model(dir: &Path, plan: &ScanPlan, model: &str) -> anyhow::Result<Value> {
     let name = FIT_MODELS
         .iter()
         .find(|(m, _)| *m == model)
         .map(|(_, name)| *name)
         .with_context(|| format!("unknown model {model:?}"))?;
     let samples = read_csv(&dir.join("samples.csv"))?;
-    let result = fit(&samples, &FitOptions::new(model.parse::<Model>()?))?;
+    let live = plan
+        .theta_l
+        .last()
+        .and_then(|&last| SavedFits::read(dir, last))
+        .and_then(|saved| saved.of(model, &fingerprint(&samples)).cloned());
+    let result = match live {
+        Some(result) => result,
+        None => fit(&samples, &FitOptions::new(model.parse::<Model>()?))?,
+    };
     write_atomic(&dir.join(name), &serde_json::to_vec_pretty(&result)?)
         .with_context(|| name.to_owned())?;
     Ok(json!({ "path": name, "loss": result.loss }))
@@ -291,5 +363,88 @@ mod tests {
         assert!(prefetched.frames.is_empty());
         assert!(!prefetched.advance(std::slice::from_ref(&broken)));
         assert!(prefetched.take(&[broken]).is_err());
+    }
+
+    fn theta_samples(theta_l: f64) -> Vec<Sample> {
+        (0..40)
+            .map(|i| {
+                let theta_i = -30.0 + 1.5 * f64::from(i);
+                let theta_r = theta_l - theta_i;
+                let lobe = 2.0 * (-((theta_i - theta_r) / 12.0).powi(2)).exp();
+                Sample::in_plane(
+                    theta_l,
+                    theta_i,
+                    theta_r,
+                    [0.3 + lobe, 0.2 + lobe, 0.1 + lobe],
+                )
+            })
+            .collect()
+    }
+
+    #[test]
+    fn live_fits_are_saved_for_the_next_theta_l_and_become_the_scan_fits() {
+        let dir = tempfile::tempdir().unwrap();
+        let dir = dir.path();
+        std::fs::create_dir(dir.join("samples")).unwrap();
+        let plan = ScanPlan {
+            sample: "s".into(),
+            theta_l: vec![-20.0, -40.0, -30.0],
+            shutter_s: Vec::new(),
+            auto_bracket: true,
+        };
+        let mut live = Vec::new();
+        for &theta_l in &plan.theta_l {
+            let samples = theta_samples(theta_l);
+            write_csv(&dir.join(theta_samples_path(theta_l)), &samples).unwrap();
+            live.push(live_fits(dir, &plan, theta_l, &samples).unwrap());
+        }
+        let held_out = &live[2]["fits"]["ward"]["held_out_err_p"];
+        assert!(held_out.is_array(), "{held_out}");
+        // The fits before the last θL are those the previous step saved: made again
+        // without them, they are the same.
+        std::fs::remove_file(dir.join(theta_fits_path(-40.0))).unwrap();
+        let again = live_fits(dir, &plan, -30.0, &theta_samples(-30.0)).unwrap();
+        assert_eq!(again, live[2]);
+        // Once samples.csv is gathered, the last θL's fits are the scan's: the same as
+        // fitting samples.csv.
+        gather(dir, &plan).unwrap();
+        let gathered = read_csv(&dir.join("samples.csv")).unwrap();
+        let scan_fits = |dir: &Path| -> Vec<FitResult> {
+            FIT_MODELS
+                .iter()
+                .map(|(model, name)| {
+                    fit_model(dir, &plan, model).unwrap();
+                    serde_json::from_slice(&std::fs::read(dir.join(name)).unwrap()).unwrap()
+                })
+                .collect()
+        };
+        let fresh: Vec<FitResult> = FIT_MODELS
+            .iter()
+            .map(|(model, _)| fit(&gathered, &FitOptions::new(model.parse().unwrap())).unwrap())
+            .collect();
+        let same = |a: &[FitResult], b: &[FitResult]| {
+            a.iter().zip(b).all(|(a, b)| {
+                a == &FitResult {
+                    seconds: a.seconds,
+                    ..b.clone()
+                }
+            })
+        };
+        assert!(same(&scan_fits(dir), &fresh));
+        // They are taken as they are saved when they are of exactly these samples, and
+        // fitted again when not, or when they cannot be read.
+        let path = dir.join(theta_fits_path(-30.0));
+        let mut saved: SavedFits = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+        assert_eq!(saved.samples, fingerprint(&gathered));
+        for fit in saved.fits.values_mut() {
+            fit.kd = [9.0; 3];
+        }
+        std::fs::write(&path, serde_json::to_vec(&saved).unwrap()).unwrap();
+        assert!(scan_fits(dir).iter().all(|f| f.kd == [9.0; 3]));
+        saved.samples = fingerprint(&gathered[1..]);
+        std::fs::write(&path, serde_json::to_vec(&saved).unwrap()).unwrap();
+        assert!(same(&scan_fits(dir), &fresh));
+        std::fs::write(&path, b"{").unwrap();
+        assert!(same(&scan_fits(dir), &fresh));
     }
 }

@@ -50,10 +50,12 @@ impl ProcessingLane {
         }
     }
 
-    /// Runs forever on a thread pool of its own, at a lower priority, with at least two
-    /// threads: the lane's own and one for the background step.
+    /// Runs forever on a thread pool of its own, at a lower priority, with a thread per
+    /// core beside the lane's own: the lane's thread waits for the background step
+    /// most of the time (blocked, not stealing its work), and the step's parallel
+    /// parts must still get every core.
     pub fn run(self) {
-        let threads = std::thread::available_parallelism().map_or(2, |n| n.get().max(2));
+        let threads = std::thread::available_parallelism().map_or(2, |n| n.get()) + 1;
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .thread_name(|n| format!("processing-{n}"))
