@@ -91,7 +91,6 @@ impl Frame16 {
         use tiff::tags::{
             CompressionMethod, PhotometricInterpretation, PlanarConfiguration, Predictor, Tag,
         };
-        let tiff_error = |e: tiff::TiffError| std::io::Error::other(format!("TIFF encoding: {e}"));
         let row_len = 3 * self.width as usize;
         let strips: Vec<Vec<u8>> = self
             .data
@@ -116,47 +115,41 @@ impl Frame16 {
                 zlib.finish()
             })
             .collect::<std::io::Result<_>>()?;
-        let mut out = Cursor::new(Vec::new());
-        let mut encoder = TiffEncoder::new(&mut out).map_err(tiff_error)?;
-        let mut dir = encoder.image_directory().map_err(tiff_error)?;
-        let mut offsets = Vec::with_capacity(strips.len());
-        for strip in &strips {
-            offsets.push(
-                u32::try_from(dir.write_data(strip.as_slice()).map_err(tiff_error)?)
-                    .map_err(|_| std::io::Error::other("TIFF encoding: over 4 GB"))?,
-            );
-        }
-        let counts: Vec<u32> = strips.iter().map(|s| s.len() as u32).collect();
-        dir.write_tag(Tag::ImageWidth, self.width)
-            .map_err(tiff_error)?;
-        dir.write_tag(Tag::ImageLength, self.height)
-            .map_err(tiff_error)?;
-        dir.write_tag(Tag::BitsPerSample, &[16u16, 16, 16][..])
-            .map_err(tiff_error)?;
-        dir.write_tag(Tag::Compression, CompressionMethod::Deflate.to_u16())
-            .map_err(tiff_error)?;
-        dir.write_tag(
-            Tag::PhotometricInterpretation,
-            PhotometricInterpretation::RGB.to_u16(),
-        )
-        .map_err(tiff_error)?;
-        dir.write_tag(Tag::StripOffsets, offsets.as_slice())
-            .map_err(tiff_error)?;
-        dir.write_tag(Tag::SamplesPerPixel, 3u16)
-            .map_err(tiff_error)?;
-        dir.write_tag(Tag::RowsPerStrip, ROWS_PER_STRIP)
-            .map_err(tiff_error)?;
-        dir.write_tag(Tag::StripByteCounts, counts.as_slice())
-            .map_err(tiff_error)?;
-        dir.write_tag(
-            Tag::PlanarConfiguration,
-            PlanarConfiguration::Chunky.to_u16(),
-        )
-        .map_err(tiff_error)?;
-        dir.write_tag(Tag::Predictor, Predictor::Horizontal.to_u16())
-            .map_err(tiff_error)?;
-        dir.finish().map_err(tiff_error)?;
-        Ok(out.into_inner())
+        // The directory: the strips' offsets and sizes, and how their pixels are stored.
+        let write = || -> tiff::TiffResult<Vec<u8>> {
+            let mut out = Cursor::new(Vec::new());
+            let mut encoder = TiffEncoder::new(&mut out)?;
+            let mut dir = encoder.image_directory()?;
+            // Offsets and sizes are 32-bit in a classic TIFF.
+            let too_large = |_| std::io::Error::other("over 4 GB");
+            let mut offsets = Vec::with_capacity(strips.len());
+            let mut counts = Vec::with_capacity(strips.len());
+            for strip in &strips {
+                let offset = dir.write_data(strip.as_slice())?;
+                offsets.push(u32::try_from(offset).map_err(too_large)?);
+                counts.push(u32::try_from(strip.len()).map_err(too_large)?);
+            }
+            dir.write_tag(Tag::ImageWidth, self.width)?;
+            dir.write_tag(Tag::ImageLength, self.height)?;
+            dir.write_tag(Tag::BitsPerSample, &[16u16, 16, 16][..])?;
+            dir.write_tag(Tag::Compression, CompressionMethod::Deflate.to_u16())?;
+            dir.write_tag(
+                Tag::PhotometricInterpretation,
+                PhotometricInterpretation::RGB.to_u16(),
+            )?;
+            dir.write_tag(Tag::StripOffsets, offsets.as_slice())?;
+            dir.write_tag(Tag::SamplesPerPixel, 3u16)?;
+            dir.write_tag(Tag::RowsPerStrip, ROWS_PER_STRIP)?;
+            dir.write_tag(Tag::StripByteCounts, counts.as_slice())?;
+            dir.write_tag(
+                Tag::PlanarConfiguration,
+                PlanarConfiguration::Chunky.to_u16(),
+            )?;
+            dir.write_tag(Tag::Predictor, Predictor::Horizontal.to_u16())?;
+            dir.finish()?;
+            Ok(out.into_inner())
+        };
+        write().map_err(|e| std::io::Error::other(format!("TIFF encoding: {e}")))
     }
 
     /// Writes the TIFF atomically at `path`.

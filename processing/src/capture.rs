@@ -268,14 +268,10 @@ pub fn write_tiff_capture(
             path: path.to_path_buf(),
             reason: format!("{} values for {width}×{height} RGB", counts.len()),
         })?;
-    let image_error = |reason: String| CaptureError::Image {
-        path: path.to_path_buf(),
-        reason,
-    };
     image
         .save_with_format(path, image::ImageFormat::Tiff)
-        .map_err(|e| image_error(e.to_string()))?;
-    let json = serde_json::to_string_pretty(sidecar).map_err(|e| image_error(e.to_string()))?;
+        .map_err(|e| image_error(path, e))?;
+    let json = serde_json::to_string_pretty(sidecar).map_err(|e| image_error(path, e))?;
     let side = sidecar_path(path);
     fs::write(&side, json).map_err(|error| CaptureError::SidecarIo { path: side, error })
 }
@@ -578,12 +574,11 @@ fn decode_tiff_rows<
     use tiff::decoder::ChunkType;
     use tiff::tags::{CompressionMethod, PlanarConfiguration, Tag};
     use tiff::ColorType;
-    let image_error = |e: tiff::TiffError| tiff_error(path, e);
     let Ok(mut decoder) = open_tiff(path) else {
         // Let the full decoder report what is wrong with the file.
         return Ok(Err(select));
     };
-    let (width, height) = decoder.dimensions().map_err(image_error)?;
+    let (width, height) = decoder.dimensions().map_err(|e| image_error(path, e))?;
     // Check the claimed size before anything is allocated for it.
     let (samples, bits) = match decoder.colortype() {
         Ok(ColorType::Gray(b)) => (1, b),
@@ -594,7 +589,7 @@ fn decode_tiff_rows<
     };
     let compressed = decoder
         .find_tag_unsigned::<u16>(Tag::Compression)
-        .map_err(image_error)?
+        .map_err(|e| image_error(path, e))?
         .is_some_and(|c| c != CompressionMethod::None.to_u16());
     check_claim(
         path,
@@ -610,7 +605,7 @@ fn decode_tiff_rows<
     let (width, height) = (width as usize, height as usize);
     let chunky = decoder
         .find_tag_unsigned::<u16>(Tag::PlanarConfiguration)
-        .map_err(image_error)?
+        .map_err(|e| image_error(path, e))?
         .is_none_or(|v| v == PlanarConfiguration::Chunky.to_u16());
     let rgb16 = matches!(decoder.colortype(), Ok(ColorType::RGB(16)));
     if !(chunky && rgb16 && decoder.get_chunk_type() == ChunkType::Strip) {
@@ -618,7 +613,7 @@ fn decode_tiff_rows<
     }
     let rows_per_strip = decoder
         .find_tag_unsigned::<u32>(Tag::RowsPerStrip)
-        .map_err(image_error)?
+        .map_err(|e| image_error(path, e))?
         .map_or(height, |r| (r as usize).clamp(1, height.max(1)));
     let bands = select(width, height)?;
     check_bands(path, &bands, height)?;
@@ -629,7 +624,7 @@ fn decode_tiff_rows<
     data.par_chunks_mut(per_part * row_len)
         .zip(rows.par_chunks(per_part))
         .try_for_each(|(out, rows)| {
-            let mut decoder = open_tiff(path).map_err(image_error)?;
+            let mut decoder = open_tiff(path).map_err(|e| image_error(path, e))?;
             decode_strip_rows(&mut decoder, path, rows, rows_per_strip, out)
         })?;
     Ok(Ok(Decoded {
@@ -651,10 +646,11 @@ fn open_tiff(path: &Path) -> Result<TiffDecoder, tiff::TiffError> {
     Ok(tiff::decoder::Decoder::new(std::io::BufReader::new(file))?.with_limits(tiff_limits()))
 }
 
-fn tiff_error(path: &Path, e: tiff::TiffError) -> CaptureError {
+/// The error of an image `path` that cannot be read or written, for `reason`.
+fn image_error(path: &Path, reason: impl std::fmt::Display) -> CaptureError {
     CaptureError::Image {
         path: path.to_path_buf(),
-        reason: e.to_string(),
+        reason: reason.to_string(),
     }
 }
 
@@ -675,7 +671,7 @@ fn decode_strip_rows(
         if cached.as_ref().is_none_or(|(index, _)| *index != strip) {
             let values = match decoder
                 .read_chunk(strip as u32)
-                .map_err(|e| tiff_error(path, e))?
+                .map_err(|e| image_error(path, e))?
             {
                 DecodingResult::U16(values) => values,
                 _ => {
@@ -702,19 +698,15 @@ fn decode_strip_rows(
 
 fn decode_tiff(path: &Path) -> Result<Decoded, CaptureError> {
     use image::DynamicImage;
-    let image_error = |reason: String| CaptureError::Image {
-        path: path.to_path_buf(),
-        reason,
-    };
     let mut reader = image::ImageReader::open(path)
-        .map_err(|e| image_error(e.to_string()))?
+        .map_err(|e| image_error(path, e))?
         .with_guessed_format()
-        .map_err(|e| image_error(e.to_string()))?;
+        .map_err(|e| image_error(path, e))?;
     let mut limits = image::Limits::default();
     // Room for the decoded image (at most 4 channels of 16 bits) and its conversion.
     limits.max_alloc = Some(max_pixels().saturating_mul(16));
     reader.limits(limits);
-    let image = reader.decode().map_err(|e| image_error(e.to_string()))?;
+    let image = reader.decode().map_err(|e| image_error(path, e))?;
     let (width, height) = (image.width() as usize, image.height() as usize);
     let (data, max_count) = match image {
         DynamicImage::ImageRgb16(img) => (img.into_raw(), f64::from(u16::MAX)),
@@ -773,10 +765,7 @@ fn decode_raw(path: &Path) -> Result<Decoded, CaptureError> {
         path: path.to_path_buf(),
         reason,
     };
-    let bytes = fs::read(path).map_err(|e| CaptureError::Image {
-        path: path.to_path_buf(),
-        reason: e.to_string(),
-    })?;
+    let bytes = fs::read(path).map_err(|e| image_error(path, e))?;
     // Only the containers of the formats above reach rawler: TIFF-structured files
     // (checked below), CR3 (ISO BMFF) and RAF. rawler's other readers (JPEG/Exif, MRW,
     // X3F, CRW…) are for formats not listed, and some allocate or spin on a damaged file.
@@ -832,13 +821,8 @@ fn decode_raw(path: &Path) -> Result<Decoded, CaptureError> {
         )?;
     }
     let source = rawler::rawsource::RawSource::new_from_slice(&bytes);
-    let raw =
-        rawler::decode(&source, &rawler::decoders::RawDecodeParams::default()).map_err(|e| {
-            CaptureError::Image {
-                path: path.to_path_buf(),
-                reason: e.to_string(),
-            }
-        })?;
+    let raw = rawler::decode(&source, &rawler::decoders::RawDecodeParams::default())
+        .map_err(|e| image_error(path, e))?;
     drop(bytes);
     let RawImageData::Integer(counts) = &raw.data else {
         return Err(layout("floating-point raw data".into()));

@@ -256,13 +256,17 @@ impl HdrImage {
                 .collect(),
         )
         .with_attributes(attributes);
-        // A tile's bytes: each of its rows, channel after channel, little-endian.
-        let tile_bytes = |block: &exr::block::BlockIndex| {
+        // A tile's rows of interleaved RGB, top to bottom.
+        let tile_rows = |block: &exr::block::BlockIndex| {
             let (x0, y0) = (block.pixel_position.x(), block.pixel_position.y());
             let (w, h) = (block.pixel_size.width(), block.pixel_size.height());
-            let mut data = Vec::with_capacity(w * h * 4 * CHANNELS.len());
-            for y in y0..y0 + h {
-                let row = &self.rgb[3 * (y * self.width + x0)..3 * (y * self.width + x0 + w)];
+            (y0..y0 + h)
+                .map(move |y| &self.rgb[3 * (y * self.width + x0)..3 * (y * self.width + x0 + w)])
+        };
+        // A tile's bytes: each of its rows, channel after channel, little-endian.
+        let tile_bytes = |block: &exr::block::BlockIndex| {
+            let mut data = Vec::with_capacity(block.pixel_size.area() * 4 * CHANNELS.len());
+            for row in tile_rows(block) {
                 for (_, offset) in CHANNELS {
                     for pixel in row.chunks_exact(3) {
                         data.extend_from_slice(&pixel[offset].to_le_bytes());
@@ -271,15 +275,8 @@ impl HdrImage {
             }
             data
         };
-        let tile_is_zero = |block: &exr::block::BlockIndex| {
-            let (x0, y0) = (block.pixel_position.x(), block.pixel_position.y());
-            let w = block.pixel_size.width();
-            (y0..y0 + block.pixel_size.height()).all(|y| {
-                self.rgb[3 * (y * self.width + x0)..3 * (y * self.width + x0 + w)]
-                    .iter()
-                    .all(|v| v.to_bits() == 0)
-            })
-        };
+        let tile_is_zero =
+            |block: &exr::block::BlockIndex| tile_rows(block).flatten().all(|v| v.to_bits() == 0);
         // Written through our own handle: on failure the path is left as it is (the
         // exr crate's `to_file` would remove it, whatever it was).
         let file = std::fs::File::create(path).map_err(|e| exr_error(e.to_string()))?;
@@ -312,29 +309,29 @@ impl HdrImage {
                     }
                     None => None,
                 };
+                // The chunk of `block` when it is a full tile of zeros: the zero tile's
+                // bytes at its coordinates.
+                let zero_chunk = |block: &exr::block::BlockIndex| {
+                    let zeros = zero_tile.as_ref()?;
+                    (block.pixel_size == tile_size && tile_is_zero(block)).then(|| Chunk {
+                        layer_index: block.layer,
+                        compressed_block: CompressedBlock::Tile(CompressedTileBlock {
+                            coordinates: TileCoordinates {
+                                tile_index: block.pixel_position / tile_size,
+                                level_index: block.level,
+                            },
+                            compressed_pixels_le: zeros.clone(),
+                        }),
+                    })
+                };
                 // A bounded number of compressed tiles in memory at once.
                 for batch in blocks.chunks(EXR_TILES_PER_BATCH) {
                     let chunks = batch
                         .par_iter()
                         .map(|(index, block)| {
-                            let chunk = match &zero_tile {
-                                Some(zeros)
-                                    if block.pixel_size == tile_size && tile_is_zero(block) =>
-                                {
-                                    Chunk {
-                                        layer_index: block.layer,
-                                        compressed_block: CompressedBlock::Tile(
-                                            CompressedTileBlock {
-                                                coordinates: TileCoordinates {
-                                                    tile_index: block.pixel_position / tile_size,
-                                                    level_index: block.level,
-                                                },
-                                                compressed_pixels_le: zeros.clone(),
-                                            },
-                                        ),
-                                    }
-                                }
-                                _ => UncompressedBlock {
+                            let chunk = match zero_chunk(block) {
+                                Some(chunk) => chunk,
+                                None => UncompressedBlock {
                                     index: *block,
                                     data: tile_bytes(block),
                                 }
