@@ -1,4 +1,8 @@
-//! Fit speed on 1,000 points: robust and Nelder–Mead, Cook–Torrance and Ward.
+//! Fit speed on 1,000 points: robust and Nelder–Mead, Cook–Torrance and Ward, and the
+//! robust fits with shared m without their uncertainty (target: the uncertainty costs at
+//! most 10 % of a Cook–Torrance fit).
+//!
+//!     cargo bench -p gonio-processing --bench fit
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use gonio_processing::brdf::{Model, Params, Roughness};
@@ -38,15 +42,18 @@ fn bench_fits(c: &mut Criterion) {
     let mut group = c.benchmark_group("fit_1000");
     for model in [Model::CookTorrance, Model::Ward] {
         let data = samples(model);
-        for (method, roughness) in [
-            (FitMethod::Robust, Roughness::Shared),
-            (FitMethod::Robust, Roughness::PerChannel),
-            (FitMethod::NelderMead, Roughness::Shared),
+        for (method, roughness, uncertainty) in [
+            (FitMethod::Robust, Roughness::Shared, true),
+            (FitMethod::Robust, Roughness::Shared, false),
+            (FitMethod::Robust, Roughness::PerChannel, true),
+            (FitMethod::NelderMead, Roughness::Shared, true),
         ] {
             let mut options = FitOptions::new(model);
             options.method = method;
             options.roughness = roughness;
-            let name = format!("{model}/{method}/{roughness}");
+            options.uncertainty = uncertainty;
+            let suffix = if uncertainty { "" } else { "/no-uncertainty" };
+            let name = format!("{model}/{method}/{roughness}{suffix}");
             group.bench_function(name, |b| {
                 b.iter(|| fit(black_box(&data), &options).expect("fit"))
             });

@@ -160,8 +160,7 @@ fn test_colour_shift(
             p_value: None,
         });
     }
-    let chi2 = uncertainty::covariance(data, options, &found.params, ks_90)
-        .and_then(|c| c.shift_statistic(&found.params, ks_90));
+    let chi2 = uncertainty::shift_statistic(data, options, &found.params, ks_90);
     let p_value = chi2.map(chi2_3_survival);
     if p_value.is_some_and(|p| p < COLOUR_SHIFT_LEVEL) {
         return Ok(ColourShift {
@@ -252,7 +251,11 @@ pub fn fit(samples: &[Sample], options: &FitOptions) -> Result<FitResult, FitErr
             return Err(FitError::Overflow(what));
         }
     }
-    let (stderr, ci95, correlation) = match uncertainty::estimate(&data, options, &params, &ks_90) {
+    let spread = options
+        .uncertainty
+        .then(|| uncertainty::estimate(&data, options, &params, &ks_90))
+        .flatten();
+    let (stderr, ci95, correlation) = match spread {
         Some(s) => (Some(s.stderr), Some(s.ci95), Some(s.correlation)),
         None => (None, None, None),
     };

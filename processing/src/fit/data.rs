@@ -96,11 +96,22 @@ impl Data {
     /// Eq. 10 loss of `params` with the specular colour at 90° `ks_90`, over the measured
     /// values.
     pub fn loss_fresnel(&self, params: &Params, ks_90: &[f64; 3]) -> f64 {
-        self.estimates(params, ks_90)
-            .iter()
-            .zip(&self.y)
-            .map(|(estimate, y)| metrics::point_loss(y, estimate))
-            .sum()
+        let loss = |(b, y): (&Basis, &[f64; 3])| {
+            metrics::point_loss(y, &b.evaluate_fresnel(params, ks_90))
+        };
+        match &self.keep {
+            None => self.bases.iter().zip(&self.y).map(loss).sum(),
+            Some(keep) => self
+                .bases
+                .iter()
+                .zip(&self.y)
+                .zip(keep)
+                .map(|((b, y), keep)| {
+                    let estimate = b.evaluate_fresnel(params, ks_90);
+                    metrics::point_loss(y, &std::array::from_fn(|c| estimate[c] * keep[c]))
+                })
+                .sum(),
+        }
     }
 
     /// The model's β at every point, 0 where the measured value was dropped (so dropped

@@ -79,10 +79,14 @@ pub struct FitOptions {
     pub method: FitMethod,
     pub robust: RobustOptions,
     pub nelder_mead: NelderMeadOptions,
+    /// Estimate the parameters' standard uncertainty, intervals and correlation (default
+    /// true); without it they are absent from the result. The colour-shift test of
+    /// Cook–Torrance–Fresnel runs either way (it decides the fit).
+    pub uncertainty: bool,
 }
 
 impl FitOptions {
-    /// Default options for `model`: shared roughness, robust method.
+    /// Default options for `model`: shared roughness, robust method, with uncertainty.
     pub fn new(model: Model) -> Self {
         FitOptions {
             model,
@@ -90,6 +94,7 @@ impl FitOptions {
             method: FitMethod::Robust,
             robust: RobustOptions::default(),
             nelder_mead: NelderMeadOptions::default(),
+            uncertainty: true,
         }
     }
 }

@@ -76,12 +76,10 @@ pub struct ColourShift {
     pub p_value: Option<f64>,
 }
 
-/// The sandwich covariances of the parameters of one fit, θ laid out as in [`Layout`]:
-/// HC1 (intervals) and HC3 (the colour-shift test).
+/// The HC1 sandwich covariance of the parameters of one fit, θ laid out as in [`Layout`].
 pub(crate) struct Covariance {
     layout: Layout,
     hc1: DMatrix<f64>,
-    hc3: DMatrix<f64>,
 }
 
 /// The uncertainty of one fit.
@@ -138,25 +136,31 @@ pub(crate) fn estimate(
     Some(spread)
 }
 
-impl Covariance {
-    /// The Wald statistic of Ks_90 = Ks (χ², 3 degrees of freedom) with the HC3
-    /// covariance; `None` when the fit has no specular colour at 90° or the difference's
-    /// covariance is singular.
-    pub fn shift_statistic(&self, params: &Params, ks_90: &[f64; 3]) -> Option<f64> {
-        let layout = &self.layout;
-        let d = DVector::from_iterator(3, (0..3).map(|c| ks_90[c] - params.ks[c]));
-        let mut sigma = DMatrix::<f64>::zeros(3, 3);
-        for i in 0..3 {
-            for j in 0..3 {
-                let (gi, gj) = (layout.kg(i)?, layout.kg(j)?);
-                let (si, sj) = (layout.ks(i), layout.ks(j));
-                let v = &self.hc3;
-                sigma[(i, j)] = v[(gi, gj)] - v[(gi, sj)] - v[(si, gj)] + v[(si, sj)];
-            }
+/// The Wald statistic of Ks_90 = Ks (χ², 3 degrees of freedom) with the HC3 covariance
+/// at (`params`, `ks_90`); `None` when the fit has no specular colour at 90°, too few
+/// points, or A or the difference's covariance is singular.
+pub(crate) fn shift_statistic(
+    data: &Data,
+    options: &FitOptions,
+    params: &Params,
+    ks_90: &[f64; 3],
+) -> Option<f64> {
+    let residuals = Residuals::new(data, options, params, ks_90)?;
+    let layout = &residuals.layout;
+    let inverse = inverse_if_identifiable(&residuals.sums().hessian)?;
+    let hc3 = &inverse * residuals.hc3_spread(&inverse) * &inverse;
+    let d = DVector::from_iterator(3, (0..3).map(|c| ks_90[c] - params.ks[c]));
+    let mut sigma = DMatrix::<f64>::zeros(3, 3);
+    for i in 0..3 {
+        for j in 0..3 {
+            let (gi, gj) = (layout.kg(i)?, layout.kg(j)?);
+            let (si, sj) = (layout.ks(i), layout.ks(j));
+            let v = &hc3;
+            sigma[(i, j)] = v[(gi, gj)] - v[(gi, sj)] - v[(si, gj)] + v[(si, sj)];
         }
-        let chi2 = (d.transpose() * inverse_if_identifiable(&sigma)? * &d)[(0, 0)];
-        chi2.is_finite().then_some(chi2.max(0.0))
     }
+    let chi2 = (d.transpose() * inverse_if_identifiable(&sigma)? * &d)[(0, 0)];
+    chi2.is_finite().then_some(chi2.max(0.0))
 }
 
 /// P(X > x) for X ~ χ² with 3 degrees of freedom: erfc(√(x/2)) + √(2x/π)·e^(−x/2).
@@ -183,7 +187,7 @@ fn erfc(x: f64) -> f64 {
     t * poly.exp()
 }
 
-/// The sandwich covariance of the parameters at (`params`, `ks_90`); `None` when it
+/// The HC1 sandwich covariance of the parameters at (`params`, `ks_90`); `None` when it
 /// is not defined (singular A, too few points).
 pub(crate) fn covariance(
     data: &Data,
@@ -191,79 +195,210 @@ pub(crate) fn covariance(
     params: &Params,
     ks_90: &[f64; 3],
 ) -> Option<Covariance> {
-    let layout = Layout {
-        fresnel: data.shift_weight.is_some(),
-        shared: options.roughness == Roughness::Shared,
-    };
-    let n = data.y.len();
-    let p = layout.len();
-    if n <= p {
-        return None;
-    }
-    // Dropped values (y = 0, estimate 0) leave no residual.
-    let estimates = data.estimates(params, ks_90);
-    let norms: Vec<f64> = estimates
-        .iter()
-        .zip(&data.y)
-        .map(|(estimate, y)| crate::metrics::point_loss(y, estimate))
-        .collect();
-    let mut sorted = norms.clone();
-    sorted.sort_by(f64::total_cmp);
-    let floor = 1e-6 * sorted[n / 2] + data.residual_floor;
-
-    // Per point: its Jacobian J_p (no row for a dropped channel), its curvature M_p and
-    // its gradient g_p.
-    let terms: Vec<(DMatrix<f64>, DMatrix<f64>, DVector<f64>)> = data
-        .bases
-        .iter()
-        .enumerate()
-        .zip(data.y.iter().zip(&estimates))
-        .zip(&norms)
-        .map(|(((point, basis), (y, predicted)), &norm)| {
-            let mut jacobian = DMatrix::<f64>::zeros(3, p);
-            let x = basis.shift_weight();
-            let keep = data.keep.as_ref().map_or([1.0; 3], |keep| keep[point]);
-            for c in (0..3).filter(|&c| keep[c] > 0.0) {
-                let (s, slope) = basis.specular_and_slope(params.m[c]);
-                let colour = params.ks[c] + x * (ks_90[c] - params.ks[c]);
-                jacobian[(c, layout.kd(c))] = basis.diffuse;
-                match layout.kg(c) {
-                    Some(kg) => {
-                        jacobian[(c, layout.ks(c))] = s * (1.0 - x);
-                        jacobian[(c, kg)] = s * x;
-                    }
-                    None => jacobian[(c, layout.ks(c))] = s,
-                }
-                jacobian[(c, layout.ln_m(c))] += colour * slope;
-            }
-            let norm = norm.max(floor);
-            let u = DVector::from_iterator(3, (0..3).map(|c| (y[c] - predicted[c]) / norm));
-            // (I − u uᵀ)/‖r‖, with u of length ≤ 1 after the floor.
-            let curvature = (DMatrix::<f64>::identity(3, 3) - &u * u.transpose()) / norm;
-            let gradient = jacobian.transpose() * &u;
-            (jacobian, curvature, gradient)
-        })
-        .collect();
-    let mut a = DMatrix::<f64>::zeros(p, p);
-    let mut b = DMatrix::<f64>::zeros(p, p);
-    for (jacobian, curvature, gradient) in &terms {
-        a += jacobian.transpose() * curvature * jacobian;
-        b += gradient * gradient.transpose();
-    }
-    let inverse = inverse_if_identifiable(&a)?;
-    let mut b3 = DMatrix::<f64>::zeros(p, p);
-    for (jacobian, curvature, gradient) in &terms {
-        let leverage = (curvature * jacobian * &inverse * jacobian.transpose())
-            .trace()
-            .clamp(0.0, MAX_LEVERAGE);
-        b3 += gradient * gradient.transpose() / ((1.0 - leverage) * (1.0 - leverage));
-    }
-    b *= n as f64 / (n - p) as f64;
+    let residuals = Residuals::new(data, options, params, ks_90)?;
+    let (n, p) = (data.y.len(), residuals.layout.len());
+    let Sums { hessian, spread } = residuals.sums();
+    let inverse = inverse_if_identifiable(&hessian)?;
+    let hc1 = &inverse * spread * (n as f64 / (n - p) as f64) * &inverse;
     Some(Covariance {
-        hc1: &inverse * b * &inverse,
-        hc3: &inverse * b3 * &inverse,
-        layout,
+        hc1,
+        layout: residuals.layout,
     })
+}
+
+/// The most parameters a fit has: Kd, Ks, Ks_90 and m per channel.
+const MAX_PARAMETERS: usize = 12;
+
+/// A symmetric P × P sum on the stack; only i ≤ j is accumulated.
+type Square = [[f64; MAX_PARAMETERS]; MAX_PARAMETERS];
+
+/// One point's part of the sandwich: its Jacobian J_p (a zero row for a dropped
+/// channel), its curvature M_p and its gradient g_p, on the stack.
+struct PointTerm {
+    jacobian: [[f64; MAX_PARAMETERS]; 3],
+    curvature: [[f64; 3]; 3],
+    gradient: [f64; MAX_PARAMETERS],
+}
+
+/// A and Σ_p g_p g_pᵀ (B without its small-sample factor).
+struct Sums {
+    hessian: DMatrix<f64>,
+    spread: DMatrix<f64>,
+}
+
+/// The residuals of a fit at its parameters, read by the passes over the points.
+struct Residuals<'a> {
+    data: &'a Data,
+    layout: Layout,
+    params: Params,
+    ks_90: [f64; 3],
+    /// r_p = y_p − ŷ_p (0 in a dropped channel) per point.
+    residuals: Vec<[f64; 3]>,
+    /// ‖r_p‖ per point, at least `floor`.
+    norms: Vec<f64>,
+}
+
+impl<'a> Residuals<'a> {
+    /// `None` when there are no more points than parameters.
+    fn new(
+        data: &'a Data,
+        options: &FitOptions,
+        params: &Params,
+        ks_90: &[f64; 3],
+    ) -> Option<Self> {
+        let layout = Layout {
+            fresnel: data.shift_weight.is_some(),
+            shared: options.roughness == Roughness::Shared,
+        };
+        let n = data.y.len();
+        if n <= layout.len() {
+            return None;
+        }
+        // Dropped values (y = 0, estimate 0) leave no residual.
+        let mut residuals = data.estimates(params, ks_90);
+        for (r, y) in residuals.iter_mut().zip(&data.y) {
+            *r = std::array::from_fn(|c| y[c] - r[c]);
+        }
+        let mut norms: Vec<f64> = residuals
+            .iter()
+            .map(|r| crate::metrics::point_loss(r, &[0.0; 3]))
+            .collect();
+        let mut order = norms.clone();
+        let median = *order.select_nth_unstable_by(n / 2, f64::total_cmp).1;
+        let floor = 1e-6 * median + data.residual_floor;
+        for norm in &mut norms {
+            *norm = norm.max(floor);
+        }
+        Some(Residuals {
+            data,
+            layout,
+            params: *params,
+            ks_90: *ks_90,
+            residuals,
+            norms,
+        })
+    }
+
+    /// J_p, M_p and g_p of point `point`.
+    fn term(&self, point: usize) -> PointTerm {
+        let (data, layout, params) = (self.data, &self.layout, &self.params);
+        let basis = &data.bases[point];
+        let x = basis.shift_weight();
+        let keep = data.keep.as_ref().map_or([1.0; 3], |keep| keep[point]);
+        let mut jacobian = [[0.0; MAX_PARAMETERS]; 3];
+        // A shared roughness needs one lobe evaluation for all channels.
+        let shared = basis.specular_and_slope(params.m[0]);
+        for c in (0..3).filter(|&c| keep[c] > 0.0) {
+            let (s, slope) = if params.m[c] == params.m[0] {
+                shared
+            } else {
+                basis.specular_and_slope(params.m[c])
+            };
+            let colour = params.ks[c] + x * (self.ks_90[c] - params.ks[c]);
+            let row = &mut jacobian[c];
+            row[layout.kd(c)] = basis.diffuse;
+            match layout.kg(c) {
+                Some(kg) => {
+                    row[layout.ks(c)] = s * (1.0 - x);
+                    row[kg] = s * x;
+                }
+                None => row[layout.ks(c)] = s,
+            }
+            row[layout.ln_m(c)] += colour * slope;
+        }
+        let norm = self.norms[point];
+        let u: [f64; 3] = self.residuals[point].map(|r| r / norm);
+        // (I − u uᵀ)/‖r‖, with u of length ≤ 1 after the floor.
+        let curvature = std::array::from_fn(|c| {
+            std::array::from_fn(|d| (if c == d { 1.0 } else { 0.0 } - u[c] * u[d]) / norm)
+        });
+        let gradient = std::array::from_fn(|i| (0..3).map(|c| jacobian[c][i] * u[c]).sum());
+        PointTerm {
+            jacobian,
+            curvature,
+            gradient,
+        }
+    }
+
+    /// A = Σ_p J_pᵀ M_p J_p and Σ_p g_p g_pᵀ, in one pass.
+    fn sums(&self) -> Sums {
+        let p = self.layout.len();
+        let mut hessian: Square = [[0.0; MAX_PARAMETERS]; MAX_PARAMETERS];
+        let mut spread: Square = [[0.0; MAX_PARAMETERS]; MAX_PARAMETERS];
+        for point in 0..self.norms.len() {
+            let term = self.term(point);
+            let weighted = term.weighted_jacobian(p);
+            for i in 0..p {
+                for j in i..p {
+                    hessian[i][j] += (0..3)
+                        .map(|c| term.jacobian[c][i] * weighted[c][j])
+                        .sum::<f64>();
+                    spread[i][j] += term.gradient[i] * term.gradient[j];
+                }
+            }
+        }
+        Sums {
+            hessian: symmetric(&hessian, p),
+            spread: symmetric(&spread, p),
+        }
+    }
+
+    /// The HC3 spread Σ_p g_p g_pᵀ/(1 − h_p)², h_p = tr(M_p J_p A⁻¹ J_pᵀ) the leverage
+    /// (capped at [`MAX_LEVERAGE`]), with `inverse` = A⁻¹.
+    fn hc3_spread(&self, inverse: &DMatrix<f64>) -> DMatrix<f64> {
+        let p = self.layout.len();
+        let mut spread: Square = [[0.0; MAX_PARAMETERS]; MAX_PARAMETERS];
+        for point in 0..self.norms.len() {
+            let term = self.term(point);
+            let leverage = term.leverage(inverse, p).clamp(0.0, MAX_LEVERAGE);
+            let scale = 1.0 / ((1.0 - leverage) * (1.0 - leverage));
+            for i in 0..p {
+                for j in i..p {
+                    spread[i][j] += scale * term.gradient[i] * term.gradient[j];
+                }
+            }
+        }
+        symmetric(&spread, p)
+    }
+}
+
+impl PointTerm {
+    /// M_p J_p (3 × P).
+    fn weighted_jacobian(&self, p: usize) -> [[f64; MAX_PARAMETERS]; 3] {
+        let mut out = [[0.0; MAX_PARAMETERS]; 3];
+        for (c, row) in out.iter_mut().enumerate() {
+            for (j, v) in row.iter_mut().enumerate().take(p) {
+                *v = (0..3)
+                    .map(|d| self.curvature[c][d] * self.jacobian[d][j])
+                    .sum();
+            }
+        }
+        out
+    }
+
+    /// tr(M_p J_p A⁻¹ J_pᵀ) with `inverse` = A⁻¹ (P × P).
+    fn leverage(&self, inverse: &DMatrix<f64>, p: usize) -> f64 {
+        // K = J_p A⁻¹ (3 × P), then tr(M_p K J_pᵀ) = Σ_cd M_cd (K J_pᵀ)_dc.
+        let mut k = [[0.0; MAX_PARAMETERS]; 3];
+        for (row, jacobian) in k.iter_mut().zip(&self.jacobian) {
+            for (j, v) in row.iter_mut().enumerate().take(p) {
+                *v = (0..p).map(|i| jacobian[i] * inverse[(i, j)]).sum();
+            }
+        }
+        let mut trace = 0.0;
+        for c in 0..3 {
+            for d in 0..3 {
+                let kj: f64 = (0..p).map(|j| k[d][j] * self.jacobian[c][j]).sum();
+                trace += self.curvature[c][d] * kj;
+            }
+        }
+        trace
+    }
+}
+
+/// The P × P symmetric matrix whose upper triangle `upper` holds.
+fn symmetric(upper: &Square, p: usize) -> DMatrix<f64> {
+    DMatrix::from_fn(p, p, |i, j| upper[i.min(j)][i.max(j)])
 }
 
 /// A⁻¹ of the symmetric positive semi-definite A, or `None` when A is singular in its
@@ -351,4 +486,68 @@ fn spread(
         ci95,
         correlation,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::brdf::Model;
+    use crate::samples::Sample;
+
+    /// A small two-θL scan of `model` with 2 % deterministic multiplicative noise, a
+    /// colour shift in the truth, and one dropped value.
+    fn samples(model: Model) -> Vec<Sample> {
+        let truth = Params::shared([8.0, 6.0, 3.0], [4.0, 3.5, 2.0], 0.15);
+        let ks_90 = [2.0, 4.5, 3.0];
+        let mut state = 0x2545_f491_4f6c_dd1d_u64;
+        let mut out = Vec::new();
+        for theta_l in [-20.0, -45.0] {
+            for k in 0..60 {
+                let phi = theta_l / 2.0 - 50.0 + 100.0 * f64::from(k) / 59.0;
+                let mut sample = Sample::in_plane(theta_l, theta_l - phi, phi, [0.0; 3]);
+                let beta = model
+                    .basis_at(&sample.cosines())
+                    .evaluate_fresnel(&truth, &ks_90);
+                sample.rgb = beta.map(|b| {
+                    state = state
+                        .wrapping_mul(6_364_136_223_846_793_005)
+                        .wrapping_add(1_442_695_040_888_963_407);
+                    b * (1.0 + 0.04 * ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5))
+                });
+                out.push(sample);
+            }
+        }
+        out[7].dropped[1] = true;
+        out[7].rgb[1] = 0.0;
+        out
+    }
+
+    /// Σ_p h_p = tr(A⁻¹ Σ_p J_pᵀ M_p J_p) = P: the leverages and A come from the same
+    /// per-point terms, for every layout of θ.
+    #[test]
+    fn leverages_sum_to_the_number_of_parameters() {
+        for (model, roughness, expected) in [
+            (Model::CookTorrance, Roughness::Shared, 7),
+            (Model::Ward, Roughness::PerChannel, 9),
+            (Model::CookTorranceFresnel, Roughness::Shared, 10),
+            (Model::CookTorranceFresnel, Roughness::PerChannel, 12),
+        ] {
+            let samples = samples(model);
+            let data = Data::new(&samples, model, expected).unwrap();
+            let mut options = FitOptions::new(model);
+            options.roughness = roughness;
+            let params = Params::shared([7.5, 6.2, 3.1], [4.2, 3.3, 2.1], 0.16);
+            let ks_90 = [2.2, 4.4, 2.9];
+            let residuals = Residuals::new(&data, &options, &params, &ks_90).unwrap();
+            assert_eq!(residuals.layout.len(), expected, "{model} {roughness}");
+            let inverse = inverse_if_identifiable(&residuals.sums().hessian).unwrap();
+            let total: f64 = (0..samples.len())
+                .map(|p| residuals.term(p).leverage(&inverse, expected))
+                .sum();
+            assert!(
+                (total - expected as f64).abs() < 1e-8,
+                "{model} {roughness}: Σ h = {total}, expected {expected}"
+            );
+        }
+    }
 }
