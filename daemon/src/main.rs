@@ -68,7 +68,8 @@ fn main() {
         ))
     });
     if let Err(err) = result {
-        eprintln!("error: {err:#}");
+        // One line, whatever a cause's message holds.
+        eprintln!("error: {}", guard::one_line(&format!("{err:#}")));
         std::process::exit(1);
     }
 }

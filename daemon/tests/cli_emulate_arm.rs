@@ -42,6 +42,8 @@ fn serves_the_configured_board_until_interrupted() {
         "time_scale = 0.01\nhoming_enabled = true\nhoming_cycles = [\"X\"]\nstatus_extras = false\n",
     )
     .unwrap();
+    let beside = dir.path().join("ttyGRBL.new");
+    std::fs::write(&beside, "keep").unwrap();
     let mut child = gonio_emulate(&link, Some(&config));
     let deadline = Instant::now() + Duration::from_secs(10);
     while !link.exists() {
@@ -75,6 +77,9 @@ fn serves_the_configured_board_until_interrupted() {
         .unwrap();
     assert!(stdout.contains("GRBL 1.1h emulator on"), "{stdout}");
     assert!(!link.exists() && std::fs::symlink_metadata(&link).is_err());
+    // Files beside the link that are not the emulator's stay (`ttyGRBL.new` was once
+    // taken for its temporary link and deleted).
+    assert_eq!(std::fs::read_to_string(&beside).unwrap(), "keep");
 }
 
 #[test]
@@ -95,6 +100,30 @@ fn bad_configurations_and_links_are_refused_in_one_line() {
         assert!(!output.status.success());
         let stderr = String::from_utf8_lossy(&output.stderr);
         assert!(stderr.contains(named), "{text}: {stderr}");
+        assert_eq!(stderr.trim_end().lines().count(), 1, "{text}: {stderr}");
+    }
+    // Devices and FIFOs are no configuration: refused unread, at once.
+    let fifo = dir.path().join("board.fifo");
+    assert!(Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap()
+        .success());
+    for (config, what) in [
+        (Path::new("/dev/zero"), "a character device"),
+        (Path::new("/dev/urandom"), "a character device"),
+        (fifo.as_path(), "a FIFO"),
+    ] {
+        let output = gonio_emulate(&link, Some(config))
+            .wait_with_output()
+            .unwrap();
+        assert!(!output.status.success());
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(
+            stderr.contains(&format!("not a regular file ({what})")),
+            "{stderr}"
+        );
+        assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
     }
     // A regular file at the link path is left alone.
     std::fs::write(&link, "keep").unwrap();

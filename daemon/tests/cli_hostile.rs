@@ -40,6 +40,15 @@ fn hdr(out: &Path, input: &Path) -> Output {
     ])
 }
 
+/// The temporaries left in `dir`.
+fn partials(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".partial"))
+        .collect()
+}
+
 /// A failure: exit 1, one line on stderr starting `error:`, no panic text.
 fn assert_clean_failure(output: &Output, needle: &str) -> String {
     let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
@@ -87,6 +96,299 @@ fn hdr_refuses_crafted_captures_with_one_line() {
     std::fs::write(&raw, seed("raw", "truncated_dng")).unwrap();
     let output = hdr(&out, &raw);
     assert_clean_failure(&output, "huge.dng");
+    // rawler's message of a panic it caught spans two lines: joined into one.
+    std::fs::write(&raw, seed("raw", "regression_crop_outside_sensor")).unwrap();
+    let output = hdr(&out, &raw);
+    assert_clean_failure(&output, "Caught a panic while decoding. Please file a bug");
+}
+
+/// A sidecar's values outside their physical range are refused naming the key (a
+/// shutter of 1e-300 s once gave an EXR of +inf, ISO 1e308 an all-zero one, both exit
+/// 0); a frame whose θL is not its directory's is refused naming the file.
+#[test]
+fn sidecars_out_of_physical_range_or_directory_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let image = capture_from_seed(dir.path(), "valid_rgb16_4x3");
+    let sidecar = image.with_extension("json");
+    let valid: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&sidecar).unwrap()).unwrap();
+    let out = dir.path().join("map.exr");
+    for (key, value) in [
+        ("shutter_s", serde_json::json!(1e-300)),
+        ("shutter_s", serde_json::json!(5e-7)),
+        ("shutter_s", serde_json::json!(3601.0)),
+        ("iso", serde_json::json!(1e308)),
+        ("iso", serde_json::json!(12)),
+        ("iso", serde_json::json!(409_601)),
+        ("white_level", serde_json::json!(1e300)),
+        ("black_level", serde_json::json!(-1)),
+    ] {
+        let mut bad = valid.clone();
+        bad[key] = value.clone();
+        std::fs::write(&sidecar, bad.to_string()).unwrap();
+        let output = hdr(&out, &image);
+        let stderr = assert_clean_failure(&output, &format!("sidecar field '{key}'"));
+        assert!(
+            stderr.contains("valid_rgb16_4x3.json"),
+            "{key} {value}: {stderr}"
+        );
+        assert!(!out.exists(), "{key} {value}: an output was written");
+    }
+    // The frame in theta_l_-20.0/ says θL −45.
+    let theta_dir = dir.path().join("theta_l_-20.0");
+    std::fs::create_dir(&theta_dir).unwrap();
+    let mut moved = valid.clone();
+    moved["theta_l"] = serde_json::json!(-45.0);
+    let frame = theta_dir.join("exp_00.tiff");
+    std::fs::copy(&image, &frame).unwrap();
+    std::fs::write(frame.with_extension("json"), moved.to_string()).unwrap();
+    let stderr = assert_clean_failure(&hdr(&out, &frame), "theta_l_-20.0/exp_00.json");
+    assert!(
+        stderr.contains("'theta_l'") && stderr.contains("-45"),
+        "{stderr}"
+    );
+    moved["theta_l"] = serde_json::json!(-20.04);
+    std::fs::write(frame.with_extension("json"), moved.to_string()).unwrap();
+    let output = hdr(&out, &frame);
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+}
+
+/// Runs `gonio ARGS`, which must end within 20 s (a device once kept it reading).
+fn gonio_within(args: &[&std::ffi::OsStr]) -> Output {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_gonio"))
+        .args(args)
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("gonio runs");
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
+    while child.try_wait().unwrap().is_none() {
+        if std::time::Instant::now() > deadline {
+            let _ = child.kill();
+            panic!("gonio {args:?} still runs after 20 s");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    child.wait_with_output().unwrap()
+}
+
+fn mkfifo(path: &Path) {
+    let made = Command::new("mkfifo").arg(path).status().unwrap();
+    assert!(made.success(), "mkfifo {}", path.display());
+}
+
+/// Devices and FIFOs named as input files are refused at once, unread: `/dev/zero` was
+/// once read until memory ran out, `/dev/urandom` never answered, a FIFO blocked.
+#[test]
+fn devices_and_fifos_as_inputs_are_refused_unread() {
+    let dir = tempfile::tempdir().unwrap();
+    let fifo = dir.path().join("pipe");
+    mkfifo(&fifo);
+    let scan = dir.path().join("scan");
+    std::fs::create_dir(&scan).unwrap();
+    let out = dir.path().join("out.csv");
+    // A capture whose sidecar is the device, and one that is the device.
+    let image = capture_from_seed(dir.path(), "valid_rgb16_4x3");
+    let sidecar = image.with_extension("json");
+    let frame = dir.path().join("frame.tiff");
+    std::fs::write(
+        frame.with_extension("json"),
+        std::fs::read(&sidecar).unwrap(),
+    )
+    .unwrap();
+    for device in [Path::new("/dev/zero"), Path::new("/dev/urandom"), &fifo] {
+        let what = if device == fifo {
+            "a FIFO"
+        } else {
+            "a character device"
+        };
+        let needle = format!("not a regular file ({what})");
+        let d = device.as_os_str();
+        std::fs::remove_file(&sidecar).unwrap();
+        std::os::unix::fs::symlink(device, &sidecar).unwrap();
+        let _ = std::fs::remove_file(&frame);
+        std::os::unix::fs::symlink(device, &frame).unwrap();
+        let runs: [&[&std::ffi::OsStr]; 8] = [
+            &[
+                "export".as_ref(),
+                d,
+                "--format".as_ref(),
+                "mitsuba".as_ref(),
+                "--out".as_ref(),
+                out.as_os_str(),
+            ],
+            &[
+                "calibrate".as_ref(),
+                scan.as_os_str(),
+                "--setup".as_ref(),
+                d,
+                "--out".as_ref(),
+                out.as_os_str(),
+            ],
+            &[
+                "fit".as_ref(),
+                d,
+                "--model".as_ref(),
+                "ward".as_ref(),
+                "--out".as_ref(),
+                out.as_os_str(),
+            ],
+            &[
+                "extract".as_ref(),
+                scan.as_os_str(),
+                "--setup".as_ref(),
+                d,
+                "--out".as_ref(),
+                out.as_os_str(),
+            ],
+            &[
+                "simulate".as_ref(),
+                "--scene".as_ref(),
+                d,
+                "--out".as_ref(),
+                scan.as_os_str(),
+            ],
+            &[
+                "serve".as_ref(),
+                "--config".as_ref(),
+                d,
+                "--data".as_ref(),
+                scan.as_os_str(),
+            ],
+            &[
+                "hdr".as_ref(),
+                "--out".as_ref(),
+                out.as_os_str(),
+                image.as_os_str(),
+            ],
+            &[
+                "hdr".as_ref(),
+                "--out".as_ref(),
+                out.as_os_str(),
+                frame.as_os_str(),
+            ],
+        ];
+        for args in runs {
+            let output = gonio_within(args);
+            assert_clean_failure(&output, &needle);
+            assert!(!out.exists(), "{args:?} wrote an output");
+        }
+    }
+}
+
+/// `--out` naming a device or a FIFO is written in place: `export` and `calibrate` once
+/// replaced a device (`/dev/null` as root) with a regular file. As root the device is
+/// a node of the test's own with /dev/null's numbers; a FIFO always.
+#[test]
+fn devices_and_fifos_as_outputs_stay_what_they_are() {
+    use std::os::unix::fs::FileTypeExt;
+    let dir = tempfile::tempdir().unwrap();
+    // A fit to export and a scan to calibrate, both small.
+    let scene = dir.path().join("scene.toml");
+    let fixture = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/tiny_scene.toml");
+    let text = std::fs::read_to_string(fixture).unwrap()
+        + "\n[sample]\nmodel = \"cook-torrance\"\nkd = [9.0, 6.5, 2.0]\nks = [25.0, 20.0, 7.0]\nm = [0.07]\n";
+    std::fs::write(&scene, text).unwrap();
+    let scan = dir.path().join("scan");
+    let fit = dir.path().join("fit.json");
+    let samples = dir.path().join("samples.csv");
+    for args in [
+        vec![
+            "simulate".as_ref(),
+            "--scene".as_ref(),
+            scene.as_os_str(),
+            "--out".as_ref(),
+            scan.as_os_str(),
+        ],
+        vec![
+            "extract".as_ref(),
+            scan.as_os_str(),
+            "--out".as_ref(),
+            samples.as_os_str(),
+        ],
+        vec![
+            "fit".as_ref(),
+            samples.as_os_str(),
+            "--model".as_ref(),
+            "ward".as_ref(),
+            "--out".as_ref(),
+            fit.as_os_str(),
+        ],
+    ] {
+        let output = gonio(&args);
+        assert!(
+            output.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+    }
+    let null = dir.path().join("null");
+    let c_path = std::ffi::CString::new(null.as_os_str().as_encoded_bytes()).unwrap();
+    // SAFETY: a valid NUL-terminated path.
+    let device =
+        unsafe { libc::mknod(c_path.as_ptr(), libc::S_IFCHR | 0o666, libc::makedev(1, 3)) } == 0;
+    if !device {
+        eprintln!("no device node (creating one needs root): the outputs are a FIFO only");
+    }
+    let fifo = dir.path().join("fifo");
+    mkfifo(&fifo);
+    let targets = if device {
+        vec![null.clone(), fifo.clone()]
+    } else {
+        vec![fifo.clone()]
+    };
+    for target in targets {
+        let runs: [Vec<&std::ffi::OsStr>; 2] = [
+            vec![
+                "export".as_ref(),
+                fit.as_os_str(),
+                "--format".as_ref(),
+                "mitsuba".as_ref(),
+                "--out".as_ref(),
+                target.as_os_str(),
+            ],
+            vec![
+                "calibrate".as_ref(),
+                scan.as_os_str(),
+                "--out".as_ref(),
+                target.as_os_str(),
+            ],
+        ];
+        for args in runs {
+            // The FIFO's reading end, open (non-blocking) before the writer comes.
+            let reader = (target == fifo).then(|| {
+                use std::os::unix::fs::OpenOptionsExt;
+                std::fs::OpenOptions::new()
+                    .read(true)
+                    .custom_flags(libc::O_NONBLOCK)
+                    .open(&fifo)
+                    .unwrap()
+            });
+            let output = gonio_within(&args);
+            assert!(
+                output.status.success(),
+                "{args:?}: {}",
+                String::from_utf8_lossy(&output.stderr)
+            );
+            if let Some(mut reader) = reader {
+                let mut got = Vec::new();
+                let _ = std::io::Read::read_to_end(&mut reader, &mut got);
+                assert!(!got.is_empty(), "{args:?}: nothing came through the FIFO");
+            }
+            let kind = std::fs::symlink_metadata(&target).unwrap().file_type();
+            assert!(
+                kind.is_char_device() || kind.is_fifo(),
+                "{args:?} replaced {}",
+                target.display()
+            );
+        }
+    }
+    assert_eq!(partials(dir.path()), Vec::<String>::new());
 }
 
 /// `--out` through a link to a path whose writes fail (a stand-in for `/dev/full`, which
@@ -124,12 +426,7 @@ fn a_failed_output_never_removes_a_path_it_did_not_create() {
         String::from_utf8_lossy(&output.stderr)
     );
     assert_ne!(std::fs::read(&good).unwrap(), b"old");
-    let names: Vec<_> = std::fs::read_dir(dir.path())
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .filter(|n| n.ends_with(".partial"))
-        .collect();
-    assert!(names.is_empty(), "{names:?}");
+    assert_eq!(partials(dir.path()), Vec::<String>::new());
 }
 
 #[test]

@@ -19,11 +19,11 @@ use gphoto2::error::ErrorKind;
 use gphoto2::widget::RadioWidget;
 use gphoto2::{Camera as GpCamera, Context};
 
-use crate::atomic_file::write_atomically;
 use crate::camera_choice::{
     nearest_iso, nearest_shutter, parse_iso, parse_shutter, shutter_times, ShutterChoice,
 };
 use crate::{Camera, CameraInfo, Capture, DeviceError, Exposure};
+use gonio_files::output::write_atomically;
 
 /// Which camera to open and how patiently to retry.
 #[derive(Debug, Clone, PartialEq)]

@@ -10,9 +10,7 @@
 //!   `gonio-camera-worker` binary.
 //! - [`bracket`]: choosing a bracket of shutter speeds from a metering capture.
 //! - [`camera_choice`]: reading a camera's shutter and ISO choice strings.
-//! - [`atomic_file`]: writing captures so readers never see half a file.
 
-pub mod atomic_file;
 pub mod bracket;
 pub mod camera_choice;
 mod error;
@@ -96,7 +94,7 @@ pub trait Arm: Send {
     /// was). Afterwards the position is known.
     fn home(&mut self) -> Result<(), DeviceError>;
     /// Declare where the arm is (degrees), for controllers without homing; refused
-    /// where the arm is referenced by homing.
+    /// where the arm is referenced by homing, and outside the arm's travel.
     fn declare_position(&mut self, angle_deg: f64) -> Result<(), DeviceError>;
     /// Move to `angle_deg` and return once the arm is idle there.
     fn move_to(&mut self, angle_deg: f64) -> Result<(), DeviceError>;

@@ -8,8 +8,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant};
 
-use gonio_drivers::atomic_file::write_atomically;
 use gonio_drivers::{Camera, CameraInfo, Capture, DeviceError, Exposure};
+use gonio_files::output::write_atomically;
 
 use crate::render::{self, FileLevels, Shot};
 use crate::scene::Scene;

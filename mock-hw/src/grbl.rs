@@ -95,15 +95,6 @@ impl GrblEmulator {
     /// exist; an existing symlink there is replaced, any other file is left alone and
     /// refused). The link is removed when the emulator is dropped.
     pub fn start_at(config: GrblConfig, world: World, link: &Path) -> io::Result<GrblEmulator> {
-        match std::fs::symlink_metadata(link) {
-            Ok(meta) if !meta.file_type().is_symlink() => {
-                return Err(io::Error::new(
-                    io::ErrorKind::AlreadyExists,
-                    format!("{} exists and is not a symlink", link.display()),
-                ))
-            }
-            _ => {}
-        }
         Self::spawn(config, world, link.to_owned(), None)
     }
 

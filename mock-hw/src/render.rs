@@ -32,7 +32,7 @@ pub mod reference;
 use std::io::{Cursor, Write};
 use std::path::Path;
 
-use gonio_drivers::atomic_file::write_atomically;
+use gonio_files::output::write_atomically;
 use rayon::prelude::*;
 
 use crate::scene::{Misalignment, Scene};

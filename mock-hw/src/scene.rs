@@ -392,10 +392,7 @@ const OPAL: &str = include_str!("../scenes/opal.toml");
 impl Scene {
     /// Reads a scene file; relative paths inside resolve against its directory.
     pub fn load(path: &Path) -> Result<Scene, SceneError> {
-        let text = std::fs::read_to_string(path).map_err(|error| SceneError::Io {
-            path: path.to_path_buf(),
-            error,
-        })?;
+        let text = spectral::read_capped(path, gonio_files::input::MAX_SMALL_FILE_BYTES)?;
         let base = path.parent().unwrap_or(Path::new("."));
         Self::parse(&text, &path.display().to_string(), base)
     }
@@ -426,7 +423,7 @@ impl Scene {
     fn parse(text: &str, origin: &str, base: &Path) -> Result<Scene, SceneError> {
         let file: SceneFile = toml::from_str(text).map_err(|e| SceneError::Parse {
             origin: origin.to_string(),
-            message: e.to_string(),
+            message: crate::toml_error::one_line(text, &e),
         })?;
         file.setup.validate()?;
         if file.scan.theta_l_deg.is_empty() {

@@ -232,7 +232,7 @@ fn bad_tables_name_file_and_line() {
         std::fs::write(&scene, text).unwrap();
         let err = Scene::load(&scene).unwrap_err().to_string();
         assert!(
-            err.contains("/dev/zero") && err.contains("bytes: not a"),
+            err.contains("/dev/zero") && err.contains("not a regular file (a character device)"),
             "{err}"
         );
     }

@@ -19,6 +19,7 @@ use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 
+use gonio_files::input::{open_input, read_input, read_input_to_string, MAX_SMALL_FILE_BYTES};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -120,21 +121,32 @@ impl Sidecar {
         self.shutter_s * self.iso.unwrap_or(100.0) / 100.0
     }
 
-    fn validate(&self, path: &Path) -> Result<(), CaptureError> {
+    /// Checks every value against its physical range (docs/ARCHITECTURE.md, "File
+    /// formats"), and θL against the `theta_l_<θL>` directory `image` is in, if it is
+    /// in one. `path` is the sidecar's.
+    fn validate(&self, path: &Path, image: &Path) -> Result<(), CaptureError> {
         let bad = |field: &'static str, reason: String| CaptureError::InvalidSidecar {
             path: path.to_path_buf(),
             field,
             reason,
         };
-        if !(self.shutter_s.is_finite() && self.shutter_s > 0.0 && self.shutter_s <= 3600.0) {
+        let (shortest, longest) = SHUTTER_RANGE_S;
+        if !(self.shutter_s.is_finite() && (shortest..=longest).contains(&self.shutter_s)) {
             return Err(bad(
                 "shutter_s",
-                format!("{} is not a time in (0, 3600] s", self.shutter_s),
+                format!(
+                    "{} is not an exposure time in [{shortest:e}, {longest}] s",
+                    self.shutter_s
+                ),
             ));
         }
         if let Some(iso) = self.iso {
-            if !(iso.is_finite() && iso > 0.0) {
-                return Err(bad("iso", format!("{iso} is not a positive number")));
+            let (lowest, highest) = ISO_RANGE;
+            if !(iso.is_finite() && (lowest..=highest).contains(&iso)) {
+                return Err(bad(
+                    "iso",
+                    format!("{iso} is not an ISO speed in [{lowest}, {highest}]"),
+                ));
             }
         }
         if !(self.theta_l.is_finite() && self.theta_l.abs() <= 180.0) {
@@ -142,6 +154,14 @@ impl Sidecar {
                 "theta_l",
                 format!("{} is not an angle in [-180, 180] degrees", self.theta_l),
             ));
+        }
+        if let Some((dir, theta_l)) = theta_l_directory(image) {
+            if (self.theta_l - theta_l).abs() > THETA_DIR_TOLERANCE_DEG {
+                return Err(bad(
+                    "theta_l",
+                    format!("{} but the frame is in {dir}/ (θL {theta_l})", self.theta_l),
+                ));
+            }
         }
         if let Some(bits) = self.significant_bits {
             if !(1..=16).contains(&bits) {
@@ -156,13 +176,36 @@ impl Sidecar {
             ("white_level", self.white_level),
         ] {
             if let Some(v) = level {
-                if !(v.is_finite() && v >= 0.0) {
-                    return Err(bad(field, format!("{v} is not a non-negative count")));
+                if !(v.is_finite() && (0.0..=MAX_COUNT).contains(&v)) {
+                    return Err(bad(
+                        field,
+                        format!("{v} is not a count in [0, {MAX_COUNT}]"),
+                    ));
                 }
             }
         }
         Ok(())
     }
+}
+
+/// Exposure times a sidecar may state, seconds: a microsecond to an hour.
+pub const SHUTTER_RANGE_S: (f64, f64) = (1e-6, 3600.0);
+/// ISO speeds a sidecar may state.
+pub const ISO_RANGE: (f64, f64) = (25.0, 409_600.0);
+/// Largest count a sidecar level may state (16-bit files).
+const MAX_COUNT: f64 = u16::MAX as f64;
+/// How far a sidecar's θL may be from its directory's name, written to 0.1°.
+const THETA_DIR_TOLERANCE_DEG: f64 = 0.05 + 1e-6;
+
+/// The name of the `theta_l_<θL>` directory `image` is in, and its θL.
+fn theta_l_directory(image: &Path) -> Option<(String, f64)> {
+    let dir = image.parent()?.file_name()?.to_str()?;
+    let theta_l = dir
+        .strip_prefix("theta_l_")?
+        .parse::<f64>()
+        .ok()
+        .filter(|t| t.is_finite())?;
+    Some((dir.to_owned(), theta_l))
 }
 
 /// Errors reading a capture.
@@ -236,7 +279,7 @@ pub fn sidecar_path(image: &Path) -> PathBuf {
 /// Reads and validates the sidecar of `image`.
 pub fn read_sidecar(image: &Path) -> Result<Sidecar, CaptureError> {
     let path = sidecar_path(image);
-    let text = match fs::read_to_string(&path) {
+    let text = match read_input_to_string(&path, MAX_SMALL_FILE_BYTES) {
         Ok(text) => text,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
             return Err(CaptureError::MissingSidecar {
@@ -251,7 +294,7 @@ pub fn read_sidecar(image: &Path) -> Result<Sidecar, CaptureError> {
             path: path.clone(),
             error,
         })?;
-    sidecar.validate(&path)?;
+    sidecar.validate(&path, image)?;
     Ok(sidecar)
 }
 
@@ -310,15 +353,14 @@ impl Frame {
         path: &Path,
         select: impl FnOnce(usize, usize) -> Result<Vec<Range<usize>>, E>,
     ) -> Result<Frame, E> {
-        let file_len = match fs::metadata(path) {
-            Ok(meta) if meta.is_file() => meta.len(),
-            _ => {
-                return Err(CaptureError::Image {
-                    path: path.to_path_buf(),
-                    reason: "no such file".into(),
-                }
-                .into())
+        // A regular file only (a device or FIFO is refused unopened); its size is
+        // checked below with the reason.
+        let file_len = match open_input(path, u64::MAX).and_then(|file| file.metadata()) {
+            Ok(meta) => meta.len(),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                return Err(image_error(path, "no such file").into())
             }
+            Err(e) => return Err(image_error(path, e).into()),
         };
         if file_len > max_file_bytes() {
             return Err(too_large(
@@ -642,15 +684,16 @@ type TiffDecoder = tiff::decoder::Decoder<std::io::BufReader<fs::File>>;
 
 /// A TIFF decoder on `path` with [`tiff_limits`].
 fn open_tiff(path: &Path) -> Result<TiffDecoder, tiff::TiffError> {
-    let file = fs::File::open(path)?;
+    let file = open_input(path, max_file_bytes())?;
     Ok(tiff::decoder::Decoder::new(std::io::BufReader::new(file))?.with_limits(tiff_limits()))
 }
 
-/// The error of an image `path` that cannot be read or written, for `reason`.
+/// The error of an image `path` that cannot be read or written, for `reason` (on one
+/// line: rawler's messages may span several).
 fn image_error(path: &Path, reason: impl std::fmt::Display) -> CaptureError {
     CaptureError::Image {
         path: path.to_path_buf(),
-        reason: reason.to_string(),
+        reason: guard::one_line(&reason.to_string()),
     }
 }
 
@@ -698,8 +741,8 @@ fn decode_strip_rows(
 
 fn decode_tiff(path: &Path) -> Result<Decoded, CaptureError> {
     use image::DynamicImage;
-    let mut reader = image::ImageReader::open(path)
-        .map_err(|e| image_error(path, e))?
+    let file = open_input(path, max_file_bytes()).map_err(|e| image_error(path, e))?;
+    let mut reader = image::ImageReader::new(std::io::BufReader::new(file))
         .with_guessed_format()
         .map_err(|e| image_error(path, e))?;
     let mut limits = image::Limits::default();
@@ -765,7 +808,7 @@ fn decode_raw(path: &Path) -> Result<Decoded, CaptureError> {
         path: path.to_path_buf(),
         reason,
     };
-    let bytes = fs::read(path).map_err(|e| image_error(path, e))?;
+    let bytes = read_input(path, max_file_bytes()).map_err(|e| image_error(path, e))?;
     // Only the containers of the formats above reach rawler: TIFF-structured files
     // (checked below), CR3 (ISO BMFF) and RAF. rawler's other readers (JPEG/Exif, MRW,
     // X3F, CRW…) are for formats not listed, and some allocate or spin on a damaged file.

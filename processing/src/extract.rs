@@ -401,7 +401,9 @@ pub fn read_setup(path: &Path) -> Result<Setup, ExtractError> {
         path: path.to_path_buf(),
         reason,
     };
-    let text = fs::read_to_string(path).map_err(|e| setup_error(format!("cannot read: {e}")))?;
+    let text =
+        gonio_files::input::read_input_to_string(path, gonio_files::input::MAX_SMALL_FILE_BYTES)
+            .map_err(|e| setup_error(format!("cannot read: {e}")))?;
     let setup: Setup =
         serde_json::from_str(&text).map_err(|e| setup_error(format!("invalid setup JSON: {e}")))?;
     setup.validate().map_err(|error| ExtractError::Geometry {

@@ -3,6 +3,7 @@
 //! panic's message as an error instead of unwinding further. While a closure runs under
 //! [`catch`], the hook of [`install_quiet_panic_hook`] prints nothing, so a caught
 //! panic (ours, or one a third-party decoder catches itself) never reaches stderr.
+//! [`one_line`] keeps such messages, and any error a user sees, on one line.
 
 use std::cell::Cell;
 use std::panic::{self, AssertUnwindSafe};
@@ -23,10 +24,20 @@ pub fn catch<T>(f: impl FnOnce() -> T) -> Result<T, String> {
     result.map_err(|payload| {
         payload
             .downcast_ref::<&str>()
-            .map(|s| (*s).to_owned())
-            .or_else(|| payload.downcast_ref::<String>().cloned())
+            .map(|s| one_line(s))
+            .or_else(|| payload.downcast_ref::<String>().map(|s| one_line(s)))
             .unwrap_or_else(|| "unknown panic".to_owned())
     })
+}
+
+/// `text` on one line: its lines trimmed and joined by a space. Messages of
+/// third-party code (a decoder's error, a panic) may span several.
+pub fn one_line(text: &str) -> String {
+    text.lines()
+        .map(str::trim)
+        .filter(|line| !line.is_empty())
+        .collect::<Vec<_>>()
+        .join(" ")
 }
 
 /// Whether the current thread runs inside [`catch`].
@@ -61,6 +72,10 @@ mod tests {
         assert_eq!(
             catch(|| std::panic::panic_any(5u8)).unwrap_err(),
             "unknown panic"
+        );
+        assert_eq!(
+            catch(|| -> u8 { panic!("Caught a panic.\nPlease file a bug\n") }).unwrap_err(),
+            "Caught a panic. Please file a bug"
         );
         let nested = catch(|| catch(|| panic!("inner")).unwrap_err());
         assert_eq!(nested.as_deref(), Ok("inner"));

@@ -366,12 +366,19 @@ pub fn read_exr_rgb(path: &Path) -> Result<(usize, usize, Vec<f32>), HdrError> {
         path: path.to_path_buf(),
         reason,
     };
-    let file_len = std::fs::metadata(path)
+    let open = || {
+        gonio_files::input::open_input(path, max_exr_bytes())
+            .map(std::io::BufReader::new)
+            .map_err(|e| exr_error(e.to_string()))
+    };
+    let file = open()?;
+    let file_len = file
+        .get_ref()
+        .metadata()
         .map_err(|e| exr_error(e.to_string()))?
         .len();
     let read = || -> std::result::Result<(usize, usize, Vec<f32>), HdrError> {
-        let file = std::fs::File::open(path).map_err(|e| exr_error(e.to_string()))?;
-        let meta = exr::meta::MetaData::read_from_buffered(std::io::BufReader::new(file), true)
+        let meta = exr::meta::MetaData::read_from_buffered(file, true)
             .map_err(|e| exr_error(e.to_string()))?;
         for header in &meta.headers {
             let (w, h) = (header.layer_size.x() as u64, header.layer_size.y() as u64);
@@ -406,7 +413,7 @@ pub fn read_exr_rgb(path: &Path) -> Result<(usize, usize, Vec<f32>), HdrError> {
             )
             .first_valid_layer()
             .all_attributes()
-            .from_file(path)
+            .from_buffered(open()?)
             .map_err(|e| exr_error(e.to_string()))?;
         let size = image.layer_data.size;
         let (_, rgb) = image.layer_data.channel_data.pixels;
@@ -418,6 +425,14 @@ pub fn read_exr_rgb(path: &Path) -> Result<(usize, usize, Vec<f32>), HdrError> {
 
 /// Largest ratio of decoded to stored bytes an OpenEXR file may claim.
 const EXR_MAX_COMPRESSION_RATIO: u64 = 1032;
+
+/// Largest OpenEXR file read at all: four float32 channels per allowed pixel (see
+/// [`capture::max_pixels`]) plus 64 MiB of headers and attributes.
+fn max_exr_bytes() -> u64 {
+    capture::max_pixels()
+        .saturating_mul(16)
+        .saturating_add(64 << 20)
+}
 
 fn saturating_i32(n: usize) -> i32 {
     i32::try_from(n).unwrap_or(i32::MAX)

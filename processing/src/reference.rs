@@ -116,12 +116,17 @@ pub struct Reference {
     rows: Vec<(f64, Spline)>,
 }
 
+/// Largest reference CSV read (a goniospectrophotometer's grid takes a few megabytes).
+const MAX_CSV_BYTES: u64 = 256 << 20;
+
 impl Reference {
     /// Reads a reference CSV and converts it with the built-in camera model.
     pub fn read_csv(path: &Path) -> Result<Self, ReferenceError> {
-        let file = std::fs::File::open(path).map_err(|error| ReferenceError::Io {
-            path: path.to_path_buf(),
-            error,
+        let file = gonio_files::input::open_input(path, MAX_CSV_BYTES).map_err(|error| {
+            ReferenceError::Io {
+                path: path.to_path_buf(),
+                error,
+            }
         })?;
         Self::from_reader(file, &path.display().to_string(), &CameraModel::builtin())
     }

@@ -149,12 +149,16 @@ impl SamplesError {
     }
 }
 
+/// Largest samples CSV read (a 63-θL full-frame scan writes about 15 MB).
+const MAX_CSV_BYTES: u64 = 1 << 30;
+
 /// Reads a samples CSV file.
 pub fn read_csv(path: &Path) -> Result<Vec<Sample>, SamplesError> {
-    let file = File::open(path).map_err(|error| SamplesError::Io {
-        path: path.display().to_string(),
-        error,
-    })?;
+    let file =
+        gonio_files::input::open_input(path, MAX_CSV_BYTES).map_err(|error| SamplesError::Io {
+            path: path.display().to_string(),
+            error,
+        })?;
     read_csv_from(file).map_err(|e| e.in_file(path))
 }
 

@@ -2,6 +2,8 @@
 //! field, the queue (two concurrent POSTs run one after the other), operator controls,
 //! and the page and API description.
 
+use std::fs::Permissions;
+use std::os::unix::fs::PermissionsExt;
 use std::time::Duration;
 
 use gonio_tests::{emulator_config, temp_dir, Daemon, TOKEN};
@@ -14,8 +16,26 @@ fn scan_count(daemon: &Daemon) -> usize {
 #[test]
 fn mutating_routes_need_the_token_and_change_nothing_without_it() {
     let dir = temp_dir("api-auth");
+    // A data directory open to all, as an earlier version left it: made private.
+    let data = dir.join("data");
+    std::fs::create_dir_all(&data).unwrap();
+    std::fs::set_permissions(&data, Permissions::from_mode(0o755)).unwrap();
     let daemon = Daemon::start(&dir, &emulator_config(0.01));
     assert_eq!(daemon.get("/api/health").json, json!({"status": "ok"}));
+    let mode =
+        |path: &std::path::Path| std::fs::metadata(path).unwrap().permissions().mode() & 0o777;
+    assert_eq!(mode(&data), 0o700);
+    for entry in std::fs::read_dir(&data).unwrap() {
+        let path = entry.unwrap().path();
+        if path
+            .file_name()
+            .unwrap()
+            .to_string_lossy()
+            .starts_with("gonio.sqlite")
+        {
+            assert_eq!(mode(&path), 0o600, "{}", path.display());
+        }
+    }
     let body = json!({"sample": "gold", "theta_l": [-20]}).to_string();
     for token in [None, Some("wrong-token"), Some("")] {
         let answer = daemon.post_raw("/api/scans", token, &body);

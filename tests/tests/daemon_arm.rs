@@ -134,6 +134,17 @@ fn stock_board_waits_with_each_setting_then_for_the_declared_position() {
     assert_eq!(daemon.post_raw(path, None, r#"{"angle": 0}"#).status, 401);
     let bad = daemon.post_raw(path, Some(TOKEN), r#"{"angle": "zero"}"#);
     assert_eq!((bad.status, &bad.json["field"]), (422, &json!("angle")));
+    // Off the travel [−180, 0] (a scan after +10 declared at 0 once ended `done` with
+    // Ks 13× too small).
+    for angle in [10.0, 0.5, -180.5, 359.0] {
+        let off = daemon.post(path, &json!({ "angle": angle }));
+        assert_eq!(
+            (off.status, &off.json["field"]),
+            (422, &json!("angle")),
+            "{angle}: {:?}",
+            off.json
+        );
+    }
     let declared = daemon.post(path, &json!({"angle": 0.0}));
     assert_eq!(declared.status, 200, "{:?}", declared.json);
     let done = daemon.wait_state(id, &["done", "failed"], Duration::from_secs(120));

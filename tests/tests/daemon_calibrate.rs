@@ -58,6 +58,20 @@ fn a_calibration_becomes_the_setup_of_later_scans() {
     assert!((arm - 0.3).abs() < 0.15, "{c}");
     let stored = dir.join("data").join("setup.json");
     assert!(stored.is_file());
+    // Twelve at once all succeed (they once shared a temporary name: "writing
+    // DATA/setup.json: No such file or directory" in about a third).
+    let path = format!("/api/scans/{first}/calibrate");
+    std::thread::scope(|scope| {
+        let calls: Vec<_> = (0..12)
+            .map(|_| scope.spawn(|| daemon.post(&path, &json!({}))))
+            .collect();
+        for call in calls {
+            let answer = call.join().unwrap();
+            assert_eq!(answer.status, 200, "{:?}", answer.json);
+        }
+    });
+    let whole: Value = serde_json::from_slice(&std::fs::read(&stored).unwrap()).unwrap();
+    assert_eq!(whole["calibration"]["scan"], first);
 
     // The next scan is set up with the calibration, and its fit recovers the scene
     // where the first one's could not.
@@ -82,5 +96,19 @@ fn a_calibration_becomes_the_setup_of_later_scans() {
     let forgotten = daemon.delete("/api/setup");
     assert_eq!(forgotten.json, json!({"removed": true}));
     assert!(!stored.exists());
+
+    // A scan that cannot be calibrated: 422 naming the file relative to the scan, no
+    // path of the server.
+    let scan_dir = daemon.data.join(format!("scans/{first}"));
+    std::fs::remove_file(scan_dir.join("setup.json")).unwrap();
+    let refused = daemon.post(&format!("/api/scans/{first}/calibrate"), &json!({}));
+    assert_eq!(refused.status, 422, "{:?}", refused.json);
+    let message = refused.json["error"].as_str().unwrap();
+    assert!(message.contains("setup.json"), "{message}");
+    let data = daemon.data.display().to_string();
+    assert!(
+        !message.contains(&data) && !message.contains("/scans/"),
+        "{message}"
+    );
     std::fs::remove_dir_all(dir).ok();
 }

@@ -373,7 +373,9 @@ fn an_amplifying_sweep_is_refused_before_anything_is_inserted() {
     std::fs::remove_dir_all(dir).ok();
 }
 
-/// Links in a scan directory are neither served nor listed.
+/// Links in a scan directory are neither served nor listed; a FIFO is refused at
+/// once (opening it once blocked a thread for good: ~530 of them starved every route
+/// but health).
 #[test]
 fn the_files_route_follows_no_link() {
     let dir = temp_dir("harden-links");
@@ -386,10 +388,22 @@ fn the_files_route_follows_no_link() {
     let scan_dir = daemon.data.join(format!("scans/{id}"));
     std::os::unix::fs::symlink(secret.join("shadow"), scan_dir.join("shadow.csv")).unwrap();
     std::os::unix::fs::symlink(&secret, scan_dir.join("etc")).unwrap();
-    for path in ["shadow.csv", "etc/shadow"] {
+    let fifo = scan_dir.join("fifo.csv");
+    assert!(std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap()
+        .success());
+    for path in ["shadow.csv", "etc/shadow", "fifo.csv"] {
+        let asked = Instant::now();
         let answer = daemon.get(&format!("/api/scans/{id}/files/{path}"));
         assert_eq!(answer.status, 404, "{path}: {:?}", answer.bytes);
         assert!(answer.json["error"].is_string());
+        assert!(
+            asked.elapsed() < Duration::from_secs(10),
+            "{path} took {:?}",
+            asked.elapsed()
+        );
     }
     let listing = daemon.get(&format!("/api/scans/{id}/files")).json;
     let names: Vec<&str> = listing
@@ -452,14 +466,19 @@ fn host_content_type_error_shape_and_scheme() {
     assert_eq!(status, 201, "{body}");
 
     // axum's own rejections, in the API's JSON shape (on a route that needs the
-    // token, the token is checked before the method).
+    // token, the token is checked before the method), and hyper's own answers to what
+    // it cannot parse (a bad header, a URI too long), in the same shape.
+    let long_uri = format!("GET /{} HTTP/1.1", "a".repeat(70_000));
     for (head, want) in [
         ("GET /api/scans/abc HTTP/1.1", 400),
         ("GET /api/nothing-here HTTP/1.1", 404),
         ("DELETE /api/hardware HTTP/1.1", 405),
         ("DELETE /api/scans HTTP/1.1", 401),
+        ("GET /api/scans HTTP/1.1\r\nBad Header", 400),
+        (&long_uri, 414),
     ] {
         let (status, body) = request(&format!("{head}\r\nHost: {addr}"), "");
+        let head = &head[..head.len().min(40)];
         assert_eq!(status, want, "{head}: {body}");
         let value: Value = serde_json::from_str(&body).unwrap_or_else(|_| panic!("{head}: {body}"));
         assert!(
@@ -496,7 +515,9 @@ fn host_content_type_error_shape_and_scheme() {
 }
 
 /// Event streams beyond `max_event_streams` get a clear 503 in the API's error shape;
-/// the streams already open go on.
+/// the streams already open go on, and end with the scan's final state (they once
+/// stayed open until another event of that scan came), as does a stream opened on an
+/// ended scan.
 #[test]
 fn event_streams_beyond_the_cap_get_503() {
     use std::io::{Read, Write};
@@ -544,16 +565,37 @@ fn event_streams_beyond_the_cap_get_503() {
             .is_some_and(|e| e.contains("max_event_streams")),
         "{body}"
     );
-    // The open streams still deliver: a cancel reaches both.
+    // The open streams still deliver: a cancel reaches both, and ends them.
     daemon.post(&format!("/api/scans/{id}/cancel"), &json!({}));
-    for (mut stream, _) in streams {
-        let mut seen = String::new();
+    // The body is chunked: it ends with the last, empty chunk.
+    let read_to_end = |mut stream: TcpStream| {
+        stream
+            .set_read_timeout(Some(Duration::from_secs(10)))
+            .unwrap();
+        let mut seen = Vec::new();
         let mut chunk = [0u8; 4096];
-        while !seen.contains("cancelled") {
-            let n = stream.read(&mut chunk).unwrap();
-            assert!(n > 0, "stream ended without the cancel: {seen}");
-            seen.push_str(&String::from_utf8_lossy(&chunk[..n]));
+        while !seen.ends_with(b"\r\n0\r\n\r\n") {
+            match stream.read(&mut chunk) {
+                Ok(n) if n > 0 => seen.extend_from_slice(&chunk[..n]),
+                other => panic!(
+                    "the stream did not end: {other:?}, {}",
+                    String::from_utf8_lossy(&seen)
+                ),
+            }
         }
+        String::from_utf8_lossy(&seen).into_owned()
+    };
+    for (stream, _) in streams {
+        let seen = read_to_end(stream);
+        assert!(
+            seen.contains("cancelled"),
+            "stream ended without the cancel: {seen}"
+        );
     }
+    let (stream, head) = open_stream();
+    assert!(head.starts_with("HTTP/1.1 200"), "{head}");
+    let seen = read_to_end(stream);
+    assert_eq!(seen.matches("event: progress").count(), 1, "{seen}");
+    assert!(seen.contains("cancelled"), "{seen}");
     std::fs::remove_dir_all(dir).ok();
 }

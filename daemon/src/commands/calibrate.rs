@@ -3,7 +3,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use gonio_drivers::atomic_file::write_atomically;
+use gonio_files::output::write_atomically;
 use gonio_processing::calibrate::{self, CalibrateOptions, Calibration, Estimate};
 use gonio_processing::extract::read_setup;
 

@@ -5,6 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
+use gonio_files::input::{read_input_to_string, MAX_SMALL_FILE_BYTES};
 use gonio_mock_hw::grbl::{GrblConfig, GrblEmulator};
 use gonio_mock_hw::world::World;
 
@@ -29,7 +30,7 @@ pub struct Args {
 
 /// Reads and checks an emulator configuration file.
 fn load_config(path: &Path) -> anyhow::Result<GrblConfig> {
-    let text = std::fs::read_to_string(path)
+    let text = read_input_to_string(path, MAX_SMALL_FILE_BYTES)
         .with_context(|| format!("reading emulator config {}", path.display()))?;
     GrblConfig::from_toml_str(&text).with_context(|| format!("emulator config {}", path.display()))
 }

@@ -4,7 +4,8 @@
 use std::path::PathBuf;
 
 use anyhow::{bail, Context};
-use gonio_drivers::atomic_file::write_atomically;
+use gonio_files::input::{read_input_to_string, MAX_SMALL_FILE_BYTES};
+use gonio_files::output::write_atomically;
 use gonio_processing::color::CameraModel;
 use gonio_processing::export;
 use gonio_processing::fit::FitResult;
@@ -38,7 +39,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let text = std::fs::read_to_string(&args.fit)
+    let text = read_input_to_string(&args.fit, MAX_SMALL_FILE_BYTES)
         .with_context(|| format!("reading {}", args.fit.display()))?;
     let fit: FitResult = serde_json::from_str(&text)
         .with_context(|| format!("{} is not a fit JSON", args.fit.display()))?;

@@ -1,16 +1,16 @@
-//! Where the offline commands write their results. A regular file (or a new path) is
-//! written to a temporary file beside it and renamed over it, so a reader never sees
-//! half of it; anything else (a device such as `/dev/null`, a FIFO) is written in place.
-//! On failure only the temporary is removed: a path the command did not create is
-//! never removed. A command that writes a directory of results through a writer it
-//! does not control (`gonio study`) writes them into a temporary directory first, then
-//! each file into place as above.
+//! Where the offline commands write their results: through
+//! `gonio_files::output::write_atomically_with`, so a regular file (or a new path) is
+//! written to a temporary file beside it and renamed over it, a device (`/dev/null`) or
+//! a FIFO is written in place, a directory is refused; on failure only the temporary is
+//! removed. A command that writes a directory of results through a writer it does not
+//! control (`gonio study`) writes them into a temporary directory first, then each file
+//! into place as above.
 
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use anyhow::{anyhow, bail, Context};
-use gonio_drivers::atomic_file::write_atomically_with;
+use anyhow::{anyhow, Context};
+use gonio_files::output::{write_atomically_with, AtomicWriteError};
 
 use crate::interrupt::RemoveOnInterrupt;
 
@@ -19,15 +19,13 @@ pub fn write_output<E: std::fmt::Display>(
     path: &Path,
     write: impl FnOnce(&Path) -> Result<(), E>,
 ) -> anyhow::Result<()> {
-    let failed = |reason: String| anyhow!("writing {}: {reason}", path.display());
-    match fs::metadata(path) {
-        Ok(meta) if meta.is_dir() => bail!("writing {}: it is a directory", path.display()),
-        Ok(meta) if !meta.is_file() => return write(path).map_err(|e| failed(e.to_string())),
-        _ => {}
-    }
-    // A link to a regular file: replace the file it names, not the link.
-    let target = fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf());
-    write_atomically_with(&target, write).map_err(|e| failed(e.to_string()))
+    write_atomically_with(path, write).map_err(|err| {
+        let reason = match err {
+            AtomicWriteError::Write(err) => err.to_string(),
+            AtomicWriteError::Io(err) => err.to_string(),
+        };
+        anyhow!("writing {}: {reason}", path.display())
+    })
 }
 
 /// Writes files into directory `out` (created if missing) through `write`, which gets a

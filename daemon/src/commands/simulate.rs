@@ -5,8 +5,8 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use gonio_drivers::atomic_file::write_atomically;
 use gonio_drivers::camera_choice::format_shutter;
+use gonio_files::output::write_atomically;
 use gonio_mock_hw::render::{self, reference};
 use gonio_mock_hw::scene::Scene;
 use gonio_processing::geometry::Setup;

@@ -76,9 +76,6 @@ use crate::{Arm, ArmState, ArmStatus, DeviceError, EmergencyStop, LiveAngle};
 use link::{Link, POLL_INTERVAL};
 use session::{AngleWatch, Patience, Session, FEED_HOLD, SOFT_RESET};
 
-/// The largest angle an operator may declare, degrees.
-const MAX_DECLARED_DEG: f64 = 360.0;
-
 /// The stop handle: a clone of the port handle, replaced on every reconnect.
 struct GrblStop {
     port: Mutex<Option<Box<dyn SerialPort>>>,
@@ -706,12 +703,14 @@ impl Arm for GrblArm {
                     .into(),
             ));
         }
-        if !(angle_deg.is_finite() && angle_deg.abs() <= MAX_DECLARED_DEG) {
+        // The arm is somewhere on its travel: [−$130, 0], the switch at 0.
+        let (min, max) = (-self.config.max_travel_deg, 0.0);
+        if !(angle_deg.is_finite() && (min..=max).contains(&angle_deg)) {
             return Err(DeviceError::OutOfRange {
-                what: "declared arm angle (degrees)".into(),
+                what: "declared arm angle (degrees, on the travel)".into(),
                 value: angle_deg,
-                min: -MAX_DECLARED_DEG,
-                max: MAX_DECLARED_DEG,
+                min,
+                max,
             });
         }
         self.prepare()?;

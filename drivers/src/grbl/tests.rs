@@ -282,6 +282,18 @@ fn declared_position_where_the_controller_does_not_home() {
     let mut arm = GrblArm::open(&fake.path, off).unwrap();
     assert_eq!(arm.status().unwrap().state, ArmState::NeedsPosition);
     assert!(matches!(arm.home(), Err(DeviceError::PositionUnknown(_))));
+    // Off the travel [−$130, 0]: refused unsent.
+    let sent = fake.received().len();
+    for angle in [10.0, 0.5, -180.5, 359.0, f64::NAN] {
+        assert!(
+            matches!(
+                arm.declare_position(angle),
+                Err(DeviceError::OutOfRange { min, max, .. }) if (min, max) == (-180.0, 0.0)
+            ),
+            "{angle}"
+        );
+    }
+    assert_eq!(fake.received().len(), sent);
     arm.declare_position(-12.0).unwrap();
     arm.home().unwrap();
     arm.move_to(-20.0).unwrap();

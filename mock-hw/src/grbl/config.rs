@@ -143,8 +143,9 @@ impl Default for GrblConfig {
 /// Why a configuration text was refused.
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
-    #[error(transparent)]
-    Toml(#[from] toml::de::Error),
+    /// The text is no TOML of a configuration (position and reason, on one line).
+    #[error("{0}")]
+    Toml(String),
     #[error("{0}")]
     Problems(String),
 }
@@ -152,7 +153,8 @@ pub enum ConfigError {
 impl GrblConfig {
     /// Parse a TOML configuration and check it.
     pub fn from_toml_str(text: &str) -> Result<GrblConfig, ConfigError> {
-        let config: GrblConfig = toml::from_str(text)?;
+        let config: GrblConfig = toml::from_str(text)
+            .map_err(|e| ConfigError::Toml(crate::toml_error::one_line(text, &e)))?;
         let problems = config.problems();
         if problems.is_empty() {
             Ok(config)

@@ -73,18 +73,30 @@ impl Pty {
     }
 }
 
-/// Point `link` at `target`, replacing any previous link atomically.
+/// Point `link` at `target`, replacing a previous link atomically (a fresh temporary
+/// link renamed over it); anything at `link` other than a link is refused, never
+/// replaced.
 fn point_link(link: &Path, target: &Path) -> io::Result<()> {
-    let mut tmp = link.as_os_str().to_owned();
-    tmp.push(".new");
-    let tmp = Path::new(&tmp);
-    let _ = std::fs::remove_file(tmp);
-    std::os::unix::fs::symlink(target, tmp)?;
-    std::fs::rename(tmp, link)
+    if let Ok(meta) = std::fs::symlink_metadata(link) {
+        if !meta.file_type().is_symlink() {
+            return Err(io::Error::new(
+                io::ErrorKind::AlreadyExists,
+                format!("{} exists and is not a symlink", link.display()),
+            ));
+        }
+    }
+    let (temp, ()) =
+        gonio_files::output::create_beside(link, |temp| std::os::unix::fs::symlink(target, temp))?;
+    std::fs::rename(&temp, link).inspect_err(|_| {
+        let _ = std::fs::remove_file(&temp);
+    })
 }
 
-/// Remove the device link (the device is unplugged).
+/// Remove the device link (the device is unplugged); anything else at its path is not
+/// ours and stays.
 pub(crate) fn remove_link(link: &Path) {
     // Already gone is fine: the device is absent either way.
-    let _ = std::fs::remove_file(link);
+    if std::fs::symlink_metadata(link).is_ok_and(|meta| meta.file_type().is_symlink()) {
+        let _ = std::fs::remove_file(link);
+    }
 }

@@ -147,7 +147,7 @@ pub struct Table {
 
 impl Table {
     fn read(path: &Path, domain: &CameraDomain) -> Result<Self, SceneError> {
-        let text = spectral::read_capped(path, MAX_MEASURED_BYTES, "a measured table")?;
+        let text = spectral::read_capped(path, MAX_MEASURED_BYTES)?;
         let what = path.display().to_string();
         let bad = |line: usize, reason: String| SceneError::Table {
             what: what.clone(),

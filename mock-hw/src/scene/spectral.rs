@@ -46,31 +46,20 @@ pub fn nikon_d5100() -> [Spectrum; 3] {
 /// 390–730 nm in 10 nm steps.
 /// At most [`MAX_TABLE_BYTES`] are read: a scene may name any path (even `/dev/zero`).
 pub fn read_table<const N: usize>(path: &Path) -> Result<[Spectrum; N], SceneError> {
-    let text = read_capped(path, MAX_TABLE_BYTES, "a spectral table")?;
+    let text = read_capped(path, MAX_TABLE_BYTES)?;
     parse_table::<N>(&text, &path.display().to_string())
 }
 
 /// Largest spectral table file read (35 rows of a few numbers need far less).
 const MAX_TABLE_BYTES: u64 = 1 << 20;
 
-/// The text of the file at `path`, refused when longer than `max_bytes` (never read
-/// beyond them), `what` naming what it should have been.
-pub fn read_capped(path: &Path, max_bytes: u64, what: &str) -> Result<String, SceneError> {
-    use std::io::Read;
-    let io_error = |error| SceneError::Io {
+/// The text of the input file at `path` (`gonio_files::input`: a regular file of at
+/// most `max_bytes`, never read beyond them).
+pub fn read_capped(path: &Path, max_bytes: u64) -> Result<String, SceneError> {
+    gonio_files::input::read_input_to_string(path, max_bytes).map_err(|error| SceneError::Io {
         path: path.to_path_buf(),
         error,
-    };
-    let mut text = String::new();
-    std::fs::File::open(path)
-        .and_then(|file| file.take(max_bytes + 1).read_to_string(&mut text))
-        .map_err(io_error)?;
-    if text.len() as u64 > max_bytes {
-        return Err(io_error(std::io::Error::other(format!(
-            "more than {max_bytes} bytes: not {what}"
-        ))));
-    }
-    Ok(text)
+    })
 }
 
 fn parse_table<const N: usize>(text: &str, what: &str) -> Result<[Spectrum; N], SceneError> {

@@ -54,9 +54,11 @@ impl ApiError {
 
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
+        // One line, whatever a cause's message holds.
+        let message = gonio_processing::guard::one_line(&self.message);
         let body = match self.field {
-            Some(field) => json!({ "error": self.message, "field": field }),
-            None => json!({ "error": self.message }),
+            Some(field) => json!({ "error": message, "field": field }),
+            None => json!({ "error": message }),
         };
         (self.status, Json(body)).into_response()
     }
@@ -77,6 +79,16 @@ impl From<FieldError> for ApiError {
             field: Some(err.field),
         }
     }
+}
+
+/// `message` with every path under `dirs` (most specific first) made relative to it,
+/// so that an answer shows no path of the server (`theta_l_-20.0/exp_00.json`, not
+/// `/srv/gonio-data/scans/3/theta_l_-20.0/exp_00.json`).
+fn without_server_paths(message: &str, dirs: &[&FsPath]) -> String {
+    dirs.iter().fold(message.to_owned(), |message, dir| {
+        let dir = dir.display().to_string();
+        message.replace(&format!("{dir}/"), "").replace(&dir, ".")
+    })
 }
 
 fn internal(err: impl std::fmt::Display) -> ApiError {
@@ -472,14 +484,16 @@ async fn calibrate_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResu
         ));
     }
     let (dir, data) = (shared.scan_dir(id), shared.config.data_dir.clone());
+    let (scan_dir, data_dir) = (dir.clone(), data.clone());
     let stored =
         tokio::task::spawn_blocking(move || calibration::calibrate_and_store(&dir, &data, id))
             .await
             .map_err(internal)?
             .map_err(|e| {
+                let message = format!("calibrating from scan {id}: {e:#}");
                 ApiError::new(
                     StatusCode::UNPROCESSABLE_ENTITY,
-                    format!("calibrating from scan {id}: {e:#}"),
+                    without_server_paths(&message, &[&scan_dir, &data_dir]),
                 )
             })?;
     Ok(Json(stored))
@@ -531,7 +545,7 @@ const DECLARE_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(30);
 /// the hardware lane applies it (`G92`), records it in the hardware log and queues the
 /// waiting scans again.
 async fn declare_arm_position(State(shared): AppState, body: Bytes) -> ApiResult<Json<Value>> {
-    let angle = validate::arm_position(&parse_json(&body)?)?;
+    let angle = validate::arm_position(&parse_json(&body)?, shared.config.arm.max_travel_deg)?;
     let (reply, answer) = std::sync::mpsc::sync_channel(1);
     {
         let mut pending = lock(&shared.arm_position);
@@ -710,20 +724,30 @@ async fn scan_events(
     // The publisher sends the view now: every event of the stream comes from it, in
     // order.
     shared.changed(id);
-    let stream = updates
-        .filter_map(move |msg| async move {
-            // A lagging subscriber skips views; the next one is complete anyway.
-            msg.ok().filter(|event| event.id == id)
-        })
-        .scan(false, move |ended, event| {
-            // The slot is released with the stream.
-            let _open = &open;
-            let item = (!*ended).then(|| {
-                *ended = event.state.is_final();
-                Ok(Event::default().event("progress").data(&*event.view))
-            });
-            async move { item }
-        });
+    // The stream ends right after the view of a final state, as it is sent (the slot
+    // is released with it).
+    let stream = futures_util::stream::unfold(
+        (updates, false, open, shared),
+        move |(mut updates, ended, open, shared)| async move {
+            if ended {
+                return None;
+            }
+            loop {
+                match updates.next().await? {
+                    Ok(event) if event.id == id => {
+                        let ended = event.state.is_final();
+                        let view = Event::default().event("progress").data(&*event.view);
+                        let item = Ok::<_, Infallible>(view);
+                        return Some((item, (updates, ended, open, shared)));
+                    }
+                    Ok(_) => {}
+                    // A lagging subscriber skipped views, maybe the final one: the
+                    // publisher sends this scan's view again.
+                    Err(_) => shared.changed(id),
+                }
+            }
+        },
+    );
     Ok(Sse::new(stream).keep_alive(KeepAlive::default()))
 }
 
@@ -810,16 +834,17 @@ async fn get_file(
     let dir = shared.scan_dir(id);
     let not_found = || ApiError::not_found(format!("file {rel:?} of scan {id}"));
     let wanted = rel.clone();
-    let (path, bytes) = tokio::task::spawn_blocking(move || {
-        let (path, mut file) = open_under(&dir, &wanted)?;
+    let bytes = tokio::task::spawn_blocking(move || {
+        let mut file = open_under(&dir, &wanted)?;
         let mut bytes = Vec::new();
         std::io::Read::read_to_end(&mut file, &mut bytes).ok()?;
-        Some((path, bytes))
+        Some(bytes)
     })
     .await
     .map_err(internal)?
     .ok_or_else(not_found)?;
-    Ok(([(header::CONTENT_TYPE, content_type(&path))], bytes).into_response())
+    let kind = content_type(FsPath::new(&rel));
+    Ok(([(header::CONTENT_TYPE, kind)], bytes).into_response())
 }
 
 /// The latest captured frame of a scan as a small PNG.
@@ -883,6 +908,17 @@ async fn inject_fault(State(shared): AppState, body: Bytes) -> ApiResult<Json<Va
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn answers_show_paths_relative_to_the_scan_or_data_directory() {
+        let (scan, data) = (FsPath::new("/srv/data/scans/3"), FsPath::new("/srv/data"));
+        let message = "/srv/data/scans/3/theta_l_-20.0/exp_00.json: sidecar field 'iso'; \
+                       writing /srv/data/setup.json; reading /srv/data/scans/3";
+        assert_eq!(
+            without_server_paths(message, &[scan, data]),
+            "theta_l_-20.0/exp_00.json: sidecar field 'iso'; writing setup.json; reading ."
+        );
+    }
 
     #[test]
     fn host_check_answers_the_bind_address_localhost_and_allowed_names() {

@@ -56,6 +56,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use gonio_drivers::grbl::ArmAxis;
+use gonio_files::input::{read_input_to_string, MAX_SMALL_FILE_BYTES};
 use gonio_processing::geometry::Setup;
 use serde::Deserialize;
 
@@ -305,14 +306,15 @@ fn default_iso() -> u32 {
 impl Config {
     /// Reads and checks a configuration file.
     pub fn load(path: &Path) -> anyhow::Result<Self> {
-        let text = std::fs::read_to_string(path)
+        let text = read_input_to_string(path, MAX_SMALL_FILE_BYTES)
             .with_context(|| format!("reading config {}", path.display()))?;
         Self::from_toml_str(&text).with_context(|| format!("config {}", path.display()))
     }
 
     /// Parses and checks configuration text.
     pub fn from_toml_str(text: &str) -> anyhow::Result<Self> {
-        let config: Config = toml::from_str(text)?;
+        let config: Config = toml::from_str(text)
+            .map_err(|e| anyhow::anyhow!(gonio_mock_hw::toml_error::one_line(text, &e)))?;
         config.check()?;
         Ok(config)
     }

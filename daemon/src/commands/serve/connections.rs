@@ -19,6 +19,7 @@ use axum::body::{Body, Bytes};
 use axum::Router;
 use hyper::body::Incoming;
 use hyper_util::rt::{TokioIo, TokioTimer};
+use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
 use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::Notify;
 use tower::ServiceExt;
@@ -341,7 +342,7 @@ async fn serve_connection(
         hyper::server::conn::http1::Builder::new()
             .timer(TokioTimer::new())
             .header_read_timeout(limits.header_timeout)
-            .serve_connection(TokioIo::new(stream), service),
+            .serve_connection(TokioIo::new(JsonParseErrors::new(stream)), service),
     );
     tokio::select! {
         _ = served.as_mut() => {}
@@ -354,6 +355,143 @@ async fn serve_connection(
     drop(served);
     lock(&registry.connections).remove(&id);
     registry.removed.notify_one();
+}
+
+/// A connection's socket on which hyper's own answers to requests it cannot parse
+/// (400 bad request line or header, 414 URI too long, 431 headers too large) get the
+/// API's error shape `{"error": …}` instead of an empty body. They are recognised as
+/// the heads hyper writes for them: one of those statuses, `content-length: 0` and no
+/// content type, which no answer of the router has (every error of the router is
+/// JSON). The rewritten answer closes the connection, as hyper does after it.
+struct JsonParseErrors {
+    inner: TcpStream,
+    /// A rewritten answer, and how much of it is written.
+    pending: Vec<u8>,
+    written: usize,
+}
+
+impl JsonParseErrors {
+    fn new(inner: TcpStream) -> Self {
+        Self {
+            inner,
+            pending: Vec::new(),
+            written: 0,
+        }
+    }
+
+    /// Writes what is left of a rewritten answer.
+    fn poll_pending(&mut self, cx: &mut Context<'_>) -> Poll<std::io::Result<()>> {
+        while self.written < self.pending.len() {
+            let n = std::task::ready!(
+                Pin::new(&mut self.inner).poll_write(cx, &self.pending[self.written..])
+            )?;
+            if n == 0 {
+                return Poll::Ready(Err(std::io::ErrorKind::WriteZero.into()));
+            }
+            self.written += n;
+        }
+        self.pending.clear();
+        self.written = 0;
+        Poll::Ready(Ok(()))
+    }
+
+    /// Takes `bytes` (hyper's next write) in place of writing them when they are one of
+    /// hyper's own error heads, queueing their JSON form; returns how many were taken.
+    fn take_parse_error(&mut self, cx: &mut Context<'_>, bytes: &[u8]) -> Option<usize> {
+        self.pending = json_parse_error(bytes)?;
+        // Started now; the rest goes with the next write, flush or shutdown.
+        let _ = self.poll_pending(cx);
+        Some(bytes.len())
+    }
+}
+
+/// The JSON form of hyper's own error answer `head`, or `None` for any other bytes.
+fn json_parse_error(head: &[u8]) -> Option<Vec<u8>> {
+    let head = std::str::from_utf8(head).ok()?.strip_suffix("\r\n\r\n")?;
+    let mut lines = head.split("\r\n");
+    let status_line = lines.next()?;
+    let message = match status_line.strip_prefix("HTTP/1.1 ")?.get(..3)? {
+        "400" => "malformed request: its request line or a header cannot be parsed",
+        "414" => "URI too long",
+        "431" => "request header fields too large",
+        _ => return None,
+    };
+    let headers: Vec<&str> = lines.collect();
+    let header = |name: &str| {
+        headers
+            .iter()
+            .filter_map(|h| h.split_once(':'))
+            .find(|(n, _)| n.trim().eq_ignore_ascii_case(name))
+            .map(|(_, v)| v.trim())
+    };
+    if header("content-length") != Some("0") || header("content-type").is_some() {
+        return None;
+    }
+    let body = serde_json::json!({ "error": message }).to_string();
+    Some(
+        format!(
+            "{status_line}\r\ncontent-type: application/json\r\ncontent-length: {}\r\n\
+             connection: close\r\n\r\n{body}",
+            body.len()
+        )
+        .into_bytes(),
+    )
+}
+
+impl AsyncRead for JsonParseErrors {
+    fn poll_read(
+        mut self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &mut ReadBuf<'_>,
+    ) -> Poll<std::io::Result<()>> {
+        Pin::new(&mut self.inner).poll_read(cx, buf)
+    }
+}
+
+impl AsyncWrite for JsonParseErrors {
+    fn poll_write(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &[u8],
+    ) -> Poll<std::io::Result<usize>> {
+        let this = self.get_mut();
+        std::task::ready!(this.poll_pending(cx))?;
+        if let Some(taken) = this.take_parse_error(cx, buf) {
+            return Poll::Ready(Ok(taken));
+        }
+        Pin::new(&mut this.inner).poll_write(cx, buf)
+    }
+
+    fn poll_write_vectored(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        bufs: &[std::io::IoSlice<'_>],
+    ) -> Poll<std::io::Result<usize>> {
+        let this = self.get_mut();
+        std::task::ready!(this.poll_pending(cx))?;
+        if let Some(first) = bufs.iter().find(|b| !b.is_empty()) {
+            if let Some(taken) = this.take_parse_error(cx, first) {
+                return Poll::Ready(Ok(taken));
+            }
+        }
+        Pin::new(&mut this.inner).poll_write_vectored(cx, bufs)
+    }
+
+    fn is_write_vectored(&self) -> bool {
+        self.inner.is_write_vectored()
+    }
+
+    fn poll_flush(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<std::io::Result<()>> {
+        let this = self.get_mut();
+        std::task::ready!(this.poll_pending(cx))?;
+        Pin::new(&mut this.inner).poll_flush(cx)
+    }
+
+    fn poll_shutdown(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<std::io::Result<()>> {
+        let this = self.get_mut();
+        std::task::ready!(this.poll_pending(cx))?;
+        Pin::new(&mut this.inner).poll_shutdown(cx)
+    }
 }
 
 #[cfg(test)]
@@ -450,6 +588,40 @@ mod tests {
         refused.read_to_string(&mut answer).unwrap();
         assert!(answer.starts_with("HTTP/1.1 503"), "{answer}");
         assert!(answer.contains("too many open connections"), "{answer}");
+    }
+
+    #[test]
+    fn hyper_s_own_error_answers_are_json() {
+        let addr = start(ConnectionLimits {
+            header_timeout: Duration::from_secs(30),
+            idle_timeout: Duration::from_secs(600),
+            max_connections: 16,
+        });
+        let long_uri = format!("GET /{} HTTP/1.1\r\nHost: x\r\n\r\n", "a".repeat(70_000));
+        let many_headers = format!("GET /ok HTTP/1.1\r\n{}\r\n", "X-A: 1\r\n".repeat(200));
+        for (request, status) in [
+            ("GARBAGE\r\n\r\n".to_owned(), 400),
+            ("GET /ok HTTP/1.1\r\nBad Header\r\n\r\n".to_owned(), 400),
+            (long_uri, 414),
+            (many_headers, 431),
+        ] {
+            let mut client = connect(addr);
+            client.write_all(request.as_bytes()).unwrap();
+            let mut answer = String::new();
+            client.read_to_string(&mut answer).unwrap();
+            let (head, body) = answer.split_once("\r\n\r\n").unwrap();
+            assert!(head.starts_with(&format!("HTTP/1.1 {status} ")), "{answer}");
+            assert!(head.contains("content-type: application/json"), "{answer}");
+            let error: serde_json::Value = serde_json::from_str(body).unwrap();
+            assert!(
+                error["error"].as_str().is_some_and(|e| !e.is_empty()),
+                "{answer}"
+            );
+        }
+        // Answers of the router pass unchanged, on the same connection too.
+        let mut client = connect(addr);
+        assert!(get_head(&mut client, "/ok").starts_with("HTTP/1.1 200"));
+        assert!(get_head(&mut client, "/ok").starts_with("HTTP/1.1 200"));
     }
 
     #[test]

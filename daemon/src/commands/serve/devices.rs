@@ -9,6 +9,7 @@ use anyhow::Context;
 use gonio_drivers::grbl::{ArmAxis, GrblArm, GrblArmConfig, Homing};
 use gonio_drivers::supervised_camera::{SupervisedCamera, SupervisorConfig, WorkerSpec};
 use gonio_drivers::{Arm, Camera, DeviceError};
+use gonio_files::input::{read_input_to_string, MAX_SMALL_FILE_BYTES};
 use gonio_mock_hw::camera::{CameraFault, CaptureTiming, EmulatedCamera, FaultInjector};
 use gonio_mock_hw::grbl::{Axis, AxisSet, Fault, GrblConfig, GrblEmulator};
 use gonio_mock_hw::scene::Scene;
@@ -96,7 +97,7 @@ fn grbl_arm_config(arm: &ArmConfig, limits: Limits) -> GrblArmConfig {
 fn emulated_board(arm: &ArmConfig) -> anyhow::Result<GrblConfig> {
     let board = match &arm.board {
         Some(path) => {
-            let text = std::fs::read_to_string(path)
+            let text = read_input_to_string(path, MAX_SMALL_FILE_BYTES)
                 .with_context(|| format!("reading arm.board {}", path.display()))?;
             GrblConfig::from_toml_str(&text)
                 .with_context(|| format!("arm.board {}", path.display()))?

@@ -3,10 +3,10 @@
 use std::fs;
 use std::path::{Component, Path, PathBuf};
 
-pub use gonio_drivers::atomic_file::{is_partial, AtomicWriteError};
-use gonio_drivers::atomic_file::{write_atomically, write_atomically_with};
+pub use gonio_files::output::{is_partial, AtomicWriteError};
+use gonio_files::output::{write_atomically, write_atomically_with};
 
-/// Writes `bytes` to `path` atomically (see `gonio_drivers::atomic_file`), creating the
+/// Writes `bytes` to `path` atomically (see `gonio_files::output`), creating the
 /// directory first.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     fs::create_dir_all(parent(path))?;
@@ -65,32 +65,13 @@ pub fn safe_join(base: &Path, relative: &str) -> Option<PathBuf> {
     any.then_some(out)
 }
 
-/// Opens a file under `base` for reading by a client: `relative` is joined as
-/// [`safe_join`] does, no component below `base` may be a symbolic link, the canonical
-/// path must lie under the canonical `base`, the last component is opened without
-/// following a link (`O_NOFOLLOW`), and it must be a regular file.
-pub fn open_under(base: &Path, relative: &str) -> Option<(PathBuf, fs::File)> {
-    let path = safe_join(base, relative)?;
-    let mut prefix = base.to_path_buf();
-    for part in Path::new(relative).components() {
-        prefix.push(part);
-        if fs::symlink_metadata(&prefix).ok()?.file_type().is_symlink() {
-            return None;
-        }
-    }
-    let canonical = path.canonicalize().ok()?;
-    if !canonical.starts_with(base.canonicalize().ok()?) {
-        return None;
-    }
-    let mut options = fs::OpenOptions::new();
-    options.read(true);
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::OpenOptionsExt;
-        options.custom_flags(libc::O_NOFOLLOW);
-    }
-    let file = options.open(&canonical).ok()?;
-    file.metadata().ok()?.is_file().then_some((canonical, file))
+/// Opens a file under `base` for reading by a client: `relative` must be a path
+/// [`safe_join`] accepts, and is opened by handle relative to `base`
+/// (`gonio_files::beneath`): no link followed at any component, regular files only,
+/// never blocking on a FIFO.
+pub fn open_under(base: &Path, relative: &str) -> Option<fs::File> {
+    safe_join(base, relative)?;
+    gonio_files::beneath::open_beneath(base, Path::new(relative)).ok()
 }
 
 /// Whether `name` is a safe single path component for a sample: 1–64 characters of
@@ -127,27 +108,23 @@ mod tests {
         }
     }
 
-    #[cfg(unix)]
     #[test]
-    fn open_under_follows_no_link() {
+    fn open_under_serves_plain_files_only() {
         let dir = tempfile::tempdir().unwrap();
-        let (base, outside) = (dir.path().join("scan"), dir.path().join("secret"));
+        let base = dir.path();
         fs::create_dir_all(base.join("sub")).unwrap();
-        fs::create_dir_all(&outside).unwrap();
-        fs::write(outside.join("shadow"), b"secret").unwrap();
         fs::write(base.join("sub/ok.csv"), b"ok").unwrap();
-        std::os::unix::fs::symlink(outside.join("shadow"), base.join("link.csv")).unwrap();
-        std::os::unix::fs::symlink(&outside, base.join("linked-dir")).unwrap();
-        std::os::unix::fs::symlink(base.join("sub/ok.csv"), base.join("inner-link.csv")).unwrap();
-        assert!(open_under(&base, "sub/ok.csv").is_some());
+        fs::write(base.join("sub/.x.1.partial"), b"half").unwrap();
+        std::os::unix::fs::symlink(base.join("sub/ok.csv"), base.join("link.csv")).unwrap();
+        assert!(open_under(base, "sub/ok.csv").is_some());
         for bad in [
             "link.csv",
-            "linked-dir/shadow",
-            "inner-link.csv",
             "sub",
+            "sub/.x.1.partial",
+            "sub/../sub/ok.csv",
             "missing",
         ] {
-            assert!(open_under(&base, bad).is_none(), "{bad}");
+            assert!(open_under(base, bad).is_none(), "{bad}");
         }
     }
 

@@ -30,6 +30,7 @@ use std::time::Duration;
 
 use anyhow::Context;
 use gonio_drivers::ArmState;
+use gonio_files::input::{read_input_to_string, MAX_SMALL_FILE_BYTES};
 use tokio::sync::broadcast;
 
 use config::Config;
@@ -77,8 +78,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(data) = args.data {
         config.data_dir = data;
     }
-    std::fs::create_dir_all(&config.data_dir)
-        .with_context(|| format!("creating data directory {}", config.data_dir.display()))?;
+    private_data_dir(&config.data_dir)?;
     gonio_processing::capture::set_max_pixels(config.max_frame_pixels);
     // One daemon per data directory: the OS drops the lock when the process ends,
     // however it ends.
@@ -95,6 +95,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let token = token(&config)?;
 
     let db_path = config.data_dir.join("gonio.sqlite");
+    // SQLite gives its journal files the database's mode.
+    make_private(&db_path).with_context(|| format!("creating {}", db_path.display()))?;
     let mut api_store =
         Store::open(&db_path).with_context(|| format!("opening {}", db_path.display()))?;
     let boot = api_store.begin_boot()?;
@@ -223,7 +225,7 @@ fn token(config: &Config) -> anyhow::Result<String> {
         return Ok(token);
     }
     let path = config.data_dir.join("token");
-    if let Ok(existing) = std::fs::read_to_string(&path) {
+    if let Ok(existing) = read_input_to_string(&path, MAX_SMALL_FILE_BYTES) {
         let existing = existing.trim().to_owned();
         if !existing.is_empty() {
             println!("gonio: token in {}", path.display());
@@ -236,6 +238,41 @@ fn token(config: &Config) -> anyhow::Result<String> {
     write_private(&path, &token)?;
     println!("gonio: token {token} (saved in {})", path.display());
     Ok(token)
+}
+
+/// Creates the data directory (the token, the journal, every scan) accessible to its
+/// owner only (0700), and makes an existing one so.
+fn private_data_dir(dir: &Path) -> anyhow::Result<()> {
+    use std::os::unix::fs::{DirBuilderExt, PermissionsExt};
+    let context = || format!("creating data directory {}", dir.display());
+    std::fs::DirBuilder::new()
+        .recursive(true)
+        .mode(0o700)
+        .create(dir)
+        .with_context(context)?;
+    let mode = std::fs::metadata(dir)
+        .with_context(context)?
+        .permissions()
+        .mode()
+        & 0o777;
+    if mode != 0o700 {
+        std::fs::set_permissions(dir, std::fs::Permissions::from_mode(0o700))
+            .with_context(|| format!("making {} private (mode 700)", dir.display()))?;
+        tracing::info!("{}: mode {mode:o} made 700", dir.display());
+    }
+    Ok(())
+}
+
+/// Creates `path` if missing, and makes it readable and writable by its owner only.
+fn make_private(path: &Path) -> std::io::Result<()> {
+    use std::os::unix::fs::{OpenOptionsExt, PermissionsExt};
+    std::fs::OpenOptions::new()
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .mode(0o600)
+        .open(path)?;
+    std::fs::set_permissions(path, std::fs::Permissions::from_mode(0o600))
 }
 
 /// Writes a file readable by its owner only.

@@ -4,6 +4,7 @@
 use std::io::Cursor;
 use std::path::Path;
 
+use gonio_files::input::{read_input_to_string, MAX_SMALL_FILE_BYTES};
 use gonio_processing::capture::Frame;
 use gonio_processing::fit::FitResult;
 use image::{ImageBuffer, Rgb};
@@ -81,7 +82,7 @@ pub fn plot_data(dir: &Path) -> Result<Value, PreviewError> {
     let mut fits = serde_json::Map::new();
     for (model, name) in FIT_MODELS {
         let path = dir.join(name);
-        let Ok(text) = std::fs::read_to_string(&path) else {
+        let Ok(text) = read_input_to_string(&path, MAX_SMALL_FILE_BYTES) else {
             continue;
         };
         let fit: FitResult = serde_json::from_str(&text)

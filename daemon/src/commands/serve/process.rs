@@ -8,6 +8,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
+use gonio_files::input::{read_input, MAX_SMALL_FILE_BYTES};
 use gonio_processing::brdf::Model;
 use gonio_processing::capture::{is_capture_path, CaptureError, Frame};
 use gonio_processing::extract::{extract_scan, ExtractOptions};
@@ -204,7 +205,7 @@ struct SavedFits {
 impl SavedFits {
     /// The fits θL's samples step saved; none when they cannot be read.
     fn read(dir: &Path, theta_l: f64) -> Option<SavedFits> {
-        let bytes = std::fs::read(dir.join(theta_fits_path(theta_l))).ok()?;
+        let bytes = read_input(&dir.join(theta_fits_path(theta_l)), MAX_SMALL_FILE_BYTES).ok()?;
         serde_json::from_slice(&bytes).ok()
     }
 

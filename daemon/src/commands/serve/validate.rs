@@ -308,21 +308,22 @@ pub fn sweep_request(body: &Value, bounds: &Bounds) -> Result<SweepPlan, FieldEr
     Ok(SweepPlan { scans, start_at })
 }
 
-/// Largest |angle| an operator may declare for the arm, degrees.
-const MAX_DECLARED_DEG: f64 = 360.0;
-
-/// `{"angle": degrees}` of `POST /api/arm/position`: where the arm is now.
-pub fn arm_position(value: &Value) -> Result<f64, FieldError> {
+/// `{"angle": degrees}` of `POST /api/arm/position`: where the arm is now, on its
+/// travel [−`max_travel_deg`, 0] (the home switch at 0).
+pub fn arm_position(value: &Value, max_travel_deg: f64) -> Result<f64, FieldError> {
     let map = object(value, &["angle"])?;
     let angle = map
         .get("angle")
         .ok_or_else(|| invalid("angle", "required"))?
         .as_f64()
         .ok_or_else(|| invalid("angle", "must be a number of degrees"))?;
-    if !(angle.is_finite() && angle.abs() <= MAX_DECLARED_DEG) {
+    if !(angle.is_finite() && (-max_travel_deg..=0.0).contains(&angle)) {
         return Err(invalid(
             "angle",
-            format!("must be within ±{MAX_DECLARED_DEG} degrees"),
+            format!(
+                "{angle} is not on the arm's travel, [-{max_travel_deg}, 0] degrees \
+                 (arm.max_travel_deg)"
+            ),
         ));
     }
     Ok(angle)
@@ -469,5 +470,18 @@ mod tests {
         )
         .unwrap_err();
         assert_eq!(err.field, "start_at");
+    }
+
+    #[test]
+    fn a_declared_arm_position_lies_on_the_travel() {
+        for angle in [0.0, -0.5, -180.0] {
+            assert_eq!(arm_position(&json!({ "angle": angle }), 180.0), Ok(angle));
+        }
+        for angle in [10.0, 0.5, -180.5, 359.0, 1e300] {
+            let err = arm_position(&json!({ "angle": angle }), 180.0).unwrap_err();
+            assert_eq!(err.field, "angle");
+            assert!(err.to_string().contains("[-180, 0]"), "{err}");
+        }
+        assert!(arm_position(&json!({ "angle": -190.0 }), 200.0).is_ok());
     }
 }

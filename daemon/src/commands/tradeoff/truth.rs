@@ -3,6 +3,7 @@
 use std::path::Path;
 
 use anyhow::Context;
+use gonio_files::input::{read_input_to_string, MAX_SMALL_FILE_BYTES};
 use gonio_processing::brdf::{Model, Params, Roughness};
 use gonio_processing::fit::FitResult;
 use gonio_processing::reference::Reference;
@@ -34,8 +35,8 @@ pub struct Truth {
 
 impl Truth {
     pub fn read(path: &Path) -> anyhow::Result<Truth> {
-        let text =
-            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let text = read_input_to_string(path, MAX_SMALL_FILE_BYTES)
+            .with_context(|| format!("reading {}", path.display()))?;
         let file: TruthFile =
             serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
         let model = match (file.model.parse::<Model>(), file.kd, file.ks, &file.m) {
