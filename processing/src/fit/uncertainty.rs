@@ -352,9 +352,10 @@ impl<'a> Residuals<'a> {
             let term = self.term(point);
             let leverage = term.leverage(inverse, p).clamp(0.0, MAX_LEVERAGE);
             let scale = 1.0 / ((1.0 - leverage) * (1.0 - leverage));
-            for i in 0..p {
-                for j in i..p {
-                    spread[i][j] += scale * term.gradient[i] * term.gradient[j];
+            for (i, row) in spread.iter_mut().enumerate().take(p) {
+                let gi = scale * term.gradient[i];
+                for (v, gj) in row.iter_mut().zip(&term.gradient).take(p).skip(i) {
+                    *v += gi * gj;
                 }
             }
         }
@@ -386,10 +387,10 @@ impl PointTerm {
             }
         }
         let mut trace = 0.0;
-        for c in 0..3 {
-            for d in 0..3 {
-                let kj: f64 = (0..p).map(|j| k[d][j] * self.jacobian[c][j]).sum();
-                trace += self.curvature[c][d] * kj;
+        for (curvature, jacobian) in self.curvature.iter().zip(&self.jacobian) {
+            for (m, k_row) in curvature.iter().zip(&k) {
+                let kj: f64 = k_row.iter().zip(jacobian).take(p).map(|(a, b)| a * b).sum();
+                trace += m * kj;
             }
         }
         trace
