@@ -101,6 +101,32 @@ pub struct FitResult {
     /// Cook–Torrance–Fresnel only: whether the colour shift was fitted, and its test.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub colour_shift: Option<ColourShift>,
+    /// Nelder–Mead only: its loss against the global minimum of the same samples. A fit
+    /// that ends above it reports no uncertainty.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub global_minimum: Option<GlobalMinimum>,
+}
+
+/// Where a local method (Nelder–Mead) ended, against the global minimum of the eq. 10
+/// loss on the same samples: the robust method's (exact Kd, Ks at each m, a global
+/// search over log m).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct GlobalMinimum {
+    /// Whether the fit's loss is within [`LOCAL_MINIMUM_MARGIN`] of `loss`; when false
+    /// the fit ended in a local minimum (or at its evaluation cap) and is not the
+    /// optimum.
+    pub reached: bool,
+    /// Eq. 10 loss of the robust fit.
+    pub loss: f64,
+    /// Wall time of the robust fit, seconds (not in the fit's `seconds`).
+    pub seconds: f64,
+}
+
+impl FitResult {
+    /// Whether the fit is known to have ended above the global minimum.
+    pub fn above_global_minimum(&self) -> bool {
+        self.global_minimum.is_some_and(|g| !g.reached)
+    }
 }
 
 impl FitResult {
@@ -136,6 +162,10 @@ impl FitResult {
             .evaluate_fresnel(&self.params(), &self.specular_90())
     }
 }
+
+/// A fit whose loss exceeds the global minimum by more than this fraction of it ended
+/// above it: in a local minimum, or stopped by its evaluation cap before the optimum.
+pub const LOCAL_MINIMUM_MARGIN: f64 = 1e-3;
 
 /// Significance level of the colour-shift test: Ks_90 is kept when the Wald test of
 /// Ks_90 = Ks rejects it at this level.
@@ -195,9 +225,17 @@ pub fn parameter_count(model: Model, roughness: Roughness) -> usize {
     colours + roughness.count()
 }
 
-/// Fits `options.model` to `samples`.
-pub fn fit(samples: &[Sample], options: &FitOptions) -> Result<FitResult, FitError> {
-    let start = Instant::now();
+/// What a method ends at, before the result is assembled.
+struct Minimised {
+    /// The prepared samples (without the colour shift's weights when it was tied).
+    data: Data,
+    found: Found,
+    ks_90: [f64; 3],
+    colour_shift: Option<ColourShift>,
+}
+
+/// Runs `options.method` on `samples`, and the colour-shift test where the model has one.
+fn minimise(samples: &[Sample], options: &FitOptions) -> Result<Minimised, FitError> {
     if options.model.has_fresnel_colour() {
         if options.method == FitMethod::NelderMead {
             return Err(FitError::InvalidOptions(format!(
@@ -230,6 +268,37 @@ pub fn fit(samples: &[Sample], options: &FitOptions) -> Result<FitResult, FitErr
     } else {
         None
     };
+    Ok(Minimised {
+        data,
+        found,
+        ks_90,
+        colour_shift,
+    })
+}
+
+/// The eq. 10 loss `options.method` ends at on `samples`: the fit alone, without its
+/// metrics, uncertainty or check against the global minimum (what a comparison of
+/// methods keeps).
+pub fn loss_reached(samples: &[Sample], options: &FitOptions) -> Result<f64, FitError> {
+    let Minimised {
+        data, found, ks_90, ..
+    } = minimise(samples, options)?;
+    let loss = data.loss_fresnel(&found.params, &ks_90);
+    if !loss.is_finite() {
+        return Err(FitError::Overflow("loss"));
+    }
+    Ok(loss)
+}
+
+/// Fits `options.model` to `samples`.
+pub fn fit(samples: &[Sample], options: &FitOptions) -> Result<FitResult, FitError> {
+    let start = Instant::now();
+    let Minimised {
+        data,
+        found,
+        ks_90,
+        colour_shift,
+    } = minimise(samples, options)?;
     let params = found.params;
     let m = match options.roughness {
         Roughness::Shared => FittedRoughness::Shared([params.m[0]]),
@@ -251,8 +320,12 @@ pub fn fit(samples: &[Sample], options: &FitOptions) -> Result<FitResult, FitErr
             return Err(FitError::Overflow(what));
         }
     }
-    let spread = options
-        .uncertainty
+    let global_minimum = match options.method {
+        FitMethod::NelderMead => Some(global_minimum(&data, options, loss)?),
+        FitMethod::Robust => None,
+    };
+    // Intervals around a point that is not the optimum would describe nothing.
+    let spread = (options.uncertainty && !global_minimum.is_some_and(|g| !g.reached))
         .then(|| uncertainty::estimate(&data, options, &params, &ks_90))
         .flatten();
     let (stderr, ci95, correlation) = match spread {
@@ -271,11 +344,28 @@ pub fn fit(samples: &[Sample], options: &FitOptions) -> Result<FitResult, FitErr
         err_p,
         method: options.method,
         evaluations: found.evaluations,
-        seconds: start.elapsed().as_secs_f64(),
+        seconds: start.elapsed().as_secs_f64() - global_minimum.map_or(0.0, |g| g.seconds),
         stderr,
         ci95,
         correlation,
         colour_shift,
+        global_minimum,
+    })
+}
+
+/// The robust fit of the same data and roughness as `options`, as the global minimum a
+/// fit of loss `loss` is checked against.
+fn global_minimum(data: &Data, options: &FitOptions, loss: f64) -> Result<GlobalMinimum, FitError> {
+    let start = Instant::now();
+    let mut robust = options.clone();
+    robust.method = FitMethod::Robust;
+    robust.robust.polish = false;
+    let (found, ks_90) = robust::fit(data, &robust)?;
+    let minimum = data.loss_fresnel(&found.params, &ks_90);
+    Ok(GlobalMinimum {
+        reached: loss <= minimum * (1.0 + LOCAL_MINIMUM_MARGIN),
+        loss: minimum,
+        seconds: start.elapsed().as_secs_f64(),
     })
 }
 

@@ -34,6 +34,7 @@ fn fit_of(model: Model, kd: [f64; 3], ks: [f64; 3], m: f64) -> FitResult {
         ci95: None,
         correlation: None,
         colour_shift: None,
+        global_minimum: None,
     }
 }
 

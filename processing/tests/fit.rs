@@ -6,7 +6,8 @@
 
 use gonio_processing::brdf::{Model, Params, Roughness};
 use gonio_processing::fit::{
-    fit, solve_at_roughness, FitError, FitMethod, FitOptions, FitResult, FittedRoughness,
+    fit, loss_reached, solve_at_roughness, FitError, FitMethod, FitOptions, FitResult,
+    FittedRoughness, LOCAL_MINIMUM_MARGIN,
 };
 use gonio_processing::metrics;
 use gonio_processing::samples::Sample;
@@ -335,6 +336,12 @@ fn nelder_mead_is_fminsearch_and_polish() {
         nm.loss,
         robust.loss
     );
+    // It says so, and reports its uncertainty as at any optimum.
+    let global = nm.global_minimum.expect("a Nelder–Mead fit is checked");
+    assert!(global.reached);
+    assert_eq!(global.loss, robust.loss);
+    assert!(nm.ci95.is_some() && nm.stderr.is_some());
+    assert!(robust.global_minimum.is_none());
     // MaxFunEvals is checked before each iteration (a shrink may add n = 7 more).
     let mut capped = options(model, Roughness::Shared, FitMethod::NelderMead);
     capped.nelder_mead.max_fun_evals = Some(100);
@@ -345,6 +352,10 @@ fn nelder_mead_is_fminsearch_and_polish() {
         early.evaluations
     );
     assert!(early.loss > nm.loss);
+    // Stopped by its cap above the global minimum: not the optimum, no intervals.
+    assert!(early.loss > robust.loss * (1.0 + LOCAL_MINIMUM_MARGIN));
+    assert!(early.above_global_minimum());
+    assert!(early.stderr.is_none() && early.ci95.is_none() && early.correlation.is_none());
     // Prediction uses the fitted parameters.
     let s = &samples[100];
     assert_eq!(
@@ -374,6 +385,42 @@ fn nelder_mead_is_fminsearch_and_polish() {
     let polished = fit(&samples, &polish).unwrap();
     assert!(polished.loss <= robust.loss * (1.0 + 1e-12));
     assert!(polished.evaluations > robust.evaluations);
+}
+
+/// On a sharp lobe (m = 0.07) the paper's Nelder–Mead from its start (m = 0.3) ends in a
+/// local minimum: the fit says so in its JSON and gives no intervals; the study's
+/// comparison gets the same loss from `loss_reached`.
+#[test]
+fn nelder_mead_above_the_global_minimum_says_so() {
+    let truth = Params::shared([9.0, 6.5, 2.0], [25.0, 20.0, 7.0], 0.07);
+    let model = Model::CookTorrance;
+    let samples = synthetic(model, &truth, &[-30.0], 0.01);
+    let robust = fit(
+        &samples,
+        &options(model, Roughness::Shared, FitMethod::Robust),
+    )
+    .unwrap();
+    let nelder_mead = options(model, Roughness::Shared, FitMethod::NelderMead);
+    let nm = fit(&samples, &nelder_mead).unwrap();
+    let global = nm.global_minimum.expect("checked");
+    assert!(!global.reached);
+    assert_eq!(global.loss, robust.loss);
+    assert!(
+        nm.loss > 2.0 * robust.loss,
+        "{} vs {}",
+        nm.loss,
+        robust.loss
+    );
+    assert!(nm.stderr.is_none() && nm.ci95.is_none() && nm.correlation.is_none());
+    let json: serde_json::Value = serde_json::to_value(&nm).unwrap();
+    assert_eq!(json["global_minimum"]["reached"], false);
+    assert_eq!(json["global_minimum"]["loss"], robust.loss);
+    assert!(json.get("ci95").is_none() && json.get("stderr").is_none());
+    assert!(serde_json::to_value(&robust)
+        .unwrap()
+        .get("global_minimum")
+        .is_none());
+    assert_eq!(loss_reached(&samples, &nelder_mead).unwrap(), nm.loss);
 }
 
 #[test]

@@ -162,6 +162,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             ci.ks.map(|b| interval(b, 3)).join(" ")
         );
     }
+    if let Some(global) = result.global_minimum {
+        let times = result.loss / global.loss;
+        if global.reached {
+            println!(
+                "  at the global minimum: the robust fit's loss is {:.6} ({times:.4}×)",
+                global.loss
+            );
+        } else {
+            println!(
+                "  warning: Nelder–Mead ended above the global minimum, in a local minimum or at \
+                 its evaluation cap: its loss is {times:.2}× the robust fit's ({:.6}). These are \
+                 not the optimal parameters and no intervals are given; fit with --method robust",
+                global.loss
+            );
+        }
+    }
     if let Some(shift) = result.colour_shift {
         match (shift.fitted, shift.p_value) {
             (true, Some(p)) if p < 1e-16 => println!("  colour shift fitted (Wald p < 1e-16)"),

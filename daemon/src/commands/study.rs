@@ -7,6 +7,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use gonio_processing::brdf::{Model, Roughness};
 use gonio_processing::color::CameraModel;
+use gonio_processing::fit::LOCAL_MINIMUM_MARGIN;
 use gonio_processing::reference::Reference;
 use gonio_processing::samples;
 use gonio_processing::study::{self, StudyOptions, Variant};
@@ -62,7 +63,7 @@ pub struct Args {
     pub no_nelder_mead: bool,
     /// Relative loss excess over the robust fit at which a Nelder–Mead fit counts as a
     /// local minimum.
-    #[arg(long, default_value_t = 1e-3)]
+    #[arg(long, default_value_t = LOCAL_MINIMUM_MARGIN)]
     pub local_minimum_margin: f64,
     /// Sample name shown in the figure titles.
     #[arg(long, default_value = "")]

@@ -247,7 +247,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     options.method = method;
                     let start = Instant::now();
                     let fitted = fit::fit(&samples, &options);
-                    let fit_s = start.elapsed().as_secs_f64();
+                    // A Nelder–Mead fit's check against the robust fit is not its cost.
+                    let fit_s = fitted
+                        .as_ref()
+                        .map_or_else(|_| start.elapsed().as_secs_f64(), |f| f.seconds);
                     let outcome = fitted.map_err(|e| e.to_string()).and_then(|fit| {
                         let err_p = metrics::err_p(&points.beta, &points.predict(&fit))
                             .map_err(|e| e.to_string())?;
