@@ -1,0 +1,323 @@
+#!/usr/bin/env python3
+"""Writes the tables of docs/results/README.md and the README's Results summary from the
+outputs under docs/results/<scene>/ (what scripts/results.sh has just produced), so that
+no number in them is written by hand.
+
+Each generated block sits between `<!-- results: NAME -->` and `<!-- /results: NAME -->`;
+the prose around the blocks is written by hand and holds no measured number. One function
+per section builds its block from the outputs; SECTIONS maps each block to it.
+
+Usage:
+  python3 scripts/results_docs.py [--root DIR]          # rewrite the blocks in place
+  python3 scripts/results_docs.py [--root DIR] --check  # exit 1, naming the blocks, when
+                                                        # a block differs from what the
+                                                        # outputs say
+DIR is the repository (default: the one holding this script). Needs only the Python
+standard library.
+"""
+
+import csv
+import json
+import re
+import sys
+from pathlib import Path
+
+ROOT = RESULTS = DOCS = None
+
+
+def set_root(root):
+    """Reads the outputs and writes the documents of the repository at `root`."""
+    global ROOT, RESULTS, DOCS
+    ROOT = Path(root).resolve()
+    RESULTS = ROOT / "docs" / "results"
+    DOCS = {"results": RESULTS / "README.md", "readme": ROOT / "README.md"}
+# Scenes in the order results.sh runs them; any other scene directory follows by name.
+ORDER = ["gold", "red", "blue-green", "opal"]
+MODEL_NAMES = {
+    "cook-torrance": "Cook–Torrance",
+    "ward": "Ward",
+    "cook-torrance-fresnel": "Cook–Torrance–Fresnel",
+}
+
+
+def scenes():
+    """Scene directories that hold a study and a tradeoff, in results.sh's order."""
+    found = [
+        d.name
+        for d in RESULTS.iterdir()
+        if (d / "study" / "study.json").is_file() and (d / "tradeoff" / "tradeoff.json").is_file()
+    ]
+    return sorted(found, key=lambda s: (ORDER.index(s) if s in ORDER else len(ORDER), s))
+
+
+def read_json(path):
+    with open(path, encoding="utf-8") as f:
+        return json.load(f)
+
+
+def read_csv(path):
+    with open(path, newline="", encoding="utf-8") as f:
+        return list(csv.DictReader(f))
+
+
+def variant_label(model, roughness):
+    name = MODEL_NAMES.get(model, model)
+    return name if roughness == "shared" else f"{name}, per-channel m"
+
+
+def shutter(seconds):
+    """A shutter time as photographers write it (as gonio's format_shutter)."""
+    if seconds >= 0.5 or seconds <= 0:
+        return f"{seconds:g} s"
+    return f"1/{round(1 / seconds)} s"
+
+
+def setting(row, roughness):
+    """A tradeoff setting in words."""
+    theta = ", ".join(f"{t:g}°".replace("-", "−") for t in row["theta_l"])
+    shutters = ", ".join(shutter(s) for s in row["shutters_s"])
+    n, k = len(row["theta_l"]), len(row["shutters_s"])
+    words = (
+        f"{n} θL ({theta}), {k} exposure{'s' if k > 1 else ''} ({shutters}), "
+        f"stride {row['stride']}, {row['method']}"
+    )
+    return words + (", per-channel m" if roughness == "per-channel" else "")
+
+
+def table(header, rows):
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
+    return "\n".join(lines)
+
+
+def boxplot(scene):
+    """(model, roughness, n_theta_l, metric) → the boxplots.csv row."""
+    rows = read_csv(RESULTS / scene / "study" / "boxplots.csv")
+    return {(r["model"], r["roughness"], int(r["n_theta_l"]), r["metric"]): r for r in rows}
+
+
+def study_table():
+    """Per scene and variant: ΔErr_p (G) against the reference fitting one θL (median and
+    interquartile range) and all θL, the held-out errors, and Nelder–Mead's local minima."""
+    rows = []
+    for scene in scenes():
+        study = read_json(RESULTS / scene / "study" / "study.json")
+        boxes = boxplot(scene)
+        n_all = len(study["theta_l"])
+        held_out = {(h["model"], h["roughness"]): h for h in study["held_out"]}
+        for v in study["variants"]:
+            key = (v["model"], v["roughness"])
+            one = boxes[key + (1, "err_p_g")]
+            every = boxes[key + (n_all, "err_p_g")]
+            iqr = float(one["q3"]) - float(one["q1"])
+            h = held_out.get(key)
+            held = (
+                " / ".join(f"{e:.4f}" for e in h["median_err_p"]) if h else "–"
+            )
+            held_uv = f"{h['median_delta_e_uv']:.4f}" if h and h["median_delta_e_uv"] is not None else "–"
+            compared = v["nelder_mead_compared"]
+            above = f"{v['nelder_mead_above']}/{compared}" if compared else "not compared"
+            rows.append(
+                [
+                    scene,
+                    variant_label(*key),
+                    f"{float(one['median']):.4f} ({iqr:.4f})",
+                    f"{float(every['median']):.4f}",
+                    held,
+                    held_uv,
+                    above,
+                ]
+            )
+    return table(
+        [
+            "scene",
+            "model",
+            "ΔErr_p (G), 1 θL: median (IQR)",
+            "all θL",
+            "held out: median ΔErr_p (R / G / B)",
+            "held out: ΔE_u′v′",
+            "Nelder–Mead above robust",
+        ],
+        rows,
+    )
+
+
+def study_time_table():
+    """Per scene: the study's size and its measured time."""
+    rows = []
+    for scene in scenes():
+        study = read_json(RESULTS / scene / "study" / "study.json")
+        compared = sum(v["nelder_mead_compared"] for v in study["variants"])
+        rows.append(
+            [
+                scene,
+                study["combinations"],
+                len(study["variants"]),
+                study["fits"],
+                compared,
+                study["evaluation_points"],
+                f"{study['seconds']:.1f} s",
+            ]
+        )
+    return table(
+        [
+            "scene",
+            "θL combinations",
+            "models",
+            "robust fits",
+            "Nelder–Mead fits compared",
+            "samples",
+            "time",
+        ],
+        rows,
+    )
+
+
+def full_scan(scene):
+    """The tradeoff row of the full scan: every θL, the whole bracket, every column,
+    robust."""
+    rows = read_csv(RESULTS / scene / "tradeoff" / "tradeoff.csv")
+    n = max(int(r["n_theta_l"]) for r in rows)
+    b = max(int(r["bracket"]) for r in rows)
+    for r in rows:
+        if (int(r["n_theta_l"]), int(r["bracket"]), int(r["stride"]), r["method"]) == (
+            n,
+            b,
+            1,
+            "robust",
+        ):
+            return r
+    raise SystemExit(f"{scene}: tradeoff.csv has no full-scan robust row")
+
+
+def err3(values, digits=4):
+    return ", ".join(f"{float(v):.{digits}f}" for v in values)
+
+
+def tradeoff_table():
+    """Per scene: the recommended setting, its time and accuracy, against the full scan."""
+    rows = []
+    for scene in scenes():
+        t = read_json(RESULTS / scene / "tradeoff" / "tradeoff.json")
+        r = t["recommended"]
+        full = full_scan(scene)
+        rows.append(
+            [
+                scene,
+                MODEL_NAMES.get(t["model"], t["model"]),
+                setting(r, t["roughness"]),
+                f"{r['acquisition_s']:.1f} s + {r['processing_s']:.2f} s",
+                err3(r["err_p"]),
+                f"{float(full['acquisition_s']):.1f} s + {float(full['processing_s']):.2f} s",
+                err3([full["err_p_r"], full["err_p_g"], full["err_p_b"]]),
+            ]
+        )
+    return table(
+        [
+            "scene",
+            "model",
+            "recommended setting",
+            "acquisition + processing",
+            "ΔErr_p (R, G, B)",
+            "full scan: acquisition + processing",
+            "full scan: ΔErr_p (R, G, B)",
+        ],
+        rows,
+    )
+
+
+def nelder_mead_counts(study):
+    """Nelder–Mead fits compared and ending above the robust loss, over every variant."""
+    compared = sum(v["nelder_mead_compared"] for v in study["variants"])
+    above = sum(v["nelder_mead_above"] for v in study["variants"])
+    return above, compared
+
+
+def summary_table():
+    """The README's summary: per scene the setting to choose, what it costs against the
+    full scan, and how often the paper's method ends in a local minimum."""
+    rows = []
+    for scene in scenes():
+        t = read_json(RESULTS / scene / "tradeoff" / "tradeoff.json")
+        study = read_json(RESULTS / scene / "study" / "study.json")
+        r = t["recommended"]
+        full = full_scan(scene)
+        above, compared = nelder_mead_counts(study)
+        rows.append(
+            [
+                f"`{scene}`",
+                setting(r, t["roughness"]),
+                f"{r['total_s']:.1f} s",
+                f"{float(full['total_s']):.1f} s",
+                f"{max(r['err_p']):.4f}",
+                f"{max(float(full[k]) for k in ('err_p_r', 'err_p_g', 'err_p_b')):.4f}",
+                f"{above}/{compared}",
+            ]
+        )
+    return table(
+        [
+            "scene",
+            "setting to choose",
+            "time",
+            "full scan",
+            "worst ΔErr_p",
+            "full scan",
+            "Nelder–Mead fits above the robust loss",
+        ],
+        rows,
+    )
+
+
+# Block name → (document, function).
+SECTIONS = {
+    "study": ("results", study_table),
+    "study-time": ("results", study_time_table),
+    "tradeoff": ("results", tradeoff_table),
+    "summary": ("readme", summary_table),
+}
+
+
+def block_pattern(name):
+    return re.compile(
+        rf"(<!-- results: {re.escape(name)} -->\n)(.*?)(<!-- /results: {re.escape(name)} -->)",
+        re.S,
+    )
+
+
+def main(argv):
+    args = argv[1:]
+    root = Path(__file__).resolve().parent.parent
+    if args[:1] == ["--root"] and len(args) >= 2:
+        root, args = Path(args[1]), args[2:]
+    check = args == ["--check"]
+    if args and not check:
+        raise SystemExit(__doc__)
+    set_root(root)
+    texts = {k: p.read_text(encoding="utf-8") for k, p in DOCS.items()}
+    stale = []
+    for name, (doc, build) in SECTIONS.items():
+        pattern = block_pattern(name)
+        found = pattern.search(texts[doc])
+        if not found:
+            raise SystemExit(f"{DOCS[doc]}: no block `<!-- results: {name} -->`")
+        block = build() + "\n"
+        if found.group(2) != block:
+            stale.append(f"{DOCS[doc].relative_to(ROOT)}: {name}")
+            texts[doc] = pattern.sub(lambda m: m.group(1) + block + m.group(3), texts[doc])
+    if check:
+        if stale:
+            print(
+                "these blocks differ from the outputs under docs/results "
+                "(run `python3 scripts/results_docs.py`):\n  " + "\n  ".join(stale)
+            )
+            return 1
+        return 0
+    for doc, path in DOCS.items():
+        path.write_text(texts[doc], encoding="utf-8")
+    for s in stale:
+        print(f"rewrote {s}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv))
