@@ -14,9 +14,7 @@ Needs numpy and scipy, and a built `gonio` (target/debug/gonio or --gonio PATH).
 """
 
 import argparse
-import csv
 import json
-import math
 import os
 import subprocess
 import sys
@@ -25,52 +23,8 @@ import tempfile
 import numpy as np
 from scipy.optimize import minimize
 
-M_MIN, M_MAX = 1e-6, 1e6
-COS_GRAZING, COS_ALPHA_MIN = 1e-9, 1e-12
-
-
-def read_samples(path):
-    with open(path, newline="") as f:
-        rows = list(csv.DictReader(f))
-    cols = lambda *names: np.array([[float(r[n]) for n in names] for r in rows])
-    y = cols("r", "g", "b")
-    if rows and "n_dot_l" in rows[0]:
-        cosines = cols("n_dot_l", "n_dot_v", "n_dot_h", "v_dot_h")
-    else:
-        ti, tr = np.radians(cols("theta_i", "theta_r")).T
-        cosines = np.stack(
-            [np.cos(ti), np.cos(tr), np.cos((ti - tr) / 2), np.cos((ti + tr) / 2)], axis=1
-        )
-    return y, cosines
-
-
-def basis(model, cosines):
-    """Diffuse basis a, tan²α and the lobe gain g, as gonio's `Model::basis_at`."""
-    cos_i, cos_r, n_h, v_h = cosines.T
-    c = np.clip(n_h, COS_ALPHA_MIN, 1.0)
-    tan2 = np.maximum((1 - c * c) / (c * c), 0.0)
-    if model == "cook-torrance":
-        v_h = np.maximum(v_h, COS_GRAZING)
-        g = np.minimum(1.0, np.minimum(2 * c * cos_r / v_h, 2 * c * cos_i / v_h))
-        return np.ones_like(c), tan2, g / (math.pi * c**4 * cos_i * cos_r)
-    return np.full_like(c, 1 / math.pi), tan2, 1 / (4 * math.pi * np.sqrt(cos_i * cos_r))
-
-
-def specular(tan2, gain, m):
-    m = min(max(m, M_MIN), M_MAX)
-    x = tan2 / (m * m)
-    return np.where(x > 708.0, 0.0, gain * np.exp(-np.minimum(x, 708.0)) / (m * m))
-
-
-def start(y, a, tan2, gain, m=0.3):
-    kd = np.maximum((y / a[:, None]).min(axis=0), 0.0)
-    peak = y.argmax(axis=0)
-    s = specular(tan2, gain, m)
-    ks = [
-        max((y[p, c] - kd[c] * a[p]) / s[p], 0.0) if s[p] > 0 else 0.0
-        for c, p in enumerate(peak)
-    ]
-    return np.concatenate([kd, ks, [m]])
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from bench_peers import M_MAX, M_MIN, basis, read_samples, specular, start  # noqa: E402
 
 
 def synthetic(n, path):
@@ -85,7 +39,7 @@ def synthetic(n, path):
     r_i, r_r = np.radians(ti), np.radians(tr)
     cos = np.stack([np.cos(r_i), np.cos(r_r), np.cos((r_i - r_r) / 2), np.cos((r_i + r_r) / 2)], 1)
     a, tan2, gain = basis("cook-torrance", cos)
-    beta = kd * a[:, None] + ks * specular(tan2, gain, m)[:, None]
+    beta = kd * a[:, None] + ks * specular(tan2, gain, m)[0][:, None]
     beta *= 1 + 0.02 * rng.standard_normal(beta.shape)
     with open(path, "w") as f:
         f.write("theta_l,theta_i,theta_r,r,g,b\n")
@@ -117,12 +71,12 @@ def main():
         synthetic(args.synthetic, samples)
     if not samples:
         p.error("give SAMPLES.csv or --synthetic N")
-    y, cosines = read_samples(samples)
+    y, mask, cosines = read_samples(samples)
     a, tan2, gain = basis(args.model, cosines)
 
     def loss(x):
-        beta = x[:3] * a[:, None] + x[3:6] * specular(tan2, gain, x[6])[:, None]
-        return float(np.sqrt(((y - beta) ** 2).sum(axis=1)).sum())
+        beta = x[:3] * a[:, None] + x[3:6] * specular(tan2, gain, x[6])[0][:, None]
+        return float(np.sqrt(((y - beta * mask) ** 2).sum(axis=1)).sum())
 
     x0 = start(y, a, tan2, gain)
     bounds = [(0, None)] * 6 + [(M_MIN, M_MAX)]

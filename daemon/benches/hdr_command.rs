@@ -4,6 +4,11 @@
 //! within 1.5× of the merge alone. Decoding and writing the EXR are timed alone too.
 //!
 //!     cargo bench -p gonio-daemon --bench hdr_command [-- --runs N]
+//!
+//! The last line is the result as JSON (`{"bench": "hdr_command", ...}`), which
+//! scripts/bench.sh keeps.
+
+mod common;
 
 use std::path::PathBuf;
 use std::process::Command;
@@ -24,15 +29,7 @@ fn timed<T>(f: impl FnOnce() -> T) -> (T, Duration) {
 }
 
 fn main() {
-    let mut runs = 5;
-    let mut args = std::env::args().skip(1);
-    while let Some(arg) = args.next() {
-        match arg.as_str() {
-            "--runs" => runs = args.next().and_then(|n| n.parse().ok()).expect("--runs N"),
-            "--bench" => {}
-            other => panic!("unknown argument {other}"),
-        }
-    }
+    let runs = common::runs(5);
     let gonio = env!("CARGO_BIN_EXE_gonio");
     let dir = tempfile::tempdir().expect("temp dir");
     let status = Command::new(gonio)
@@ -83,4 +80,9 @@ fn main() {
     println!("  merge alone   {merge_s:.3} s");
     println!("  EXR write     {:.3} s", median(write));
     println!("  whole / merge {:.2} (target ≤ 1.5)", whole / merge_s);
+    // The line scripts/bench.sh keeps for the README's table.
+    println!(
+        "{}",
+        serde_json::json!({ "bench": "hdr_command", "whole_s": whole, "merge_s": merge_s })
+    );
 }

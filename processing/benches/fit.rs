@@ -1,13 +1,15 @@
 //! Fit speed on 1,000 points: robust and Nelder–Mead, Cook–Torrance and Ward, and the
 //! robust fits with shared m without their uncertainty (target: the uncertainty costs at
-//! most 10 % of a Cook–Torrance fit).
+//! most 10 % of a Cook–Torrance fit). A Nelder–Mead fit includes its check against the
+//! robust fit.
 //!
 //!     cargo bench -p gonio-processing --bench fit
+//!     GONIO_BENCH_SAMPLES=samples.csv cargo bench -p gonio-processing --bench fit
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use gonio_processing::brdf::{Model, Params, Roughness};
-use gonio_processing::fit::{fit, FitMethod, FitOptions};
-use gonio_processing::samples::Sample;
+use gonio_processing::fit::{fit, loss_reached, FitMethod, FitOptions};
+use gonio_processing::samples::{read_csv, Sample};
 
 /// 1,000 distant-geometry points over four θL (θi = θL − φ, θr = φ, 250 per θL) with 1 %
 /// deterministic multiplicative noise.
@@ -62,5 +64,35 @@ fn bench_fits(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench_fits);
+/// With `GONIO_BENCH_SAMPLES=samples.csv`: the robust Cook–Torrance fit of that file (with
+/// its uncertainty) and Nelder–Mead's minimisation alone (`fit::loss_reached`, as scipy's
+/// `minimize` that scripts/bench_peers.py times on the same file); prints the samples'
+/// size and the robust loss as the JSON line scripts/bench.sh keeps.
+fn bench_samples_file(c: &mut Criterion) {
+    let Ok(path) = std::env::var("GONIO_BENCH_SAMPLES") else {
+        return;
+    };
+    let data = read_csv(std::path::Path::new(&path)).expect("GONIO_BENCH_SAMPLES is a samples CSV");
+    let robust = FitOptions::new(Model::CookTorrance);
+    let nelder_mead = FitOptions {
+        method: FitMethod::NelderMead,
+        ..robust.clone()
+    };
+    let loss = fit(&data, &robust).expect("robust fit").loss;
+    println!(
+        "{}",
+        serde_json::json!({ "bench": "fit_samples", "samples": data.len(), "robust_loss": loss })
+    );
+    let mut group = c.benchmark_group("fit_samples");
+    group.sample_size(10);
+    group.bench_function("cook-torrance/robust/shared", |b| {
+        b.iter(|| fit(black_box(&data), &robust).expect("fit"))
+    });
+    group.bench_function("cook-torrance/nelder-mead/shared", |b| {
+        b.iter(|| loss_reached(black_box(&data), &nelder_mead).expect("fit"))
+    });
+    group.finish();
+}
+
+criterion_group!(benches, bench_fits, bench_samples_file);
 criterion_main!(benches);

@@ -1,0 +1,83 @@
+//! `gonio study` as a whole process on the full-size `gold` scan, as docs/results runs
+//! it: the 63 θL combinations × 3 models with their uncertainty, and the Nelder–Mead
+//! comparison of the paper's two models, every column fitted. The scan is rendered by
+//! `gonio simulate` and extracted once; the study runs `--runs` times (default 3).
+//! Prints the median wall time (target ≤ 4 s on the 2-core machine, idle) and the
+//! median CPU time of the process (user + system, which a loaded machine disturbs less),
+//! then the result as JSON (`{"bench": "study_command", ...}`), which scripts/bench.sh
+//! keeps.
+//!
+//!     cargo bench -p gonio-daemon --bench study_command [-- --runs N]
+
+mod common;
+
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::Instant;
+
+fn median(mut values: Vec<f64>) -> f64 {
+    values.sort_by(f64::total_cmp);
+    values[values.len() / 2]
+}
+
+fn run(gonio: &str, args: &[&str], dir: &Path) {
+    let output = Command::new(gonio)
+        .args(args)
+        .current_dir(dir)
+        .stdin(Stdio::null())
+        .output()
+        .expect("running gonio");
+    assert!(output.status.success(), "gonio {args:?}: {output:?}");
+}
+
+/// User + system CPU seconds of the children waited for so far.
+fn children_cpu_s() -> f64 {
+    let mut usage = std::mem::MaybeUninit::<libc::rusage>::zeroed();
+    // SAFETY: getrusage fills the struct it is given.
+    let usage = unsafe {
+        libc::getrusage(libc::RUSAGE_CHILDREN, usage.as_mut_ptr());
+        usage.assume_init()
+    };
+    let seconds = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+    seconds(usage.ru_utime) + seconds(usage.ru_stime)
+}
+
+fn main() {
+    let runs = common::runs(3);
+    let gonio = env!("CARGO_BIN_EXE_gonio");
+    let dir = tempfile::tempdir().expect("temp dir");
+    run(
+        gonio,
+        &["simulate", "--scene", "gold", "--out", "scan"],
+        dir.path(),
+    );
+    run(
+        gonio,
+        &["extract", "scan", "--out", "samples.csv"],
+        dir.path(),
+    );
+    let study = [
+        "study",
+        "samples.csv",
+        "--reference",
+        "scan/reference.csv",
+        "--out",
+        "study",
+    ];
+    let mut wall = Vec::new();
+    let mut cpu = Vec::new();
+    for _ in 0..runs {
+        let before = children_cpu_s();
+        let started = Instant::now();
+        run(gonio, &study, dir.path());
+        wall.push(started.elapsed().as_secs_f64());
+        cpu.push(children_cpu_s() - before);
+    }
+    let (wall_s, cpu_s) = (median(wall), median(cpu));
+    println!("gonio study, full-size gold scan, 3 models, Nelder–Mead compared, median of {runs}:");
+    println!("  wall {wall_s:.2} s (target ≤ 4 s), CPU {cpu_s:.2} s");
+    println!(
+        "{}",
+        serde_json::json!({ "bench": "study_command", "wall_s": wall_s, "cpu_s": cpu_s })
+    );
+}

@@ -1,0 +1,106 @@
+#!/usr/bin/env bash
+# Runs gonio's benchmarks and, when they can be installed, their peers on the same inputs
+# (scipy's Nelder–Mead and least_squares on the same samples and model, OpenCV's Debevec
+# merge on the same frames), then writes README.md's "What accuracy costs in time" table
+# from what it measured (scripts/bench_table.py): no number in it is written by hand.
+# The peers go into a virtual environment of their own, .venv-bench/ (numpy, scipy,
+# opencv-python-headless from PyPI); --no-peers skips them.
+# The machine should be idle: the table states the load average when the run started.
+# Usage: bash scripts/bench.sh [--no-peers]
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+peers=1
+if [ "${1:-}" = --no-peers ]; then
+    peers=0
+fi
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+mkdir -p target/bench
+results="$PWD/target/bench/results.jsonl"
+: >"$results"
+gonio=target/release/gonio
+
+# Shows a benchmark's output and keeps its result lines (`{"bench": ...}`) for the table.
+keep() {
+    tee /dev/stderr | { grep '^{"bench"' || true; } >>"$results"
+}
+
+# One JSON line for the table: bench name, then the object on stdin merged in.
+record() {
+    python3 -c 'import json, sys; print(json.dumps({"bench": sys.argv[1], **json.load(sys.stdin)}))' "$1" >>"$results"
+}
+
+conditions() {
+    local cpu
+    cpu=$(grep -m1 'model name' /proc/cpuinfo | sed 's/.*: //' || echo unknown)
+    printf '{"date": "%s", "cpu": "%s", "cores": %s, "load": "%s"}' \
+        "$(date -u +%Y-%m-%d)" "$cpu" "$(nproc)" "$(cut -d' ' -f1 /proc/loadavg)" | record conditions
+}
+
+# The inputs: a full-size gold scan and its samples; 8-bit frames for the OpenCV peer.
+inputs() {
+    cargo build --release --locked -p gonio-daemon
+    "$gonio" simulate --scene gold --out "$work/gold" >/dev/null
+    "$gonio" extract "$work/gold" --out "$work/gold/samples.csv" >/dev/null
+    # The gold scene with an 8-bit non-linear response and a 7-exposure bracket.
+    sed 's/^bracket_s = .*/bracket_s = [1.0, 0.5, 0.25, 0.125, 0.0625, 0.03125, 0.015625]/' \
+        mock-hw/scenes/gold.toml >"$work/gold-8bit.toml"
+    printf '\n[effects.response]\ngamma = 2.2\n' >>"$work/gold-8bit.toml"
+    "$gonio" simulate --scene "$work/gold-8bit.toml" --theta-l -20 --out "$work/gold-8bit" >/dev/null
+}
+
+criterion_benches() {
+    GONIO_BENCH_SAMPLES="$work/gold/samples.csv" cargo bench --locked -p gonio-processing --bench fit | keep
+    cargo bench --locked -p gonio-processing --bench study
+    cargo bench --locked -p gonio-processing --bench hdr
+    GONIO_BENCH_SCAN="$work/gold" cargo bench --locked -p gonio-processing --bench extract
+    cargo bench --locked -p gonio-mock-hw --bench render
+}
+
+# Peak memory of the linear merge alone, from its benchmark binary.
+hdr_memory() {
+    local bin peak
+    bin=$(cargo bench --locked -p gonio-processing --bench hdr --no-run --message-format=json 2>/dev/null |
+        python3 -c 'import json, sys
+for line in sys.stdin:
+    m = json.loads(line)
+    if m.get("executable") and m.get("target", {}).get("name") == "hdr":
+        print(m["executable"])')
+    peak=$(/usr/bin/time -f '%M' "$bin" --bench linear --profile-time 2 2>&1 >/dev/null | tail -1)
+    echo "{\"peak_bytes\": $((peak * 1024))}" | record hdr_memory
+}
+
+process_benches() {
+    cargo bench --locked -p gonio-daemon --bench study_command | keep
+    cargo bench --locked -p gonio-daemon --bench hdr_command | keep
+    cargo bench --locked -p gonio-daemon --bench scan -- --runs 5 | keep
+}
+
+install_peers() {
+    [ "$peers" = 1 ] || return 1
+    if [ ! -x .venv-bench/bin/python ]; then
+        python3 -m venv .venv-bench || return 1
+    fi
+    .venv-bench/bin/pip install --quiet --disable-pip-version-check \
+        numpy scipy opencv-python-headless || return 1
+}
+
+peer_benches() {
+    if ! install_peers; then
+        echo "peers not installed: their rows say so"
+        return 0
+    fi
+    .venv-bench/bin/python scripts/bench_peers.py fit "$work/gold/samples.csv" | record peers_fit
+    .venv-bench/bin/python scripts/bench_peers.py hdr --gonio "$gonio" \
+        "$work/gold-8bit/theta_l_-20.0/"*.tiff | record peers_hdr
+}
+
+conditions
+inputs
+criterion_benches
+hdr_memory
+process_benches
+peer_benches
+python3 scripts/bench_table.py "$results"
+echo "README.md's table rewritten from $results"

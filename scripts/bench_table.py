@@ -1,0 +1,276 @@
+#!/usr/bin/env python3
+"""Writes README.md's "What accuracy costs in time" table (the block between
+`<!-- bench: costs -->` and `<!-- /bench: costs -->`) from what scripts/bench.sh has just
+measured: criterion's medians under target/criterion and the JSON lines the other
+benchmarks and the peers appended to the results file. Every row names the command that
+measures it; a row whose measurement is missing says so instead of keeping an old number.
+
+Usage: python3 scripts/bench_table.py RESULTS.jsonl [--criterion DIR] [--readme FILE]
+Needs only the Python standard library.
+"""
+
+import argparse
+import json
+import re
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+FIT = "`cargo bench -p gonio-processing --bench fit`"
+FIT_SAMPLES = "`GONIO_BENCH_SAMPLES=samples.csv cargo bench -p gonio-processing --bench fit`"
+STUDY = "`cargo bench -p gonio-processing --bench study`"
+HDR = "`cargo bench -p gonio-processing --bench hdr`"
+PEERS_FIT = "`python3 scripts/bench_peers.py fit samples.csv`"
+PEERS_HDR = "`python3 scripts/bench_peers.py hdr --gonio target/release/gonio FRAME...`"
+
+
+def criterion_medians(root):
+    """full id → median seconds, from each benchmark's latest run."""
+    medians = {}
+    for bench in Path(root).glob("**/new/benchmark.json"):
+        with open(bench, encoding="utf-8") as f:
+            full_id = json.load(f)["full_id"]
+        with open(bench.parent / "estimates.json", encoding="utf-8") as f:
+            medians[full_id] = json.load(f)["median"]["point_estimate"] * 1e-9
+    return medians
+
+
+def read_results(path):
+    """bench name → its last recorded JSON object."""
+    results = {}
+    if Path(path).is_file():
+        for line in Path(path).read_text(encoding="utf-8").splitlines():
+            if line.strip():
+                record = json.loads(line)
+                results[record["bench"]] = record
+    return results
+
+
+def duration(seconds):
+    if seconds is None:
+        return None
+    if seconds < 1e-3:
+        return f"{seconds * 1e6:.0f} µs"
+    if seconds < 1.0:
+        return f"{seconds * 1e3:.3g} ms"
+    return f"{seconds:.2f} s"
+
+
+def ratio(a, b, digits=2):
+    return f"{a / b:.{digits}f}" if a is not None and b else None
+
+
+def megabytes(size):
+    return f"{size / 2**20:.0f} MiB"
+
+
+class Table:
+    def __init__(self, medians, results):
+        self.medians, self.results, self.rows = medians, results, []
+
+    def median(self, full_id):
+        return self.medians.get(full_id)
+
+    def row(self, what, values, target, command):
+        """A row; `values` None or holding None means not measured in this run."""
+        if values is None or (isinstance(values, (list, tuple)) and None in values):
+            values = "not measured in this run"
+        elif isinstance(values, (list, tuple)):
+            values = " / ".join(values)
+        self.rows.append([what, values, target, command])
+
+    def markdown(self):
+        lines = ["| what | median | target | command |", "|---|---|---|---|"]
+        lines += ["| " + " | ".join(r) + " |" for r in self.rows]
+        return "\n".join(lines)
+
+
+def fit_rows(t):
+    ct = t.median("fit_1000/cook-torrance/robust/shared")
+    bare = t.median("fit_1000/cook-torrance/robust/shared/no-uncertainty")
+    t.row("robust Cook–Torrance fit, 1,000 points, shared m", [duration(ct)], "≤ 5 ms", FIT)
+    t.row(
+        "same without its uncertainty: with / without",
+        [f"{duration(bare)}: {ratio(ct, bare, 3)}" if bare else None],
+        "≤ 1.1",
+        "same",
+    )
+    t.row(
+        "robust Ward fit, 1,000 points, shared m",
+        [duration(t.median("fit_1000/ward/robust/shared"))],
+        "",
+        "same",
+    )
+    t.row(
+        "robust CT / Ward fit, per-channel m",
+        [duration(t.median(f"fit_1000/{m}/robust/per-channel")) for m in ("cook-torrance", "ward")],
+        "",
+        "same",
+    )
+    t.row(
+        "Nelder–Mead CT / Ward fit (the paper's method), with its check against the robust fit",
+        [duration(t.median(f"fit_1000/{m}/nelder-mead/shared")) for m in ("cook-torrance", "ward")],
+        "",
+        "same",
+    )
+
+
+def peer_fit_rows(t):
+    robust = t.median("fit_samples/cook-torrance/robust/shared")
+    nm = t.median("fit_samples/cook-torrance/nelder-mead/shared")
+    samples = t.results.get("fit_samples")
+    points = f"{samples['samples']:,} " if samples else ""
+    global_loss = samples["robust_loss"] if samples else None
+    t.row(
+        f"robust / Nelder–Mead Cook–Torrance fit of the full-size `gold` scan's {points}samples",
+        [duration(robust), duration(nm)],
+        "",
+        FIT_SAMPLES,
+    )
+    peer = t.results.get("peers_fit")
+    if peer is None:
+        t.row("scipy on the same samples and model", None, "", PEERS_FIT + " (scipy not installed)")
+        return
+    ls, sp = peer["least_squares"], peer["nelder_mead"]
+    above = lambda loss: f"{100 * (loss / global_loss - 1):.1f} %" if global_loss else "?"
+    t.row(
+        f"scipy {peer['scipy']} `least_squares` (trf, analytic Jacobian) / gonio robust",
+        [
+            f"{duration(ls['seconds'])}: {ratio(ls['seconds'], robust, 1)}× the time, loss "
+            f"{above(ls['loss'])} above gonio's ({ls['evaluations']} evaluations)"
+        ],
+        "",
+        PEERS_FIT,
+    )
+    t.row(
+        f"scipy {peer['scipy']} Nelder–Mead (gonio's settings and start) / gonio Nelder–Mead",
+        [
+            f"{duration(sp['seconds'])}: {ratio(sp['seconds'], nm, 1)}× the time, loss "
+            f"{above(sp['loss'])} above the robust fit's ({sp['evaluations']} of "
+            f"{sp['cap']} evaluations)"
+        ],
+        "",
+        "same",
+    )
+
+
+def study_rows(t):
+    name = "study/3_samples_x_63_combinations_x_3_models_robust_stride_{}"
+    t.row(
+        "study: 3 samples × 63 θL combinations × 3 models, robust, every column (~1,370 per θL)",
+        [duration(t.median(name.format(1)))],
+        "",
+        STUDY,
+    )
+    t.row("same, every 4th column", [duration(t.median(name.format(4)))], "", "same")
+    s = t.results.get("study_command")
+    t.row(
+        "`gonio study` of the full-size `gold` scan (3 models, Nelder–Mead compared): "
+        "wall / CPU time of the process",
+        [f"{duration(s['wall_s'])} / {duration(s['cpu_s'])}" if s else None],
+        "≤ 4 s wall",
+        "`cargo bench -p gonio-daemon --bench study_command`",
+    )
+
+
+def hdr_rows(t):
+    linear = t.median("hdr_merge_7x3872x2592/linear")
+    memory = t.results.get("hdr_memory")
+    t.row(
+        "HDR merge, 7 frames of 3872×2592, linear (noise-weighted): time, peak memory",
+        [duration(linear) + (f", {megabytes(memory['peak_bytes'])}" if memory else "")]
+        if linear
+        else None,
+        "≤ 0.5 s, ≤ 1.5 GB",
+        HDR + "; memory: `/usr/bin/time -v` on its binary, `--bench linear`",
+    )
+    t.row(
+        "HDR merge, same frames, Debevec–Malik",
+        [duration(t.median("hdr_merge_7x3872x2592/debevec_malik"))],
+        "",
+        "same",
+    )
+    peer = t.results.get("peers_hdr")
+    if peer is None:
+        t.row("OpenCV's Debevec merge on the same frames", None, "", PEERS_HDR + " (OpenCV not installed)")
+    else:
+        g, o = peer["gonio"], peer["opencv"]
+        t.row(
+            f"`gonio hdr` / OpenCV {peer['opencv']} CalibrateDebevec + MergeDebevec, "
+            f"{peer['frames']} 8-bit frames of the `gold` scene, whole process",
+            [
+                f"{duration(g['seconds'])}, {megabytes(g['peak_bytes'])} / "
+                f"{duration(o['seconds'])}, {megabytes(o['peak_bytes'])}: OpenCV takes "
+                f"{ratio(o['seconds'], g['seconds'], 1)}× the time"
+            ],
+            "",
+            PEERS_HDR,
+        )
+    cmd = t.results.get("hdr_command")
+    t.row(
+        "`gonio hdr`, 4 Deflate TIFFs of 3872×2592: whole process / merge alone",
+        [f"{ratio(cmd['whole_s'], cmd['merge_s'])} ({duration(cmd['whole_s'])} / {duration(cmd['merge_s'])})"]
+        if cmd
+        else None,
+        "≤ 1.5",
+        "`cargo bench -p gonio-daemon --bench hdr_command`",
+    )
+
+
+def scan_rows(t):
+    t.row(
+        "6-θL full-size `gold` scan (24 TIFFs) → samples.csv",
+        [duration(t.median("extract/six_theta_l_scan_to_csv"))],
+        "",
+        "`GONIO_BENCH_SCAN=DIR cargo bench -p gonio-processing --bench extract` (DIR from "
+        "`gonio simulate --scene gold`)",
+    )
+    labels = ["none", "default effects (noise, vignetting)", "spectral (thin film)", "all (thin film + every effect)"]
+    t.row(
+        "render 3872×2592: no effects / default (noise, vignetting) / thin film / everything",
+        [duration(t.median(f"render 3872x2592/{label}")) for label in labels],
+        "≤ 0.3 s",
+        "`cargo bench -p gonio-mock-hw --bench render`",
+    )
+    scan = t.results.get("scan")
+    t.row(
+        "6-θL `gold` scan through `gonio serve` on the emulators, auto bracket: wall time / "
+        "time in hardware steps",
+        [f"{scan['ratio']:.3f} ({scan['wall_s']:.2f} s / {scan['hardware_s']:.2f} s)"] if scan else None,
+        "≤ 1.05",
+        "`cargo bench -p gonio-daemon --bench scan -- --runs 5`",
+    )
+
+
+def conditions(results):
+    c = results.get("conditions")
+    if not c:
+        return "Measured conditions unknown."
+    return (
+        f"Measured by `bash scripts/bench.sh` on {c['date']}: {c['cpu']}, {c['cores']} cores, "
+        f"load average {c['load']} when it started; criterion medians, and medians of the "
+        "other benchmarks' own runs."
+    )
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("results")
+    p.add_argument("--criterion", default=str(ROOT / "target" / "criterion"))
+    p.add_argument("--readme", default=str(ROOT / "README.md"))
+    args = p.parse_args()
+    results = read_results(args.results)
+    t = Table(criterion_medians(args.criterion), results)
+    for rows in (fit_rows, peer_fit_rows, study_rows, hdr_rows, scan_rows):
+        rows(t)
+    block = conditions(results) + "\n\n" + t.markdown() + "\n"
+    readme = Path(args.readme)
+    text = readme.read_text(encoding="utf-8")
+    pattern = re.compile(r"(<!-- bench: costs -->\n)(.*?)(<!-- /bench: costs -->)", re.S)
+    if not pattern.search(text):
+        raise SystemExit(f"{readme}: no block `<!-- bench: costs -->`")
+    readme.write_text(pattern.sub(lambda m: m.group(1) + block + m.group(3), text), encoding="utf-8")
+    print(block)
+
+
+if __name__ == "__main__":
+    main()
