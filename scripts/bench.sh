@@ -19,7 +19,8 @@ trap 'rm -rf "$work"' EXIT
 mkdir -p target/bench
 results="$PWD/target/bench/results.jsonl"
 : >"$results"
-gonio=target/release/gonio
+target=${CARGO_TARGET_DIR:-target}
+gonio=$target/release/gonio
 
 # Shows a benchmark's output and keeps its result lines (`{"bench": ...}`) for the table.
 keep() {
@@ -102,5 +103,5 @@ criterion_benches
 hdr_memory
 process_benches
 peer_benches
-python3 scripts/bench_table.py "$results"
+python3 scripts/bench_table.py "$results" --criterion "$target/criterion"
 echo "README.md's table rewritten from $results"

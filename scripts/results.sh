@@ -11,7 +11,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-gonio=target/release/gonio
+gonio=${CARGO_TARGET_DIR:-target}/release/gonio
 
 # Simulates SCENE's full scan into $scans/SCENE and extracts its samples there; keeps
 # the scene's truth, setup and the extraction's summary in docs/results/SCENE.
