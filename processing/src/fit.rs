@@ -325,7 +325,7 @@ pub fn fit(samples: &[Sample], options: &FitOptions) -> Result<FitResult, FitErr
         FitMethod::Robust => None,
     };
     // Intervals around a point that is not the optimum would describe nothing.
-    let spread = (options.uncertainty && !global_minimum.is_some_and(|g| !g.reached))
+    let spread = (options.uncertainty && global_minimum.is_none_or(|g| g.reached))
         .then(|| uncertainty::estimate(&data, options, &params, &ks_90))
         .flatten();
     let (stderr, ci95, correlation) = match spread {
