@@ -205,7 +205,7 @@ fn score_combination(
     let nelder_mead_loss = (options.compare_nelder_mead && !variant.model.has_fresnel_colour())
         .then(|| {
             fit_options.method = FitMethod::NelderMead;
-            fit::fit(&subset, &fit_options).ok().map(|f| f.loss)
+            fit::loss_reached(&subset, &fit_options).ok()
         })
         .flatten();
     let estimated: Vec<[f64; 3]> = points
