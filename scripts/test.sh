@@ -62,4 +62,5 @@ RUSTUP_HOME="${RUSTUP_HOME:-$HOME/.rustup}" CARGO_HOME="${CARGO_HOME:-$HOME/.car
 python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore \
     --target "$work/mitsuba" mitsuba==3.9.1 </dev/null
 GONIO_MITSUBA_PYTHONPATH="$work/mitsuba" \
-    cargo test -p gonio-daemon --test cli_export --locked -- --ignored
+    # --workspace: the features the suite was built with, so nothing is compiled again.
+    cargo test --workspace --test cli_export --locked -- --ignored
