@@ -8,6 +8,7 @@
 
 mod error;
 pub mod material;
+pub mod rgl;
 mod sample;
 pub mod spectral;
 
@@ -492,6 +493,9 @@ impl Scene {
             Sample::Measured { path } => Sample::Measured {
                 path: resolve(&path.to_string_lossy()),
             },
+            Sample::Rgl { bsdf } => Sample::Rgl {
+                bsdf: resolve(&bsdf.to_string_lossy()),
+            },
             other => other,
         };
         let material = Material::new(&sample, &domain)?;
@@ -680,6 +684,7 @@ impl Scene {
                 flakes.truth(),
             ),
             Sample::Measured { path } => put("table", path.display().to_string().into()),
+            Sample::Rgl { bsdf } => put("bsdf", bsdf.display().to_string().into()),
         }
         if let Some(retro) = &self.effects.retro_reflection {
             put("retro_reflection", serde_json::json!(retro));

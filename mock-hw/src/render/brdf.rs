@@ -102,6 +102,7 @@ impl Material {
                 std::array::from_fn(|c| lobe * colour[c] + kd[c])
             }
             Material::Measured(table) => table.rgb_at(g.theta_i_deg, g.theta_r_deg),
+            Material::Rgl(bsdf) => bsdf.beta(g.cos_i, g.cos_r, g.l_dot_v),
         }
     }
 
@@ -122,6 +123,7 @@ impl Material {
                 std::array::from_fn(|i| lobe * reflectance[i] + kd_spectrum[i])
             }
             Material::Measured(table) => table.spectrum_at(g.theta_i_deg, g.theta_r_deg),
+            Material::Rgl(bsdf) => bsdf.beta_spectrum(g.cos_i, g.cos_r, g.l_dot_v),
             _ => domain.spectrum_from_rgb(self.beta(g)),
         }
     }

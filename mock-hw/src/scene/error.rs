@@ -17,6 +17,8 @@ pub enum SceneError {
     Parse { origin: String, message: String },
     #[error("scene key `{key}`: {reason}")]
     Invalid { key: String, reason: String },
+    #[error("{}: {reason}", path.display())]
+    Bsdf { path: PathBuf, reason: String },
     #[error("{what}, line {line}: {reason}")]
     Table {
         what: String,

@@ -1,11 +1,12 @@
 //! The sample prepared for rendering: the camera-RGB colour of spectral lobes
-//! integrated once over the facet incidence, measured tables read and converted, when
-//! the scene loads (so an unreadable table is an error of the scene). The renderer
-//! evaluates a [`Material`] at a surface point (`render::brdf`).
+//! integrated once over the facet incidence, measured tables and `.bsdf` files read and
+//! converted, when the scene loads (so an unreadable table is an error of the scene).
+//! The renderer evaluates a [`Material`] at a surface point (`render::brdf`).
 
 use std::path::Path;
 
 use super::error::SceneError;
+use super::rgl::{RglBsdf, RglMaterial};
 use super::sample::Sample;
 use super::spectral::{self, CameraDomain, Spectrum, BANDS};
 
@@ -287,6 +288,8 @@ pub enum Material {
         table: Vec<[f64; 3]>,
     },
     Measured(Table),
+    /// An RGL-EPFL `.bsdf` file, prepared for the scene's camera and light.
+    Rgl(Box<RglMaterial>),
 }
 
 fn roughness3(m: &[f64]) -> [f64; 3] {
@@ -331,6 +334,16 @@ impl Material {
                 }),
             ),
             Sample::Measured { path } => Material::Measured(Table::read(path, domain)?),
+            Sample::Rgl { bsdf } => {
+                let material =
+                    RglMaterial::new(RglBsdf::read(bsdf)?, domain).map_err(|reason| {
+                        SceneError::Bsdf {
+                            path: bsdf.clone(),
+                            reason,
+                        }
+                    })?;
+                Material::Rgl(Box::new(material))
+            }
         })
     }
 

@@ -31,6 +31,9 @@ pub enum Sample {
     /// A measured table in the reference CSV format (`theta_i,theta_r,390,…,730`, a
     /// full regular grid of spectral radiance factor).
     Measured { path: PathBuf },
+    /// An RGL-EPFL measured material: a `.bsdf` tensor file (RGB or spectral,
+    /// isotropic), evaluated as its reference evaluator does (`scene::rgl`).
+    Rgl { bsdf: PathBuf },
 }
 
 fn default_medium_index() -> f64 {
@@ -144,6 +147,7 @@ impl Sample {
             Sample::ThinFilm(_) => "thin-film",
             Sample::BraggFlakes(_) => "bragg-flakes",
             Sample::Measured { .. } => "measured",
+            Sample::Rgl { .. } => "rgl",
         }
     }
 
@@ -151,7 +155,10 @@ impl Sample {
     pub fn is_spectral(&self) -> bool {
         matches!(
             self,
-            Sample::ThinFilm(_) | Sample::BraggFlakes(_) | Sample::Measured { .. }
+            Sample::ThinFilm(_)
+                | Sample::BraggFlakes(_)
+                | Sample::Measured { .. }
+                | Sample::Rgl { .. }
         )
     }
 
@@ -166,7 +173,7 @@ impl Sample {
             }
             Sample::ThinFilm(film) => film.validate(),
             Sample::BraggFlakes(flakes) => flakes.validate(),
-            Sample::Measured { .. } => Ok(()),
+            Sample::Measured { .. } | Sample::Rgl { .. } => Ok(()),
         }
     }
 }

@@ -26,6 +26,8 @@ pub type Spectrum = [f64; BANDS];
 
 const ILLUMINANT_A_CSV: &str =
     include_str!("../../../processing/data/cie_illuminant_a_390_730_10nm.csv");
+const CIE_1931_CSV: &str =
+    include_str!("../../../processing/data/cie1931_2deg_cmf_390_730_10nm.csv");
 const NIKON_D5100_CSV: &str =
     include_str!("../../../processing/data/nikon_d5100_npl_sensitivities_390_730_10nm.csv");
 
@@ -40,6 +42,36 @@ pub fn illuminant_a() -> Spectrum {
 pub fn nikon_d5100() -> [Spectrum; 3] {
     parse_table::<3>(NIKON_D5100_CSV, "built-in Nikon D5100 sensitivities")
         .expect("embedded Nikon D5100 table is valid")
+}
+
+/// Linear sRGB (IEC 61966-2-1) from CIE XYZ.
+const XYZ_TO_SRGB: [[f64; 3]; 3] = [
+    [3.2406, -1.5372, -0.4986],
+    [-0.9689, 1.8758, 0.0415],
+    [0.0557, -0.2040, 1.0570],
+];
+
+/// The three smooth spectra (combinations of the Gaussian basis of
+/// [`CameraDomain::spectrum_from_rgb`]) whose linear sRGB are (1, 0, 0), (0, 1, 0) and
+/// (0, 0, 1): sRGB of a radiance factor taken from the CIE 1931 observer under an
+/// equal-energy light, each channel scaled so that a perfect white is 1.
+pub fn srgb_unit_spectra() -> [Spectrum; 3] {
+    let cmf = parse_table::<3>(CIE_1931_CSV, "built-in CIE 1931 observer")
+        .expect("embedded CIE 1931 table is valid");
+    let raw: [Spectrum; 3] =
+        XYZ_TO_SRGB.map(|row| std::array::from_fn(|i| (0..3).map(|k| row[k] * cmf[k][i]).sum()));
+    let weights = raw.map(|w| {
+        let white: f64 = w.iter().sum();
+        w.map(|v| v / white)
+    });
+    let basis = CameraDomain::basis();
+    let matrix: [[f64; 3]; 3] = std::array::from_fn(|c| {
+        std::array::from_fn(|j| weights[c].iter().zip(&basis[j]).map(|(w, b)| w * b).sum())
+    });
+    std::array::from_fn(|k| {
+        let a = solve3(matrix, std::array::from_fn(|c| f64::from(u8::from(c == k))));
+        std::array::from_fn(|i| (0..3).map(|j| a[j] * basis[j][i]).sum())
+    })
 }
 
 /// Reads a table with a header line and rows `wavelength_nm,v1,..,vN` covering exactly
@@ -155,6 +187,11 @@ impl CameraDomain {
     pub fn rgb(&self, beta: &Spectrum) -> [f64; 3] {
         self.weights
             .map(|w| w.iter().zip(beta).map(|(w, b)| w * b).sum())
+    }
+
+    /// The per-channel weights k·c̄(λ)·I(λ) of each band (zero outside 400–700 nm).
+    pub fn weights(&self) -> &[Spectrum; 3] {
+        &self.weights
     }
 
     /// Camera-RGB value of a perfect reflecting diffuser (G = 100).
