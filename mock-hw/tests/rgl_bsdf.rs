@@ -424,6 +424,65 @@ fn hostile_and_unsupported_files_are_refused_with_one_line_naming_the_problem() 
     assert!(error.contains("not a regular file"), "{error}");
 }
 
+/// Damaged files (random bytes changed, random lengths cut, float values replaced by
+/// extremes) never panic: each is refused with one line, or evaluates to finite β at
+/// every geometry, grazing ones included.
+#[test]
+fn damaged_files_are_refused_or_evaluate_finitely() {
+    let scene = small_scene("model = \"lambertian\"\nkd = [1.0, 1.0, 1.0]").unwrap();
+    let mut rng = Pcg64Mcg::seed_from_u64(7);
+    let originals = [
+        synthetic(11, false, 1, false),
+        synthetic(22, true, 2, false),
+    ];
+    let (mut refused, mut accepted) = (0, 0);
+    for round in 0..600 {
+        let mut bytes = originals[round % 2].clone();
+        match round % 3 {
+            0 => {
+                for _ in 0..rng.random_range(1..8) {
+                    let at = rng.random_range(0..bytes.len());
+                    bytes[at] = rng.random();
+                }
+            }
+            1 => bytes.truncate(rng.random_range(0..bytes.len())),
+            _ => {
+                let extremes = [f32::MAX, f32::MIN_POSITIVE, 1e-45, -1.0, 0.0, f32::NAN];
+                for _ in 0..rng.random_range(1..4) {
+                    let at = 4 * rng.random_range(8..bytes.len() / 4);
+                    let v = extremes[rng.random_range(0..extremes.len())];
+                    bytes[at..at + 4].copy_from_slice(&v.to_le_bytes());
+                }
+            }
+        }
+        match RglBsdf::from_bytes(&bytes) {
+            Err(error) => {
+                assert!(!error.is_empty() && !error.contains('\n'), "{error}");
+                refused += 1;
+            }
+            Ok(bsdf) => {
+                let material = RglMaterial::new(bsdf, scene.camera_domain()).unwrap();
+                for _ in 0..50 {
+                    let cos_i: f64 = rng.random_range(0.0..1.0);
+                    let cos_r: f64 = rng.random_range(0.0..1.0);
+                    let l_dot_v: f64 = rng.random_range(-1.0..1.0);
+                    let beta = material.beta(cos_i, cos_r, l_dot_v);
+                    let spectrum = material.beta_spectrum(cos_i, cos_r, l_dot_v);
+                    assert!(
+                        beta.iter().chain(&spectrum).all(|b| b.is_finite()),
+                        "round {round}"
+                    );
+                }
+                accepted += 1;
+            }
+        }
+    }
+    assert!(
+        refused > 100 && accepted > 100,
+        "{refused} refused, {accepted} accepted"
+    );
+}
+
 /// β of a prepared file at a surface point is π f_r = π·(f_r cos θo)/cos θo of the
 /// evaluation at the point's local directions, in camera RGB as the scene's camera and
 /// light see it; a spectral file's camera RGB is that of its spectrum.

@@ -19,9 +19,12 @@ use std::path::Path;
 use super::error::SceneError;
 use super::spectral::{self, CameraDomain, Spectrum, BANDS};
 
-/// Largest `.bsdf` file read (RGL's spectral files are tens of MB); a scene may name any
+/// Largest `.bsdf` file read (RGL's isotropic files are a few MB); a scene may name any
 /// path (even `/dev/zero`).
-const MAX_BSDF_BYTES: u64 = 512 << 20;
+const MAX_BSDF_BYTES: u64 = 256 << 20;
+
+/// Smallest cos θo by which f_r cos θo is divided (as the other models clamp cosines).
+const MIN_COS: f64 = 1e-4;
 
 /// Type codes of the tensor format used here.
 const UINT8: u8 = 1;
@@ -86,8 +89,10 @@ fn parse_fields(bytes: &[u8]) -> Result<HashMap<String, Field<'_>>, String> {
     let mut fields = HashMap::new();
     for _ in 0..count {
         let name_len = u16::from_le_bytes(cursor.array("a field's name length")?);
-        let name =
-            String::from_utf8_lossy(cursor.take(name_len.into(), "a field's name")?).into_owned();
+        // Escaped, so that an error quoting it stays on one line.
+        let name = String::from_utf8_lossy(cursor.take(name_len.into(), "a field's name")?)
+            .escape_debug()
+            .to_string();
         let rank = u16::from_le_bytes(cursor.array("a field's rank")?);
         let [dtype] = cursor.array::<1>("a field's type")?;
         let offset = u64::from_le_bytes(cursor.array("a field's offset")?);
@@ -430,7 +435,7 @@ pub struct RglBsdf {
 }
 
 impl RglBsdf {
-    /// Reads a `.bsdf` file (at most 512 MiB); an anisotropic one is refused.
+    /// Reads a `.bsdf` file (at most 256 MiB); an anisotropic one is refused.
     pub fn read(path: &Path) -> Result<Self, SceneError> {
         let bytes = gonio_files::input::read_input(path, MAX_BSDF_BYTES).map_err(|error| {
             SceneError::Io {
@@ -668,11 +673,12 @@ impl RglMaterial {
         Ok(Self { geometry, colour })
     }
 
-    /// The lookup at a surface point and π/cos θo, or `None` where no light reflects.
+    /// The lookup at a surface point and π/cos θo (cos θo at least [`MIN_COS`]), or
+    /// `None` where no light reflects.
     fn lookup(&self, cos_i: f64, cos_r: f64, l_dot_v: f64) -> Option<(Lookup, f64)> {
         let (wi, wo) = local_directions(cos_i, cos_r, l_dot_v);
         let look = self.geometry.lookup(wi, wo)?;
-        Some((look, PI / wo[2]))
+        Some((look, PI / wo[2].max(MIN_COS)))
     }
 
     /// β per camera channel at a surface point (cosines n·l, n·v, l·v).
