@@ -483,9 +483,38 @@ fn damaged_files_are_refused_or_evaluate_finitely() {
     );
 }
 
+/// Linear sRGB of a spectral radiance factor on the 390–730 nm bands: the CIE 1931
+/// observer (processing's table) under an equal-energy light, each channel scaled so
+/// that a perfect white is 1.
+fn srgb(spectrum: &[f64]) -> [f64; 3] {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../processing/data/cie1931_2deg_cmf_390_730_10nm.csv"
+    );
+    let cmf: Vec<Vec<f64>> = std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').skip(1).map(|v| v.parse().unwrap()).collect())
+        .collect();
+    let m = [
+        [3.2406, -1.5372, -0.4986],
+        [-0.9689, 1.8758, 0.0415],
+        [0.0557, -0.2040, 1.0570],
+    ];
+    std::array::from_fn(|k| {
+        let w: Vec<f64> = cmf
+            .iter()
+            .map(|x| (0..3).map(|j| m[k][j] * x[j]).sum())
+            .collect();
+        w.iter().zip(spectrum).map(|(w, s)| w * s).sum::<f64>() / w.iter().sum::<f64>()
+    })
+}
+
 /// β of a prepared file at a surface point is π f_r = π·(f_r cos θo)/cos θo of the
 /// evaluation at the point's local directions, in camera RGB as the scene's camera and
-/// light see it; a spectral file's camera RGB is that of its spectrum.
+/// light see it: a spectral file's bands are its wavelengths interpolated, an RGB
+/// file's spectrum has the file's linear sRGB, and camera RGB is that of the spectrum.
 #[test]
 fn prepared_materials_give_the_evaluation_as_radiance_factor() {
     let scene = small_scene("model = \"lambertian\"\nkd = [1.0, 1.0, 1.0]").unwrap();
@@ -523,15 +552,59 @@ fn prepared_materials_give_the_evaluation_as_radiance_factor() {
                     "{name}: {} against {expected}",
                     spectrum[band]
                 );
+            } else {
+                let rgb = srgb(&spectrum);
+                let top = value.iter().fold(1e-12f64, |a, b| a.max(PI / cos_r * b));
+                for c in 0..3 {
+                    let expected = PI / cos_r * value[c];
+                    assert!(
+                        (rgb[c] - expected).abs() <= 1e-9 * top,
+                        "{name}: {rgb:?} {value:?}"
+                    );
+                }
             }
         }
     }
 }
 
-/// A scene whose sample is a `.bsdf` file renders it: the sample strip's pixels divided
-/// by the white strip's mirror pixels give β/β_white·ρ_white.
+/// The cosines n·l, n·v, l·v of the surface point the pixel at sensor offsets (`x_mm`
+/// right, `y_mm` down) sees on the scene's cylinder (axis z through the origin, camera
+/// at (camera distance, 0, 0) looking along −x, light in the z = 0 plane at θL), traced
+/// in 3D here independently of the renderer.
+fn pixel_cosines(scene: &Scene, theta_l_deg: f64, x_mm: f64, y_mm: f64) -> [f64; 3] {
+    let s = scene.setup();
+    let (dc, r, f) = (
+        s.camera_distance_mm,
+        s.cylinder_radius_mm,
+        s.focal_length_mm,
+    );
+    let d = [-f, x_mm, -y_mm];
+    // |(dc, 0) + t (d0, d1)|² = r², the nearer root.
+    let a = d[0] * d[0] + d[1] * d[1];
+    let b = 2.0 * dc * d[0];
+    let c = dc * dc - r * r;
+    let t = (-b - (b * b - 4.0 * a * c).sqrt()) / (2.0 * a);
+    let p = [dc + t * d[0], t * d[1], t * d[2]];
+    let n = [p[0] / r, p[1] / r, 0.0];
+    let tl = theta_l_deg.to_radians();
+    let light = [
+        s.light_distance_mm * tl.cos(),
+        s.light_distance_mm * tl.sin(),
+        0.0,
+    ];
+    let l: Vec<f64> = (0..3).map(|k| light[k] - p[k]).collect();
+    let v: Vec<f64> = (0..3).map(|k| [dc, 0.0, 0.0][k] - p[k]).collect();
+    let dot = |a: &[f64], b: &[f64]| -> f64 { (0..3).map(|k| a[k] * b[k]).sum() };
+    let (ll, vv) = (dot(&l, &l).sqrt(), dot(&v, &v).sqrt());
+    [dot(&n, &l) / ll, dot(&n, &v) / vv, dot(&l, &v) / (ll * vv)]
+}
+
+/// A scene whose sample is a `.bsdf` file renders it at each pixel's 3D geometry: a
+/// sample pixel over the white pixel at the mirrored row (same light, same gain) is
+/// β(n·l, n·v, l·v)/(ρ_white·W) up to the rounding of the counts, at every pixel of the
+/// sample strip where both are well exposed.
 #[test]
-fn a_scene_renders_a_bsdf_sample() {
+fn a_scene_renders_a_bsdf_sample_at_each_pixels_geometry() {
     let file = synthetic(12, false, 1, false);
     let (dir, path) = with_file(&file);
     std::fs::write(
@@ -542,18 +615,49 @@ fn a_scene_renders_a_bsdf_sample() {
     let scene = Scene::load(&dir.path().join("scene.toml")).unwrap();
     assert_eq!(scene.sample().model_name(), "rgl");
     assert_eq!(scene.truth_json()["bsdf"], path.display().to_string());
-    let shot = Shot {
-        theta_l_deg: -30.0,
-        shutter_s: 0.01,
-        iso: 100,
-        frame_index: 0,
-    };
-    let frame = render::render(&scene, &shot);
-    let row = scene.setup().sample_row();
-    let lit = (0..frame.width())
-        .filter(|&u| frame.pixel(u, row).iter().all(|v| *v > 0))
-        .count();
-    assert!(lit > 100, "{lit} lit sample columns");
+    let material =
+        RglMaterial::new(RglBsdf::from_bytes(&file).unwrap(), scene.camera_domain()).unwrap();
+    let theta_l = -30.0;
+    let frame = render::render(
+        &scene,
+        &Shot {
+            theta_l_deg: theta_l,
+            shutter_s: 0.002,
+            iso: 100,
+            frame_index: 0,
+        },
+    );
+    let s = scene.setup();
+    let white = scene
+        .camera_domain()
+        .white_rgb()
+        .map(|w| w * scene.white_reflectance());
+    let pitch = s.pixel_pitch_um / 1000.0;
+    let mut checked = 0;
+    for row in s.sample_rows[0]..=s.sample_rows[1] {
+        let mirror = (2.0 * s.cy() - f64::from(row)) as u32;
+        for u in 0..frame.width() {
+            let (sample, reference) = (frame.pixel(u, row), frame.pixel(u, mirror));
+            let x_mm = (f64::from(u) - s.cx()) * pitch;
+            let y_mm = (f64::from(row) - s.cy()) * pitch;
+            let [cos_i, cos_r, l_dot_v] = pixel_cosines(&scene, theta_l, x_mm, y_mm);
+            let beta = material.beta(cos_i, cos_r, l_dot_v);
+            for c in 0..3 {
+                let (a, b) = (f64::from(sample[c]), f64::from(reference[c]));
+                if !(200.0..60_000.0).contains(&a) || !(200.0..60_000.0).contains(&b) {
+                    continue;
+                }
+                let expected = beta[c] / white[c];
+                let tolerance = expected * (0.6 / a + 0.6 / b);
+                assert!(
+                    (a / b - expected).abs() <= tolerance,
+                    "pixel ({u}, {row}) channel {c}: {a}/{b} against β ratio {expected}"
+                );
+                checked += 1;
+            }
+        }
+    }
+    assert!(checked > 1000, "{checked} values checked");
 }
 
 /// Real RGL files, when `GONIO_RGL_DIR` names a directory of them: every isotropic file
