@@ -663,8 +663,8 @@ fn a_scene_renders_a_bsdf_sample_at_each_pixels_geometry() {
 /// Real RGL files, when `GONIO_RGL_DIR` names a directory of them: every isotropic file
 /// loads and gives finite, non-negative β in camera RGB; an anisotropic one (`aniso_`)
 /// is refused as such; where `<name>.reference.csv` lies beside a file (the reference
-/// evaluator's output, tests/fixtures/rgl/README.md), the evaluation is within 1e-4
-/// relative of it.
+/// evaluator's output, tests/fixtures/rgl/README.md), the evaluation agrees with it as
+/// [`check_reference`] states.
 #[test]
 fn real_rgl_files_when_gonio_rgl_dir_is_set() {
     let Some(dir) = std::env::var_os("GONIO_RGL_DIR") else {
