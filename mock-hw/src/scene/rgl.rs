@@ -126,8 +126,8 @@ fn parse_fields(bytes: &[u8]) -> Result<HashMap<String, Field<'_>>, String> {
 struct Fields<'a>(HashMap<String, Field<'a>>);
 
 impl Fields<'_> {
-    /// The shape of field `name`, of type `dtype` and rank `rank`, every extent ≥ 1.
-    fn shape(&self, name: &str, dtype: u8, rank: usize) -> Result<Vec<usize>, String> {
+    /// Field `name`, checked to be of type `dtype` and rank `rank`.
+    fn typed(&self, name: &str, dtype: u8, rank: usize) -> Result<&Field<'_>, String> {
         let field = self
             .0
             .get(name)
@@ -139,6 +139,12 @@ impl Fields<'_> {
                 field.shape.len()
             ));
         }
+        Ok(field)
+    }
+
+    /// The shape of field `name`, of type `dtype` and rank `rank`, every extent ≥ 1.
+    fn shape(&self, name: &str, dtype: u8, rank: usize) -> Result<Vec<usize>, String> {
+        let field = self.typed(name, dtype, rank)?;
         if field.shape.contains(&0) {
             return Err(format!("field `{name}` has an empty extent"));
         }
@@ -460,7 +466,7 @@ impl RglBsdf {
             ));
         }
         let theta_n = fields.shape("theta_i", FLOAT32, 1)?[0];
-        fields.shape("description", UINT8, 1)?;
+        fields.typed("description", UINT8, 1)?;
         if fields.shape("jacobian", UINT8, 1)? != [1] {
             return Err("field `jacobian` must hold one value".into());
         }
