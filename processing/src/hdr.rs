@@ -1,21 +1,24 @@
 //! HDR radiance maps from a bracket of exposures.
 //!
-//! Two methods:
-//! - **linear** (raw counts): a noise-aware weighted mean of count/exposure over the
-//!   frames where the sample is neither near black nor near clipping. The weight of a
-//!   frame is its inverse variance, H²/(σ²_shot + σ²_read) with H the frame's exposure
-//!   and the shot variance predicted from the best single-frame estimate (the longest
-//!   valid exposure), so noisy samples do not bias their own weights. Which frames
-//!   count is decided by the signal an estimate predicts for them, not by their own
-//!   reading (a reading that noise lifts over the black threshold would otherwise be
-//!   kept more often than one it lowers: a bias of up to 1 % at low signal): first
-//!   from that single-frame estimate, then again from the merged one. A frame whose
-//!   own reading is clipped never counts.
+//! Two methods, one merge of a value's readings: the weighted mean of reading/exposure
+//! over the frames that hold it, each weighted by its inverse variance H²/σ² (H the
+//! frame's exposure). Which frames hold it and the variance σ² of each are decided by
+//! the reading an estimate predicts for the frame (estimate × H), not by the frame's own
+//! noisy reading: a reading that noise lifts over the black threshold would otherwise be
+//! kept more often than one it lowers (a bias of up to 1 % at low signal in the linear
+//! case, and several-fold for dark 8-bit values), and noisy readings would set their own
+//! weights. The first estimate is the longest exposure's usable reading alone; the mean
+//! is taken from it, then again from the merged value. A frame whose own reading is
+//! clipped never counts; a black reading in a frame that should hold the value counts as
+//! the signal it reads.
+//! - **linear** (raw counts): the reading is the normalised signal, usable between
+//!   `min_signal` and `max_signal`; σ² is shot plus read noise of the noise model.
 //! - **Debevec–Malik (1997)** for non-linear frames: counts quantised to 256 levels,
 //!   the log response g(z) recovered per channel by least squares from sampled pixels
 //!   with hat weights, a second-difference smoothness term λ and g(128) = 0, made
-//!   monotone; then ln E = Σ w(z)(g(z) − ln H) / Σ w(z) with w(z) the inverse variance
-//!   of level z from a noise model fitted to the bracket (see `response`).
+//!   monotone (see `response`). The reading of level z is the exposure e^g(z) (0 at level
+//!   0), usable where the prediction reads between levels 1 and 254; σ² is shot, read
+//!   and quantisation noise of a model fitted to the bracket.
 //!
 //! Radiance is relative: for the linear method, normalised signal (0 black, 1 clipping)
 //! per second of exposure at ISO 100; for Debevec–Malik the scale fixed by g(128) = 0.
@@ -607,27 +610,17 @@ fn merge_sample(
         let s = signal(f);
         (s >= lo && s <= hi).then(|| s / f.exposure)
     });
-    // The weighted mean over the frames whose signal predicted from `estimate` is in
-    // range (and whose own reading is not clipped).
-    let weighted = |estimate: f64| {
-        let (mut sum, mut weights) = (0.0, 0.0);
-        for f in sorted {
-            let predicted = estimate * f.exposure;
-            let s = signal(f);
-            if predicted >= lo && predicted <= hi && s <= hi {
-                // w = H²/σ², and w·(s/H) = H·s/σ².
-                let inv_var = 1.0 / (f.shot * predicted + read_var);
-                sum += f.exposure * s * inv_var;
-                weights += f.exposure * f.exposure * inv_var;
-            }
-        }
-        (weights > 0.0).then(|| sum / weights)
-    };
     match reference {
         Some(l0) => {
-            // The reference frame itself always qualifies in the first pass.
-            let first = weighted(l0).unwrap_or(l0);
-            (weighted(first).unwrap_or(first).max(0.0), 0)
+            let estimate = predicted_mean(
+                sorted.len(),
+                |j| sorted[j].exposure,
+                |j| Some(signal(&sorted[j])).filter(|&s| s <= hi),
+                |predicted| predicted >= lo && predicted <= hi,
+                |j, predicted| sorted[j].shot * predicted + read_var,
+                l0,
+            );
+            (estimate.max(0.0), 0)
         }
         // Sorted longest first, so the last clipped frame is the shortest.
         None => match sorted.iter().rev().find(|f| signal(f) > hi) {
@@ -635,6 +628,41 @@ fn merge_sample(
             None => (0.0, UNDEREXPOSED),
         },
     }
+}
+
+/// The merge of one value from `frames` readings (see the module comment): the mean of
+/// reading / exposure over the frames whose reading is not clipped (`reading` gives
+/// `None`) and whose reading predicted from an estimate (estimate × exposure) is
+/// `usable`, each weighted by exposure² / `variance(frame, predicted reading)`. Predicted
+/// first from `reference`, then again from that first mean; an estimate that leaves no
+/// frame is kept.
+fn predicted_mean(
+    frames: usize,
+    exposure: impl Fn(usize) -> f64,
+    reading: impl Fn(usize) -> Option<f64>,
+    usable: impl Fn(f64) -> bool,
+    variance: impl Fn(usize, f64) -> f64,
+    reference: f64,
+) -> f64 {
+    let weighted = |estimate: f64| {
+        let (mut sum, mut weights) = (0.0, 0.0);
+        for j in 0..frames {
+            let h = exposure(j);
+            let predicted = estimate * h;
+            if !usable(predicted) {
+                continue;
+            }
+            if let Some(value) = reading(j) {
+                // w = H²/σ², and w·(value/H) = H·value/σ².
+                let inv_var = 1.0 / variance(j, predicted);
+                sum += h * value * inv_var;
+                weights += h * h * inv_var;
+            }
+        }
+        (weights > 0.0).then(|| sum / weights)
+    };
+    let first = weighted(reference).unwrap_or(reference);
+    weighted(first).unwrap_or(first)
 }
 
 /// Per-frame table from count to the quantised level 0..=255 of its normalised signal.
@@ -678,33 +706,44 @@ fn merge_debevec_malik(
             .ok_or_else(|| HdrError::Response(format!("channel {c}: degenerate bracket")))
         })
         .collect::<Result<_, _>>()?;
-    // Shortest exposure first, for the clipped-everywhere bound.
+    // Longest exposure first: the first usable reading is the reference estimate, and
+    // the last clipped one the clipped-everywhere bound.
     let mut order: Vec<usize> = (0..frames.len()).collect();
-    order.sort_by(|&a, &b| ln_h[a].total_cmp(&ln_h[b]));
+    order.sort_by(|&a, &b| ln_h[b].total_cmp(&ln_h[a]));
+    let exposures: Vec<f64> = order.iter().map(|&j| ln_h[j].exp()).collect();
     let width = frames[0].width;
     let mut rgb = vec![0f32; frames[0].data.len()];
     let mut mask = vec![0u8; frames[0].width * frames[0].height];
     rgb.par_chunks_mut(3 * width)
         .zip(mask.par_chunks_mut(width))
         .enumerate()
-        .for_each(|(y, (row_rgb, row_mask))| {
+        .for_each_init(Vec::new, |levels, (y, (row_rgb, row_mask))| {
             for (i, value) in row_rgb.iter_mut().enumerate() {
                 let index = 3 * width * y + i;
                 let curve = &curves[i % 3];
-                let g = &curve.g;
-                let (mut sum, mut weights) = (0.0, 0.0);
-                for (j, &ln) in ln_h.iter().enumerate() {
-                    let z = level(j, index);
-                    sum += curve.weight[z] * (g[z] - ln);
-                    weights += curve.weight[z];
-                }
-                let (radiance, flag) = if weights > 0.0 {
-                    ((sum / weights).exp(), 0)
-                } else {
-                    match order.iter().find(|&&j| level(j, index) == LEVELS - 1) {
-                        Some(&j) => ((g[LEVELS - 1] - ln_h[j]).exp(), SATURATED),
-                        None => (0.0, UNDEREXPOSED),
+                levels.clear();
+                levels.extend(order.iter().map(|&j| level(j, index)));
+                let reference = levels
+                    .iter()
+                    .zip(&exposures)
+                    .find(|(&z, _)| z > 0 && z < LEVELS - 1)
+                    .map(|(&z, h)| curve.exposure[z] / h);
+                let (radiance, flag) = match reference {
+                    Some(l0) => {
+                        let estimate = predicted_mean(
+                            levels.len(),
+                            |k| exposures[k],
+                            |k| (levels[k] < LEVELS - 1).then(|| curve.exposure[levels[k]]),
+                            |predicted| curve.in_range(predicted),
+                            |_, predicted| curve.variance(predicted),
+                            l0,
+                        );
+                        (estimate.max(0.0), 0)
                     }
+                    None => match levels.iter().rposition(|&z| z == LEVELS - 1) {
+                        Some(k) => ((curve.g[LEVELS - 1] - ln_h[order[k]]).exp(), SATURATED),
+                        None => (0.0, UNDEREXPOSED),
+                    },
                 };
                 *value = radiance as f32;
                 row_mask[i / 3] |= channel_mask(flag, i % 3);

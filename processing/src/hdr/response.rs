@@ -1,6 +1,6 @@
 //! Debevec–Malik response recovery (Debevec & Malik 1997, §2.1) for noisy, clipped
-//! brackets quantised to 256 levels, one channel at a time, and the merge weight of each
-//! level. See docs/ARCHITECTURE.md, "HDR merge".
+//! brackets quantised to 256 levels, one channel at a time, and the noise of its readings
+//! that the merge weighs them by. See docs/ARCHITECTURE.md, "HDR merge".
 //!
 //! 1. Samples: pixel locations with a level strictly between 0 and 255 in at least two
 //!    frames (only those constrain g), chosen evenly both in rank and in value of the sum
@@ -12,12 +12,12 @@
 //!    level, so λ does not depend on the number of samples), and g(128) = 0 exactly. The
 //!    ln E_i are eliminated exactly (Schur complement), leaving a 256 × 256 Cholesky solve.
 //! 3. g is made non-decreasing (pool-adjacent-violators).
-//! 4. Merge weights: the noise is added before the response, so the variance of
-//!    g(z) − ln H is σ²(z) = a·e^(−g(z)) + b·e^(−2g(z)) + g′(z)²/12 (shot noise, read
-//!    noise, quantisation). a, b ≥ 0 are fitted to the differences between a sample's
+//! 4. Noise: the noise is added before the response, so the variance of g(z) − ln H is
+//!    σ²(z) = a·e^(−g(z)) + b·e^(−2g(z)) + g′(z)²/12 (shot noise, read noise,
+//!    quantisation), and that of the exposure x = e^g read at level z is
+//!    a·x + b + x²·g′(z)²/12. a, b ≥ 0 are fitted to the differences between a sample's
 //!    estimates in two frames adjacent in exposure (their variance is σ²(z₁) + σ²(z₂),
-//!    whatever E is), and level z gets the weight 1/σ²(z) (levels 0 and 255: 0). With too
-//!    few such pairs the hat weights are kept.
+//!    whatever E is). With too few such pairs, a = b = 0: quantisation alone.
 
 use nalgebra::{DMatrix, DVector};
 
@@ -40,14 +40,50 @@ pub(super) struct Observations<'a, L: Fn(usize, usize) -> usize> {
     pub ln_h: &'a [f64],
 }
 
-/// A recovered response and the merge weight of each level.
+/// A recovered response and the noise of its readings.
 #[derive(Debug, Clone)]
 pub(super) struct Curve {
     /// g(z): ln of the exposure that gives level z, with g(128) = 0; non-decreasing.
     pub g: [f64; LEVELS],
-    /// Weight of a value at level z in the merge (inverse variance of g(z) − ln H); 0 at
-    /// levels 0 and 255.
-    pub weight: [f64; LEVELS],
+    /// The exposure a reading at level z stands for in the merge: e^g(z), and 0 at level
+    /// 0 (black: whatever is below level 1).
+    pub exposure: [f64; LEVELS],
+    /// Shot noise: variance a·x of a reading of noiseless exposure x.
+    shot: f64,
+    /// Read noise: variance b of every reading.
+    read: f64,
+    /// Quantisation: g′(z)²/12, the variance of ln x that level z's width adds.
+    quantisation: [f64; LEVELS],
+}
+
+impl Curve {
+    fn new(g: [f64; LEVELS], [shot, read]: [f64; 2]) -> Self {
+        // g′(z) by central differences, floored so a flat stretch still quantises.
+        let slope: [f64; LEVELS] = std::array::from_fn(|z| {
+            let (a, b) = (z.saturating_sub(1), (z + 1).min(TOP));
+            ((g[b] - g[a]) / (b - a) as f64).max(1e-6)
+        });
+        Self {
+            g,
+            exposure: std::array::from_fn(|z| if z == 0 { 0.0 } else { g[z].exp() }),
+            shot,
+            read,
+            quantisation: slope.map(|s| s * s / 12.0),
+        }
+    }
+
+    /// Whether a noiseless exposure x reads between levels 1 and 254.
+    pub fn in_range(&self, x: f64) -> bool {
+        x >= self.exposure[1] && x <= self.exposure[TOP - 1]
+    }
+
+    /// Variance of the exposure read for a noiseless exposure x (in range):
+    /// a·x + b + x²·g′(z)²/12 with z the level x reads as.
+    pub fn variance(&self, x: f64) -> f64 {
+        let ln = x.ln();
+        let z = self.g.partition_point(|&v| v < ln).min(TOP);
+        self.shot * x + self.read + x * x * self.quantisation[z]
+    }
 }
 
 /// Debevec–Malik hat of level z: z for the lower half, 255 − z for the upper (0 at the ends).
@@ -59,18 +95,10 @@ fn usable(z: usize) -> bool {
     z > 0 && z < TOP
 }
 
-/// The linear response g(z) = ln(z/128) (level 0 as level 1), for a channel that nothing
-/// constrains, with hat weights.
-fn linear() -> Curve {
-    Curve {
-        g: std::array::from_fn(|z| (z.max(1) as f64 / MID as f64).ln()),
-        weight: std::array::from_fn(hat),
-    }
-}
-
 /// Recovers channel `c`'s response from about `wanted` samples with smoothness `lambda`.
-/// `None` when the least-squares system is degenerate; the linear response when no pixel
-/// is usable in two frames.
+/// `None` when the least-squares system is degenerate; the linear response g(z) = ln(z/128)
+/// when no pixel is usable in two frames. Without enough pairs for the noise fit, only
+/// quantisation is left as noise.
 pub(super) fn recover<L: Fn(usize, usize) -> usize>(
     obs: &Observations<L>,
     c: usize,
@@ -79,18 +107,16 @@ pub(super) fn recover<L: Fn(usize, usize) -> usize>(
 ) -> Option<Curve> {
     let samples = choose_samples(obs, c, wanted);
     if samples.is_empty() {
-        return Some(linear());
+        let g = std::array::from_fn(|z| (z.max(1) as f64 / MID as f64).ln());
+        return Some(Curve::new(g, [0.0, 0.0]));
     }
     let levels: Vec<Vec<usize>> = samples
         .iter()
         .map(|&p| (0..obs.frames).map(|j| (obs.level)(j, 3 * p + c)).collect())
         .collect();
     let g = monotone(solve(&levels, obs.ln_h, lambda)?, &levels);
-    let weight = match noise_variance(&levels, obs.ln_h, &g) {
-        Some(sigma2) => std::array::from_fn(|z| if usable(z) { 1.0 / sigma2[z] } else { 0.0 }),
-        None => std::array::from_fn(hat),
-    };
-    Some(Curve { g, weight })
+    let noise = noise_coefficients(&levels, obs.ln_h, &g).unwrap_or([0.0, 0.0]);
+    Some(Curve::new(g, noise))
 }
 
 /// Pixels usable in at least two frames, chosen evenly in rank and in the value of the
@@ -221,14 +247,10 @@ fn monotone(g: [f64; LEVELS], levels: &[Vec<usize>]) -> [f64; LEVELS] {
     out.map(|v| v - shift)
 }
 
-/// σ²(z) of g(z) − ln H (see the module comment), or `None` without enough pairs.
-fn noise_variance(levels: &[Vec<usize>], ln_h: &[f64], g: &[f64; LEVELS]) -> Option<[f64; LEVELS]> {
-    // g′(z) by central differences, floored so a flat stretch still quantises.
-    let slope: [f64; LEVELS] = std::array::from_fn(|z| {
-        let (a, b) = (z.saturating_sub(1), (z + 1).min(TOP));
-        ((g[b] - g[a]) / (b - a) as f64).max(1e-6)
-    });
-    let quantisation: [f64; LEVELS] = slope.map(|s| s * s / 12.0);
+/// The shot and read noise coefficients a, b of σ²(z) (see the module comment), or `None`
+/// without enough pairs.
+fn noise_coefficients(levels: &[Vec<usize>], ln_h: &[f64], g: &[f64; LEVELS]) -> Option<[f64; 2]> {
+    let quantisation = Curve::new(*g, [0.0, 0.0]).quantisation;
     let shot: [f64; LEVELS] = g.map(|v| (-v).exp());
     // Equations d² ≈ a·(u₁ + u₂) + b·(u₁² + u₂²) + q₁ + q₂ for pairs of frames adjacent in
     // exposure where both levels are usable.
@@ -272,12 +294,7 @@ fn noise_variance(levels: &[Vec<usize>], ln_h: &[f64], g: &[f64; LEVELS]) -> Opt
             *w = 1.0 / predicted.powi(2).max(1e-300);
         }
     }
-    let sigma2: [f64; LEVELS] =
-        std::array::from_fn(|z| coef[0] * shot[z] + coef[1] * shot[z] * shot[z] + quantisation[z]);
-    sigma2
-        .iter()
-        .all(|v| v.is_finite() && *v > 0.0)
-        .then_some(sigma2)
+    coef.iter().all(|v| v.is_finite()).then_some(coef)
 }
 
 /// argmin over a, b ≥ 0 of Σ w (a·x₀ + b·x₁ + q − y)².
@@ -370,16 +387,18 @@ mod tests {
                     .collect()
             })
             .collect();
-        let sigma2 = noise_variance(&levels, &ln_h, &g).expect("enough pairs");
+        let [a, b] = noise_coefficients(&levels, &ln_h, &g).expect("enough pairs");
+        let quantisation = Curve::new(g, [0.0, 0.0]).quantisation;
         for z in [20, 60, 128, 220] {
+            let u = (-g[z]).exp();
+            let sigma2 = a * u + b * u * u + quantisation[z];
             let x = (z as f64 / 128.0).max(1e-9);
             let slope = 1.0 / z as f64;
             let truth = shot / x + read * read / (x * x) + slope * slope / 12.0;
-            let ratio = sigma2[z] / truth;
+            let ratio = sigma2 / truth;
             assert!(
                 (0.8..1.25).contains(&ratio),
-                "level {z}: {} vs {truth}",
-                sigma2[z]
+                "level {z}: {sigma2} vs {truth}"
             );
         }
     }
