@@ -18,7 +18,7 @@
 use std::path::PathBuf;
 
 use gonio_processing::capture::{Frame, Response, Sidecar};
-use gonio_processing::hdr::{self, MergeMethod, MergeOptions, NoiseModel};
+use gonio_processing::hdr::{self, MergeMethod, MergeOptions, NoiseModel, UNDEREXPOSED};
 
 mod bracket;
 mod common;
@@ -407,17 +407,30 @@ fn oracle(
     (weights > 0.0).then(|| sum / weights)
 }
 
-/// How much worse than the oracle the linear merge may be, pooled over a family. The
-/// oracle chooses frames by the true signal, which no merge can know: a value whose
-/// only usable frame reads below `min_signal` through noise is black to the merge (error
-/// 1) and measured by the oracle; that is the whole gap, in the 99th percentile.
-const ORACLE_TOLERANCE: f64 = 1.1;
+/// How much worse than the oracle the linear merge may be on the values it measures,
+/// pooled over a family: the oracle weighs each reading by its true variance and keeps a
+/// frame by its true signal, the merge by a noisy estimate of both.
+const ORACLE_TOLERANCE: f64 = 1.05;
 
+/// The largest share of the values the oracle measures that the merge may declare black
+/// (see the test).
+const MAX_BLACK_SHARE: f64 = 0.02;
+
+/// The linear merge declares a value black (flagged underexposed, 0) when no frame reads
+/// it at `min_signal` or more; a value whose true signal is just above that in its
+/// longest frame is read below it about half of the time, and the oracle, which knows
+/// the truth, measures it anyway. So the comparison is split: the errors on the values
+/// the merge measures, against the oracle's on the same values; and the share of the
+/// oracle's values the merge declares black. Also printed: the errors over all of the
+/// oracle's values, a value declared black counting as error 1.
 #[test]
 fn linear_merge_matches_an_oracle_on_a_random_family() {
     let mut rng = Rng(0x11ea_4f00_d5ee_d500);
-    let (mut gonio_all, mut oracle_all) = (Vec::new(), Vec::new());
-    eprintln!("bracket                                  gonio median / p99   oracle median / p99");
+    let (mut gonio_all, mut oracle_all, mut gonio_measured, mut oracle_measured) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    eprintln!(
+        "bracket                                  gonio median / p99   oracle median / p99   black"
+    );
     for k in 0..family_size() {
         let design = Design::random(&mut rng);
         let sensor = Sensor::random(&mut rng, k);
@@ -434,33 +447,60 @@ fn linear_merge_matches_an_oracle_on_a_random_family() {
         };
         let merged = hdr::merge(&frames, &options).unwrap();
         assert!(merged.rgb.iter().all(|v| v.is_finite() && *v >= 0.0));
-        let (mut gonio, mut best) = (Vec::new(), Vec::new());
+        let (mut gonio, mut best, mut black) = (Vec::new(), Vec::new(), 0);
         for (i, &e) in truth.iter().enumerate() {
-            if let Some(o) = oracle(&frames, &sensor, &options, e, i) {
-                gonio.push((f64::from(merged.rgb[i]) - e).abs() / e);
-                best.push((o - e).abs() / e);
+            let Some(o) = oracle(&frames, &sensor, &options, e, i) else {
+                continue;
+            };
+            let error = (f64::from(merged.rgb[i]) - e).abs() / e;
+            let oracle_error = (o - e).abs() / e;
+            gonio_all.push(error);
+            oracle_all.push(oracle_error);
+            let (x, y) = (i / 3 % W, i / 3 / W);
+            if merged.channel_flags(x, y, i % 3) & UNDEREXPOSED != 0 {
+                black += 1;
+            } else {
+                gonio.push(error);
+                best.push(oracle_error);
             }
         }
         let (median, p99) = bracket::median_p99(&gonio);
         let (o_median, o_p99) = bracket::median_p99(&best);
+        let share = black as f64 / (black + gonio.len()) as f64;
         eprintln!(
-            "{k:>3} {:>2}-bit {} fr {:.2} EV {:.1} dec fw {:>5.0} rn {:.1e} {median:>8.4} {p99:>8.4} {o_median:>8.4} {o_p99:>8.4}",
+            "{k:>3} {:>2}-bit {} fr {:.2} EV {:.1} dec fw {:>5.0} rn {:.1e} {median:>8.4} {p99:>8.4} {o_median:>8.4} {o_p99:>8.4} {:>6.2} %",
             sensor.bits,
             design.frames,
             design.ev,
             design.decades,
             sensor.noise.full_well_electrons,
-            sensor.noise.read_noise
+            sensor.noise.read_noise,
+            100.0 * share
         );
-        gonio_all.extend(gonio);
-        oracle_all.extend(best);
+        gonio_measured.extend(gonio);
+        oracle_measured.extend(best);
     }
-    let (median, p99) = bracket::median_p99(&gonio_all);
-    let (o_median, o_p99) = bracket::median_p99(&oracle_all);
-    eprintln!("linear family: gonio median {median:.4}, p99 {p99:.4}");
-    eprintln!("linear family: oracle median {o_median:.4}, p99 {o_p99:.4}");
+    let (median, p99) = bracket::median_p99(&gonio_measured);
+    let (o_median, o_p99) = bracket::median_p99(&oracle_measured);
+    let share = 1.0 - gonio_measured.len() as f64 / gonio_all.len() as f64;
+    let (all_median, all_p99) = bracket::median_p99(&gonio_all);
+    let (o_all_median, o_all_p99) = bracket::median_p99(&oracle_all);
+    eprintln!("linear family, values merged: gonio median {median:.4}, p99 {p99:.4}");
+    eprintln!("linear family, values merged: oracle median {o_median:.4}, p99 {o_p99:.4}");
+    eprintln!(
+        "linear family: {:.2} % of the oracle's values declared black",
+        100.0 * share
+    );
+    eprintln!(
+        "linear family, all (black = error 1): gonio median {all_median:.4}, p99 {all_p99:.4}; \
+         oracle median {o_all_median:.4}, p99 {o_all_p99:.4}"
+    );
     assert!(
         median <= ORACLE_TOLERANCE * o_median && p99 <= ORACLE_TOLERANCE * o_p99,
         "gonio median {median}, p99 {p99}; oracle {o_median}, {o_p99}"
+    );
+    assert!(
+        share <= MAX_BLACK_SHARE,
+        "{share} of the values declared black"
     );
 }

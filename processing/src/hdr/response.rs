@@ -80,8 +80,7 @@ impl Curve {
     /// Variance of the exposure read for a noiseless exposure x (in range):
     /// a·x + b + x²·g′(z)²/12 with z the level x reads as.
     pub fn variance(&self, x: f64) -> f64 {
-        let ln = x.ln();
-        let z = self.g.partition_point(|&v| v < ln).min(TOP);
+        let z = self.exposure.partition_point(|&v| v < x).min(TOP);
         self.shot * x + self.read + x * x * self.quantisation[z]
     }
 }
