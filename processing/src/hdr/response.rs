@@ -74,7 +74,7 @@ impl Curve {
 
     /// Whether a noiseless exposure x reads between levels 1 and 254.
     pub fn in_range(&self, x: f64) -> bool {
-        x >= self.exposure[1] && x <= self.exposure[TOP - 1]
+        x > 0.0 && x >= self.exposure[1] && x <= self.exposure[TOP - 1]
     }
 
     /// Variance of the exposure read for a noiseless exposure x (in range):
@@ -355,6 +355,25 @@ mod tests {
         // Levels away from the violations are untouched.
         for z in (20..190).chain(210..LEVELS) {
             assert!((out[z] - g[z]).abs() < 1e-12, "level {z}");
+        }
+    }
+
+    /// Without a noise fit (a = b = 0) and with flat stretches in g, every exposure in
+    /// range still has a finite, positive variance, and 0 is never in range.
+    #[test]
+    fn variance_is_positive_wherever_a_reading_is_usable() {
+        let mut g: [f64; LEVELS] = std::array::from_fn(|z| (z.max(1) as f64 / 128.0).ln());
+        let flat = g[50];
+        g[40..60].fill(flat);
+        let curve = Curve::new(g, [0.0, 0.0]);
+        assert!(!curve.in_range(0.0));
+        for z in 1..TOP {
+            for x in [curve.exposure[z], curve.exposure[z] * 1.001] {
+                if curve.in_range(x) {
+                    let v = curve.variance(x);
+                    assert!(v.is_finite() && v > 0.0, "level {z}: {v}");
+                }
+            }
         }
     }
 
