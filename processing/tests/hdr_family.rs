@@ -180,50 +180,62 @@ impl Tally {
     }
 }
 
-/// Merges one Debevec–Malik bracket with gonio and OpenCV, adds their errors to the
-/// tallies and prints a table row; false when OpenCV could not run.
-#[allow(clippy::too_many_arguments)]
-fn compare(
-    label: &str,
-    truth: &[f64],
-    shutters: &[f64],
-    camera: &Camera,
-    seed: u64,
-    gonio: &mut Tally,
-    opencv: &mut Tally,
-    dir: &std::path::Path,
-) -> bool {
-    let captured = bracket::capture(truth, W, H, shutters, camera, seed);
-    let regimes: Vec<usize> = bracket::evaluated(&captured.measurable)
-        .into_iter()
-        .map(|i| regime(truth[i], shutters, camera.curve))
-        .collect();
-    let (radiance, _) = bracket::gonio_merge(&captured);
-    let errors = bracket::relative_errors(&radiance, truth, &captured.measurable);
-    let (median, p99) = gonio.add(&errors, &regimes);
-    match bracket::opencv_or_skip(&captured, dir) {
-        Some(cv) => {
-            let errors = bracket::relative_errors(&cv, truth, &captured.measurable);
-            let (cv_median, cv_p99) = opencv.add(&errors, &regimes);
-            eprintln!("{label} {median:>8.4} {p99:>8.4} {cv_median:>8.4} {cv_p99:>8.4}");
-            true
-        }
-        None => {
-            eprintln!("{label} {median:>8.4} {p99:>8.4}");
-            false
+/// One Debevec–Malik bracket of a family: its table label, its truth and its capture.
+struct Run {
+    label: String,
+    truth: Vec<f64>,
+    captured: bracket::Bracket,
+    /// The regime of each evaluated value, in the order of `bracket::evaluated`.
+    regimes: Vec<usize>,
+}
+
+impl Run {
+    fn new(label: String, truth: Vec<f64>, shutters: &[f64], camera: &Camera, seed: u64) -> Self {
+        let captured = bracket::capture(&truth, W, H, shutters, camera, seed);
+        let regimes = bracket::evaluated(&captured.measurable)
+            .into_iter()
+            .map(|i| regime(truth[i], shutters, camera.curve))
+            .collect();
+        Self {
+            label,
+            truth,
+            captured,
+            regimes,
         }
     }
 }
 
-const HEADER: &str =
-    "bracket                                         gonio median / p99    OpenCV median / p99";
-
-/// Prints the family's pooled figures, overall and by regime, and checks that ours are
-/// no worse than OpenCV's. No tolerance: both are pooled over the same values.
-fn summary(name: &str, gonio: &Tally, opencv: &Tally, compared: bool) {
+/// Merges every bracket with gonio and (in one process) OpenCV, prints a row per bracket
+/// and the pooled figures, overall and by regime, and checks that ours are no worse than
+/// OpenCV's. No tolerance: both are pooled over the same values.
+fn judge(name: &str, runs: &[Run]) {
+    let dir = tempfile::tempdir().unwrap();
+    let brackets: Vec<&bracket::Bracket> = runs.iter().map(|run| &run.captured).collect();
+    let opencv_runs = bracket::opencv_or_skip(&brackets, dir.path());
+    let (mut gonio, mut opencv) = (Tally::default(), Tally::default());
+    eprintln!(
+        "bracket                                         gonio median / p99    OpenCV median / p99"
+    );
+    for (k, run) in runs.iter().enumerate() {
+        let errors_of = |radiance: &[f64]| {
+            bracket::relative_errors(radiance, &run.truth, &run.captured.measurable)
+        };
+        let (radiance, _) = bracket::gonio_merge(&run.captured);
+        let (median, p99) = gonio.add(&errors_of(&radiance), &run.regimes);
+        match &opencv_runs {
+            Some(cv) => {
+                let (cv_median, cv_p99) = opencv.add(&errors_of(&cv[k]), &run.regimes);
+                eprintln!(
+                    "{} {median:>8.4} {p99:>8.4} {cv_median:>8.4} {cv_p99:>8.4}",
+                    run.label
+                );
+            }
+            None => eprintln!("{} {median:>8.4} {p99:>8.4}", run.label),
+        }
+    }
     let (median, p99) = bracket::median_p99(&gonio.errors);
     eprintln!("{name}: gonio median {median:.4}, p99 {p99:.4}");
-    if !compared {
+    if opencv_runs.is_none() {
         return;
     }
     let (cv_median, cv_p99) = bracket::median_p99(&opencv.errors);
@@ -241,41 +253,30 @@ fn summary(name: &str, gonio: &Tally, opencv: &Tally, compared: bool) {
 
 #[test]
 fn debevec_malik_matches_opencv_on_a_random_family() {
-    let dir = tempfile::tempdir().unwrap();
-    let (mut gonio, mut opencv) = (Tally::default(), Tally::default());
-    let mut compared = true;
     let mut rng = Rng(0x5eed_0fb7_ac4e_7500);
-    eprintln!("{HEADER}");
-    for k in 0..family_size() {
-        let design = Design::random(&mut rng);
-        let curve = [Curve::Gamma, Curve::Srgb, Curve::Filmic, Curve::SoftS][k % 4];
-        let camera = Camera {
-            curve,
-            full_well: log_uniform(&mut rng, 2000.0, 40_000.0),
-            read_noise: log_uniform(&mut rng, 2e-4, 2e-3),
-        };
-        let truth = design.scene(&mut rng);
-        let label = format!(
-            "{k:>3} {} fr {:.2} EV {:.1} dec {:<9} fw {:>5.0} rn {:.1e}",
-            design.frames,
-            design.ev,
-            design.decades,
-            curve.name(),
-            camera.full_well,
-            camera.read_noise
-        );
-        compared &= compare(
-            &label,
-            &truth,
-            &design.shutters(),
-            &camera,
-            1000 + k as u64,
-            &mut gonio,
-            &mut opencv,
-            dir.path(),
-        );
-    }
-    summary("family", &gonio, &opencv, compared);
+    let runs: Vec<Run> = (0..family_size())
+        .map(|k| {
+            let design = Design::random(&mut rng);
+            let curve = [Curve::Gamma, Curve::Srgb, Curve::Filmic, Curve::SoftS][k % 4];
+            let camera = Camera {
+                curve,
+                full_well: log_uniform(&mut rng, 2000.0, 40_000.0),
+                read_noise: log_uniform(&mut rng, 2e-4, 2e-3),
+            };
+            let truth = design.scene(&mut rng);
+            let label = format!(
+                "{k:>3} {} fr {:.2} EV {:.1} dec {:<9} fw {:>5.0} rn {:.1e}",
+                design.frames,
+                design.ev,
+                design.decades,
+                curve.name(),
+                camera.full_well,
+                camera.read_noise
+            );
+            Run::new(label, truth, &design.shutters(), &camera, 1000 + k as u64)
+        })
+        .collect();
+    judge("family", &runs);
 }
 
 /// 7 frames 1/2…1/100 s of 4 decades and a sharp highlight through gamma 2.2, noisy:
@@ -283,9 +284,6 @@ fn debevec_malik_matches_opencv_on_a_random_family() {
 /// in the longest frames only.
 #[test]
 fn debevec_malik_matches_opencv_on_a_seven_frame_bracket_with_a_sharp_highlight() {
-    let dir = tempfile::tempdir().unwrap();
-    let (mut gonio, mut opencv) = (Tally::default(), Tally::default());
-    let mut compared = true;
     let shutters = [
         1.0 / 100.0,
         1.0 / 60.0,
@@ -300,30 +298,22 @@ fn debevec_malik_matches_opencv_on_a_seven_frame_bracket_with_a_sharp_highlight(
         full_well: 8000.0,
         read_noise: 1e-3,
     };
-    eprintln!("{HEADER}");
-    for k in 0..family_size().div_ceil(4) {
-        let mut rng = Rng(0x0a11_5e70 + k as u64);
-        let spec = SceneSpec {
-            decades: 4.0,
-            highlight_from: 0.3,
-        };
-        let truth: Vec<f64> = scene(&spec, &mut rng)
-            .into_iter()
-            .map(|x| x * 100.0)
-            .collect();
-        let label = format!("{k:>3} 7 fr 1/2…1/100 s, 4 dec, gamma 2.2      ");
-        compared &= compare(
-            &label,
-            &truth,
-            &shutters,
-            &camera,
-            2000 + k as u64,
-            &mut gonio,
-            &mut opencv,
-            dir.path(),
-        );
-    }
-    summary("seven-frame regime", &gonio, &opencv, compared);
+    let spec = SceneSpec {
+        decades: 4.0,
+        highlight_from: 0.3,
+    };
+    let runs: Vec<Run> = (0..family_size().div_ceil(4))
+        .map(|k| {
+            let mut rng = Rng(0x0a11_5e70 + k as u64);
+            let truth = scene(&spec, &mut rng)
+                .into_iter()
+                .map(|x| x * 100.0)
+                .collect();
+            let label = format!("{k:>3} 7 fr 1/2…1/100 s, 4 dec, gamma 2.2      ");
+            Run::new(label, truth, &shutters, &camera, 2000 + k as u64)
+        })
+        .collect();
+    judge("seven-frame regime", &runs);
 }
 
 /// A linear sensor of `bits` bits: black level, white level, noise.

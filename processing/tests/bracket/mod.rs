@@ -177,20 +177,28 @@ pub fn gonio_merge(bracket: &Bracket) -> (Vec<f64>, Vec<u8>) {
     )
 }
 
-/// OpenCV's merge of the same frames (with `dir` for its files), or why it could not run.
-pub fn opencv_merge(bracket: &Bracket, dir: &Path) -> Result<Vec<f64>, String> {
+/// OpenCV's merges of the brackets, in one process (with `dir` for its files), or why it
+/// could not run.
+pub fn opencv_merge(brackets: &[&Bracket], dir: &Path) -> Result<Vec<Vec<f64>>, String> {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/opencv_debevec.py");
-    let out = dir.join("opencv.f32");
-    let mut args = vec![
-        script.display().to_string(),
-        bracket.width.to_string(),
-        bracket.height.to_string(),
-        out.display().to_string(),
-    ];
-    for (j, (levels, t)) in bracket.frames.iter().zip(&bracket.shutters).enumerate() {
-        let path = dir.join(format!("frame{j}.u8"));
-        std::fs::write(&path, levels).unwrap();
-        args.push(format!("{}:{t}", path.display()));
+    let mut args = vec![script.display().to_string()];
+    let mut outputs = Vec::new();
+    for (k, bracket) in brackets.iter().enumerate() {
+        if k > 0 {
+            args.push("--".into());
+        }
+        let out = dir.join(format!("opencv{k}.f32"));
+        args.extend([
+            bracket.width.to_string(),
+            bracket.height.to_string(),
+            out.display().to_string(),
+        ]);
+        for (j, (levels, t)) in bracket.frames.iter().zip(&bracket.shutters).enumerate() {
+            let path = dir.join(format!("bracket{k}_frame{j}.u8"));
+            std::fs::write(&path, levels).unwrap();
+            args.push(format!("{}:{t}", path.display()));
+        }
+        outputs.push(out);
     }
     let run = Command::new("python3")
         .args(&args)
@@ -199,22 +207,28 @@ pub fn opencv_merge(bracket: &Bracket, dir: &Path) -> Result<Vec<f64>, String> {
     if !run.status.success() {
         return Err(String::from_utf8_lossy(&run.stderr).trim().to_string());
     }
-    let bytes = std::fs::read(&out).map_err(|e| e.to_string())?;
-    assert_eq!(
-        bytes.len(),
-        4 * 3 * bracket.width * bracket.height,
-        "OpenCV output size"
-    );
-    Ok(bytes
-        .chunks_exact(4)
-        .map(|b| f64::from(f32::from_le_bytes([b[0], b[1], b[2], b[3]])))
-        .collect())
+    brackets
+        .iter()
+        .zip(&outputs)
+        .map(|(bracket, out)| {
+            let bytes = std::fs::read(out).map_err(|e| e.to_string())?;
+            assert_eq!(
+                bytes.len(),
+                4 * 3 * bracket.width * bracket.height,
+                "OpenCV output size"
+            );
+            Ok(bytes
+                .chunks_exact(4)
+                .map(|b| f64::from(f32::from_le_bytes([b[0], b[1], b[2], b[3]])))
+                .collect())
+        })
+        .collect()
 }
 
-/// OpenCV's merge, or `None` after saying why it could not run; panics instead when
+/// OpenCV's merges, or `None` after saying why it could not run; panics instead when
 /// `GONIO_REQUIRE_OPENCV` is set.
-pub fn opencv_or_skip(bracket: &Bracket, dir: &Path) -> Option<Vec<f64>> {
-    match opencv_merge(bracket, dir) {
+pub fn opencv_or_skip(brackets: &[&Bracket], dir: &Path) -> Option<Vec<Vec<f64>>> {
+    match opencv_merge(brackets, dir) {
         Ok(radiance) => Some(radiance),
         Err(why) if std::env::var_os("GONIO_REQUIRE_OPENCV").is_none() => {
             eprintln!("OpenCV comparison skipped: {why}");
