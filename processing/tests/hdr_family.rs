@@ -3,7 +3,7 @@
 //!
 //! - Debevec–Malik against OpenCV's `CalibrateDebevec` + `MergeDebevec` on the same 8-bit
 //!   frames (error measure and OpenCV runner: `tests/bracket`): 2–6 decades of scene
-//!   range, 3–9 frames 1–2 EV apart, gamma 2.2, sRGB, filmic and soft-S responses, shot and read
+//!   range topping out at 2–95 % of clipping in the shortest frame, 3–9 frames 1–2 EV apart, gamma 2.2, sRGB, filmic and soft-S responses, shot and read
 //!   noise, values clipped or black in every frame, highlights unclipped in the shortest
 //!   frame only and a sharp highlight; plus the regime of a 7-frame 1/2…1/100 s bracket of
 //!   4 decades and a sharp highlight.
@@ -43,20 +43,22 @@ fn log_uniform(rng: &mut Rng, lo: f64, hi: f64) -> f64 {
 
 /// What a scene holds, in units of the radiance that gives x = 1 in the shortest frame.
 struct SceneSpec {
+    /// The brightest value of the body: x in the shortest frame.
+    top: f64,
     /// Decades between the brightest and darkest value of the body.
     decades: f64,
     /// The lowest x in the shortest frame of the highlights that only it leaves unclipped.
     highlight_from: f64,
 }
 
-/// A W×H scene: a body log-uniform over `decades` below x = 0.95 in the shortest frame,
+/// A W×H scene: a body log-uniform over `decades` below x = `top` in the shortest frame,
 /// each channel a random fraction 0.15–1 of the pixel's luminance; 6 % highlights (each
 /// channel log-uniform in x from `highlight_from` to 0.95 in the shortest frame); 2 % of
 /// pixels clipped in every frame and 1 % black in every frame; and a sharp highlight, a
 /// disc of radius W/12 whose luminance rises log-linearly from the body's top at its rim
 /// to 100× it at its centre.
 fn scene(spec: &SceneSpec, rng: &mut Rng) -> Vec<f64> {
-    let top = 0.95;
+    let top = spec.top;
     let (cx, cy) = (
         W as f64 * (0.2 + 0.6 * rng.uniform()),
         H as f64 * (0.2 + 0.6 * rng.uniform()),
@@ -76,7 +78,7 @@ fn scene(spec: &SceneSpec, rng: &mut Rng) -> Vec<f64> {
             } else if kind < 0.03 {
                 [1e-9; 3]
             } else if kind < 0.09 {
-                std::array::from_fn(|_| log_uniform(rng, spec.highlight_from, top))
+                std::array::from_fn(|_| log_uniform(rng, spec.highlight_from, 0.95))
             } else {
                 let luminance = top * 10f64.powf(-spec.decades * rng.uniform());
                 chroma.map(|k| luminance * k)
@@ -87,11 +89,14 @@ fn scene(spec: &SceneSpec, rng: &mut Rng) -> Vec<f64> {
     out
 }
 
-/// A bracket's design: frames `ev` stops apart from the shortest, 1/`1 / shortest` s.
+/// A bracket's design: `frames` frames `ev` stops apart from `shortest` seconds up, and
+/// the scene it is made for.
 struct Design {
     frames: usize,
     ev: f64,
     shortest: f64,
+    /// The body's brightest value: x in the shortest frame.
+    top: f64,
     decades: f64,
 }
 
@@ -101,6 +106,7 @@ impl Design {
             frames: 3 + (7.0 * rng.uniform()) as usize,
             ev: 1.0 + rng.uniform(),
             shortest: 1.0 / log_uniform(rng, 30.0, 1000.0),
+            top: log_uniform(rng, 0.02, 0.95),
             decades: 2.0 + 4.0 * rng.uniform(),
         }
     }
@@ -114,6 +120,7 @@ impl Design {
     /// The scene in radiance units (x = radiance × shutter).
     fn scene(&self, rng: &mut Rng) -> Vec<f64> {
         let spec = SceneSpec {
+            top: self.top,
             decades: self.decades,
             // Clipped in the second shortest frame (x ≥ 1.05 there).
             highlight_from: (1.05 / 2f64.powf(self.ev)).max(0.3),
@@ -265,10 +272,11 @@ fn debevec_malik_matches_opencv_on_a_random_family() {
             };
             let truth = design.scene(&mut rng);
             let label = format!(
-                "{k:>3} {} fr {:.2} EV {:.1} dec {:<9} fw {:>5.0} rn {:.1e}",
+                "{k:>3} {} fr {:.2} EV {:.1} dec top {:.2} {:<9} fw {:>5.0} rn {:.1e}",
                 design.frames,
                 design.ev,
                 design.decades,
+                design.top,
                 curve.name(),
                 camera.full_well,
                 camera.read_noise
@@ -299,6 +307,7 @@ fn debevec_malik_matches_opencv_on_a_seven_frame_bracket_with_a_sharp_highlight(
         read_noise: 1e-3,
     };
     let spec = SceneSpec {
+        top: 0.95,
         decades: 4.0,
         highlight_from: 0.3,
     };
