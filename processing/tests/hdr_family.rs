@@ -3,10 +3,11 @@
 //!
 //! - Debevec–Malik against OpenCV's `CalibrateDebevec` + `MergeDebevec` on the same 8-bit
 //!   frames (error measure and OpenCV runner: `tests/bracket`): 2–6 decades of scene
-//!   range topping out at 2–95 % of clipping in the shortest frame, 3–9 frames 1–2 EV apart, gamma 2.2, sRGB, filmic and soft-S responses, shot and read
-//!   noise, values clipped or black in every frame, highlights unclipped in the shortest
-//!   frame only and a sharp highlight; plus the regime of a 7-frame 1/2…1/100 s bracket of
-//!   4 decades and a sharp highlight.
+//!   range topping out at 2–95 % of clipping in the shortest frame, 3–9 frames 1–2 EV
+//!   apart, gamma 2.2, sRGB, filmic and soft-S responses, shot and read noise, values
+//!   clipped or black in every frame, highlights unclipped in the shortest frame only and
+//!   a sharp highlight; plus the regime of a 7-frame 1/2…1/100 s bracket of 4 decades and
+//!   a sharp highlight.
 //! - The linear merge against an oracle on linear 8-, 12- and 14-bit brackets of the same
 //!   kind of scenes: the inverse-variance mean that knows the true variance of every
 //!   reading and which frames truly hold the value within the merge's signal range.
