@@ -54,6 +54,19 @@ pub(super) struct Curve {
     read: f64,
     /// Quantisation: g′(z)²/12, the variance of ln x that level z's width adds.
     quantisation: [f64; LEVELS],
+    /// The level an exposure in range reads as, by [`bin`] from that of exposure[1]
+    /// (`first_bin`): a lookup instead of a search through `exposure`.
+    level_of_bin: Vec<u8>,
+    first_bin: u64,
+}
+
+/// Mantissa bits in [`bin`]: 2⁸ bins per octave, 0.3 % of exposure each.
+const BIN_BITS: u32 = 8;
+
+/// The bin of a positive exposure: its float's exponent and top mantissa bits, which grow
+/// with it (about 2^`BIN_BITS` × log₂ x).
+fn bin(x: f64) -> u64 {
+    x.to_bits() >> (f64::MANTISSA_DIGITS - 1 - BIN_BITS)
 }
 
 impl Curve {
@@ -63,12 +76,26 @@ impl Curve {
             let (a, b) = (z.saturating_sub(1), (z + 1).min(TOP));
             ((g[b] - g[a]) / (b - a) as f64).max(1e-6)
         });
+        let exposure: [f64; LEVELS] =
+            std::array::from_fn(|z| if z == 0 { 0.0 } else { g[z].exp() });
+        // Each bin gets the level of its lowest exposure in range (at most 2¹⁹ bins, the
+        // span of every positive float).
+        let (first_bin, last_bin) = (bin(exposure[1]), bin(exposure[TOP - 1]));
+        let level_of_bin = (first_bin..=last_bin)
+            .map(|b| {
+                let lowest = f64::from_bits(b << (f64::MANTISSA_DIGITS - 1 - BIN_BITS));
+                let z = exposure.partition_point(|&v| v < lowest.max(exposure[1]));
+                z.min(TOP) as u8
+            })
+            .collect();
         Self {
             g,
-            exposure: std::array::from_fn(|z| if z == 0 { 0.0 } else { g[z].exp() }),
+            exposure,
             shot,
             read,
             quantisation: slope.map(|s| s * s / 12.0),
+            level_of_bin,
+            first_bin,
         }
     }
 
@@ -78,9 +105,12 @@ impl Curve {
     }
 
     /// Variance of the exposure read for a noiseless exposure x (in range):
-    /// a·x + b + x²·g′(z)²/12 with z the level x reads as.
+    /// a·x + b + x²·g′(z)²/12 with z the level x reads as (to within a level).
     pub fn variance(&self, x: f64) -> f64 {
-        let z = self.exposure.partition_point(|&v| v < x).min(TOP);
+        let z = usize::try_from(bin(x).saturating_sub(self.first_bin))
+            .ok()
+            .and_then(|i| self.level_of_bin.get(i))
+            .map_or(TOP, |&z| usize::from(z));
         self.shot * x + self.read + x * x * self.quantisation[z]
     }
 }
