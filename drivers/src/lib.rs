@@ -98,6 +98,10 @@ pub trait Arm: Send {
     fn declare_position(&mut self, angle_deg: f64) -> Result<(), DeviceError>;
     /// Move to `angle_deg` and return once the arm is idle there.
     fn move_to(&mut self, angle_deg: f64) -> Result<(), DeviceError>;
+    /// Move another axis of the controller (a sample carousel) to machine position
+    /// `position` (the axis' units) and return once it is idle there. The arm must be
+    /// referenced: the homing cycle references the axes it homes.
+    fn move_axis(&mut self, axis: grbl::ArmAxis, position: f64) -> Result<(), DeviceError>;
     /// Query state and position.
     fn status(&mut self) -> Result<ArmStatus, DeviceError>;
     /// Clear an alarm or reset condition; the caller re-homes afterwards.

@@ -1,6 +1,7 @@
-//! A camera emulator behind the drivers' [`Camera`] trait: renders the scene with the
-//! light where the shared world's arm is, takes as long as a real body (exposure plus
-//! download, scalable), and fails on demand the ways a tethered DSLR fails.
+//! A camera emulator behind the drivers' [`Camera`] trait: renders the scene of the
+//! sample mounted on the cylinder with the light where the shared world's arm is, takes
+//! as long as a real body (exposure plus download, scalable), and fails on demand the
+//! ways a tethered DSLR fails.
 
 use std::collections::VecDeque;
 use std::path::Path;
@@ -185,10 +186,40 @@ impl FaultInjector {
     }
 }
 
-/// The emulated camera. Captures render `scene` with the light at the world's arm angle
-/// and are stored as 16-bit RGB TIFF (extension `tiff`).
+/// The sample on the emulated cylinder, as the scene the camera renders: state of the
+/// emulated instrument, changed from any thread (an operator swapping the cylinder, a
+/// carousel turning). A capture renders the scene mounted when it starts. Cheap to
+/// clone.
+#[derive(Debug, Clone)]
+pub struct SampleMount {
+    scene: Arc<Mutex<Arc<Scene>>>,
+}
+
+impl SampleMount {
+    fn new(scene: Scene) -> Self {
+        Self {
+            scene: Arc::new(Mutex::new(Arc::new(scene))),
+        }
+    }
+
+    /// Mounts the sample `scene` shows, in place of the one mounted.
+    pub fn mount(&self, scene: Scene) {
+        *self.scene.lock().unwrap_or_else(PoisonError::into_inner) = Arc::new(scene);
+    }
+
+    /// The scene of the sample mounted now.
+    pub fn scene(&self) -> Arc<Scene> {
+        self.scene
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .clone()
+    }
+}
+
+/// The emulated camera. Captures render the mounted sample's scene with the light at
+/// the world's arm angle and are stored as 16-bit RGB TIFF (extension `tiff`).
 pub struct EmulatedCamera {
-    scene: Arc<Scene>,
+    mount: SampleMount,
     world: World,
     timing: CaptureTiming,
     faults: FaultInjector,
@@ -197,11 +228,11 @@ pub struct EmulatedCamera {
 }
 
 impl EmulatedCamera {
-    /// A camera at the scene's ISO and 1/60 s.
+    /// A camera at the scene's ISO and 1/60 s, with the sample of `scene` mounted.
     pub fn new(scene: Scene, world: World, timing: CaptureTiming) -> Self {
         let iso = scene.camera().iso;
         Self {
-            scene: Arc::new(scene),
+            mount: SampleMount::new(scene),
             world,
             timing,
             faults: FaultInjector::default(),
@@ -213,8 +244,14 @@ impl EmulatedCamera {
         }
     }
 
-    pub fn scene(&self) -> &Scene {
-        &self.scene
+    /// The scene of the sample mounted now.
+    pub fn scene(&self) -> Arc<Scene> {
+        self.mount.scene()
+    }
+
+    /// A handle that changes the mounted sample while the camera is owned elsewhere.
+    pub fn sample_mount(&self) -> SampleMount {
+        self.mount.clone()
     }
 
     pub fn timing(&self) -> CaptureTiming {
@@ -222,9 +259,9 @@ impl EmulatedCamera {
     }
 
     /// Black and white level and response of the files this camera writes (for the
-    /// capture sidecar).
+    /// capture sidecar) with the sample mounted now.
     pub fn file_levels(&self) -> FileLevels {
-        render::file_levels(&self.scene)
+        render::file_levels(&self.scene())
     }
 
     /// Queues a fault for the coming captures.
@@ -268,7 +305,7 @@ impl Camera for EmulatedCamera {
     fn identify(&mut self) -> Result<CameraInfo, DeviceError> {
         self.faults.check_plugged()?;
         Ok(CameraInfo {
-            model: self.scene.camera().model.clone(),
+            model: self.scene().camera().model.clone(),
             port: "emulated".to_string(),
         })
     }
@@ -328,14 +365,15 @@ impl Camera for EmulatedCamera {
             }
             None => {}
         }
+        let scene = self.scene();
         let shot = Shot {
             theta_l_deg: self.world.arm_deg(),
             shutter_s: self.exposure.shutter_s,
-            iso: self.exposure.iso.unwrap_or(self.scene.camera().iso),
+            iso: self.exposure.iso.unwrap_or(scene.camera().iso),
             frame_index: self.frames,
         };
         self.frames += 1;
-        let frame = render::render(&self.scene, &shot);
+        let frame = render::render(&scene, &shot);
         let path = path.with_extension("tiff");
         let bytes = frame.encode_tiff()?;
         let duration = wall(self.timing.capture_duration_s(shot.shutter_s));

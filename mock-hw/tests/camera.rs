@@ -132,7 +132,7 @@ fn capture_renders_at_the_arm_angle_and_takes_its_time() {
     assert_eq!(capture.exposure, exposure);
     let (w, h, data) = read_tiff(&capture.path);
     assert_eq!((w, h), (400, 120));
-    let expected = render_frame(cam.scene(), -25.0, exposure.shutter_s);
+    let expected = render_frame(&cam.scene(), -25.0, exposure.shutter_s);
     assert_eq!(data, expected.stored());
 
     world.set_arm_deg(-40.0);
@@ -140,7 +140,7 @@ fn capture_renders_at_the_arm_angle_and_takes_its_time() {
     let (_, _, data) = read_tiff(&moved.path);
     assert_eq!(
         data,
-        render_frame(cam.scene(), -40.0, exposure.shutter_s).stored()
+        render_frame(&cam.scene(), -40.0, exposure.shutter_s).stored()
     );
     assert_ne!(data, expected.stored());
     assert_eq!(
@@ -244,4 +244,33 @@ fn timeout_and_missing_file_fail_after_the_deadline() {
         assert!(entries(dir.path()).is_empty());
     }
     assert!(cam.capture_to(&dir.path().join("x.tiff")).is_ok());
+}
+
+#[test]
+fn a_capture_renders_the_sample_mounted_when_it_starts() {
+    let dir = tempfile::tempdir().unwrap();
+    let world = World::new(-30.0);
+    let mut cam = camera(&world);
+    let exposure = cam
+        .set_exposure(Exposure {
+            shutter_s: 1.0 / 60.0,
+            iso: Some(100),
+        })
+        .unwrap();
+    let mount = cam.sample_mount();
+    let first = cam.capture_to(&dir.path().join("first.tiff")).unwrap();
+    let (_, _, mounted_first) = read_tiff(&first.path);
+    let other = Scene::from_toml_str(&format!(
+        "{SMALL}\n[sample]\nmodel = \"cook-torrance\"\nkd = [2.0, 3.0, 12.0]\nks = [0.5, 1.0, 4.0]\nm = [0.3]\n"
+    ))
+    .unwrap();
+    mount.mount(other.clone());
+    let second = cam.capture_to(&dir.path().join("second.tiff")).unwrap();
+    let (_, _, mounted_second) = read_tiff(&second.path);
+    assert_eq!(
+        mounted_second,
+        render_frame(&other, -30.0, exposure.shutter_s).stored()
+    );
+    assert_ne!(mounted_first, mounted_second);
+    assert_eq!(cam.scene().truth_json(), other.truth_json());
 }

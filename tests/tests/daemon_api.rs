@@ -248,7 +248,7 @@ fn sweep_waits_for_its_start_time_and_shows_one_progress_view() {
     let daemon = Daemon::start(&dir, &emulator_config(0.01));
     let created = daemon.post(
         "/api/sweeps",
-        &json!({"samples": ["a", "b"], "theta_l_sets": [[-20], [-30, -40]], "repeats": 2,
+        &json!({"samples": ["gold", "red"], "theta_l_sets": [[-20], [-30, -40]], "repeats": 2,
                 "bracket": {"shutter_s": [0.1]}, "start_at": "2099-01-01T22:00:00Z"}),
     );
     assert_eq!(created.status, 201, "{:?}", created.json);

@@ -58,7 +58,7 @@ fn hardware_view_follows_the_arm_during_a_move() {
 fn post_scan(daemon: &Daemon, theta_l: &[f64]) -> i64 {
     let answer = daemon.post(
         "/api/scans",
-        &json!({"sample": "s", "theta_l": theta_l, "bracket": {"shutter_s": [0.1, 0.01]}}),
+        &json!({"sample": "gold", "theta_l": theta_l, "bracket": {"shutter_s": [0.1, 0.01]}}),
     );
     assert_eq!(answer.status, 201, "{:?}", answer.json);
     answer.json["id"].as_i64().unwrap()
@@ -139,7 +139,7 @@ fn camera_unplugged_mid_scan_interrupts_and_the_scan_completes_once_it_is_back()
     let daemon = Daemon::start(&dir, &emulator_config(0.05));
     let answer = daemon.post(
         "/api/scans",
-        &json!({"sample": "s", "theta_l": [-20, -25, -30],
+        &json!({"sample": "gold", "theta_l": [-20, -25, -30],
                 "bracket": {"shutter_s": [0.5, 0.1, 0.02]}}),
     );
     assert_eq!(answer.status, 201, "{:?}", answer.json);
@@ -170,7 +170,7 @@ fn camera_unplugged_mid_scan_interrupts_and_the_scan_completes_once_it_is_back()
     // A scan queued meanwhile waits for the camera, with the reason.
     let next = daemon.post(
         "/api/scans",
-        &json!({"sample": "t", "theta_l": [-20], "bracket": {"shutter_s": [0.02]}}),
+        &json!({"sample": "gold", "theta_l": [-20], "bracket": {"shutter_s": [0.02]}}),
     );
     assert_eq!(next.status, 201, "{:?}", next.json);
     let next = next.json["id"].as_i64().unwrap();

@@ -17,7 +17,7 @@ const THETA_L: [f64; 3] = [-20.0, -30.0, -40.0];
 fn run_scan(daemon: &Daemon) -> (i64, Vec<Value>) {
     let answer = daemon.post(
         "/api/scans",
-        &json!({"sample": "s", "theta_l": THETA_L, "bracket": {"shutter_s": [0.5, 0.05]}}),
+        &json!({"sample": "gold", "theta_l": THETA_L, "bracket": {"shutter_s": [0.5, 0.05]}}),
     );
     assert_eq!(answer.status, 201, "{:?}", answer.json);
     let id = answer.json["id"].as_i64().unwrap();

@@ -24,7 +24,7 @@ fn kill_9_mid_sweep_then_restart_resumes_with_every_frame_once() {
     let bracket = [0.5, 0.1, 0.02];
     let created = daemon.post(
         "/api/sweeps",
-        &json!({"samples": ["a", "b"], "theta_l_sets": theta_sets, "repeats": 1,
+        &json!({"samples": ["gold"], "theta_l_sets": theta_sets, "repeats": 2,
                 "bracket": {"shutter_s": bracket}}),
     );
     assert_eq!(created.status, 201, "{:?}", created.json);

@@ -19,13 +19,15 @@
 //! - homing failure: a typed error with GRBL's meaning and advice, not retried.
 //! - slow controller: a late move completes while it progresses; past the patience it
 //!   fails cleanly, its late `ok` paired with its own line.
+//! - a second axis (a sample carousel) homed with the arm moves in machine
+//!   coordinates and leaves the arm in place.
 
 use std::thread;
 use std::time::{Duration, Instant};
 
-use gonio_drivers::grbl::{GrblArm, GrblArmConfig, Homing};
+use gonio_drivers::grbl::{ArmAxis, GrblArm, GrblArmConfig, Homing};
 use gonio_drivers::{Arm, ArmState, DeviceError};
-use gonio_mock_hw::grbl::{Fault, GrblConfig, GrblEmulator};
+use gonio_mock_hw::grbl::{AxisSet, Fault, GrblConfig, GrblEmulator};
 use gonio_mock_hw::world::World;
 
 const SCAN_DEG: [f64; 6] = [-20.0, -25.0, -30.0, -35.0, -40.0, -45.0];
@@ -513,4 +515,38 @@ fn live_angle_follows_the_arm_during_a_move() {
     assert!(between.windows(2).all(|w| w[1] <= w[0]), "{between:?}");
     assert!((live.get().unwrap() + 60.0).abs() < 0.01);
     assert!((arm.status().unwrap().angle_deg + 60.0).abs() < 0.01);
+}
+
+/// A second axis on the arm's board (a sample carousel), homed with the arm: it moves
+/// in machine coordinates and leaves the arm where it is; the arm's own axis and
+/// positions off the axis' travel are refused.
+#[test]
+fn a_carousel_axis_moves_in_machine_coordinates_beside_the_arm() {
+    let world = World::new(-7.5);
+    let config = GrblConfig {
+        homing_cycles: vec![AxisSet { mask: 0b011 }],
+        ..board(EXTRAS)
+    };
+    let emulator = GrblEmulator::start(config, world.clone()).unwrap();
+    let mut arm = GrblArm::open(emulator.device_path(), driver_config()).unwrap();
+    arm.home().unwrap();
+    move_and_check(&mut arm, &world, -20.0);
+    arm.move_axis(ArmAxis::Y, -100.0).unwrap();
+    assert!((world.arm_deg() + 20.0).abs() < 0.05, "{}", world.arm_deg());
+    move_and_check(&mut arm, &world, -30.0);
+    arm.move_axis(ArmAxis::Y, -10.0).unwrap();
+    assert!(matches!(
+        arm.move_axis(ArmAxis::X, -10.0),
+        Err(DeviceError::Refused(_))
+    ));
+    for outside in [5.0, -250.0, f64::NAN] {
+        assert!(matches!(
+            arm.move_axis(ArmAxis::Y, outside),
+            Err(DeviceError::OutOfRange { .. })
+        ));
+    }
+    let transcript = emulator.transcript();
+    for line in ["G90 G53 G0 Y-100.000", "G90 G53 G0 Y-10.000"] {
+        assert!(transcript.contains(&line.to_owned()), "{transcript:?}");
+    }
 }

@@ -656,6 +656,57 @@ impl Arm for GrblArm {
         Ok(())
     }
 
+    /// `G90 G53 G0` on `axis` (machine coordinates: the work offset the driver sets is
+    /// the arm's), then `G4 P0`, and the position read back.
+    fn move_axis(&mut self, axis: ArmAxis, position: f64) -> Result<(), DeviceError> {
+        if axis == self.config.axis {
+            return Err(DeviceError::Refused(format!(
+                "the {} axis is the arm's",
+                axis.letter()
+            )));
+        }
+        let i = axis.index();
+        let travel = self.settings.get(Settings::MAX_TRAVEL + i as u32);
+        let min = -travel.unwrap_or(f64::INFINITY);
+        if !(position.is_finite() && (min..=0.0).contains(&position)) {
+            return Err(DeviceError::OutOfRange {
+                what: format!("{} axis position", axis.letter()),
+                value: position,
+                min,
+                max: 0.0,
+            });
+        }
+        self.prepare()?;
+        self.check_ready()?;
+        let start = self.query_status()?;
+        self.check_ready()?;
+        let from = start.machine(i, self.known_wco()).unwrap_or(0.0);
+        let rate = self.settings.get(Settings::MAX_RATE + i as u32);
+        let accel = self.settings.get(Settings::ACCEL + i as u32);
+        let expected = self.motion_time(move_time_s(
+            position - from,
+            rate.unwrap_or(0.0),
+            accel.unwrap_or(0.0),
+        ));
+        let reply = self.config.reply_timeout;
+        let line = format!("G90 G53 G0 {}{position:.3}", axis.letter());
+        self.retrying(|arm| arm.command(&line, Patience::Reply(reply)))?;
+        let patience = self.motion_patience(expected);
+        self.retrying(|arm| arm.command("G4 P0", patience))?;
+        let report = self.query_status()?;
+        let at = report.machine(i, self.known_wco()).unwrap_or(f64::NAN);
+        if report.state != MachineState::Idle
+            || (at - position).abs() > self.config.position_tolerance_deg
+        {
+            return Err(DeviceError::Protocol(format!(
+                "after moving the {} axis to {position:.3} the controller reports {:?} at {at:.3}",
+                axis.letter(),
+                report.state
+            )));
+        }
+        Ok(())
+    }
+
     fn status(&mut self) -> Result<ArmStatus, DeviceError> {
         self.prepare()?;
         let report = self.query_status()?;

@@ -129,6 +129,7 @@ pub fn router(shared: Arc<Shared>) -> Router {
         .route("/api/scans/{id}/pause", post(pause_scan))
         .route("/api/scans/{id}/resume", post(resume_scan))
         .route("/api/scans/{id}/cancel", post(cancel_scan))
+        .route("/api/scans/{id}/confirm", post(confirm_scan))
         .route("/api/scans/{id}/calibrate", post(calibrate_scan))
         .route("/api/setup", delete(forget_calibration))
         .route("/api/arm/stop", post(stop_arm))
@@ -346,6 +347,26 @@ fn bounds(shared: &Shared) -> Bounds {
         shutter_min_s: camera.shutter_min_s,
         shutter_max_s: camera.shutter_max_s,
         max_steps: shared.config.max_steps_per_request,
+        samples: holdable(shared),
+    }
+}
+
+/// The samples the instrument can hold: the carousel's, of those the emulator has a
+/// scene for; `None` where any name goes (real hardware without a carousel).
+fn holdable(shared: &Shared) -> Option<Vec<String>> {
+    let slots = shared
+        .config
+        .carousel
+        .as_ref()
+        .map(|c| c.slots.keys().cloned().collect::<Vec<_>>());
+    match (slots, shared.mount.holdable()) {
+        (Some(slots), Some(scenes)) => Some(
+            slots
+                .into_iter()
+                .filter(|name| scenes.contains(name))
+                .collect(),
+        ),
+        (slots, scenes) => slots.or(scenes),
     }
 }
 
@@ -465,6 +486,61 @@ async fn cancel_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<
         "cancel",
     )
     .await
+}
+
+/// The operator confirms that the sample a waiting scan asks for is on the cylinder:
+/// it is recorded as mounted (on the emulator, its scene is mounted) and the scan is
+/// queued again. 409 unless the scan waits for its sample.
+async fn confirm_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
+    let scan = load_scan(&shared, id).await?;
+    let not_waiting = |state: ScanState| {
+        ApiError::new(
+            StatusCode::CONFLICT,
+            format!(
+                "scan {id} is {}: it does not wait for a sample to be mounted",
+                state.as_str()
+            ),
+        )
+    };
+    if !scan.waits_for_sample() {
+        return Err(not_waiting(scan.state));
+    }
+    let sample = scan.plan.sample.clone();
+    let mounting = shared.clone();
+    let mounted = sample.clone();
+    tokio::task::spawn_blocking(move || mounting.mount.mount(&mounted))
+        .await
+        .map_err(internal)?
+        .map_err(|e| internal(format!("mounting sample {sample}: {e:#}")))?;
+    let refused_in = db(&shared, move |shared, store| {
+        let Some(scan) = store.scan(id)? else {
+            return Ok(Some(ScanState::Cancelled));
+        };
+        store.log(
+            shared.boot,
+            Some(id),
+            "mount",
+            &format!(
+                "sample {} confirmed mounted by the operator",
+                scan.plan.sample
+            ),
+        )?;
+        if scan.waits_for_sample()
+            && store.transition(id, &[ScanState::Waiting], ScanState::Queued, None)?
+        {
+            shared.changed(id);
+            Ok(None)
+        } else {
+            Ok(Some(scan.state))
+        }
+    })
+    .await?;
+    if let Some(state) = refused_in {
+        return Err(not_waiting(state));
+    }
+    shared.wake();
+    tracing::info!("scan {id}: sample {} mounted", scan.plan.sample);
+    Ok(Json(load_view(&shared, id).await?))
 }
 
 /// Calibrates the setup from a scan that is no longer running and stores it as the

@@ -34,7 +34,13 @@
 //! [camera]                     # or: kind = "gphoto2"
 //! kind = "emulator"
 //! scene = "gold"               # builtin scene name or path to a scene TOML
+//! sample = "gold"              # the name of the sample `scene` shows, mounted at start
+//! samples = {}                 # scenes of other samples by name, e.g. { red = "red.toml" }
 //! time_scale = 0.1
+//!
+//! # [carousel]                 # a sample carousel on a spare axis of the arm's board
+//! # axis = "Y"                 #   homed with the arm ($H); the daemon turns it itself
+//! # slots = { gold = -10.0, red = -100.0 }   # machine position of each sample
 //!
 //! [limits]                     # soft limits of θL, degrees
 //! min_deg = -90.0
@@ -51,6 +57,7 @@
 //! fault_injection = false      # test hook: POST /api/emulator/fault
 //! ```
 
+use std::collections::BTreeMap;
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 
@@ -93,6 +100,8 @@ pub struct Config {
     pub reserved_fds: u64,
     pub arm: ArmConfig,
     pub camera: CameraConfig,
+    /// A sample carousel on a spare axis of the arm's board, if there is one.
+    pub carousel: Option<CarouselConfig>,
     pub limits: Limits,
     pub retry: RetryConfig,
     pub processing: ProcessingConfig,
@@ -123,6 +132,7 @@ impl Default for Config {
             reserved_fds: 256,
             arm: ArmConfig::default(),
             camera: CameraConfig::default(),
+            carousel: None,
             limits: Limits::default(),
             retry: RetryConfig::default(),
             processing: ProcessingConfig::default(),
@@ -213,9 +223,17 @@ pub enum CameraConfig {
         port: Option<String>,
     },
     Emulator {
-        /// Builtin scene name (`gold`, `red`, `blue-green`) or path to a scene TOML.
+        /// Builtin scene name (`gold`, `red`, `blue-green`, `opal`) or path to a scene
+        /// TOML: the scene of the sample mounted when the daemon starts.
         #[serde(default = "default_scene")]
         scene: String,
+        /// The name of the sample `scene` shows.
+        #[serde(default = "default_scene")]
+        sample: String,
+        /// Scenes (builtin name or path) of the other samples the emulated instrument
+        /// holds, by sample name; a builtin scene's name is a sample of its own.
+        #[serde(default)]
+        samples: BTreeMap<String, String>,
         /// Real seconds per emulated second.
         #[serde(default = "default_time_scale")]
         time_scale: f64,
@@ -226,8 +244,57 @@ impl Default for CameraConfig {
     fn default() -> Self {
         CameraConfig::Emulator {
             scene: default_scene(),
+            sample: default_scene(),
+            samples: BTreeMap::new(),
             time_scale: default_time_scale(),
         }
+    }
+}
+
+/// A sample carousel on a spare axis of the arm's GRBL board: the daemon turns it to a
+/// scan's sample itself instead of waiting for the operator (docs/ARCHITECTURE.md,
+/// "Sample changes").
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CarouselConfig {
+    /// The controller axis it is on: `X`, `Y` or `Z`, not the arm's.
+    pub axis: String,
+    /// Each sample's slot: the machine position of the axis (its units, degrees for a
+    /// turntable; on [−`$13N`, 0] after homing) that brings it before the camera.
+    pub slots: BTreeMap<String, f64>,
+}
+
+impl CarouselConfig {
+    /// The axis as the driver names it.
+    pub fn axis(&self) -> ArmAxis {
+        ArmAxis::from_letter(&self.axis).unwrap_or(ArmAxis::Y)
+    }
+
+    /// The slot of `sample`, if the carousel holds it.
+    pub fn slot(&self, sample: &str) -> Option<f64> {
+        self.slots.get(sample).copied()
+    }
+
+    fn check(&self, arm: &ArmConfig) -> anyhow::Result<()> {
+        let axis = ArmAxis::from_letter(&self.axis)
+            .with_context(|| format!("carousel.axis must be X, Y or Z, got {:?}", self.axis))?;
+        anyhow::ensure!(
+            axis != arm.axis(),
+            "carousel.axis {} is the arm's axis",
+            self.axis
+        );
+        anyhow::ensure!(
+            arm.homing == HomingMode::Required,
+            "carousel: needs arm.homing = \"required\" (the homing cycle references it)"
+        );
+        anyhow::ensure!(!self.slots.is_empty(), "carousel.slots is empty");
+        for (sample, slot) in &self.slots {
+            anyhow::ensure!(
+                slot.is_finite() && *slot <= 0.0,
+                "carousel.slots.{sample} must be a machine position at or below 0, got {slot}"
+            );
+        }
+        Ok(())
     }
 }
 
@@ -343,6 +410,9 @@ impl Config {
             "max_body_bytes must be at least 1024"
         );
         self.arm.check()?;
+        if let Some(carousel) = &self.carousel {
+            carousel.check(&self.arm)?;
+        }
         for (key, value) in [
             ("max_steps_per_request", self.max_steps_per_request as u64),
             ("max_frame_pixels", self.max_frame_pixels),
@@ -491,6 +561,40 @@ mod tests {
             (
                 "[arm]\nkind = \"grbl\"\npath = \"/x\"\nboard = \"b.toml\"\n",
                 "board",
+            ),
+        ] {
+            let err = Config::from_toml_str(text).unwrap_err();
+            assert!(format!("{err:#}").contains(named), "{text}: {err:#}");
+        }
+    }
+
+    #[test]
+    fn a_carousel_names_its_axis_and_slots() {
+        let config = Config::from_toml_str(
+            "[carousel]\naxis = \"y\"\nslots = { gold = -10.0, red = -100.0 }\n",
+        )
+        .unwrap();
+        let carousel = config.carousel.unwrap();
+        assert_eq!(carousel.axis(), ArmAxis::Y);
+        assert_eq!(carousel.slot("red"), Some(-100.0));
+        assert_eq!(carousel.slot("teal"), None);
+        for (text, named) in [
+            (
+                "[carousel]\naxis = \"X\"\nslots = { a = -1.0 }\n",
+                "arm's axis",
+            ),
+            (
+                "[carousel]\naxis = \"Q\"\nslots = { a = -1.0 }\n",
+                "carousel.axis",
+            ),
+            ("[carousel]\naxis = \"Y\"\nslots = {}\n", "carousel.slots"),
+            (
+                "[carousel]\naxis = \"Y\"\nslots = { a = 5.0 }\n",
+                "carousel.slots.a",
+            ),
+            (
+                "[arm]\nhoming = \"off\"\n[carousel]\naxis = \"Y\"\nslots = { a = -1.0 }\n",
+                "homing",
             ),
         ] {
             let err = Config::from_toml_str(text).unwrap_err();

@@ -18,7 +18,8 @@ use gonio_processing::capture::Response;
 use gonio_processing::geometry::Setup;
 use serde_json::Value;
 
-use super::config::{ArmConfig, ArmKind, CameraConfig, Config, HomingMode, Limits};
+use super::config::{ArmConfig, ArmKind, CameraConfig, CarouselConfig, Config, HomingMode, Limits};
+use super::mount::{EmulatedSamples, Mount};
 use super::sync::lock;
 use super::timing::Timing;
 
@@ -70,6 +71,38 @@ pub struct Devices {
     /// What the devices' steps are expected to take.
     pub timing: Timing,
     pub emulators: Option<Arc<Emulators>>,
+    /// The sample on the cylinder.
+    pub mount: Arc<Mount>,
+}
+
+/// What an emulated scan's files say of the scene it images: its setup, its truth and
+/// the levels of its captures.
+pub struct SceneFacts {
+    pub setup: Setup,
+    pub truth: Value,
+    pub sidecar: SidecarDefaults,
+}
+
+impl SceneFacts {
+    pub fn of(scene: &Scene) -> anyhow::Result<Self> {
+        let setup: Setup =
+            serde_json::from_value(scene.setup_json()).context("converting the scene setup")?;
+        let levels = gonio_mock_hw::render::file_levels(scene);
+        Ok(Self {
+            setup,
+            truth: scene.truth_json(),
+            sidecar: SidecarDefaults {
+                black_level: Some(f64::from(levels.black_level)),
+                white_level: Some(f64::from(levels.white_level)),
+                response: if levels.nonlinear {
+                    Response::Nonlinear
+                } else {
+                    Response::Linear
+                },
+                significant_bits: Some(levels.significant_bits),
+            },
+        })
+    }
 }
 
 /// The driver's expectations: the `[arm]` keys and the θL limits.
@@ -93,8 +126,12 @@ fn grbl_arm_config(arm: &ArmConfig, limits: Limits) -> GrblArmConfig {
 }
 
 /// The emulated board: the `board` file if given, else a board set up as the `[arm]`
-/// keys expect (homing the arm's axis alone); at `time_scale` either way.
-fn emulated_board(arm: &ArmConfig) -> anyhow::Result<GrblConfig> {
+/// keys expect (homing the arm's axis, and the carousel's with it); at `time_scale`
+/// either way.
+fn emulated_board(
+    arm: &ArmConfig,
+    carousel: Option<&CarouselConfig>,
+) -> anyhow::Result<GrblConfig> {
     let board = match &arm.board {
         Some(path) => {
             let text = read_input_to_string(path, MAX_SMALL_FILE_BYTES)
@@ -106,6 +143,7 @@ fn emulated_board(arm: &ArmConfig) -> anyhow::Result<GrblConfig> {
             let preset = GrblConfig::arm_board();
             let axis = arm.axis();
             let homes = arm.homing != HomingMode::Off;
+            let carousel_mask = carousel.map_or(0, |c| 1 << c.axis().index());
             GrblConfig {
                 arm_axis: match axis {
                     ArmAxis::X => Axis::X,
@@ -121,7 +159,7 @@ fn emulated_board(arm: &ArmConfig) -> anyhow::Result<GrblConfig> {
                 homing_enabled: homes,
                 soft_limits: homes,
                 homing_cycles: vec![AxisSet {
-                    mask: 1 << axis.index(),
+                    mask: (1 << axis.index()) | carousel_mask,
                 }],
                 ..preset
             }
@@ -144,7 +182,7 @@ pub fn open(config: &Config) -> anyhow::Result<Devices> {
     let real = Timing::real();
     let (grbl, arm, timing) = match config.arm.kind {
         ArmKind::Emulator => {
-            let board = emulated_board(&config.arm)?;
+            let board = emulated_board(&config.arm, config.carousel.as_ref())?;
             let timing = Timing::emulated(&board, real.capture);
             let emulator =
                 GrblEmulator::start(board, world.clone()).context("starting the GRBL emulator")?;
@@ -164,27 +202,24 @@ pub fn open(config: &Config) -> anyhow::Result<Devices> {
         ),
     };
     match &config.camera {
-        CameraConfig::Emulator { scene, time_scale } => {
-            let scene = load_scene(scene)?;
+        CameraConfig::Emulator {
+            scene: spec,
+            sample,
+            samples,
+            time_scale,
+        } => {
+            let scene = load_scene(spec)?;
             let capture = CaptureTiming {
                 time_scale: *time_scale,
                 ..CaptureTiming::default()
             };
             let camera = EmulatedCamera::new(scene.clone(), world.clone(), capture);
-            let setup: Setup =
-                serde_json::from_value(scene.setup_json()).context("converting the scene setup")?;
+            let facts = SceneFacts::of(&scene)?;
             let body = scene.camera();
-            let levels = camera.file_levels();
-            let sidecar = SidecarDefaults {
-                black_level: Some(f64::from(levels.black_level)),
-                white_level: Some(f64::from(levels.white_level)),
-                response: if levels.nonlinear {
-                    Response::Nonlinear
-                } else {
-                    Response::Linear
-                },
-                significant_bits: Some(levels.significant_bits),
-            };
+            let mut scenes = samples.clone();
+            scenes.insert(sample.clone(), spec.clone());
+            let mount =
+                Mount::emulated(sample, EmulatedSamples::new(camera.sample_mount(), scenes)?);
             let emulators = grbl.map(|grbl| {
                 Arc::new(Emulators {
                     grbl: std::sync::Mutex::new(grbl),
@@ -194,12 +229,13 @@ pub fn open(config: &Config) -> anyhow::Result<Devices> {
             Ok(Devices {
                 arm,
                 camera: Box::new(camera),
-                setup: Some(setup),
-                truth: Some(scene.truth_json()),
-                sidecar,
+                setup: Some(facts.setup),
+                truth: Some(facts.truth),
+                sidecar: facts.sidecar,
                 iso: Some(body.iso),
                 timing: Timing { capture, ..timing },
                 emulators,
+                mount: Arc::new(mount),
             })
         }
         CameraConfig::Gphoto2 { iso, model, port } => Ok(Devices {
@@ -211,6 +247,7 @@ pub fn open(config: &Config) -> anyhow::Result<Devices> {
             iso: Some(*iso),
             timing,
             emulators: None,
+            mount: Arc::new(Mount::unknown()),
         }),
     }
 }

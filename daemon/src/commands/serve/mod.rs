@@ -9,6 +9,7 @@ mod connections;
 mod devices;
 mod files;
 mod lanes;
+mod mount;
 mod plan;
 mod preview;
 mod process;
@@ -144,6 +145,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         arm_position: Mutex::new(None),
         timing: devices.timing,
         emulators: devices.emulators.clone(),
+        mount: devices.mount.clone(),
         config,
     });
     step_guard::fail_crash_looping_scans(&shared, &mut lock(&shared.store))?;

@@ -110,6 +110,12 @@ impl Step {
     }
 }
 
+/// Why a scan waits for the operator to mount its sample (`POST
+/// /api/scans/{id}/confirm` once it is on the cylinder).
+pub fn mount_reason(sample: &str) -> String {
+    format!("mount sample {sample}")
+}
+
 /// Directory of the captures of one θL inside a scan directory.
 pub fn theta_dir_name(theta_l: f64) -> String {
     format!("theta_l_{theta_l:.1}")

@@ -8,7 +8,7 @@ use rusqlite::{params, Connection, OptionalExtension, Transaction, TransactionBe
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
-use super::plan::{Lane, ScanPlan, Step};
+use super::plan::{mount_reason, Lane, ScanPlan, Step};
 
 /// Errors of the store.
 #[derive(Debug, thiserror::Error)]
@@ -155,6 +155,14 @@ pub struct ScanRecord {
     pub steps_total: u32,
     /// The hardware step being executed or next in line, else the processing one.
     pub current_step: Option<String>,
+}
+
+impl ScanRecord {
+    /// Whether the scan waits for the operator to mount its sample.
+    pub fn waits_for_sample(&self) -> bool {
+        self.state == ScanState::Waiting
+            && self.error.as_deref() == Some(mount_reason(&self.plan.sample).as_str())
+    }
 }
 
 /// One step as stored.
@@ -568,6 +576,15 @@ impl Store {
                 [now],
             )?
             .pop())
+    }
+
+    /// The oldest scan waiting for its sample to be mounted, if any: the hardware lane
+    /// starts no scan meanwhile.
+    pub fn waiting_for_sample(&self) -> Result<Option<ScanRecord>, StoreError> {
+        Ok(self
+            .query_scans("WHERE state = 'waiting' ORDER BY id", [])?
+            .into_iter()
+            .find(ScanRecord::waits_for_sample))
     }
 
     /// Ids of the scans whose captured brackets are processed now, oldest first.

@@ -32,6 +32,9 @@ pub struct Bounds {
     pub shutter_max_s: f64,
     /// Most steps one request may queue (`max_steps_per_request`).
     pub max_steps: usize,
+    /// The samples the instrument can hold, where it knows them (the emulator's
+    /// scenes); `None`: any name.
+    pub samples: Option<Vec<String>>,
 }
 
 /// Most θL of one scan.
@@ -64,6 +67,20 @@ fn sample_name(field: &str, value: Option<&Value>) -> Result<String, FieldError>
         ));
     }
     Ok(name.to_owned())
+}
+
+/// Checks that the instrument can hold `sample` (field `field`).
+fn holdable(field: &str, sample: &str, bounds: &Bounds) -> Result<(), FieldError> {
+    match &bounds.samples {
+        Some(names) if !names.iter().any(|n| n == sample) => Err(invalid(
+            field,
+            format!(
+                "the instrument holds no sample {sample:?}; it holds {}",
+                names.join(", ")
+            ),
+        )),
+        _ => Ok(()),
+    }
 }
 
 fn theta_list(field: &str, value: Option<&Value>, limits: Limits) -> Result<Vec<f64>, FieldError> {
@@ -161,6 +178,7 @@ fn bracket(value: Option<&Value>, bounds: &Bounds) -> Result<(Vec<f64>, bool), F
 pub fn scan_request(body: &Value, bounds: &Bounds) -> Result<ScanPlan, FieldError> {
     let map = object(body, &["sample", "theta_l", "bracket"])?;
     let sample = sample_name("sample", map.get("sample"))?;
+    holdable("sample", &sample, bounds)?;
     let theta_l = theta_list("theta_l", map.get("theta_l"), bounds.limits)?;
     let (shutter_s, auto_bracket) = bracket(map.get("bracket"), bounds)?;
     let plan = ScanPlan {
@@ -280,6 +298,9 @@ pub fn sweep_request(body: &Value, bounds: &Bounds) -> Result<SweepPlan, FieldEr
             ));
         }
     }
+    for (i, sample) in samples.iter().enumerate() {
+        holdable(&format!("samples[{i}]"), sample, bounds)?;
+    }
     let start_at = match map.get("start_at") {
         None | Some(Value::Null) => None,
         Some(v) => {
@@ -343,6 +364,7 @@ mod tests {
             shutter_min_s: 1.0 / 4000.0,
             shutter_max_s: 30.0,
             max_steps: 10_000,
+            samples: None,
         }
     }
 
@@ -442,6 +464,24 @@ mod tests {
         let many: Vec<f64> = (0..40).map(|k| -(k as f64)).collect();
         let err = scan_request(&json!({"sample": "g", "theta_l": many}), &bounds).unwrap_err();
         assert_eq!(err.field, "theta_l", "{err}");
+    }
+
+    #[test]
+    fn a_sample_the_instrument_cannot_hold_is_named() {
+        let bounds = Bounds {
+            samples: Some(vec!["gold".into(), "red".into()]),
+            ..bounds()
+        };
+        let err = scan_request(&json!({"sample": "blue", "theta_l": [-20]}), &bounds).unwrap_err();
+        assert_eq!(err.field, "sample", "{err}");
+        assert!(err.message.contains("gold, red"), "{err}");
+        assert!(scan_request(&json!({"sample": "red", "theta_l": [-20]}), &bounds).is_ok());
+        let err = sweep_request(
+            &json!({"samples": ["gold", "blue"], "theta_l_sets": [[-20]]}),
+            &bounds,
+        )
+        .unwrap_err();
+        assert_eq!(err.field, "samples[1]", "{err}");
     }
 
     #[test]

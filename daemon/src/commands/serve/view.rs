@@ -54,6 +54,20 @@ pub const CONTROLS: [(&str, &[ScanState]); 3] = [
     ),
 ];
 
+/// The control routes a scan's state allows, and `confirm` while it waits for its
+/// sample to be mounted.
+fn actions(scan: &ScanRecord) -> Vec<&'static str> {
+    let mut verbs: Vec<&str> = CONTROLS
+        .iter()
+        .filter(|(_, from)| from.contains(&scan.state))
+        .map(|(verb, _)| *verb)
+        .collect();
+    if scan.waits_for_sample() {
+        verbs.push("confirm");
+    }
+    verbs
+}
+
 /// The states control `verb` applies to (none for an unknown verb).
 pub fn applies_to(verb: &str) -> &'static [ScanState] {
     CONTROLS
@@ -124,11 +138,7 @@ pub fn scan_view(
             "theta_l": journal.as_ref().map(|p| p.theta_l),
             "eta_s": eta_s,
         },
-        "actions": CONTROLS
-            .iter()
-            .filter(|(_, from)| from.contains(&scan.state))
-            .map(|(verb, _)| *verb)
-            .collect::<Vec<_>>(),
+        "actions": actions(scan),
         "current_step": scan.current_step,
         "processing_step": journal.as_ref().and_then(|p| p.processing_step.clone()),
         "live": journal.map(|p| p.live),

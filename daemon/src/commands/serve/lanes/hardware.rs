@@ -10,6 +10,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use gonio_drivers::bracket::{auto_bracket, BracketError, BracketRegion, MeteringFrame};
+use gonio_drivers::grbl::ArmAxis;
 use gonio_drivers::{Arm, ArmState, Camera, DeviceError, Exposure};
 use gonio_processing::capture::{sidecar_path, Frame, Sidecar};
 use gonio_processing::geometry::{column_angles, Setup};
@@ -17,9 +18,11 @@ use serde_json::{json, Value};
 
 use super::step::{self, Flow, Outcome, StepError};
 use crate::commands::serve::calibration;
-use crate::commands::serve::devices::{ArmOpener, Devices, SidecarDefaults};
+use crate::commands::serve::devices::{ArmOpener, Devices, SceneFacts, SidecarDefaults};
 use crate::commands::serve::files::write_atomic;
-use crate::commands::serve::plan::{exposure_stem, theta_dir_name, Lane, ScanPlan, Step};
+use crate::commands::serve::plan::{
+    exposure_stem, mount_reason, theta_dir_name, Lane, ScanPlan, Step,
+};
 use crate::commands::serve::shared::{Shared, EMERGENCY_STOP};
 use crate::commands::serve::store::{
     now_rfc3339, now_unix, ScanRecord, ScanState, Store, StoreError,
@@ -62,6 +65,9 @@ pub struct HardwareLane {
     truth: Option<Value>,
     sidecar: SidecarDefaults,
     iso: Option<u32>,
+    /// Where the carousel goes back to after every homing (the cycle moves it): the
+    /// slot of the running scan's sample, its axis.
+    carousel_slot: Option<(ArmAxis, f64)>,
 }
 
 impl HardwareLane {
@@ -84,6 +90,7 @@ impl HardwareLane {
             truth: devices.truth,
             sidecar: devices.sidecar,
             iso: devices.iso,
+            carousel_slot: None,
         }
     }
 
@@ -173,8 +180,18 @@ impl HardwareLane {
                 self.shared.changed(id);
             }
         }
+        if self.store.waiting_for_sample()?.is_some() {
+            // The operator is changing the sample: nothing moves meanwhile.
+            self.refresh_arm_status();
+            self.idle();
+            return Ok(());
+        }
         match self.store.next_for_hardware(now_unix())? {
-            Some(scan) => self.run_scan(scan),
+            Some(scan) if self.sample_ready(&scan)? => self.run_scan(scan),
+            Some(_) => {
+                self.idle();
+                Ok(())
+            }
             None => {
                 self.refresh_arm_status();
                 self.idle();
@@ -261,6 +278,28 @@ impl HardwareLane {
             self.shared.changed(scan.id);
         }
         Ok(())
+    }
+
+    /// Whether the sample `scan` measures is known to be on the cylinder, or the
+    /// carousel brings it; if neither, the scan waits for the operator to mount it and
+    /// confirm, before any of its steps.
+    fn sample_ready(&mut self, scan: &ScanRecord) -> Result<bool, StoreError> {
+        let sample = &scan.plan.sample;
+        if self.shared.mount.is_mounted(sample) || self.shared.config.carousel.is_some() {
+            return Ok(true);
+        }
+        let reason = mount_reason(sample);
+        if self.store.transition(
+            scan.id,
+            &[ScanState::Queued, ScanState::Running],
+            ScanState::Waiting,
+            Some(&reason),
+        )? {
+            tracing::info!("scan {}: waiting: {reason}", scan.id);
+            self.log(Some(scan.id), "wait", &reason)?;
+            self.shared.changed(scan.id);
+        }
+        Ok(false)
     }
 
     /// Waiting scans go back to the queue (what they waited for may have changed).
@@ -370,6 +409,9 @@ impl HardwareLane {
         }
         tracing::info!("scan {id} ({}): running", scan.plan.sample);
         self.shared.changed(id);
+        if !self.bring_sample(id, &scan.plan.sample)? {
+            return Ok(());
+        }
         let dir = self.shared.scan_dir(id);
         if let Err(err) = self.prepare_dir(&dir) {
             let reason = format!("preparing {}: {err}", dir.display());
@@ -413,6 +455,54 @@ impl HardwareLane {
         Ok(())
     }
 
+    /// With a carousel: turns it to the slot of `sample` unless that sample is known to
+    /// be there (homing the arm first if needed), and remembers the slot to go back to
+    /// after any later homing. Returns whether the scan goes on.
+    fn bring_sample(&mut self, id: i64, sample: &str) -> Result<bool, StoreError> {
+        let carousel = self.shared.config.carousel.as_ref();
+        let Some((axis, slot)) = carousel.map(|c| (c.axis(), c.slot(sample))) else {
+            return Ok(true);
+        };
+        let Some(slot) = slot else {
+            let reason = format!("the carousel has no slot for sample {sample}");
+            step::stop(
+                &self.shared,
+                &mut self.store,
+                id,
+                RUNNING,
+                StepError::Failed(reason),
+            )?;
+            return Ok(false);
+        };
+        self.carousel_slot = Some((axis, slot));
+        if self.shared.mount.is_mounted(sample) {
+            return Ok(true);
+        }
+        let what = format!("turn the carousel to sample {sample}");
+        let turned = self
+            .arm_op(id, &what, true, |arm| arm.move_axis(axis, slot))
+            .and_then(|()| {
+                self.shared
+                    .mount
+                    .mount(sample)
+                    .map_err(|e| StepError::Failed(format!("{what}: {e:#}")))
+            });
+        match turned {
+            Ok(()) => {
+                self.log(
+                    Some(id),
+                    "carousel",
+                    &format!("sample {sample} at {} {slot:.3}", axis.letter()),
+                )?;
+                Ok(true)
+            }
+            Err(err) => {
+                step::stop(&self.shared, &mut self.store, id, RUNNING, err)?;
+                Ok(false)
+            }
+        }
+    }
+
     /// Before a new bracket: waits while the processing lane has as many captured
     /// brackets left as the configuration allows (back-pressure), so a slow disk or
     /// CPU never lets them pile up. Returns whether scan `id` is still running.
@@ -440,8 +530,15 @@ impl HardwareLane {
         calibration::current_setup(&self.shared.config.data_dir, self.setup.as_ref())
     }
 
-    /// Creates the scan directory with setup.json (and truth.json for emulated scans).
-    fn prepare_dir(&self, dir: &Path) -> std::io::Result<()> {
+    /// Creates the scan directory with setup.json (and truth.json for emulated scans,
+    /// of the scene mounted now, whose levels its capture sidecars then carry).
+    fn prepare_dir(&mut self, dir: &Path) -> std::io::Result<()> {
+        if let Some(scene) = self.shared.mount.emulated_scene() {
+            let facts = SceneFacts::of(&scene).map_err(std::io::Error::other)?;
+            self.setup = Some(facts.setup);
+            self.truth = Some(facts.truth);
+            self.sidecar = facts.sidecar;
+        }
         std::fs::create_dir_all(dir)?;
         let files = [
             ("setup.json", self.setup().map(|s| json!(s))),
@@ -585,6 +682,10 @@ impl HardwareLane {
         if let Err(StepError::Interrupted(reason)) = &result {
             self.disconnect_arm(reason);
         }
+        if result.is_err() && self.carousel_slot.is_some() {
+            // The carousel may have been moved (homing) and not brought back.
+            self.shared.mount.forget();
+        }
         result
     }
 
@@ -613,7 +714,7 @@ impl HardwareLane {
                 op(arm.as_mut())
             } else {
                 rehomed = true;
-                arm.home().and_then(|()| op(arm.as_mut()))
+                home_with_carousel(arm.as_mut(), self.carousel_slot).and_then(|()| op(arm.as_mut()))
             };
             match result {
                 Ok(()) => {
@@ -704,7 +805,8 @@ impl HardwareLane {
     }
 
     fn home(&mut self, id: i64) -> Result<(), StepError> {
-        self.arm_op(id, "home", false, |arm| arm.home())?;
+        let slot = self.carousel_slot;
+        self.arm_op(id, "home", false, |arm| home_with_carousel(arm, slot))?;
         self.homed = true;
         self.at_deg = None;
         self.log(Some(id), "home", "")?;
@@ -848,6 +950,15 @@ impl HardwareLane {
         };
         let text = serde_json::to_vec_pretty(&sidecar).map_err(|e| e.to_string())?;
         write_atomic(path, &text).map_err(|e| format!("{}: {e}", path.display()))
+    }
+}
+
+/// The homing cycle, then the carousel (which the cycle homes too) back to `slot`.
+fn home_with_carousel(arm: &mut dyn Arm, slot: Option<(ArmAxis, f64)>) -> Result<(), DeviceError> {
+    arm.home()?;
+    match slot {
+        Some((axis, position)) => arm.move_axis(axis, position),
+        None => Ok(()),
     }
 }
 

@@ -57,32 +57,44 @@ pub fn finish(
     from: &[ScanState],
     outcome: Outcome,
 ) -> Result<Flow, StoreError> {
-    let flow = match outcome {
+    match outcome {
         Ok((result, followers)) => {
             if store.step_done(id, index, &result, &followers)? {
                 tracing::info!("scan {id}: done");
             }
-            Flow::Next
+            shared.changed(id);
+            Ok(Flow::Next)
         }
-        Err(StepError::Halted) => Flow::Stop,
-        Err(StepError::Interrupted(reason)) => {
+        Err(err) => stop(shared, store, id, from, err),
+    }
+}
+
+/// Records why scan `id` stopped: failed, interrupted or waiting, out of `from` (a scan
+/// the operator changed meanwhile stays as they set it).
+pub fn stop(
+    shared: &Shared,
+    store: &mut Store,
+    id: i64,
+    from: &[ScanState],
+    err: StepError,
+) -> Result<Flow, StoreError> {
+    match err {
+        StepError::Halted => {}
+        StepError::Interrupted(reason) => {
             tracing::warn!("scan {id} interrupted: {reason}");
             store.transition(id, from, ScanState::Interrupted, Some(&reason))?;
-            Flow::Stop
         }
-        Err(StepError::Waiting(reason)) => {
+        StepError::Waiting(reason) => {
             tracing::warn!("scan {id} waiting: {reason}");
             store.log(shared.boot, Some(id), "wait", &reason)?;
             store.transition(id, from, ScanState::Waiting, Some(&reason))?;
-            Flow::Stop
         }
-        Err(StepError::Failed(reason)) => {
+        StepError::Failed(reason) => {
             tracing::error!("scan {id} failed: {reason}");
             store.transition(id, from, ScanState::Failed, Some(&reason))?;
-            Flow::Stop
         }
-        Err(StepError::Store(err)) => return Err(err),
-    };
+        StepError::Store(err) => return Err(err),
+    }
     shared.changed(id);
-    Ok(flow)
+    Ok(Flow::Stop)
 }
