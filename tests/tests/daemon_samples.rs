@@ -176,7 +176,9 @@ fn a_two_sample_sweep_waits_for_the_change_and_images_the_sample_confirmed() {
         let scan_dir = daemon.data.join(format!("scans/{id}"));
         let written: Value =
             serde_json::from_slice(&std::fs::read(scan_dir.join("truth.json")).unwrap()).unwrap();
-        assert_eq!(&written, truth, "scan {id}");
+        for key in ["scene", "kd", "ks", "m"] {
+            assert_eq!(written[key], truth[key], "scan {id}: {key}");
+        }
         let fit: Value = serde_json::from_slice(
             &std::fs::read(scan_dir.join("fit-cook-torrance.json")).unwrap(),
         )
@@ -290,7 +292,9 @@ fn a_carousel_brings_each_sample_itself_and_no_scan_waits() {
         let scan_dir = daemon.data.join(format!("scans/{id}"));
         let written: Value =
             serde_json::from_slice(&std::fs::read(scan_dir.join("truth.json")).unwrap()).unwrap();
-        assert_eq!(&written, truth, "scan {id}");
+        for key in ["scene", "kd", "ks", "m"] {
+            assert_eq!(written[key], truth[key], "scan {id}: {key}");
+        }
         let fit: Value = serde_json::from_slice(
             &std::fs::read(scan_dir.join("fit-cook-torrance.json")).unwrap(),
         )

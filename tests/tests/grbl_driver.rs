@@ -546,7 +546,7 @@ fn a_carousel_axis_moves_in_machine_coordinates_beside_the_arm() {
         ));
     }
     let transcript = emulator.transcript();
-    for line in ["G90 G53 G0 Y-100.000", "G90 G53 G0 Y-10.000"] {
+    for line in ["G90G53G0Y-100.000", "G90G53G0Y-10.000"] {
         assert!(transcript.contains(&line.to_owned()), "{transcript:?}");
     }
 }
