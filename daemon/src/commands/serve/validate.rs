@@ -178,7 +178,6 @@ fn bracket(value: Option<&Value>, bounds: &Bounds) -> Result<(Vec<f64>, bool), F
 pub fn scan_request(body: &Value, bounds: &Bounds) -> Result<ScanPlan, FieldError> {
     let map = object(body, &["sample", "theta_l", "bracket"])?;
     let sample = sample_name("sample", map.get("sample"))?;
-    holdable("sample", &sample, bounds)?;
     let theta_l = theta_list("theta_l", map.get("theta_l"), bounds.limits)?;
     let (shutter_s, auto_bracket) = bracket(map.get("bracket"), bounds)?;
     let plan = ScanPlan {
@@ -201,6 +200,8 @@ pub fn scan_request(body: &Value, bounds: &Bounds) -> Result<ScanPlan, FieldErro
             ),
         ));
     }
+    // Whether the instrument holds the sample comes last, as for a sweep.
+    holdable("sample", &plan.sample, bounds)?;
     Ok(plan)
 }
 
