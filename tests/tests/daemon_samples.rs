@@ -94,7 +94,7 @@ fn a_two_sample_sweep_waits_for_the_change_and_images_the_sample_confirmed() {
     let created = daemon.post(
         "/api/sweeps",
         &json!({"samples": ["gold", "red"], "theta_l_sets": [[-20, -30, -40]],
-                "bracket": {"shutter_s": [0.5, 0.125, 0.033333333333333333, 0.01]}}),
+                "bracket": {"shutter_s": [0.5, 0.125, 1.0 / 30.0, 0.01]}}),
     );
     assert_eq!(created.status, 201, "{:?}", created.json);
     let ids: Vec<i64> = created.json["scans"]
@@ -239,7 +239,7 @@ fn a_carousel_brings_each_sample_itself_and_no_scan_waits() {
     let created = daemon.post(
         "/api/sweeps",
         &json!({"samples": ["red", "gold"], "theta_l_sets": [[-20, -30, -40]],
-                "bracket": {"shutter_s": [0.5, 0.125, 0.033333333333333333, 0.01]}}),
+                "bracket": {"shutter_s": [0.5, 0.125, 1.0 / 30.0, 0.01]}}),
     );
     assert_eq!(created.status, 201, "{:?}", created.json);
     let sweep = created.json["id"].as_i64().unwrap();
