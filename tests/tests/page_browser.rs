@@ -363,7 +363,14 @@ fn page_drives_a_scan_in_a_real_browser() {
     let linear = page.eval(PLOT_FACTS);
     check_plot(&linear, 3);
     assert_ne!(linear["yTicks"], all["yTicks"], "{linear}");
-    assert!(linear["yTicks"].as_array().unwrap().iter().any(|t| t == "0"), "{linear}");
+    assert!(
+        linear["yTicks"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|t| t == "0"),
+        "{linear}"
+    );
 
     // "all files" lists the scan's files as links in the page.
     page.eval("document.getElementById('allfiles').click()");
@@ -540,12 +547,12 @@ fn page_tells_the_truth_in_every_state() {
     // Scheduled: a sweep entered for 23:30 local time starts at 23:30 local, which is
     // 18:00 UTC in India; the page says so in local time and counts no time down.
     page.eval(
-        r#"(() => {
+        r##"(() => {
             document.getElementById("samples").value = "gold";
             document.getElementById("sets").value = "-20";
             document.getElementById("startat").value = "2099-12-02T23:30";
             document.querySelector("#sweepform button[type=submit]").click();
-        })()"#,
+        })()"##,
     );
     page.wait_for(
         "the sweep to be queued",
@@ -564,7 +571,12 @@ fn page_tells_the_truth_in_every_state() {
         &mut page,
         scheduled_id,
         "scheduled",
-        |s| s["times"].as_str().unwrap().contains("starts 2099-12-02 23:30:00"),
+        |s| {
+            s["times"]
+                .as_str()
+                .unwrap()
+                .contains("starts 2099-12-02 23:30:00")
+        },
         Duration::from_secs(30),
     );
     assert!(no_time_left(&shown), "{shown}");
@@ -580,12 +592,12 @@ fn page_tells_the_truth_in_every_state() {
 
     // Running: a scan from the form, its bracket written as shutters are written.
     page.eval(
-        r#"(() => {
+        r##"(() => {
             document.getElementById("theta").value = "-20,-25,-30,-35,-40,-45";
             document.getElementById("bracket").value = "1/2, 1/8, 1/30, 1/100";
             document.getElementById("scanmsg").textContent = "";
             document.querySelector("#scanform button[type=submit]").click();
-        })()"#,
+        })()"##,
     );
     let message = page.wait_for(
         "the scan to be queued",
@@ -746,7 +758,9 @@ fn page_tells_the_truth_in_every_state() {
 
     // Downloads named after what they are, and the whole scan as one archive.
     let base = format!("{}/api/scans/{queued_id}", daemon.url);
-    let csv = ureq::get(&format!("{base}/files/samples.csv")).call().unwrap();
+    let csv = ureq::get(&format!("{base}/files/samples.csv"))
+        .call()
+        .unwrap();
     assert_eq!(
         csv.header("Content-Disposition"),
         Some(format!("attachment; filename=\"{queued_id}-gold-samples.csv\"").as_str())
@@ -767,10 +781,15 @@ fn page_tells_the_truth_in_every_state() {
         "fit-ward.json",
         "log.json",
     ] {
-        assert!(names.contains(&format!("{top}{wanted}")), "{wanted}: {names:?}");
+        assert!(
+            names.contains(&format!("{top}{wanted}")),
+            "{wanted}: {names:?}"
+        );
     }
     assert!(
-        names.iter().any(|n| n.starts_with(&format!("{top}theta_l_")) && n.ends_with(".tiff")),
+        names
+            .iter()
+            .any(|n| n.starts_with(&format!("{top}theta_l_")) && n.ends_with(".tiff")),
         "{names:?}"
     );
     assert!(
@@ -849,7 +868,10 @@ fn page_tells_the_truth_in_every_state() {
         "window.innerWidth === 390 && document.querySelectorAll('#files a').length > 0 && document.documentElement.scrollWidth",
         Duration::from_secs(30),
     );
-    assert!(width.as_u64().unwrap() <= 390, "page {width} px wide at 390 px");
+    assert!(
+        width.as_u64().unwrap() <= 390,
+        "page {width} px wide at 390 px"
+    );
 
     // STOP ARM: a note, not an error; no angle while the position is unknown; Home
     // brings it back.
@@ -866,8 +888,14 @@ fn page_tells_the_truth_in_every_state() {
         Duration::from_secs(30),
     );
     let arm = arm.as_str().unwrap();
-    assert!(arm.contains("position unknown") && !arm.contains('°'), "{arm}");
-    assert_eq!(daemon.get("/api/hardware").json["arm"]["angle_deg"], Value::Null);
+    assert!(
+        arm.contains("position unknown") && !arm.contains('°'),
+        "{arm}"
+    );
+    assert_eq!(
+        daemon.get("/api/hardware").json["arm"]["angle_deg"],
+        Value::Null
+    );
     page.eval("document.getElementById('home').click()");
     let arm = page.wait_for(
         "the arm homed",
