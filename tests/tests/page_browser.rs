@@ -615,7 +615,7 @@ fn page_tells_the_truth_in_every_state() {
     // Queued behind it: an automatic bracket, not metered yet.
     let created = daemon.post(
         "/api/scans",
-        &json!({"sample": "gold", "theta_l": [-20, -35], "bracket": "auto"}),
+        &json!({"sample": "gold", "theta_l": [-20, -30, -45], "bracket": "auto"}),
     );
     assert_eq!(created.status, 201, "{:?}", created.json);
     let queued_id = created.json["id"].as_i64().unwrap();
@@ -647,7 +647,7 @@ fn page_tells_the_truth_in_every_state() {
         },
         Duration::from_secs(60),
     );
-    assert_eq!(shown["bracket"], "1/2 s, 1/8 s, 1/30 s, 1/100 s", "{shown}");
+    assert_eq!(shown["bracket"], "0.5 s, 1/8 s, 1/30 s, 1/100 s", "{shown}");
     let started = daemon.get(&format!("/api/scans/{running_id}")).json["started"]
         .as_str()
         .unwrap()
@@ -736,7 +736,7 @@ fn page_tells_the_truth_in_every_state() {
     assert!(!used.is_empty(), "{view}");
     assert_eq!(
         view["bracket"]["by_theta_l"].as_array().unwrap().len(),
-        2,
+        3,
         "{view}"
     );
     let bracket = shown["bracket"].as_str().unwrap();
@@ -806,8 +806,8 @@ fn page_tells_the_truth_in_every_state() {
         Duration::from_secs(10),
     );
     let table = page.wait_for(
-        "the calibrated setup",
-        "document.querySelector('#calbox table.setup') && document.getElementById('calbox').textContent",
+        "the calibrated setup (or an error)",
+        "(document.querySelector('#calbox table.setup') || document.querySelector('#calbox .msg')) && document.getElementById('calbox').textContent",
         Duration::from_secs(180),
     );
     let table = table.as_str().unwrap();
@@ -818,14 +818,18 @@ fn page_tells_the_truth_in_every_state() {
         "{table}"
     );
 
-    // Waiting: no camera for the next scan; its reason shown, no Confirm for it.
+    // Waiting: the camera gone (a scan interrupted by it), the next scan waits for it;
+    // its reason shown, no Confirm for it.
     let unplug = daemon.post("/api/emulator/fault", &json!({"fault": "camera_unplug"}));
     assert_eq!(unplug.status, 200, "{:?}", unplug.json);
-    let created = daemon.post(
-        "/api/scans",
-        &json!({"sample": "gold", "theta_l": [-20], "bracket": {"shutter_s": [0.1]}}),
-    );
-    let waiting_id = created.json["id"].as_i64().unwrap();
+    let one_frame = json!({"sample": "gold", "theta_l": [-20], "bracket": {"shutter_s": [0.1]}});
+    let interrupted_id = daemon.post("/api/scans", &one_frame).json["id"]
+        .as_i64()
+        .unwrap();
+    daemon.wait_state(interrupted_id, &["interrupted"], Duration::from_secs(60));
+    let waiting_id = daemon.post("/api/scans", &one_frame).json["id"]
+        .as_i64()
+        .unwrap();
     let shown = select_and_wait(
         &mut page,
         waiting_id,
@@ -836,16 +840,14 @@ fn page_tells_the_truth_in_every_state() {
     assert!(no_time_left(&shown), "{shown}");
     assert_eq!(shown["confirmHidden"], json!(true), "{shown}");
     assert_eq!(shown["frame"], Value::Null, "{shown}");
-    assert_eq!(
-        daemon
-            .post(&format!("/api/scans/{waiting_id}/cancel"), &json!({}))
-            .status,
-        200
-    );
+    for id in [interrupted_id, waiting_id] {
+        let cancelled = daemon.post(&format!("/api/scans/{id}/cancel"), &json!({}));
+        assert_eq!(cancelled.status, 200, "{:?}", cancelled.json);
+    }
     daemon.post("/api/emulator/fault", &json!({"fault": "camera_replug"}));
 
-    // At 390 px (a phone): nothing wider than the screen, with the plot and the
-    // calibrated setup on show.
+    // At 390 px (a phone): nothing wider than the screen, with the plot and the file
+    // list on show.
     select_and_wait(
         &mut page,
         queued_id,

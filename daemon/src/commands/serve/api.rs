@@ -542,12 +542,16 @@ async fn stop_arm(State(shared): AppState) -> ApiResult<Json<Value>> {
     Ok(Json(json!({ "stopped": true, "paused": paused })))
 }
 
-/// Whether an arm in `state` knows where it is (not after a reset or a stop until it is
-/// homed or its position declared, nor while disconnected).
+/// Whether an arm in `state` knows where it is (not in an alarm, nor after a reset or a
+/// stop until it is homed or its position declared, nor while homing or disconnected).
 fn position_known(state: ArmState) -> bool {
     !matches!(
         state,
-        ArmState::NeedsHoming | ArmState::NeedsPosition | ArmState::Disconnected
+        ArmState::Alarm
+            | ArmState::Homing
+            | ArmState::NeedsHoming
+            | ArmState::NeedsPosition
+            | ArmState::Disconnected
     )
 }
 

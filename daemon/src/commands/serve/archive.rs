@@ -91,9 +91,8 @@ fn header(name: &str, size: u64, mtime: u64) -> io::Result<[u8; BLOCK]> {
         // Split at a `/` so that the prefix and the name each fit.
         let cut = name
             .char_indices()
-            .filter(|&(i, c)| c == '/' && i <= PREFIX_LEN && name.len() - i - 1 <= NAME_LEN)
+            .find(|&(i, c)| c == '/' && i <= PREFIX_LEN && name.len() - i - 1 <= NAME_LEN)
             .map(|(i, _)| i)
-            .next()
             .ok_or_else(too_long)?;
         (&name[..cut], &name[cut + 1..])
     };
