@@ -123,6 +123,15 @@ pub fn calibrate_and_store(scan_dir: &Path, data_dir: &Path, id: i64) -> anyhow:
     Ok(stored)
 }
 
+/// Forgets the calibrated setup; returns whether there was one.
+pub fn forget(data_dir: &Path) -> std::io::Result<bool> {
+    match std::fs::remove_file(calibrated_path(data_dir)) {
+        Ok(()) => Ok(true),
+        Err(err) if err.kind() == std::io::ErrorKind::NotFound => Ok(false),
+        Err(err) => Err(err),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -146,14 +155,5 @@ mod tests {
                 "focal_length_mm": "emulated scene",
             })
         );
-    }
-}
-
-/// Forgets the calibrated setup; returns whether there was one.
-pub fn forget(data_dir: &Path) -> std::io::Result<bool> {
-    match std::fs::remove_file(calibrated_path(data_dir)) {
-        Ok(()) => Ok(true),
-        Err(err) if err.kind() == std::io::ErrorKind::NotFound => Ok(false),
-        Err(err) => Err(err),
     }
 }

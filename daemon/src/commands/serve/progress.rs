@@ -6,9 +6,11 @@
 //! by how long the steps of its kind already done in this scan took against their
 //! priors (a kind this scan has not measured yet, such as the fits at its end, by what
 //! it took in the previous scan that ended done); a metering step not done brings the
-//! bracket the scan last metered (or a typical one). The two lanes are then played forward: hardware steps one after the
-//! other, each processing step once the steps before it and the previous processing
-//! step are done. The estimate is when the later lane finishes.
+//! bracket the scan last metered (or a typical one). The lanes are then played
+//! forward: hardware steps one after the other, each processing step once the steps
+//! before it and the previous processing step are done, HDR merges beside them (the
+//! processing lane runs them in the background, one at a time). The estimate is when
+//! the last of them finishes.
 
 use std::collections::HashMap;
 use std::mem::Discriminant;
@@ -140,7 +142,7 @@ pub fn progress(
         scale(&any_capture, prior_s)
     };
     let mut bracket_s = capture_scale(timing.expected_bracket_s());
-    let (mut hardware_s, mut processing_s) = (0.0_f64, 0.0_f64);
+    let (mut hardware_s, mut processing_s, mut hdr_s) = (0.0_f64, 0.0_f64, 0.0_f64);
     for (record, &from) in steps.iter().zip(&from_deg) {
         if record.state == StepState::Done {
             if let Some(bracket) = metered_bracket(record) {
@@ -164,6 +166,9 @@ pub fn progress(
                     hardware_s += bracket_s;
                 }
             }
+            Lane::Processing if matches!(record.step, Step::Hdr { .. }) => {
+                hdr_s = hdr_s.max(hardware_s) + left_s;
+            }
             Lane::Processing => processing_s = processing_s.max(hardware_s) + left_s,
         }
     }
@@ -173,7 +178,7 @@ pub fn progress(
             .iter()
             .find(|s| s.step.lane() == Lane::Processing && s.state == StepState::Started)
             .map(|s| s.step.describe()),
-        eta_s: hardware_s.max(processing_s),
+        eta_s: hardware_s.max(processing_s).max(hdr_s),
         live: steps
             .iter()
             .filter(|s| s.state == StepState::Done && matches!(s.step, Step::Samples { .. }))
@@ -279,7 +284,7 @@ mod tests {
         let fresh = journal(&fixed, 0, now, |_| 0.0);
         let full = progress(&fresh, &[], &timing, now);
         // Nothing done: every hardware prior, then the last θL's processing and the
-        // extraction and fits after the hardware.
+        // extraction and fits after the hardware, its HDR merge beside them.
         let hardware: f64 = fresh
             .iter()
             .scan(0.0, |at, r| {
@@ -292,7 +297,6 @@ mod tests {
             .flatten()
             .sum();
         let tail = timing.prior_s(&Step::Samples { theta_l: 0.0 }, 0.0)
-            + timing.prior_s(&Step::Hdr { theta_l: 0.0 }, 0.0)
             + timing.prior_s(&Step::Extract, 0.0)
             + FIT_MODELS
                 .iter()
@@ -305,6 +309,7 @@ mod tests {
                     )
                 })
                 .sum::<f64>();
+        let tail = tail.max(timing.prior_s(&Step::Hdr { theta_l: 0.0 }, 0.0));
         assert!((full.eta_s - (hardware + tail)).abs() < 1e-9, "{full:?}");
         assert_eq!(
             full.theta_l,
