@@ -362,14 +362,17 @@ mod tests {
         }
         let informed = progress(&fresh, &earlier, &timing, now).eta_s;
         let fits = FIT_MODELS.len() as f64;
-        let fit_prior = timing.prior_s(
-            &Step::Fit {
-                model: "ward".into(),
-            },
-            0.0,
-        );
+        let prior = |step: Step| timing.prior_s(&step, 0.0);
+        let fit_prior = prior(Step::Fit {
+            model: "ward".into(),
+        });
+        let (samples, extract) = (prior(Step::Samples { theta_l: 0.0 }), prior(Step::Extract));
+        // After the hardware: the last θL's samples, the extraction and the fits, its
+        // HDR merge beside them.
+        let hardware =
+            alone - (samples + extract + fits * fit_prior).max(prior(Step::Hdr { theta_l: 0.0 }));
         assert!(
-            (informed - alone - fits * (fit_s - fit_prior)).abs() < 1e-6,
+            (informed - (hardware + samples + extract + fits * fit_s)).abs() < 1e-6,
             "{informed} vs {alone}"
         );
         // What this scan measured itself wins over the earlier scan: its last fit is
