@@ -14,9 +14,16 @@ use serde_json::Value;
 /// first use, so `cargo test --workspace` works on a clean checkout. The update runs
 /// `cargo test --workspace --no-run`: the same feature resolution as the workspace test
 /// run that is executing us, so there it finds the binary fresh and rebuilds nothing.
+/// `GONIO_BIN=/path/to/gonio` uses that binary as it is (running one test file without
+/// building the whole workspace).
 pub fn gonio_bin() -> &'static Path {
     static BIN: OnceLock<PathBuf> = OnceLock::new();
     BIN.get_or_init(|| {
+        if let Some(bin) = std::env::var_os("GONIO_BIN") {
+            let bin = PathBuf::from(bin);
+            assert!(bin.is_file(), "GONIO_BIN={} is not a file", bin.display());
+            return bin;
+        }
         // The test executable lives in <target>/<profile-dir>/deps/.
         let exe = std::env::current_exe().expect("test executable path");
         let profile_dir = exe

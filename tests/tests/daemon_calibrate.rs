@@ -46,6 +46,22 @@ fn a_calibration_becomes_the_setup_of_later_scans() {
     let daemon = Daemon::start(&dir, &config);
 
     let (first, first_scan) = scan(&daemon);
+    // Before any calibration, every field of a scan's setup comes from the scene.
+    let setup_of = |id: i64| -> Value {
+        serde_json::from_slice(
+            &daemon
+                .get(&format!("/api/scans/{id}/files/setup.json"))
+                .bytes,
+        )
+        .unwrap()
+    };
+    let first_setup = setup_of(first);
+    let provenance = first_setup["provenance"].as_object().unwrap();
+    assert!(provenance.contains_key("camera_offset_mm"), "{first_setup}");
+    assert!(
+        provenance.values().all(|v| v == "emulated scene"),
+        "{first_setup}"
+    );
     let missing = daemon.post("/api/scans/999/calibrate", &json!({}));
     assert_eq!(missing.status, 404, "{:?}", missing.json);
     let calibrated = daemon.post(&format!("/api/scans/{first}/calibrate"), &json!({}));
@@ -56,6 +72,21 @@ fn a_calibration_becomes_the_setup_of_later_scans() {
     let arm = c["arm_zero_offset_deg"]["value"].as_f64().unwrap();
     assert!((offset - 3.0).abs() < 0.1, "{c}");
     assert!((arm - 0.3).abs() < 0.15, "{c}");
+    // Where each value came from: the estimates from this calibration, the rest as the
+    // calibrated scan's setup said.
+    let from = &calibrated.json["provenance"];
+    let by_calibration = format!("calibrated from scan {first}");
+    for field in [
+        "sample_row",
+        "white_row",
+        "camera_offset_mm",
+        "arm_zero_offset_deg",
+    ] {
+        assert_eq!(from[field], by_calibration.as_str(), "{field}: {from}");
+    }
+    for field in ["focal_length_mm", "pixel_pitch_um", "cylinder_radius_mm"] {
+        assert_eq!(from[field], "emulated scene", "{field}: {from}");
+    }
     let stored = dir.join("data").join("setup.json");
     assert!(stored.is_file());
     // Twelve at once all succeed (they once shared a temporary name: "writing
@@ -76,13 +107,11 @@ fn a_calibration_becomes_the_setup_of_later_scans() {
     // The next scan is set up with the calibration, and its fit recovers the scene
     // where the first one's could not.
     let (second, second_scan) = scan(&daemon);
-    let setup: Value = serde_json::from_slice(
-        &daemon
-            .get(&format!("/api/scans/{second}/files/setup.json"))
-            .bytes,
-    )
-    .unwrap();
+    let setup = setup_of(second);
     assert_eq!(setup["camera_offset_mm"].as_f64().unwrap(), offset);
+    // It keeps where its values came from.
+    assert_eq!(setup["provenance"], whole["provenance"], "{setup}");
+    assert_eq!(setup["calibration"]["scan"], first);
     assert_eq!(setup["white_reflectance"], 0.99);
     let (before, after) = (
         ks_error(&daemon, &first_scan),

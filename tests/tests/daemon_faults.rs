@@ -212,17 +212,15 @@ fn emergency_stop_pauses_mid_move_and_resume_finishes() {
     let stopped = daemon.post("/api/arm/stop", &json!({}));
     assert_eq!(stopped.status, 200, "{:?}", stopped.json);
     assert_eq!(stopped.json["paused"], json!([id]));
-    let angle_at_stop = daemon.get("/api/hardware").json["arm"]["angle_deg"]
-        .as_f64()
-        .unwrap();
+    // The controller reports the arm still, and its position unknown after the reset:
+    // no angle is given until it is homed.
     std::thread::sleep(Duration::from_millis(600));
-    let angle_later = daemon.get("/api/hardware").json["arm"]["angle_deg"]
-        .as_f64()
-        .unwrap();
+    let arm = daemon.get("/api/hardware").json["arm"].clone();
     assert!(
-        (angle_later - angle_at_stop).abs() < 3.0,
-        "the arm kept moving: {angle_at_stop} -> {angle_later}"
+        arm["state"] != "moving" && arm["state"] != "idle",
+        "the arm kept moving or claims a position: {arm}"
     );
+    assert_eq!(arm["angle_deg"], Value::Null, "{arm}");
     let scan = daemon.get(&format!("/api/scans/{id}")).json;
     assert_eq!(scan["state"], "paused", "{scan}");
     assert!(scan["error"].as_str().unwrap().contains("emergency stop"));

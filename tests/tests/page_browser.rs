@@ -1,8 +1,12 @@
 //! The web page in a real browser: Debian's headless Chromium driven over the Chrome
 //! DevTools Protocol (a WebSocket, JSON commands). The page loads with no console
-//! error, a wrong token shows the 401 message, a scan started from the form shows its
-//! progress and ends with the fit plot (ticks on round values, legend below the data),
-//! and a finished scan's controls are disabled.
+//! error, a wrong token shows the 401 message, a scan started from the form (its
+//! bracket written as the page writes shutters, "1/30") shows its progress and ends
+//! with the fit plot (ticks on round values, legend inside the figure, markers, both
+//! scales), and a finished scan's controls are disabled. A second test walks scans
+//! through every state (scheduled, queued, running, paused, interrupted, cancelled,
+//! waiting, done) and checks what the page shows in each, then the downloads, the
+//! calibration, STOP ARM and Home, and the page at 390 px width.
 //!
 //! Chromium comes from Debian's `chromium` package, which `scripts/test.sh` installs;
 //! without it this test fails saying so (set `GONIO_CHROMIUM` to use another binary).
@@ -12,7 +16,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use gonio_tests::{emulator_config, temp_dir, Daemon, TOKEN};
+use gonio_tests::{emulator_config, emulator_config_scaled, temp_dir, Daemon, TOKEN};
 use serde_json::{json, Value};
 use tungstenite::stream::MaybeTlsStream;
 use tungstenite::{Message, WebSocket};
@@ -195,6 +199,75 @@ fn wait_until<T>(what: &str, timeout: Duration, mut probe: impl FnMut() -> Optio
     }
 }
 
+/// What the page's plot shows: the θr tick values, where the legend sits, the
+/// markers' and lines' colours and styles, the y ticks and label.
+const PLOT_FACTS: &str = r#"(() => {
+    const svg = document.querySelector('#plot svg');
+    const box = svg.viewBox.baseVal;
+    const axisY = Number(svg.querySelector('line').getAttribute('y1'));
+    const axisX = Number(svg.querySelectorAll('line')[1].getAttribute('x1'));
+    const degrees = [...svg.querySelectorAll('text')].map((t) => t.textContent)
+        .filter((s) => /^-?\d+(\.\d+)?°$/.test(s)).map(parseFloat);
+    const legend = svg.querySelector('.legend-box rect');
+    const lr = legend.getBBox();
+    const markers = [...svg.querySelectorAll('circle.marker')];
+    const paths = [...svg.querySelectorAll('path.fit')];
+    const firstCt = paths.findIndex((p) => p.classList.contains('fit-cook-torrance'));
+    const lastCtf = paths.map((p) => p.classList.contains('fit-cook-torrance-fresnel')).lastIndexOf(true);
+    const style = (m) => { const p = svg.querySelector('path.fit-' + m); return p && p.getAttribute('stroke-dasharray'); };
+    return {
+        degrees,
+        legendInside: lr.x >= axisX && lr.x + lr.width <= box.width && lr.y >= 0 && lr.y + lr.height <= axisY,
+        legend: [...svg.querySelectorAll('text.legend')].map((t) => t.textContent),
+        params: [...document.querySelectorAll('#plot .fitparams')].map((p) => p.textContent).join(' | '),
+        markers: markers.length,
+        hollow: markers.every((m) => m.getAttribute('fill') === 'none'),
+        colours: [...new Set(markers.map((m) => m.getAttribute('stroke')))].length,
+        ctOverCtf: firstCt > lastCtf,
+        dashes: [style('cook-torrance'), style('cook-torrance-fresnel'), style('ward')],
+        yTicks: [...svg.querySelectorAll('text[text-anchor=end]')].map((t) => t.textContent),
+        yLabel: (svg.querySelector('text.ylabel') || {}).textContent || '',
+        buttonsDisabled: [...document.querySelectorAll('#detail button[data-act]')].map((b) => b.disabled),
+        confirmHidden: document.querySelector('#detail button[data-act=confirm]').hidden,
+        state: document.querySelector('#dstate span').textContent,
+    };
+})()"#;
+
+/// Checks a plot of [`PLOT_FACTS`] with `colours` marker colours (θL or channels).
+fn check_plot(plot: &Value, colours: u64) {
+    let degrees: Vec<f64> = serde_json::from_value(plot["degrees"].clone()).unwrap();
+    assert!(degrees.len() >= 3, "{plot}");
+    assert!(
+        degrees.iter().all(|d| d % 5.0 == 0.0),
+        "ticks off round values: {degrees:?}"
+    );
+    assert_eq!(plot["legendInside"], json!(true), "{plot}");
+    let legend = plot["legend"].to_string();
+    assert!(
+        ["Cook–Torrance", "Cook–Torrance–Fresnel", "Ward", "measured"]
+            .iter()
+            .all(|name| legend.contains(name)),
+        "{legend}"
+    );
+    let params = plot["params"].as_str().unwrap();
+    assert!(
+        params.contains("cook-torrance") && params.contains("ward") && params.contains("ρd"),
+        "{params}"
+    );
+    assert!(plot["markers"].as_u64().unwrap() > 20, "{plot}");
+    assert_eq!(plot["hollow"], json!(true), "{plot}");
+    assert_eq!(plot["colours"], json!(colours), "{plot}");
+    // Cook–Torrance is drawn over the Fresnel variant, each in its own line style.
+    assert_eq!(plot["ctOverCtf"], json!(true), "{plot}");
+    let dashes: Vec<String> = serde_json::from_value(plot["dashes"].clone()).unwrap();
+    assert!(
+        dashes[0] != dashes[1] && dashes[1] != dashes[2] && dashes[0] != dashes[2],
+        "{plot}"
+    );
+    let y_label = plot["yLabel"].as_str().unwrap();
+    assert!(y_label.contains('β') && y_label.contains('%'), "{plot}");
+}
+
 /// Fills the scan form with `token` and submits it.
 fn submit_scan(page: &mut Cdp, token: &str) {
     page.eval(&format!(
@@ -203,7 +276,7 @@ fn submit_scan(page: &mut Cdp, token: &str) {
             t.value = {token};
             t.dispatchEvent(new Event("change"));
             document.getElementById("theta").value = "-20,-35";
-            document.getElementById("bracket").value = "0.5,0.03";
+            document.getElementById("bracket").value = "1/2, 1/30";
             document.getElementById("scanmsg").textContent = "";
             document.querySelector("#scanform button[type=submit]").click();
         }})()"##,
@@ -253,6 +326,10 @@ fn page_drives_a_scan_in_a_real_browser() {
         queued.as_str().unwrap().contains("scan 1 queued"),
         "{queued}"
     );
+    let shutters = daemon.get("/api/scans/1").json["bracket"]["shutter_s"].clone();
+    let shutters: Vec<f64> = serde_json::from_value(shutters).unwrap();
+    assert_eq!(shutters.len(), 2);
+    assert!((shutters[0] - 0.5).abs() < 1e-12 && (shutters[1] - 1.0 / 30.0).abs() < 1e-12);
     page.wait_for(
         "progress in the detail view",
         "(() => { const b = document.querySelector('#dstate .bar > div'); return b && parseFloat(b.style.width) > 0; })()",
@@ -263,22 +340,7 @@ fn page_drives_a_scan_in_a_real_browser() {
         "document.querySelector('#plot svg path') !== null",
         Duration::from_secs(120),
     );
-    let plot = page.eval(
-        r#"(() => {
-            const svg = document.querySelector('#plot svg');
-            const axis = Number(svg.querySelector('line').getAttribute('y1'));
-            const degrees = [...svg.querySelectorAll('text')].map((t) => t.textContent)
-                .filter((s) => /^-?\d+(\.\d+)?°$/.test(s)).map(parseFloat);
-            const legend = [...svg.querySelectorAll('text.legend')];
-            return {
-                degrees,
-                legendBelow: legend.length > 0 && legend.every((t) => Number(t.getAttribute('y')) > axis),
-                legend: legend.map((t) => t.textContent),
-                buttonsDisabled: [...document.querySelectorAll('#detail button[data-act]')].map((b) => b.disabled),
-                state: document.querySelector('#dstate span').textContent,
-            };
-        })()"#,
-    );
+    let plot = page.eval(PLOT_FACTS);
     assert_eq!(plot["state"], "done", "{plot}");
     let degrees: Vec<f64> = serde_json::from_value(plot["degrees"].clone()).unwrap();
     assert!(degrees.len() >= 3, "{plot}");
@@ -286,13 +348,29 @@ fn page_drives_a_scan_in_a_real_browser() {
         degrees.iter().all(|d| d % 5.0 == 0.0),
         "ticks off round values: {degrees:?}"
     );
-    assert_eq!(plot["legendBelow"], json!(true), "{plot}");
-    let legend = plot["legend"].to_string();
-    assert!(
-        legend.contains("cook-torrance") && legend.contains("ward") && legend.contains("ρd"),
-        "{legend}"
+    check_plot(&plot, 2);
+    assert_eq!(
+        plot["buttonsDisabled"],
+        json!([true, true, true, true]),
+        "{plot}"
     );
-    assert_eq!(plot["buttonsDisabled"], json!([true, true, true]), "{plot}");
+    assert_eq!(plot["confirmHidden"], json!(true), "{plot}");
+    // All three channels: one colour each; a linear β axis on demand.
+    page.eval("(() => { const c = document.getElementById('plotchannel'); c.value = 'all'; c.dispatchEvent(new Event('change')); })()");
+    let all = page.eval(PLOT_FACTS);
+    check_plot(&all, 3);
+    page.eval("(() => { const c = document.getElementById('plotscale'); c.value = 'linear'; c.dispatchEvent(new Event('change')); })()");
+    let linear = page.eval(PLOT_FACTS);
+    check_plot(&linear, 3);
+    assert_ne!(linear["yTicks"], all["yTicks"], "{linear}");
+    assert!(
+        linear["yTicks"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|t| t == "0"),
+        "{linear}"
+    );
 
     // "all files" lists the scan's files as links in the page.
     page.eval("document.getElementById('allfiles').click()");
@@ -313,6 +391,526 @@ fn page_drives_a_scan_in_a_real_browser() {
         after_401.iter().all(|e| e.contains("401")) && errors.len() == after_401.len(),
         "{errors:?}"
     );
+    drop(browser);
+    drop(daemon);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// What the detail panel and the queue show of the selected scan `id`.
+fn snapshot(page: &mut Cdp, id: i64) -> Value {
+    page.eval(&format!(
+        r#"(() => {{
+            const id = {id};
+            const text = (sel) => {{ const e = document.querySelector(sel); return e ? e.textContent : ""; }};
+            const img = document.getElementById('thumb');
+            const row = document.querySelector(`#scans tr[data-id="${{id}}"]`);
+            return {{
+                title: text('#dtitle'),
+                state: text('#dstate span'),
+                rowState: row ? row.children[2].textContent : null,
+                rowNote: row ? row.children[4].textContent : null,
+                lefts: [...document.querySelectorAll(`.left[data-id="${{id}}"]`)].map((e) => e.textContent),
+                work: text('#dwork'),
+                why: text('#dwhy'),
+                bracket: text('#dbracket'),
+                times: text('#dtimes'),
+                frame: img.hidden ? null : Number(img.dataset.scan),
+                noFrame: !document.getElementById('noframe').hidden,
+                enabled: [...document.querySelectorAll('#detail button[data-act]')].filter((b) => !b.disabled).map((b) => b.dataset.act),
+                confirmHidden: document.querySelector('#detail button[data-act=confirm]').hidden,
+            }};
+        }})()"#
+    ))
+}
+
+/// Selects scan `id` in the queue and waits until the detail shows it in `state` (as
+/// the page labels it) and `ready` holds of its snapshot; returns that snapshot.
+fn select_and_wait(
+    page: &mut Cdp,
+    id: i64,
+    state: &str,
+    ready: impl Fn(&Value) -> bool,
+    timeout: Duration,
+) -> Value {
+    page.wait_for(
+        &format!("scan {id} in the queue"),
+        &format!("document.querySelector('#scans tr[data-id=\"{id}\"]') !== null"),
+        Duration::from_secs(30),
+    );
+    page.eval(&format!(
+        "document.querySelector('#scans tr[data-id=\"{id}\"]').click()"
+    ));
+    wait_shown(page, id, state, ready, timeout)
+}
+
+/// Waits until the detail shows scan `id` in `state` with `ready` holding.
+fn wait_shown(
+    page: &mut Cdp,
+    id: i64,
+    state: &str,
+    ready: impl Fn(&Value) -> bool,
+    timeout: Duration,
+) -> Value {
+    let start = Instant::now();
+    loop {
+        let shown = snapshot(page, id);
+        if shown["title"]
+            .as_str()
+            .is_some_and(|t| t.starts_with(&format!("Scan {id}:")))
+            && shown["state"] == state
+            && shown["rowState"] == state
+            && ready(&shown)
+        {
+            eprintln!(
+                "scan {id} shown {state}: after {:.1} s",
+                start.elapsed().as_secs_f64()
+            );
+            return shown;
+        }
+        assert!(
+            start.elapsed() < timeout,
+            "timed out waiting for scan {id} shown {state}: {shown}"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+/// No time left anywhere for the scan: the queue row and the detail agree.
+fn no_time_left(shown: &Value) -> bool {
+    let lefts = shown["lefts"].as_array().unwrap();
+    lefts.len() == 2 && lefts.iter().all(|l| l == "")
+}
+
+/// Unix seconds of an RFC 3339 time, as the browser's local wall time in a zone
+/// `offset_minutes` east of UTC (one without daylight saving time).
+fn local_wall_time(rfc3339: &str, offset_minutes: i64) -> String {
+    let format = time::format_description::well_known::Rfc3339;
+    let t = time::OffsetDateTime::parse(rfc3339, &format).unwrap()
+        + time::Duration::minutes(offset_minutes);
+    format!(
+        "{:04}-{:02}-{:02} {:02}:{:02}:{:02}",
+        t.year(),
+        u8::from(t.month()),
+        t.day(),
+        t.hour(),
+        t.minute(),
+        t.second()
+    )
+}
+
+/// The entry names of a tar archive (ustar: name and prefix fields).
+fn tar_names(archive: &[u8]) -> Vec<String> {
+    let field = |b: &[u8]| {
+        let end = b.iter().position(|&c| c == 0).unwrap_or(b.len());
+        String::from_utf8_lossy(&b[..end]).into_owned()
+    };
+    let mut names = Vec::new();
+    let mut at = 0;
+    while at + 512 <= archive.len() && archive[at..at + 512].iter().any(|&b| b != 0) {
+        let header = &archive[at..at + 512];
+        let size = usize::from_str_radix(field(&header[124..135]).trim(), 8).unwrap();
+        let (prefix, name) = (field(&header[345..500]), field(&header[..100]));
+        names.push(if prefix.is_empty() {
+            name
+        } else {
+            format!("{prefix}/{name}")
+        });
+        at += 512 + size.div_ceil(512) * 512;
+    }
+    names
+}
+
+/// The zone the browser is put in: India, 5 h 30 min east of UTC all year round.
+const ZONE: &str = "Asia/Kolkata";
+const ZONE_OFFSET_MIN: i64 = 330;
+
+#[test]
+fn page_tells_the_truth_in_every_state() {
+    let dir = temp_dir("browser-states");
+    // Slow enough devices that a running scan can be watched, paused and unplugged.
+    let daemon = Daemon::start(&dir, &emulator_config_scaled(0.3, 0.3));
+    let browser = Browser::launch(&dir.join("profile"));
+    let mut page = browser.page();
+    page.call("Emulation.setTimezoneOverride", json!({"timezoneId": ZONE}));
+    page.call("Page.navigate", json!({"url": format!("{}/", daemon.url)}));
+    page.wait_for(
+        "the page and its hardware line",
+        "document.readyState === 'complete' && !document.getElementById('arm').textContent.includes('…')",
+        Duration::from_secs(30),
+    );
+    page.eval(&format!(
+        r#"(() => {{ const t = document.getElementById("token"); t.value = {};
+            t.dispatchEvent(new Event("change")); }})()"#,
+        json!(TOKEN)
+    ));
+
+    // Scheduled: a sweep entered for 23:30 local time starts at 23:30 local, which is
+    // 18:00 UTC in India; the page says so in local time and counts no time down.
+    page.eval(
+        r##"(() => {
+            document.getElementById("samples").value = "gold";
+            document.getElementById("sets").value = "-20";
+            document.getElementById("startat").value = "2099-12-02T23:30";
+            document.querySelector("#sweepform button[type=submit]").click();
+        })()"##,
+    );
+    page.wait_for(
+        "the sweep to be queued",
+        "document.getElementById('sweepmsg').textContent.includes('queued')",
+        Duration::from_secs(30),
+    );
+    let sweeps = daemon.get("/api/sweeps").json;
+    assert_eq!(sweeps[0]["start_at"], "2099-12-02T18:00:00Z", "{sweeps}");
+    let scheduled_id = sweeps[0]["scans"][0]["id"].as_i64().unwrap();
+    page.wait_for(
+        "the sweep's local start time",
+        "document.getElementById('sweeps').textContent.includes('2099-12-02 23:30:00')",
+        Duration::from_secs(30),
+    );
+    let shown = select_and_wait(
+        &mut page,
+        scheduled_id,
+        "scheduled",
+        |s| {
+            s["times"]
+                .as_str()
+                .unwrap()
+                .contains("starts 2099-12-02 23:30:00")
+        },
+        Duration::from_secs(30),
+    );
+    assert!(no_time_left(&shown), "{shown}");
+    assert!(
+        shown["rowNote"]
+            .as_str()
+            .unwrap()
+            .contains("starts 2099-12-02 23:30:00"),
+        "{shown}"
+    );
+    assert_eq!(shown["frame"], Value::Null, "{shown}");
+    assert_eq!(shown["noFrame"], json!(true), "{shown}");
+
+    // Running: a scan from the form, its bracket written as shutters are written.
+    page.eval(
+        r##"(() => {
+            document.getElementById("theta").value = "-20,-25,-30,-35,-40,-45";
+            document.getElementById("bracket").value = "1/2, 1/8, 1/30, 1/100";
+            document.getElementById("scanmsg").textContent = "";
+            document.querySelector("#scanform button[type=submit]").click();
+        })()"##,
+    );
+    let message = page.wait_for(
+        "the scan to be queued",
+        "document.getElementById('scanmsg').textContent.includes('queued') && document.getElementById('scanmsg').textContent",
+        Duration::from_secs(30),
+    );
+    let running_id = scheduled_id + 1;
+    assert!(
+        message
+            .as_str()
+            .unwrap()
+            .contains(&format!("scan {running_id} queued")),
+        "{message}"
+    );
+    // Queued behind it: an automatic bracket, not metered yet.
+    let created = daemon.post(
+        "/api/scans",
+        &json!({"sample": "gold", "theta_l": [-20, -30, -45], "bracket": "auto"}),
+    );
+    assert_eq!(created.status, 201, "{:?}", created.json);
+    let queued_id = created.json["id"].as_i64().unwrap();
+    daemon.wait_state(running_id, &["running"], Duration::from_secs(30));
+    let shown = select_and_wait(
+        &mut page,
+        queued_id,
+        "queued",
+        |s| s["bracket"] == "auto (not metered yet)",
+        Duration::from_secs(30),
+    );
+    assert!(no_time_left(&shown), "{shown}");
+    assert_eq!(shown["frame"], Value::Null, "{shown}");
+    assert_eq!(shown["noFrame"], json!(true), "{shown}");
+    assert_eq!(shown["work"], "", "{shown}");
+
+    // The running scan: its own frame, its time left the same in the queue and the
+    // detail, its bracket as given.
+    let shown = select_and_wait(
+        &mut page,
+        running_id,
+        "running",
+        |s| {
+            let lefts = s["lefts"].as_array().unwrap();
+            s["frame"] == json!(running_id)
+                && lefts.len() == 2
+                && lefts[0] == lefts[1]
+                && lefts[0].as_str().unwrap().contains("left")
+        },
+        Duration::from_secs(60),
+    );
+    assert_eq!(shown["bracket"], "0.5 s, 1/8 s, 1/30 s, 1/100 s", "{shown}");
+    let started = daemon.get(&format!("/api/scans/{running_id}")).json["started"]
+        .as_str()
+        .unwrap()
+        .to_owned();
+    let local = local_wall_time(&started, ZONE_OFFSET_MIN);
+    assert!(
+        shown["times"]
+            .as_str()
+            .unwrap()
+            .contains(&format!("started {local}")),
+        "{shown} vs {started}"
+    );
+
+    // Paused from the page: no time left, no step under way on the arm.
+    page.eval("document.querySelector('#detail button[data-act=pause]').click()");
+    let shown = wait_shown(
+        &mut page,
+        running_id,
+        "paused",
+        no_time_left,
+        Duration::from_secs(30),
+    );
+    assert!(
+        !shown["work"].as_str().unwrap().contains("capture"),
+        "{shown}"
+    );
+    assert_eq!(shown["frame"], json!(running_id), "{shown}");
+    page.eval("document.querySelector('#detail button[data-act=resume]').click()");
+    wait_shown(
+        &mut page,
+        running_id,
+        "running",
+        |s| s["lefts"][0].as_str().unwrap().contains("left"),
+        Duration::from_secs(30),
+    );
+
+    // Interrupted: the camera's cable pulled; the reason shown, no time left.
+    let unplug = daemon.post("/api/emulator/fault", &json!({"fault": "camera_unplug"}));
+    assert_eq!(unplug.status, 200, "{:?}", unplug.json);
+    let shown = wait_shown(
+        &mut page,
+        running_id,
+        "interrupted",
+        no_time_left,
+        Duration::from_secs(60),
+    );
+    assert!(!shown["why"].as_str().unwrap().is_empty(), "{shown}");
+    let replug = daemon.post("/api/emulator/fault", &json!({"fault": "camera_replug"}));
+    assert_eq!(replug.status, 200, "{:?}", replug.json);
+    wait_shown(
+        &mut page,
+        running_id,
+        "running",
+        |_| true,
+        Duration::from_secs(60),
+    );
+
+    // Cancelled mid-scan: nothing shown as under way after the end, no time left.
+    page.eval("document.querySelector('#detail button[data-act=cancel]').click()");
+    let shown = wait_shown(
+        &mut page,
+        running_id,
+        "cancelled",
+        no_time_left,
+        Duration::from_secs(30),
+    );
+    assert_eq!(shown["work"], "", "{shown}");
+    assert_eq!(shown["enabled"], json!([]), "{shown}");
+    let view = daemon.get(&format!("/api/scans/{running_id}")).json;
+    assert_eq!(view["processing_step"], Value::Null, "{view}");
+    assert_eq!(view["current_step"], Value::Null, "{view}");
+    assert_eq!(view["progress"]["eta_s"], Value::Null, "{view}");
+
+    // Done: the queued scan ran with the bracket its metering chose, shown as used.
+    let shown = select_and_wait(
+        &mut page,
+        queued_id,
+        "done",
+        |s| s["frame"] == json!(queued_id),
+        Duration::from_secs(180),
+    );
+    assert!(no_time_left(&shown), "{shown}");
+    assert_eq!(shown["work"], "", "{shown}");
+    let view = daemon.get(&format!("/api/scans/{queued_id}")).json;
+    let used: Vec<f64> = serde_json::from_value(view["bracket"]["shutter_s"].clone()).unwrap();
+    assert!(!used.is_empty(), "{view}");
+    assert_eq!(
+        view["bracket"]["by_theta_l"].as_array().unwrap().len(),
+        3,
+        "{view}"
+    );
+    let bracket = shown["bracket"].as_str().unwrap();
+    assert!(
+        bracket.starts_with("auto: ") && bracket.matches(" s").count() == used.len(),
+        "{bracket} vs {used:?}"
+    );
+    let times = shown["times"].as_str().unwrap();
+    let finished = local_wall_time(view["finished"].as_str().unwrap(), ZONE_OFFSET_MIN);
+    assert!(
+        times.contains(&format!("ended {finished}")) && times.contains("took "),
+        "{times}"
+    );
+    page.wait_for(
+        "the fit plot",
+        "document.querySelector('#plot svg path') !== null",
+        Duration::from_secs(60),
+    );
+
+    // Downloads named after what they are, and the whole scan as one archive.
+    let base = format!("{}/api/scans/{queued_id}", daemon.url);
+    let csv = ureq::get(&format!("{base}/files/samples.csv"))
+        .call()
+        .unwrap();
+    assert_eq!(
+        csv.header("Content-Disposition"),
+        Some(format!("attachment; filename=\"{queued_id}-gold-samples.csv\"").as_str())
+    );
+    let archive = ureq::get(&format!("{base}/archive")).call().unwrap();
+    assert_eq!(
+        archive.header("Content-Disposition"),
+        Some(format!("attachment; filename=\"{queued_id}-gold.tar\"").as_str())
+    );
+    let mut bytes = Vec::new();
+    std::io::Read::read_to_end(&mut archive.into_reader(), &mut bytes).unwrap();
+    let names = tar_names(&bytes);
+    let top = format!("{queued_id}-gold/");
+    for wanted in [
+        "setup.json",
+        "samples.csv",
+        "fit-cook-torrance.json",
+        "fit-ward.json",
+        "log.json",
+    ] {
+        assert!(
+            names.contains(&format!("{top}{wanted}")),
+            "{wanted}: {names:?}"
+        );
+    }
+    assert!(
+        names
+            .iter()
+            .any(|n| n.starts_with(&format!("{top}theta_l_")) && n.ends_with(".tiff")),
+        "{names:?}"
+    );
+    assert!(
+        names.iter().any(|n| n.starts_with(&format!("{top}hdr/"))),
+        "{names:?}"
+    );
+
+    // Calibrating from the done scan: progress while it works, then the setup it
+    // stored and where each value came from.
+    page.eval("document.getElementById('calibrate').click()");
+    page.wait_for(
+        "the calibration's progress",
+        "document.getElementById('calprogress') !== null",
+        Duration::from_secs(10),
+    );
+    let table = page.wait_for(
+        "the calibrated setup (or an error)",
+        "(document.querySelector('#calbox table.setup') || document.querySelector('#calbox .msg')) && document.getElementById('calbox').textContent",
+        Duration::from_secs(180),
+    );
+    let table = table.as_str().unwrap();
+    assert!(
+        table.contains(&format!("calibrated from scan {queued_id}"))
+            && table.contains("emulated scene")
+            && table.contains("sample_row"),
+        "{table}"
+    );
+
+    // Waiting: the camera gone (a scan interrupted by it), the next scan waits for it;
+    // its reason shown, no Confirm for it.
+    let unplug = daemon.post("/api/emulator/fault", &json!({"fault": "camera_unplug"}));
+    assert_eq!(unplug.status, 200, "{:?}", unplug.json);
+    let one_frame = json!({"sample": "gold", "theta_l": [-20], "bracket": {"shutter_s": [0.1]}});
+    let interrupted_id = daemon.post("/api/scans", &one_frame).json["id"]
+        .as_i64()
+        .unwrap();
+    daemon.wait_state(interrupted_id, &["interrupted"], Duration::from_secs(60));
+    let waiting_id = daemon.post("/api/scans", &one_frame).json["id"]
+        .as_i64()
+        .unwrap();
+    let shown = select_and_wait(
+        &mut page,
+        waiting_id,
+        "waiting",
+        |s| s["why"].as_str().unwrap().contains("camera not available"),
+        Duration::from_secs(60),
+    );
+    assert!(no_time_left(&shown), "{shown}");
+    assert_eq!(shown["confirmHidden"], json!(true), "{shown}");
+    assert_eq!(shown["frame"], Value::Null, "{shown}");
+    for id in [interrupted_id, waiting_id] {
+        let cancelled = daemon.post(&format!("/api/scans/{id}/cancel"), &json!({}));
+        assert_eq!(cancelled.status, 200, "{:?}", cancelled.json);
+    }
+    daemon.post("/api/emulator/fault", &json!({"fault": "camera_replug"}));
+
+    // At 390 px (a phone): nothing wider than the screen, with the plot and the file
+    // list on show.
+    select_and_wait(
+        &mut page,
+        queued_id,
+        "done",
+        |_| true,
+        Duration::from_secs(30),
+    );
+    page.wait_for(
+        "the fit plot",
+        "document.querySelector('#plot svg path') !== null",
+        Duration::from_secs(60),
+    );
+    page.eval("document.getElementById('allfiles').click()");
+    page.call(
+        "Emulation.setDeviceMetricsOverride",
+        json!({"width": 390, "height": 844, "deviceScaleFactor": 1, "mobile": true}),
+    );
+    let width = page.wait_for(
+        "the layout at 390 px",
+        "window.innerWidth === 390 && document.querySelectorAll('#files a').length > 0 && document.documentElement.scrollWidth",
+        Duration::from_secs(30),
+    );
+    assert!(
+        width.as_u64().unwrap() <= 390,
+        "page {width} px wide at 390 px"
+    );
+
+    // STOP ARM: a note, not an error; no angle while the position is unknown; Home
+    // brings it back.
+    page.eval("document.getElementById('stop').click()");
+    let stopped = page.wait_for(
+        "the stop note",
+        "document.getElementById('stopmsg').textContent.includes('arm stopped') && document.getElementById('stopmsg').className",
+        Duration::from_secs(30),
+    );
+    assert_eq!(stopped, "note");
+    let arm = page.wait_for(
+        "the arm's unknown position",
+        "!document.getElementById('home').hidden && document.getElementById('arm').textContent",
+        Duration::from_secs(30),
+    );
+    let arm = arm.as_str().unwrap();
+    assert!(
+        arm.contains("position unknown") && !arm.contains('°'),
+        "{arm}"
+    );
+    assert_eq!(
+        daemon.get("/api/hardware").json["arm"]["angle_deg"],
+        Value::Null
+    );
+    page.eval("document.getElementById('home').click()");
+    let arm = page.wait_for(
+        "the arm homed",
+        "document.getElementById('home').hidden && document.getElementById('arm').textContent.includes('°') && document.getElementById('arm').textContent",
+        Duration::from_secs(60),
+    );
+    assert!(arm.as_str().unwrap().starts_with("arm: idle at"), "{arm}");
+    assert_eq!(
+        page.eval("document.getElementById('stopmsg').className"),
+        "note"
+    );
+
+    assert_eq!(page.errors(), Vec::<String>::new(), "console errors");
     drop(browser);
     drop(daemon);
     let _ = std::fs::remove_dir_all(&dir);

@@ -15,10 +15,12 @@ use axum::response::{IntoResponse, Response};
 use axum::routing::{delete, get, post};
 use axum::{Json, Router};
 use futures_util::{Stream, StreamExt};
+use gonio_drivers::ArmState;
 use serde::Deserialize;
 use serde_json::{json, Value};
-use tokio_stream::wrappers::BroadcastStream;
+use tokio_stream::wrappers::{BroadcastStream, ReceiverStream};
 
+use super::archive::{file_name_part, TarWriter};
 use super::calibration;
 use super::config::Config;
 use super::devices::InjectedFault;
@@ -133,6 +135,7 @@ pub fn router(shared: Arc<Shared>) -> Router {
         .route("/api/scans/{id}/calibrate", post(calibrate_scan))
         .route("/api/setup", delete(forget_calibration))
         .route("/api/arm/stop", post(stop_arm))
+        .route("/api/arm/home", post(home_arm))
         .merge(json_bodies)
         .route_layer(token());
     let reads = Router::new()
@@ -146,6 +149,7 @@ pub fn router(shared: Arc<Shared>) -> Router {
         .route("/api/scans/{id}/plot", get(plot))
         .route("/api/scans/{id}/files", get(list_files))
         .route("/api/scans/{id}/files/{*path}", get(get_file))
+        .route("/api/scans/{id}/archive", get(scan_archive))
         .route("/api/sweeps", get(list_sweeps))
         .route("/api/sweeps/{id}", get(get_sweep));
     let reads = if reads_need_token(&shared.config) {
@@ -614,6 +618,59 @@ async fn stop_arm(State(shared): AppState) -> ApiResult<Json<Value>> {
     Ok(Json(json!({ "stopped": true, "paused": paused })))
 }
 
+/// Whether an arm in `state` knows where it is (not in an alarm, nor after a reset or a
+/// stop until it is homed or its position declared, nor while homing or disconnected).
+fn position_known(state: ArmState) -> bool {
+    !matches!(
+        state,
+        ArmState::Alarm
+            | ArmState::Homing
+            | ArmState::NeedsHoming
+            | ArmState::NeedsPosition
+            | ArmState::Disconnected
+    )
+}
+
+/// Homes the arm (after a stop or a reset): 202 at once, the hardware lane homes it
+/// before it runs anything else; 409 while a scan runs or when the controller does not
+/// home, 503 without an arm.
+async fn home_arm(State(shared): AppState) -> ApiResult<impl IntoResponse> {
+    let running = db(&shared, |_, store| {
+        Ok(store
+            .scans()?
+            .iter()
+            .find(|s| s.state == ScanState::Running)
+            .map(|s| s.id))
+    })
+    .await?;
+    if let Some(id) = running {
+        return Err(ApiError::new(
+            StatusCode::CONFLICT,
+            format!("scan {id} is running: pause or cancel it before homing the arm"),
+        ));
+    }
+    match lock(&shared.hardware).arm.state {
+        ArmState::Disconnected => {
+            return Err(ApiError::new(
+                StatusCode::SERVICE_UNAVAILABLE,
+                "arm not connected: nothing to home",
+            ))
+        }
+        ArmState::NeedsPosition => {
+            return Err(ApiError::new(
+                StatusCode::CONFLICT,
+                "this controller does not home: declare the arm's position \
+                 (POST /api/arm/position)",
+            ))
+        }
+        _ => {}
+    }
+    shared.home_requested.store(true, Ordering::Release);
+    shared.hardware_wake.post(|wake| *wake = true);
+    tracing::info!("homing asked by the operator");
+    Ok((StatusCode::ACCEPTED, Json(json!({ "homing": true }))))
+}
+
 /// How long a declared position may wait for the hardware lane (busy with a step).
 const DECLARE_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(30);
 
@@ -756,6 +813,9 @@ async fn hardware(State(shared): AppState) -> Json<Value> {
     if let Some(angle) = lock(&shared.arm_angle).as_ref().and_then(|a| a.get()) {
         // As the arm reported it, also while a move is under way.
         status.arm.angle_deg = Some(angle);
+    }
+    if !position_known(status.arm.state) {
+        status.arm.angle_deg = None;
     }
     Json(json!({
         "arm": status.arm,
@@ -920,7 +980,106 @@ async fn get_file(
     .map_err(internal)?
     .ok_or_else(not_found)?;
     let kind = content_type(FsPath::new(&rel));
-    Ok(([(header::CONTENT_TYPE, kind)], bytes).into_response())
+    let sample = load_scan(&shared, id).await?.plan.sample;
+    let name = format!(
+        "{id}-{}-{}",
+        file_name_part(&sample),
+        file_name_part(&rel.replace('/', "-"))
+    );
+    Ok((
+        [
+            (header::CONTENT_TYPE, kind.to_owned()),
+            (header::CONTENT_DISPOSITION, attachment(&name)),
+        ],
+        bytes,
+    )
+        .into_response())
+}
+
+/// `Content-Disposition` of a download named `name` (made of safe characters).
+fn attachment(name: &str) -> String {
+    format!("attachment; filename=\"{name}\"")
+}
+
+/// Chunks of an archive in flight between its writer and the connection.
+const ARCHIVE_CHUNKS: usize = 8;
+
+/// Writes into a channel of byte chunks, for a streamed answer; fails once the
+/// receiver (the connection) is gone.
+struct ChannelWriter(tokio::sync::mpsc::Sender<Result<Bytes, std::io::Error>>);
+
+impl std::io::Write for ChannelWriter {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.0
+            .blocking_send(Ok(Bytes::copy_from_slice(buf)))
+            .map_err(|_| std::io::Error::new(std::io::ErrorKind::BrokenPipe, "client gone"))?;
+        Ok(buf.len())
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+/// The whole scan as one tar archive, streamed: every file of its directory
+/// (captures, maps, samples, fits, setup) and `log.json` (its journal and its entries
+/// of the hardware log), under `<id>-<sample>/`.
+async fn scan_archive(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Response> {
+    let scan = load_scan(&shared, id).await?;
+    let (steps, log) = db(&shared, move |_, store| {
+        let log: Vec<_> = store
+            .hardware_log(0)?
+            .into_iter()
+            .filter(|e| e.scan_id == Some(id))
+            .collect();
+        Ok((store.steps(id)?, log))
+    })
+    .await?;
+    let log = serde_json::to_vec_pretty(&json!({ "steps": steps, "hardware_log": log }))
+        .map_err(internal)?;
+    let top = format!("{id}-{}", file_name_part(&scan.plan.sample));
+    let dir = shared.scan_dir(id);
+    let (sender, receiver) = tokio::sync::mpsc::channel(ARCHIVE_CHUNKS);
+    let root = top.clone();
+    tokio::task::spawn_blocking(move || {
+        let mut files = Vec::new();
+        collect_files(&dir, &dir, &mut files);
+        files.sort();
+        let out = std::io::BufWriter::with_capacity(1 << 16, ChannelWriter(sender.clone()));
+        let mut tar = TarWriter::new(out);
+        let written = files
+            .iter()
+            .try_for_each(|rel| tar.append_file(&format!("{root}/{rel}"), &dir.join(rel)))
+            .and_then(|()| {
+                let mtime = std::time::SystemTime::now()
+                    .duration_since(std::time::UNIX_EPOCH)
+                    .map_or(0, |d| d.as_secs());
+                tar.append(
+                    &format!("{root}/log.json"),
+                    log.len() as u64,
+                    mtime,
+                    &mut log.as_slice(),
+                )
+            })
+            .and_then(|()| tar.finish().map(drop));
+        if let Err(err) = written {
+            // The client sees a cut archive, never a silently short one.
+            tracing::warn!("archive of scan {id}: {err}");
+            let _ = sender.blocking_send(Err(err));
+        }
+    });
+    let body = axum::body::Body::from_stream(ReceiverStream::new(receiver));
+    Ok((
+        [
+            (header::CONTENT_TYPE, "application/x-tar".to_owned()),
+            (
+                header::CONTENT_DISPOSITION,
+                attachment(&format!("{top}.tar")),
+            ),
+        ],
+        body,
+    )
+        .into_response())
 }
 
 /// The latest captured frame of a scan as a small PNG.

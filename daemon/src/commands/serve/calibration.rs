@@ -35,13 +35,83 @@ pub fn current_setup(data_dir: &Path, configured: Option<&Setup>) -> Option<Setu
     configured.cloned()
 }
 
+/// The setup.json of a scan starting now: the calibrated setup (with its `calibration`
+/// and `provenance`) if there is a valid one, else `configured` with `source` as the
+/// provenance of every field.
+pub fn current_setup_json(
+    data_dir: &Path,
+    configured: Option<&Setup>,
+    source: &str,
+) -> Option<Value> {
+    let path = calibrated_path(data_dir);
+    if path.is_file() {
+        let stored = std::fs::read(&path)
+            .map_err(anyhow::Error::from)
+            .and_then(|bytes| Ok(serde_json::from_slice::<Value>(&bytes)?));
+        match (read_setup(&path), stored) {
+            (Ok(_), Ok(stored)) => return Some(stored),
+            (Err(err), _) => tracing::warn!("ignoring the calibrated setup: {err}"),
+            (_, Err(err)) => tracing::warn!("ignoring the calibrated setup: {err}"),
+        }
+    }
+    let mut value = json!(configured?);
+    let provenance: serde_json::Map<String, Value> = value
+        .as_object()?
+        .keys()
+        .map(|field| (field.clone(), json!(source)))
+        .collect();
+    value["provenance"] = Value::Object(provenance);
+    Some(value)
+}
+
+/// The fields a calibration estimates (a `null` estimate leaves the prior's value).
+const ESTIMATED: [&str; 6] = [
+    "sample_row",
+    "white_row",
+    "camera_offset_mm",
+    "camera_distance_mm",
+    "cylinder_tilt_deg",
+    "arm_zero_offset_deg",
+];
+
+/// Where each field of a setup calibrated from scan `id` came from: the estimated ones
+/// from the calibration, the others as the prior's `provenance` says (else the prior,
+/// scan `id`'s setup.json).
+fn provenance(stored: &Value, prior: &Value, id: i64) -> Value {
+    let Some(fields) = stored.as_object() else {
+        return json!({});
+    };
+    let calibration = &stored["calibration"];
+    fields
+        .keys()
+        .filter(|field| !matches!(field.as_str(), "calibration" | "provenance"))
+        .map(|field| {
+            let estimated = ESTIMATED.contains(&field.as_str()) && !calibration[field].is_null();
+            let source = if estimated {
+                json!(format!("calibrated from scan {id}"))
+            } else {
+                prior["provenance"]
+                    .get(field)
+                    .cloned()
+                    .unwrap_or_else(|| json!(format!("scan {id}'s setup.json")))
+            };
+            (field.clone(), source)
+        })
+        .collect::<serde_json::Map<_, _>>()
+        .into()
+}
+
 /// Calibrates from the captures in `scan_dir` (scan `id`) and stores the result as the
-/// setup of later scans. Returns what the API answers: the setup and its calibration.
+/// setup of later scans. Returns what the API answers: the setup, its calibration and
+/// where each field came from (`provenance`).
 pub fn calibrate_and_store(scan_dir: &Path, data_dir: &Path, id: i64) -> anyhow::Result<Value> {
-    let prior = read_setup(&scan_dir.join("setup.json"))?;
+    let prior_path = scan_dir.join("setup.json");
+    let prior = read_setup(&prior_path)?;
+    let prior_json: Value = serde_json::from_slice(&std::fs::read(&prior_path)?)?;
     let calibration = calibrate_scan(scan_dir, &prior, &CalibrateOptions::default())?;
     let mut stored = calibration.setup_json();
     stored["calibration"]["scan"] = json!(id);
+    stored["provenance"] = provenance(&stored, &prior_json, id);
     let mut text = serde_json::to_vec_pretty(&stored)?;
     text.push(b'\n');
     let path = calibrated_path(data_dir);
@@ -59,5 +129,31 @@ pub fn forget(data_dir: &Path) -> std::io::Result<bool> {
         Ok(()) => Ok(true),
         Err(err) if err.kind() == std::io::ErrorKind::NotFound => Ok(false),
         Err(err) => Err(err),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn provenance_names_the_calibration_for_estimates_and_keeps_the_prior_s_otherwise() {
+        let stored = json!({
+            "sample_row": 10, "white_row": 20, "camera_offset_mm": 0.1,
+            "camera_distance_mm": 300.0, "focal_length_mm": 50.0,
+            "calibration": { "sample_row": {}, "white_row": {}, "camera_offset_mm": {},
+                             "camera_distance_mm": null, "scan": 4 },
+        });
+        let prior = json!({ "provenance": { "focal_length_mm": "emulated scene" } });
+        assert_eq!(
+            provenance(&stored, &prior, 4),
+            json!({
+                "sample_row": "calibrated from scan 4",
+                "white_row": "calibrated from scan 4",
+                "camera_offset_mm": "calibrated from scan 4",
+                "camera_distance_mm": "scan 4's setup.json",
+                "focal_length_mm": "emulated scene",
+            })
+        );
     }
 }

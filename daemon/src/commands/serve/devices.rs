@@ -62,6 +62,8 @@ pub struct Devices {
     pub camera: Box<dyn Camera>,
     /// Geometry and white reflectance written to each scan's setup.json, if known.
     pub setup: Option<Setup>,
+    /// Where `setup` comes from: `emulated scene` or `configuration [setup]`.
+    pub setup_source: &'static str,
     /// Scene truth written to each emulated scan's truth.json.
     pub truth: Option<Value>,
     /// Levels and response written to every capture sidecar.
@@ -230,6 +232,7 @@ pub fn open(config: &Config) -> anyhow::Result<Devices> {
                 arm,
                 camera: Box::new(camera),
                 setup: Some(facts.setup),
+                setup_source: "emulated scene",
                 truth: Some(facts.truth),
                 sidecar: facts.sidecar,
                 iso: Some(body.iso),
@@ -242,6 +245,7 @@ pub fn open(config: &Config) -> anyhow::Result<Devices> {
             arm,
             camera: open_gphoto2(model.as_deref(), port.as_deref())?,
             setup: config.setup(),
+            setup_source: "configuration [setup]",
             truth: None,
             sidecar: SidecarDefaults::default(),
             iso: Some(*iso),

@@ -3,6 +3,7 @@
 //! (docs/ARCHITECTURE.md, "Daemon").
 
 mod api;
+mod archive;
 mod calibration;
 mod config;
 mod connections;
@@ -25,7 +26,7 @@ mod web;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::AtomicU64;
+use std::sync::atomic::{AtomicBool, AtomicU64};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -143,6 +144,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         arm_angle: Mutex::new(None),
         stops: AtomicU64::new(0),
         arm_position: Mutex::new(None),
+        home_requested: AtomicBool::new(false),
         timing: devices.timing,
         emulators: devices.emulators.clone(),
         mount: devices.mount.clone(),

@@ -3,7 +3,7 @@
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::AtomicU64;
+use std::sync::atomic::{AtomicBool, AtomicU64};
 use std::sync::{mpsc, Arc, Mutex};
 
 use gonio_drivers::{ArmState, DeviceError, EmergencyStop, LiveAngle};
@@ -92,6 +92,9 @@ pub struct Shared {
     pub stops: AtomicU64,
     /// A declared arm position waiting for the hardware lane (one at a time).
     pub arm_position: Mutex<Option<PositionRequest>>,
+    /// The operator asked to home the arm (`POST /api/arm/home`); the hardware lane
+    /// homes it when no scan runs and clears this.
+    pub home_requested: AtomicBool,
     /// What the devices' steps are expected to take.
     pub timing: Timing,
     /// Present when the devices are emulated.

@@ -556,6 +556,17 @@ impl Store {
         self.query_scans("WHERE sweep_id = ?1 ORDER BY id", [sweep_id])
     }
 
+    /// The latest scan before `id` that ended done: the step times it measured.
+    pub fn last_done_before(&self, id: i64) -> Result<Option<ScanRecord>, StoreError> {
+        Ok(self
+            .query_scans(
+                "WHERE state = 'done' AND id < ?1 ORDER BY id DESC LIMIT 1",
+                [id],
+            )?
+            .into_iter()
+            .next())
+    }
+
     pub fn scan(&self, id: i64) -> Result<Option<ScanRecord>, StoreError> {
         Ok(self.query_scans("WHERE id = ?1", [id])?.into_iter().next())
     }

@@ -8,10 +8,10 @@ use std::time::Duration;
 
 use serde_json::{json, Value};
 
-use super::plan::{theta_dir_name, FIT_MODELS};
-use super::progress::progress;
+use super::plan::{theta_dir_name, Step, FIT_MODELS};
+use super::progress::{metered_bracket, progress};
 use super::shared::{ScanEvent, Shared};
-use super::store::{ScanRecord, ScanState, Store, StoreError};
+use super::store::{ScanRecord, ScanState, StepRecord, StepState, Store, StoreError};
 
 /// How long the publisher sleeps when nothing changes (it then looks again).
 const PUBLISHER_POLL: Duration = Duration::from_secs(5);
@@ -112,16 +112,37 @@ pub fn scan_view(
         })
     });
     let active = !(scan.state == ScanState::Queued || scan.state.is_final());
-    let journal = if detail || active {
-        let now = time::OffsetDateTime::now_utc();
-        Some(progress(&store.steps(scan.id)?, &shared.timing, now))
+    // An automatic bracket is known from the journal's metering steps.
+    let steps = if detail || active || scan.plan.auto_bracket {
+        Some(store.steps(scan.id)?)
     } else {
         None
     };
+    // The time left of a running scan also learns from the previous scan that ended
+    // done (the kinds of step this one has not measured yet).
+    let earlier = match scan.state {
+        ScanState::Running => match store.last_done_before(scan.id)? {
+            Some(done) => store.steps(done.id)?,
+            None => Vec::new(),
+        },
+        _ => Vec::new(),
+    };
+    let journal = steps.as_ref().filter(|_| detail || active).map(|steps| {
+        let now = time::OffsetDateTime::now_utc();
+        progress(steps, &earlier, &shared.timing, now)
+    });
+    // Time left only while the scan runs: a queued, paused, waiting or interrupted
+    // scan has no end to count down to.
     let eta_s = journal
         .as_ref()
-        .filter(|_| !scan.state.is_final())
+        .filter(|_| scan.state == ScanState::Running)
         .map(|p| (p.eta_s * 10.0).round() / 10.0);
+    let bracket = match steps.as_deref().filter(|_| scan.plan.auto_bracket) {
+        Some(steps) => auto_bracket_view(steps),
+        None => json!({ "shutter_s": scan.plan.shutter_s, "auto": false }),
+    };
+    // Nothing is under way once the scan has ended.
+    let ended = scan.state.is_final();
     Ok(json!({
         "id": scan.id,
         "sample": scan.plan.sample,
@@ -130,7 +151,7 @@ pub fn scan_view(
         "reason": (scan.state == ScanState::Waiting).then_some(&scan.error),
         "sweep_id": scan.sweep_id,
         "theta_l": scan.plan.theta_l,
-        "bracket": { "shutter_s": scan.plan.shutter_s, "auto": scan.plan.auto_bracket },
+        "bracket": bracket,
         "progress": {
             "done": scan.done,
             "total": scan.total,
@@ -139,8 +160,11 @@ pub fn scan_view(
             "eta_s": eta_s,
         },
         "actions": actions(scan),
-        "current_step": scan.current_step,
-        "processing_step": journal.as_ref().and_then(|p| p.processing_step.clone()),
+        "current_step": scan.current_step.as_ref().filter(|_| !ended),
+        "processing_step": journal
+            .as_ref()
+            .filter(|_| !ended)
+            .and_then(|p| p.processing_step.clone()),
         "live": journal.map(|p| p.live),
         "created": scan.created,
         "started": scan.started,
@@ -161,6 +185,33 @@ pub fn scan_view(
             "thumbnail": has_frame.then(|| format!("{base}/thumbnail.png")),
         },
     }))
+}
+
+/// The bracket of an automatic scan as its metering steps chose it: every shutter time
+/// planned so far (longest first) and each metered θL's own bracket.
+fn auto_bracket_view(steps: &[StepRecord]) -> Value {
+    let metered: Vec<(f64, Vec<f64>)> = steps
+        .iter()
+        .filter(|s| s.state == StepState::Done)
+        .filter_map(|s| match s.step {
+            Step::Meter { theta_l } => Some((theta_l, metered_bracket(s)?)),
+            _ => None,
+        })
+        .collect();
+    let mut all: Vec<f64> = metered
+        .iter()
+        .flat_map(|(_, b)| b.iter().copied())
+        .collect();
+    all.sort_by(|a, b| b.total_cmp(a));
+    all.dedup();
+    json!({
+        "shutter_s": all,
+        "auto": true,
+        "by_theta_l": metered
+            .iter()
+            .map(|(theta_l, bracket)| json!({ "theta_l": theta_l, "shutter_s": bracket }))
+            .collect::<Vec<_>>(),
+    })
 }
 
 /// Starts the publisher: it builds the view of every scan announced as changed

@@ -62,6 +62,8 @@ pub struct HardwareLane {
     arm_error: Option<String>,
     arm_retry: Reconnect,
     setup: Option<Setup>,
+    /// Where `setup` comes from (each field's provenance in setup.json).
+    setup_source: &'static str,
     truth: Option<Value>,
     sidecar: SidecarDefaults,
     iso: Option<u32>,
@@ -87,6 +89,7 @@ impl HardwareLane {
             arm_error: None,
             arm_retry: Reconnect::now(),
             setup: devices.setup,
+            setup_source: devices.setup_source,
             truth: devices.truth,
             sidecar: devices.sidecar,
             iso: devices.iso,
@@ -166,6 +169,7 @@ impl HardwareLane {
         let arm_ready = self.arm.is_some() || self.connect_arm()?;
         let camera_ready = self.connect_camera()?;
         self.answer_position_request()?;
+        self.answer_home_request()?;
         if !(arm_ready && camera_ready) {
             self.wait_for_devices()?;
             self.idle();
@@ -345,6 +349,40 @@ impl HardwareLane {
         }
         // The handler may have given up waiting: nothing to tell then.
         let _ = request.reply.send(result);
+        Ok(())
+    }
+
+    /// Homes the arm if the operator asked (`POST /api/arm/home`); the lane only looks
+    /// between scans, so no scan's step is under way.
+    fn answer_home_request(&mut self) -> Result<(), StoreError> {
+        if !self.shared.home_requested.swap(false, Ordering::AcqRel) {
+            return Ok(());
+        }
+        let Some(arm) = self.arm.as_mut() else {
+            return self.log(None, "home refused", "arm not connected");
+        };
+        {
+            let mut status = lock(&self.shared.hardware);
+            status.arm.state = ArmState::Homing;
+            status.arm.error = None;
+        }
+        let result = arm.home();
+        self.at_deg = None;
+        match result {
+            Ok(()) => {
+                self.homed = true;
+                self.log(None, "home", "asked by the operator")?;
+                self.note_arm(None);
+                self.requeue_waiting("arm homed")?;
+            }
+            Err(err) => {
+                tracing::warn!("homing asked by the operator: {err}");
+                self.homed = false;
+                self.log(None, "home failed", &err.to_string())?;
+                lock(&self.shared.hardware).arm.error = Some(format!("homing failed: {err}"));
+                self.refresh_arm_status();
+            }
+        }
         Ok(())
     }
 
@@ -541,7 +579,14 @@ impl HardwareLane {
         }
         std::fs::create_dir_all(dir)?;
         let files = [
-            ("setup.json", self.setup().map(|s| json!(s))),
+            (
+                "setup.json",
+                calibration::current_setup_json(
+                    &self.shared.config.data_dir,
+                    self.setup.as_ref(),
+                    self.setup_source,
+                ),
+            ),
             ("truth.json", self.truth.clone()),
         ];
         for (name, value) in files {
