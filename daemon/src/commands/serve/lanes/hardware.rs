@@ -843,6 +843,7 @@ impl HardwareLane {
             white_level: self.sidecar.white_level,
             response: self.sidecar.response,
             significant_bits: self.sidecar.significant_bits,
+            aperture: None,
             width: None,
             height: None,
         };
