@@ -13,30 +13,24 @@ use std::sync::Arc;
 use anyhow::Context;
 
 use super::devices::Devices;
-use super::files::remove_partials;
+use super::files::{remove_partials, Writers};
 use super::shared::Shared;
 use super::store::Store;
 use hardware::HardwareLane;
 use processing::ProcessingLane;
 
-/// Removes the temporary files a crash left in the scans that are not finished and in
-/// the metering directory, then starts both lanes on `devices`, with connections to
-/// the database at `db_path`.
+/// Removes the temporary files that writers no longer running left anywhere in the data
+/// directory (every scan's, whatever its state, the metering frames, the calibrated
+/// setup), then starts both lanes on `devices`, with connections to the database at
+/// `db_path`.
 pub fn start(shared: Arc<Shared>, devices: Devices, db_path: &Path) -> anyhow::Result<()> {
+    let data = &shared.config.data_dir;
+    let removed = remove_partials(data, Writers::RunningOthers)
+        .with_context(|| format!("cleaning {}", data.display()))?;
+    if removed > 0 {
+        tracing::info!("{}: removed {removed} partial file(s)", data.display());
+    }
     let hardware_store = Store::open(db_path)?;
-    let mut dirs = vec![shared.config.data_dir.join("metering")];
-    for scan in hardware_store.scans()? {
-        if !scan.state.is_final() {
-            dirs.push(shared.scan_dir(scan.id));
-        }
-    }
-    for dir in dirs {
-        let removed =
-            remove_partials(&dir).with_context(|| format!("cleaning {}", dir.display()))?;
-        if removed > 0 {
-            tracing::info!("{}: removed {removed} partial file(s)", dir.display());
-        }
-    }
     let hardware = HardwareLane::new(shared.clone(), hardware_store, devices);
     let processing = ProcessingLane::new(shared, Store::open(db_path)?);
     spawn_watched("hardware", move || hardware.run())?;
