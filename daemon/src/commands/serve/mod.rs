@@ -93,6 +93,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         )
     })?;
     let token = token(&config)?;
+    let fault = step_guard::record_faults(&config.data_dir)?;
 
     let db_path = config.data_dir.join("gonio.sqlite");
     // SQLite gives its journal files the database's mode.
@@ -146,14 +147,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         emulators: devices.emulators.clone(),
         config,
     });
-    step_guard::fail_crash_looping_scans(&shared, &mut lock(&shared.store))?;
+    step_guard::fail_crash_looping_scans(&shared, &mut lock(&shared.store), fault.as_ref())?;
     view::start_publisher(shared.clone(), &db_path)?;
     lanes::start(shared.clone(), devices, &db_path)?;
 
+    // Stopped on a signal: the steps running are redone at the next start.
     let served = runtime.block_on(serve(shared.clone(), listener));
-    // Stopped on a signal: the step the hardware is in is redone at the next start,
-    // and is not counted as a crash.
-    lock(&shared.store).record_clean_stop(shared.boot)?;
     drop(lock_file);
     served
 }

@@ -14,7 +14,9 @@ use anyhow::Context;
 
 use super::devices::Devices;
 use super::files::{remove_partials, Writers};
+use super::plan::Lane;
 use super::shared::Shared;
+use super::step_guard;
 use super::store::Store;
 use hardware::HardwareLane;
 use processing::ProcessingLane;
@@ -33,23 +35,28 @@ pub fn start(shared: Arc<Shared>, devices: Devices, db_path: &Path) -> anyhow::R
     let hardware_store = Store::open(db_path)?;
     let hardware = HardwareLane::new(shared.clone(), hardware_store, devices);
     let processing = ProcessingLane::new(shared, Store::open(db_path)?);
-    spawn_watched("hardware", move || hardware.run())?;
-    spawn_watched("processing", move || processing.run())
+    spawn_watched(Lane::Hardware, move || hardware.run())?;
+    spawn_watched(Lane::Processing, move || processing.run())
 }
 
-/// Runs `lane` on a thread named `name`. A lane only ends by panicking: then the
-/// process ends too, so that a supervisor restarts it and the journal resumes the
-/// scans, rather than serve without it.
-fn spawn_watched(name: &str, lane: impl FnOnce() + Send + 'static) -> anyhow::Result<()> {
+/// Runs `run` on a thread named for `lane`, marked as that lane's. A lane only ends by
+/// panicking: then the fault is recorded against it and the process ends too, so that
+/// a supervisor restarts it and the journal resumes the scans, rather than serve
+/// without it.
+fn spawn_watched(lane: Lane, run: impl FnOnce() + Send + 'static) -> anyhow::Result<()> {
+    let name = lane.name();
     let thread = std::thread::Builder::new()
         .name(name.to_owned())
-        .spawn(lane)
+        .spawn(move || {
+            step_guard::mark_lane(lane);
+            run()
+        })
         .with_context(|| format!("starting the {name} lane"))?;
-    let name = name.to_owned();
     std::thread::Builder::new()
         .name(format!("{name}-watch"))
         .spawn(move || {
             let _ = thread.join();
+            step_guard::record_lane_death(lane);
             tracing::error!("the {name} lane stopped; exiting");
             std::process::exit(2);
         })

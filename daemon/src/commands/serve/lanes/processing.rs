@@ -15,7 +15,7 @@ use std::sync::{mpsc, Arc};
 use std::time::Duration;
 
 use super::step::{self, Outcome, StepError};
-use crate::commands::serve::plan::{ScanPlan, Step};
+use crate::commands::serve::plan::{Lane, ScanPlan, Step};
 use crate::commands::serve::process::{self, Prefetched};
 use crate::commands::serve::shared::Shared;
 use crate::commands::serve::step_guard;
@@ -59,7 +59,10 @@ impl ProcessingLane {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .thread_name(|n| format!("processing-{n}"))
-            .start_handler(|_| lower_priority())
+            .start_handler(|_| {
+                step_guard::mark_lane(Lane::Processing);
+                lower_priority()
+            })
             .build();
         match pool {
             Ok(pool) => pool.install(|| self.work()),
