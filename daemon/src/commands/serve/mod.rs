@@ -15,6 +15,7 @@ mod process;
 mod progress;
 mod shared;
 mod step_guard;
+mod storage;
 mod store;
 mod sync;
 mod timing;
@@ -145,6 +146,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         arm_position: Mutex::new(None),
         timing: devices.timing,
         emulators: devices.emulators.clone(),
+        storage: storage::Probe {
+            dir: config.data_dir.clone(),
+            reserve_bytes: config.storage.reserve_bytes,
+            emulated: config.emulator.free_space_file.clone(),
+        },
         config,
     });
     step_guard::fail_crash_looping_scans(&shared, &mut lock(&shared.store), fault.as_ref())?;

@@ -12,6 +12,7 @@ use tokio::sync::broadcast;
 
 use super::config::Config;
 use super::devices::Emulators;
+use super::storage::Probe;
 use super::store::{ScanState, Store};
 use super::sync::Mailbox;
 use super::timing::Timing;
@@ -95,6 +96,8 @@ pub struct Shared {
     pub timing: Timing,
     /// Present when the devices are emulated.
     pub emulators: Option<Arc<Emulators>>,
+    /// The data directory's free space.
+    pub storage: Probe,
 }
 
 impl Shared {

@@ -62,7 +62,8 @@ pub enum ScanState {
     Interrupted,
     /// The arm cannot serve it yet (refused, unhomed, position not declared): queued
     /// again once that changes (the arm reconnects, its position is declared, or the
-    /// operator resumes it). The reason is stored with it.
+    /// operator resumes it); or its next step does not fit on the disk: queued again
+    /// once it does. The reason is stored with it.
     Waiting,
 }
 
@@ -546,6 +547,11 @@ impl Store {
 
     pub fn scans(&self) -> Result<Vec<ScanRecord>, StoreError> {
         self.query_scans("ORDER BY id", [])
+    }
+
+    /// The scans in `state`, oldest first.
+    pub fn scans_in(&self, state: ScanState) -> Result<Vec<ScanRecord>, StoreError> {
+        self.query_scans("WHERE state = ?1 ORDER BY id", [state.as_str()])
     }
 
     pub fn scans_of_sweep(&self, sweep_id: i64) -> Result<Vec<ScanRecord>, StoreError> {

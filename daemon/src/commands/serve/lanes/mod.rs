@@ -3,6 +3,7 @@
 //! brackets into results meanwhile. Both work from the journal of steps in the store,
 //! each with its own connection; a scan is done when both are.
 
+mod backoff;
 mod hardware;
 mod processing;
 mod step;
