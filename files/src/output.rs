@@ -216,7 +216,12 @@ mod tests {
         assert!(!is_partial("map.exr"));
         assert_eq!(partial_writer(".map.exr.12.3.partial"), Some(12));
         assert_eq!(partial_writer(".x.12.3.partial"), Some(12));
-        for other in [".tmpAbC.partial", ".12.3.partial", "map.exr", ".x.y.3.partial"] {
+        for other in [
+            ".tmpAbC.partial",
+            ".12.3.partial",
+            "map.exr",
+            ".x.y.3.partial",
+        ] {
             assert_eq!(partial_writer(other), None, "{other}");
         }
     }

@@ -125,7 +125,11 @@ fn a_full_disk_makes_the_scans_wait_until_space_returns() {
         },
     );
     std::fs::write(&free, "1000").unwrap();
-    let waiting = daemon.wait_state(first, &["waiting", "failed", "done"], Duration::from_secs(30));
+    let waiting = daemon.wait_state(
+        first,
+        &["waiting", "failed", "done"],
+        Duration::from_secs(30),
+    );
     assert_eq!(waiting["state"], "waiting", "{waiting}");
     let reason = waiting["reason"].as_str().unwrap();
     assert!(
@@ -159,10 +163,7 @@ fn a_full_disk_makes_the_scans_wait_until_space_returns() {
         .iter()
         .filter(|e| e["action"] == "wait")
         .collect();
-    assert!(
-        waits.iter().any(|e| e["scan_id"] == first),
-        "{log}"
-    );
+    assert!(waits.iter().any(|e| e["scan_id"] == first), "{log}");
     drop(daemon);
     std::fs::remove_dir_all(dir).ok();
 }
@@ -198,6 +199,7 @@ fn free_bytes(path: &Path) -> u64 {
     let c_path = std::ffi::CString::new(path.as_os_str().as_bytes()).unwrap();
     // SAFETY: a zeroed statvfs is valid; statvfs fills it from a NUL-terminated path.
     let mut stat: libc::statvfs = unsafe { std::mem::zeroed() };
+    // SAFETY: as above.
     assert_eq!(unsafe { libc::statvfs(c_path.as_ptr(), &mut stat) }, 0);
     stat.f_bavail * stat.f_frsize
 }

@@ -3,8 +3,8 @@
 use std::fs;
 use std::path::{Component, Path, PathBuf};
 
-pub use gonio_files::output::{is_partial, AtomicWriteError};
 use gonio_files::output::partial_writer;
+pub use gonio_files::output::{is_partial, AtomicWriteError};
 use gonio_files::output::{write_atomically, write_atomically_with};
 
 /// Writes `bytes` to `path` atomically (see `gonio_files::output`), creating the
@@ -226,7 +226,10 @@ mod tests {
         assert_eq!(left(), expected);
         // At start, this process has written nothing: a temporary with its id is an
         // earlier daemon's.
-        assert_eq!(remove_partials(dir.path(), Writers::RunningOthers).unwrap(), 1);
+        assert_eq!(
+            remove_partials(dir.path(), Writers::RunningOthers).unwrap(),
+            1
+        );
         let mut expected = vec![name(running), "exp_00.tiff".to_owned()];
         expected.sort();
         assert_eq!(left(), expected);

@@ -84,6 +84,8 @@ pub fn is_disk_wait(reason: &str) -> bool {
     reason.starts_with("disk full:")
 }
 
+// The widths of `fsblkcnt_t` and `c_ulong` vary with the target (u64 on this one).
+#[allow(clippy::useless_conversion)]
 fn statvfs_free(dir: &Path) -> io::Result<u64> {
     use std::os::unix::ffi::OsStrExt;
     let path = std::ffi::CString::new(dir.as_os_str().as_bytes())
@@ -107,12 +109,16 @@ pub fn frame_pixels(setup: Option<&Setup>) -> u64 {
 
 /// Bytes a capture of `pixels` may take: 16-bit RGB, uncompressed.
 fn frame_bytes(pixels: u64) -> u64 {
-    pixels.saturating_mul(6).saturating_add(FRAME_OVERHEAD_BYTES)
+    pixels
+        .saturating_mul(6)
+        .saturating_add(FRAME_OVERHEAD_BYTES)
 }
 
 /// Bytes an HDR map of `pixels` may take: float32 RGB, uncompressed.
 fn map_bytes(pixels: u64) -> u64 {
-    pixels.saturating_mul(12).saturating_add(FRAME_OVERHEAD_BYTES)
+    pixels
+        .saturating_mul(12)
+        .saturating_add(FRAME_OVERHEAD_BYTES)
 }
 
 /// Bytes `step` of a scan planned as `plan`, with frames of `pixels`, will write: before

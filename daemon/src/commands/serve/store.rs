@@ -320,11 +320,10 @@ impl Store {
     ) -> Result<Vec<i64>, StoreError> {
         let tx = self.write_transaction()?;
         if let Some(lane) = faulted {
-            let previous: i64 = tx.query_row(
-                "SELECT value - 1 FROM meta WHERE key = 'boot'",
-                [],
-                |r| r.get(0),
-            )?;
+            let previous: i64 =
+                tx.query_row("SELECT value - 1 FROM meta WHERE key = 'boot'", [], |r| {
+                    r.get(0)
+                })?;
             // Steps started before boots were recorded on them count too.
             let started: Vec<(i64, u32, String)> = {
                 let mut stmt = tx.prepare(

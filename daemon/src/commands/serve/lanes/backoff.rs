@@ -67,7 +67,7 @@ impl Failures {
             self.repeats = 0;
         } else {
             self.repeats += 1;
-            if longer > self.pause || self.repeats % 10 == 0 {
+            if longer > self.pause || self.repeats.is_multiple_of(10) {
                 tracing::error!(
                     "{lane}: {message} (again, {} times; next try in {longer:?})",
                     self.repeats
@@ -101,7 +101,11 @@ mod tests {
     fn a_failing_lane_pauses_longer_until_a_turn_goes_well() {
         let mut failures = Failures::default();
         let pauses: Vec<u64> = (0..8)
-            .map(|_| failures.failed("lane", &"database or disk is full").as_secs())
+            .map(|_| {
+                failures
+                    .failed("lane", &"database or disk is full")
+                    .as_secs()
+            })
             .collect();
         assert_eq!(pauses, [1, 2, 4, 8, 16, 32, 60, 60]);
         // Another error starts no new schedule; a good turn does.

@@ -863,7 +863,9 @@ impl HardwareLane {
                     // The camera did its part: the host's disk is full.
                     status.camera.state = "idle";
                     tracing::warn!("scan {id}: camera {what}: {err}");
-                    return Err(StepError::Waiting(self.shared.storage.full_reason(self.need)));
+                    return Err(StepError::Waiting(
+                        self.shared.storage.full_reason(self.need),
+                    ));
                 }
                 Err(err) => {
                     tracing::warn!("scan {id}: camera {what} (try {}): {err}", attempt + 1);

@@ -144,7 +144,8 @@ impl ProcessingLane {
                     && scan.error.as_deref().is_some_and(storage::is_disk_wait);
                 if !waits {
                     tracing::warn!("scan {id} waiting: {reason}");
-                    self.store.log(self.shared.boot, Some(id), "wait", &reason)?;
+                    self.store
+                        .log(self.shared.boot, Some(id), "wait", &reason)?;
                     self.store
                         .transition(id, &PROCESSABLE, ScanState::Waiting, Some(&reason))?;
                     self.shared.changed(id);
