@@ -122,6 +122,8 @@ fn sidecars_out_of_physical_range_or_directory_are_refused() {
         ("iso", serde_json::json!(409_601)),
         ("white_level", serde_json::json!(1e300)),
         ("black_level", serde_json::json!(-1)),
+        ("aperture", serde_json::json!(1e300)),
+        ("aperture", serde_json::json!(0.1)),
     ] {
         let mut bad = valid.clone();
         bad[key] = value.clone();

@@ -144,6 +144,17 @@ pub fn is_partial(name: &str) -> bool {
     name.starts_with('.') && name.ends_with(".partial")
 }
 
+/// The process id of the writer of a temporary named by [`create_beside`]
+/// (`.<name>.<pid>.<n>.partial`); `None` for any other name.
+pub fn partial_writer(name: &str) -> Option<u32> {
+    let stem = name.strip_prefix('.')?.strip_suffix(".partial")?;
+    let mut parts = stem.rsplitn(3, '.');
+    parts.next()?.parse::<u64>().ok()?;
+    let pid = parts.next()?.parse().ok()?;
+    parts.next().filter(|target| !target.is_empty())?;
+    Some(pid)
+}
+
 fn parent(path: &Path) -> &Path {
     match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d,
@@ -203,6 +214,25 @@ mod tests {
         assert_eq!(fs::read_dir(dir.path()).unwrap().count(), 0);
         assert!(is_partial(".map.exr.12.3.partial"));
         assert!(!is_partial("map.exr"));
+        assert_eq!(partial_writer(".map.exr.12.3.partial"), Some(12));
+        assert_eq!(partial_writer(".x.12.3.partial"), Some(12));
+        for other in [
+            ".tmpAbC.partial",
+            ".12.3.partial",
+            "map.exr",
+            ".x.y.3.partial",
+        ] {
+            assert_eq!(partial_writer(other), None, "{other}");
+        }
+    }
+
+    #[test]
+    fn a_temporary_names_its_writer() {
+        let dir = tempfile::tempdir().unwrap();
+        let (temp, ()) = create_beside(&dir.path().join("exp_00.tiff"), |_| Ok(())).unwrap();
+        let name = temp.file_name().unwrap().to_string_lossy().into_owned();
+        assert!(is_partial(&name), "{name}");
+        assert_eq!(partial_writer(&name), Some(std::process::id()));
     }
 
     #[test]

@@ -123,6 +123,9 @@ pub enum CameraFault {
     /// The next capture exposes, but its file never reaches the host:
     /// [`DeviceError::Timeout`] after the deadline, no file written.
     FileNeverArrives,
+    /// The next capture aborts the process that drives the camera, as a camera
+    /// library with a memory fault would.
+    Abort,
 }
 
 /// Injects faults into a camera from any thread (cheap to clone).
@@ -363,6 +366,7 @@ impl Camera for EmulatedCamera {
             Some(CameraFault::FileNeverArrives) => {
                 return Err(self.timeout("the image file from the camera", started))
             }
+            Some(CameraFault::Abort) => std::process::abort(),
             None => {}
         }
         let scene = self.scene();

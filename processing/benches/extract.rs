@@ -51,6 +51,7 @@ fn write_synthetic_scan(dir: &Path) {
                 white_level: Some(4095.0),
                 response: Response::Linear,
                 significant_bits: None,
+                aperture: None,
                 width: None,
                 height: None,
             };

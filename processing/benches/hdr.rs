@@ -49,6 +49,7 @@ fn frame(shutter_s: f64, response: Response) -> Frame {
         white_level: Some(white),
         response,
         significant_bits: None,
+        aperture: None,
         width: None,
         height: None,
     };

@@ -97,6 +97,9 @@ pub struct Sidecar {
     /// Informative; the levels above are in stored units.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub significant_bits: Option<u32>,
+    /// Lens aperture as an f-number N (f/N), informative; checked when present.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub aperture: Option<f64>,
     /// Image width in pixels as stored in the file, checked when present.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub width: Option<u32>,
@@ -163,6 +166,15 @@ impl Sidecar {
                 ));
             }
         }
+        if let Some(n) = self.aperture {
+            let (widest, narrowest) = APERTURE_RANGE;
+            if !(n.is_finite() && (widest..=narrowest).contains(&n)) {
+                return Err(bad(
+                    "aperture",
+                    format!("{n} is not an f-number in [{widest}, {narrowest}]"),
+                ));
+            }
+        }
         if let Some(bits) = self.significant_bits {
             if !(1..=16).contains(&bits) {
                 return Err(bad(
@@ -192,6 +204,9 @@ impl Sidecar {
 pub const SHUTTER_RANGE_S: (f64, f64) = (1e-6, 3600.0);
 /// ISO speeds a sidecar may state.
 pub const ISO_RANGE: (f64, f64) = (25.0, 409_600.0);
+/// f-numbers a sidecar may state: from the limit of a lens in air (f/0.5) to a
+/// pinhole's (f/1024).
+pub const APERTURE_RANGE: (f64, f64) = (0.5, 1024.0);
 /// Largest count a sidecar level may state (16-bit files).
 const MAX_COUNT: f64 = u16::MAX as f64;
 /// How far a sidecar's θL may be from its directory's name, written to 0.1°.

@@ -16,6 +16,7 @@ fn sidecar() -> Sidecar {
         white_level: None,
         response: Response::Linear,
         significant_bits: None,
+        aperture: None,
         width: None,
         height: None,
     }
@@ -134,6 +135,18 @@ fn contradicting_or_nonsense_sidecar_values_are_rejected() {
             format!(r#"{{"shutter_s":0.1,"iso":100,"theta_l":-20,"black_level":-3,{base}}}"#),
             "black_level",
         ),
+        (
+            format!(r#"{{"shutter_s":0.1,"iso":100,"theta_l":-20,"aperture":0.2,{base}}}"#),
+            "aperture",
+        ),
+        (
+            format!(r#"{{"shutter_s":0.1,"iso":100,"theta_l":-20,"aperture":1e300,{base}}}"#),
+            "aperture",
+        ),
+        (
+            format!(r#"{{"shutter_s":0.1,"iso":100,"theta_l":-20,"aperture":-8,{base}}}"#),
+            "aperture",
+        ),
     ];
     for (json, field) in cases {
         match read_with_sidecar_json(dir.path(), &json) {
@@ -141,12 +154,13 @@ fn contradicting_or_nonsense_sidecar_values_are_rejected() {
             other => panic!("{json}: expected InvalidSidecar({field}), got {other:?}"),
         }
     }
-    // Matching dimensions, a null ISO and a nonlinear response are accepted.
+    // Matching dimensions, a null ISO, an aperture and a nonlinear response are accepted.
     let ok = format!(
-        r#"{{"shutter_s":0.1,"iso":null,"theta_l":-20,"width":4,"height":3,"response":"nonlinear",{base}}}"#
+        r#"{{"shutter_s":0.1,"iso":null,"theta_l":-20,"width":4,"height":3,"aperture":5.6,"response":"nonlinear",{base}}}"#
     );
     let frame = read_with_sidecar_json(dir.path(), &ok).unwrap();
     assert_eq!(frame.sidecar.response, Response::Nonlinear);
+    assert_eq!(frame.sidecar.aperture, Some(5.6));
     assert_eq!(frame.sidecar.exposure(), 0.1);
 }
 

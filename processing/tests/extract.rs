@@ -106,6 +106,7 @@ fn write_scan(dir: &Path, theta_ls: &[f64], scene: &Scene) {
                 white_level: Some(white),
                 response: Response::Linear,
                 significant_bits: None,
+                aperture: None,
                 width: Some(W),
                 height: Some(H),
             };

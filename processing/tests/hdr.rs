@@ -48,6 +48,7 @@ fn sidecar(shutter_s: f64, response: Response) -> Sidecar {
         white_level: Some(WHITE),
         response,
         significant_bits: None,
+        aperture: None,
         width: None,
         height: None,
     }

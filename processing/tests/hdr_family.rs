@@ -377,6 +377,7 @@ impl Sensor {
             white_level: Some(self.white),
             response: Response::Linear,
             significant_bits: None,
+            aperture: None,
             width: None,
             height: None,
         };

@@ -21,7 +21,12 @@ fn mutating_routes_need_the_token_and_change_nothing_without_it() {
     std::fs::create_dir_all(&data).unwrap();
     std::fs::set_permissions(&data, Permissions::from_mode(0o755)).unwrap();
     let daemon = Daemon::start(&dir, &emulator_config(0.01));
-    assert_eq!(daemon.get("/api/health").json, json!({"status": "ok"}));
+    let health = daemon.get("/api/health").json;
+    assert_eq!(health["status"], "ok");
+    assert!(
+        health["disk_free_bytes"].as_u64().is_some_and(|b| b > 0),
+        "{health}"
+    );
     let mode =
         |path: &std::path::Path| std::fs::metadata(path).unwrap().permissions().mode() & 0o777;
     assert_eq!(mode(&data), 0o700);

@@ -156,6 +156,7 @@ pub fn gonio_merge(bracket: &Bracket) -> (Vec<f64>, Vec<u8>) {
                 white_level: None,
                 response: Response::Nonlinear,
                 significant_bits: None,
+                aperture: None,
                 width: None,
                 height: None,
             };

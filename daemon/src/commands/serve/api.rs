@@ -100,6 +100,12 @@ fn internal(err: impl std::fmt::Display) -> ApiError {
 type ApiResult<T> = Result<T, ApiError>;
 type AppState = State<Arc<Shared>>;
 
+/// Liveness, and the data directory's free space (`null` when it cannot be measured).
+async fn health(State(shared): AppState) -> Json<Value> {
+    let free = shared.storage.free_bytes().ok();
+    Json(json!({ "status": "ok", "disk_free_bytes": free }))
+}
+
 /// Runs `f` with the handlers' database connection off the async workers.
 async fn db<T: Send + 'static>(
     shared: &Arc<Shared>,
@@ -160,10 +166,7 @@ pub fn router(shared: Arc<Shared>) -> Router {
     Router::new()
         .route("/", get(super::web::index))
         .route("/api/openapi.json", get(super::web::openapi))
-        .route(
-            "/api/health",
-            get(|| async { Json(json!({ "status": "ok" })) }),
-        )
+        .route("/api/health", get(health))
         .merge(reads)
         .merge(mutating)
         .fallback(|| async { ApiError::not_found("no such route:") })

@@ -53,8 +53,12 @@
 //! [processing]
 //! max_backlog = 2              # captured brackets not yet processed before the arm waits
 //!
+//! [storage]
+//! reserve_bytes = 67108864     # free space kept for the journal: no step runs below it
+//!
 //! [emulator]
 //! fault_injection = false      # test hook: POST /api/emulator/fault
+//! # free_space_file = "free"   # test hook: the data directory's free bytes, read from it
 //! ```
 
 use std::collections::BTreeMap;
@@ -105,6 +109,7 @@ pub struct Config {
     pub limits: Limits,
     pub retry: RetryConfig,
     pub processing: ProcessingConfig,
+    pub storage: StorageConfig,
     pub emulator: EmulatorConfig,
     /// Reflectance of the white reference strip of the real setup (1 = perfect
     /// reflecting diffuser) where `[setup]` gives none; emulated scans take the scene's.
@@ -136,6 +141,7 @@ impl Default for Config {
             limits: Limits::default(),
             retry: RetryConfig::default(),
             processing: ProcessingConfig::default(),
+            storage: StorageConfig::default(),
             emulator: EmulatorConfig::default(),
             white_reflectance: 1.0,
             setup: None,
@@ -349,13 +355,34 @@ impl Default for ProcessingConfig {
     }
 }
 
+/// The data directory's disk.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct StorageConfig {
+    /// Free space kept for the journal, bytes: a step runs only while its output fits
+    /// above it (else its scan waits for space).
+    pub reserve_bytes: u64,
+}
+
+impl Default for StorageConfig {
+    fn default() -> Self {
+        Self {
+            // The journal (SQLite and its write-ahead log) and the daemon's small files.
+            reserve_bytes: 64 << 20,
+        }
+    }
+}
+
 /// Emulator-only switches.
-#[derive(Debug, Clone, Copy, Default, Deserialize)]
+#[derive(Debug, Clone, Default, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct EmulatorConfig {
     /// Enables `POST /api/emulator/fault`, which injects faults into the emulated
     /// devices. A test hook: leave off in the lab.
     pub fault_injection: bool,
+    /// A file holding the data directory's free space in bytes, read instead of the
+    /// filesystem's: a test hook emulating a disk that fills up and empties.
+    pub free_space_file: Option<PathBuf>,
 }
 
 fn default_time_scale() -> f64 {

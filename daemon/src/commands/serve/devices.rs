@@ -290,6 +290,8 @@ pub enum InjectedFault {
     CameraUnplug,
     /// Plug the camera back in.
     CameraReplug,
+    /// The next capture aborts the daemon (a crashing camera library).
+    CameraAbort,
 }
 
 impl Emulators {
@@ -311,6 +313,7 @@ impl Emulators {
             }
             InjectedFault::CameraUnplug => self.camera_faults.unplug(),
             InjectedFault::CameraReplug => self.camera_faults.replug(),
+            InjectedFault::CameraAbort => self.camera_faults.inject(CameraFault::Abort),
         }
         Ok(())
     }

@@ -3,6 +3,7 @@
 use std::fs;
 use std::path::{Component, Path, PathBuf};
 
+use gonio_files::output::partial_writer;
 pub use gonio_files::output::{is_partial, AtomicWriteError};
 use gonio_files::output::{write_atomically, write_atomically_with};
 
@@ -28,8 +29,20 @@ fn parent(path: &Path) -> &Path {
     path.parent().unwrap_or(Path::new("."))
 }
 
-/// Removes leftover temporary files under `dir` (after a crash), recursively.
-pub fn remove_partials(dir: &Path) -> std::io::Result<usize> {
+/// Whose temporaries [`remove_partials`] leaves in place.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Writers {
+    /// Those of every running process: a write in flight, ours included.
+    Running,
+    /// Those of every running process but this one, which has written nothing yet (at
+    /// start, an earlier daemon with the same process id left them).
+    RunningOthers,
+}
+
+/// Removes the temporary files of atomic writes under `dir`, recursively, except those
+/// whose writer (the process id in their name) `keep` says is still writing; a
+/// temporary that names no writer is removed. Returns how many it removed.
+pub fn remove_partials(dir: &Path, keep: Writers) -> std::io::Result<usize> {
     let mut removed = 0;
     let Ok(entries) = fs::read_dir(dir) else {
         return Ok(0);
@@ -37,14 +50,44 @@ pub fn remove_partials(dir: &Path) -> std::io::Result<usize> {
     for entry in entries {
         let entry = entry?;
         let path = entry.path();
+        let name = entry.file_name();
+        let name = name.to_string_lossy();
         if entry.file_type()?.is_dir() {
-            removed += remove_partials(&path)?;
-        } else if is_partial(&entry.file_name().to_string_lossy()) {
-            fs::remove_file(&path)?;
-            removed += 1;
+            removed += remove_partials(&path, keep)?;
+        } else if is_partial(&name) && !partial_writer(&name).is_some_and(|pid| keep.has(pid)) {
+            match fs::remove_file(&path) {
+                Ok(()) => removed += 1,
+                // Its writer renamed or removed it meanwhile.
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                Err(e) => return Err(e),
+            }
         }
     }
     Ok(removed)
+}
+
+impl Writers {
+    /// Whether process `pid` is one of these writers.
+    fn has(self, pid: u32) -> bool {
+        let ours = pid == std::process::id();
+        match self {
+            Writers::Running => ours || process_exists(pid),
+            Writers::RunningOthers => !ours && process_exists(pid),
+        }
+    }
+}
+
+/// Whether a process `pid` exists (signal 0: nothing is sent).
+fn process_exists(pid: u32) -> bool {
+    let Ok(pid) = libc::pid_t::try_from(pid) else {
+        return false;
+    };
+    if pid <= 0 {
+        return false;
+    }
+    // SAFETY: kill with signal 0 sends nothing; it only checks that the process exists.
+    let found = unsafe { libc::kill(pid, 0) } == 0;
+    found || std::io::Error::last_os_error().raw_os_error() == Some(libc::EPERM)
 }
 
 /// Joins a relative, user-supplied path under `base`, refusing anything that could
@@ -144,9 +187,51 @@ mod tests {
         write_atomic(&path, b"{}").unwrap();
         assert_eq!(fs::read(&path).unwrap(), b"{}");
         fs::write(dir.join("sub/.y.tiff.1.partial"), b"half").unwrap();
-        assert_eq!(remove_partials(&dir).unwrap(), 1);
+        assert_eq!(remove_partials(&dir, Writers::Running).unwrap(), 1);
         let names: Vec<_> = fs::read_dir(dir.join("sub")).unwrap().collect();
         assert_eq!(names.len(), 1);
         fs::remove_dir_all(dir).unwrap();
+    }
+
+    #[test]
+    fn only_the_temporaries_of_writers_gone_are_removed() {
+        let dir = tempfile::tempdir().unwrap();
+        let sub = dir.path().join("theta_l_-20.0");
+        fs::create_dir_all(&sub).unwrap();
+        // A process that has ended: its id is free until reused.
+        let mut child = std::process::Command::new("true").spawn().unwrap();
+        let gone = child.id();
+        child.wait().unwrap();
+        let ours = std::process::id();
+        // The parent of this test: a process that is running.
+        let running = std::os::unix::process::parent_id();
+        let name = |pid: u32| format!(".exp_00.tiff.{pid}.0.partial");
+        for pid in [gone, ours, running] {
+            fs::write(sub.join(name(pid)), b"half").unwrap();
+        }
+        fs::write(sub.join(".study.tmp.partial"), b"half").unwrap();
+        fs::write(sub.join("exp_00.tiff"), b"whole").unwrap();
+        let left = || {
+            let mut names: Vec<String> = fs::read_dir(&sub)
+                .unwrap()
+                .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                .collect();
+            names.sort();
+            names
+        };
+        // A scan that ended while this process writes into it keeps that write.
+        assert_eq!(remove_partials(dir.path(), Writers::Running).unwrap(), 2);
+        let mut expected = vec![name(ours), name(running), "exp_00.tiff".to_owned()];
+        expected.sort();
+        assert_eq!(left(), expected);
+        // At start, this process has written nothing: a temporary with its id is an
+        // earlier daemon's.
+        assert_eq!(
+            remove_partials(dir.path(), Writers::RunningOthers).unwrap(),
+            1
+        );
+        let mut expected = vec![name(running), "exp_00.tiff".to_owned()];
+        expected.sort();
+        assert_eq!(left(), expected);
     }
 }

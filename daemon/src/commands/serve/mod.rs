@@ -17,6 +17,7 @@ mod process;
 mod progress;
 mod shared;
 mod step_guard;
+mod storage;
 mod store;
 mod sync;
 mod timing;
@@ -95,6 +96,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         )
     })?;
     let token = token(&config)?;
+    let fault = step_guard::record_faults(&config.data_dir)?;
 
     let db_path = config.data_dir.join("gonio.sqlite");
     // SQLite gives its journal files the database's mode.
@@ -148,16 +150,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         timing: devices.timing,
         emulators: devices.emulators.clone(),
         mount: devices.mount.clone(),
+        storage: storage::Probe {
+            dir: config.data_dir.clone(),
+            reserve_bytes: config.storage.reserve_bytes,
+            emulated: config.emulator.free_space_file.clone(),
+        },
         config,
     });
-    step_guard::fail_crash_looping_scans(&shared, &mut lock(&shared.store))?;
+    step_guard::fail_crash_looping_scans(&shared, &mut lock(&shared.store), fault.as_ref())?;
     view::start_publisher(shared.clone(), &db_path)?;
     lanes::start(shared.clone(), devices, &db_path)?;
 
+    // Stopped on a signal: the steps running are redone at the next start.
     let served = runtime.block_on(serve(shared.clone(), listener));
-    // Stopped on a signal: the step the hardware is in is redone at the next start,
-    // and is not counted as a crash.
-    lock(&shared.store).record_clean_stop(shared.boot)?;
     drop(lock_file);
     served
 }

@@ -34,6 +34,16 @@ pub enum Lane {
     Processing,
 }
 
+impl Lane {
+    /// The lane's name, also its thread's.
+    pub fn name(self) -> &'static str {
+        match self {
+            Lane::Hardware => "hardware",
+            Lane::Processing => "processing",
+        }
+    }
+}
+
 /// One unit of work of a scan. Every step is idempotent on resume: a capture whose
 /// frame already exists is not taken again, a processing step rewrites its outputs.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

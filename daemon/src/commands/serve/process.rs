@@ -332,6 +332,7 @@ mod tests {
                     white_level: Some(4095.0),
                     response: Response::Linear,
                     significant_bits: Some(12),
+                    aperture: None,
                     width: None,
                     height: None,
                 };

@@ -13,6 +13,7 @@ use tokio::sync::broadcast;
 use super::config::Config;
 use super::devices::Emulators;
 use super::mount::Mount;
+use super::storage::Probe;
 use super::store::{ScanState, Store};
 use super::sync::Mailbox;
 use super::timing::Timing;
@@ -101,6 +102,8 @@ pub struct Shared {
     pub emulators: Option<Arc<Emulators>>,
     /// The sample on the cylinder.
     pub mount: Arc<Mount>,
+    /// The data directory's free space.
+    pub storage: Probe,
 }
 
 impl Shared {

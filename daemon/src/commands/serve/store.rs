@@ -62,7 +62,8 @@ pub enum ScanState {
     Interrupted,
     /// The arm cannot serve it yet (refused, unhomed, position not declared): queued
     /// again once that changes (the arm reconnects, its position is declared, or the
-    /// operator resumes it). The reason is stored with it.
+    /// operator resumes it); or its next step does not fit on the disk: queued again
+    /// once it does. The reason is stored with it.
     Waiting,
 }
 
@@ -314,29 +315,43 @@ impl Store {
     }
 
     /// Called once at start, after [`Store::begin_boot`] and before anything runs.
-    /// Unless the previous daemon stopped cleanly ([`Store::record_clean_stop`]), it
-    /// died, and each step it had started and not finished counts that death. A step
-    /// that has now been running at `limit` deaths fails its scan ("... crashed the
-    /// daemon N times") and goes back to pending, so the queue goes on (and a resume
-    /// retries it). Returns the ids of the scans failed.
-    pub fn count_crashes(&mut self, limit: u32) -> Result<Vec<i64>, StoreError> {
+    /// `faulted`: the lane at fault when the previous daemon died of its own fault
+    /// (`step_guard`); each step of that lane it had started and not finished counts
+    /// that death (a kill or a power cut, which leave no record, count against none). A
+    /// step that has now been running at `limit` deaths fails its scan ("... crashed
+    /// the daemon N times") and goes back to pending, so the queue goes on (and a
+    /// resume retries it). Returns the ids of the scans failed.
+    pub fn count_crashes(
+        &mut self,
+        limit: u32,
+        faulted: Option<Lane>,
+    ) -> Result<Vec<i64>, StoreError> {
         let tx = self.write_transaction()?;
-        let died: Option<i64> = tx
-            .query_row(
-                "SELECT value - 1 FROM meta WHERE key = 'boot' AND NOT EXISTS
-                   (SELECT 1 FROM meta clean WHERE clean.key = 'clean_stop'
-                    AND clean.value = meta.value - 1)",
-                [],
-                |r| r.get(0),
-            )
-            .optional()?;
-        if let Some(previous) = died {
+        if let Some(lane) = faulted {
+            let previous: i64 =
+                tx.query_row("SELECT value - 1 FROM meta WHERE key = 'boot'", [], |r| {
+                    r.get(0)
+                })?;
             // Steps started before boots were recorded on them count too.
-            tx.execute(
-                "UPDATE steps SET crashes = crashes + 1
-                 WHERE state = 'started' AND (started_boot = ?1 OR started_boot IS NULL)",
-                [previous],
-            )?;
+            let started: Vec<(i64, u32, String)> = {
+                let mut stmt = tx.prepare(
+                    "SELECT scan_id, idx, step FROM steps WHERE state = 'started'
+                     AND (started_boot = ?1 OR started_boot IS NULL)",
+                )?;
+                let rows = stmt
+                    .query_map([previous], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?)))?
+                    .collect::<Result<_, _>>()?;
+                rows
+            };
+            for (scan_id, idx, step) in started {
+                let step: Step = serde_json::from_str(&step).map_err(json_err("step"))?;
+                if step.lane() == lane {
+                    tx.execute(
+                        "UPDATE steps SET crashes = crashes + 1 WHERE scan_id = ?1 AND idx = ?2",
+                        params![scan_id, idx],
+                    )?;
+                }
+            }
         }
         let looping: Vec<(i64, u32, String, u32)> = {
             let mut stmt = tx.prepare(
@@ -382,17 +397,6 @@ impl Store {
         Ok(self
             .conn
             .transaction_with_behavior(TransactionBehavior::Immediate)?)
-    }
-
-    /// Records that daemon start `boot` is stopping on request (a signal), so the
-    /// steps it leaves unfinished do not count as crashes at the next start.
-    pub fn record_clean_stop(&mut self, boot: i64) -> Result<(), StoreError> {
-        self.conn.execute(
-            "INSERT INTO meta (key, value) VALUES ('clean_stop', ?1)
-             ON CONFLICT(key) DO UPDATE SET value = excluded.value",
-            [boot],
-        )?;
-        Ok(())
     }
 
     /// Counts a daemon start and returns its number.
@@ -550,6 +554,11 @@ impl Store {
 
     pub fn scans(&self) -> Result<Vec<ScanRecord>, StoreError> {
         self.query_scans("ORDER BY id", [])
+    }
+
+    /// The scans in `state`, oldest first.
+    pub fn scans_in(&self, state: ScanState) -> Result<Vec<ScanRecord>, StoreError> {
+        self.query_scans("WHERE state = ?1 ORDER BY id", [state.as_str()])
     }
 
     pub fn scans_of_sweep(&self, sweep_id: i64) -> Result<Vec<ScanRecord>, StoreError> {
@@ -1145,11 +1154,12 @@ mod tests {
     }
 
     /// A daemon start as `gonio serve` makes it: open, count the start, count the
-    /// crashes (limit 3). Returns the store, the boot and the scans failed.
-    fn restart(dir: &std::path::Path) -> (Store, i64, Vec<i64>) {
+    /// crashes (limit 3) of a previous daemon that died of a fault in lane `faulted`.
+    /// Returns the store, the boot and the scans failed.
+    fn restart(dir: &std::path::Path, faulted: Option<Lane>) -> (Store, i64, Vec<i64>) {
         let mut store = Store::open(&dir.join("gonio.sqlite")).unwrap();
         let boot = store.begin_boot().unwrap();
-        let failed = store.count_crashes(3).unwrap();
+        let failed = store.count_crashes(3, faulted).unwrap();
         (store, boot, failed)
     }
 
@@ -1169,16 +1179,17 @@ mod tests {
     }
 
     #[test]
-    fn a_step_running_at_three_deaths_fails_its_scan_and_the_queue_goes_on() {
+    fn a_step_running_at_three_faults_of_its_lane_fails_its_scan_and_the_queue_goes_on() {
         let (dir, mut store) = temp_store("crashes");
         store.begin_boot().unwrap();
         let (ids, first) = running_scan(&mut store);
         for death in 1..=3 {
-            // The step starts, then the daemon dies: the next start counts it.
+            // The step starts, then the daemon dies of a fault in the hardware lane:
+            // the next start counts it.
             store.step_started(ids[0], first).unwrap();
             drop(store);
             let failed;
-            (store, _, failed) = restart(&dir);
+            (store, _, failed) = restart(&dir, Some(Lane::Hardware));
             let scan = store.scan(ids[0]).unwrap().unwrap();
             if death < 3 {
                 assert!(failed.is_empty());
@@ -1203,41 +1214,49 @@ mod tests {
             ids[1]
         );
         drop(store);
-        assert!(restart(&dir).2.is_empty());
+        assert!(restart(&dir, Some(Lane::Hardware)).2.is_empty());
         std::fs::remove_dir_all(dir).unwrap();
     }
 
     #[test]
-    fn clean_stops_and_deaths_a_step_did_not_run_at_are_not_its_crashes() {
-        let (dir, mut store) = temp_store("clean-stops");
-        let mut boot = store.begin_boot().unwrap();
+    fn kills_faults_of_another_lane_and_deaths_a_step_did_not_run_at_are_not_its_crashes() {
+        let (dir, mut store) = temp_store("kills");
+        store.begin_boot().unwrap();
         let (ids, first) = running_scan(&mut store);
-        // Stopped on a signal three times while the step ran: no crash.
-        for _ in 0..3 {
+        // Killed (or a power cut) five times while the step ran: no fault recorded, no
+        // crash.
+        for _ in 0..5 {
             store.step_started(ids[0], first).unwrap();
-            store.record_clean_stop(boot).unwrap();
             drop(store);
             let failed;
-            (store, boot, failed) = restart(&dir);
+            (store, _, failed) = restart(&dir, None);
             assert!(failed.is_empty());
         }
-        // Two deaths while it ran, each followed by a death in a start that had not
+        // Faults of the processing lane while this hardware step ran: not its.
+        for _ in 0..3 {
+            store.step_started(ids[0], first).unwrap();
+            drop(store);
+            let failed;
+            (store, _, failed) = restart(&dir, Some(Lane::Processing));
+            assert!(failed.is_empty());
+        }
+        // Two faults while it ran, each followed by a fault in a start that had not
         // run it again yet: two crashes, not four.
         for _ in 0..2 {
             store.step_started(ids[0], first).unwrap();
             for _ in 0..2 {
                 drop(store);
                 let failed;
-                (store, _, failed) = restart(&dir);
+                (store, _, failed) = restart(&dir, Some(Lane::Hardware));
                 assert!(failed.is_empty());
             }
         }
         let scan = store.scan(ids[0]).unwrap().unwrap();
         assert_eq!(scan.state, ScanState::Running);
-        // The third death it runs at fails it.
+        // The third fault it runs at fails it.
         store.step_started(ids[0], first).unwrap();
         drop(store);
-        let (store, _, failed) = restart(&dir);
+        let (store, _, failed) = restart(&dir, Some(Lane::Hardware));
         assert_eq!(failed, vec![ids[0]]);
         drop(store);
         std::fs::remove_dir_all(dir).unwrap();

@@ -1,6 +1,7 @@
 //! A scan as the API shows it (docs/ARCHITECTURE.md, "HTTP API"), and the publisher
 //! thread that sends it to event subscribers whenever it changes: the lanes only say
-//! which scan changed, so they never wait for a view to be built.
+//! which scan changed, so they never wait for a view to be built. A scan that reached
+//! a final state is cleared of leftover temporary files as it is published.
 
 use std::path::Path;
 use std::sync::Arc;
@@ -8,6 +9,7 @@ use std::time::Duration;
 
 use serde_json::{json, Value};
 
+use super::files::{remove_partials, Writers};
 use super::plan::{theta_dir_name, Step, FIT_MODELS};
 use super::progress::{metered_bracket, progress};
 use super::shared::{ScanEvent, Shared};
@@ -235,6 +237,16 @@ fn publish(shared: &Shared, store: &Store, id: i64) -> Result<(), StoreError> {
     let Some(scan) = store.scan(id)? else {
         return Ok(());
     };
+    if scan.state.is_final() {
+        // A scan that ended keeps no temporary of a writer no longer running (a write
+        // still in flight, ours included, renames or removes its own).
+        let dir = shared.scan_dir(id);
+        match remove_partials(&dir, Writers::Running) {
+            Ok(0) => {}
+            Ok(n) => tracing::info!("scan {id}: removed {n} partial file(s)"),
+            Err(err) => tracing::warn!("scan {id}: cleaning {}: {err}", dir.display()),
+        }
+    }
     let view = scan_view(shared, store, &scan, true)?;
     // No subscriber is not an error.
     let _ = shared.events.send(ScanEvent {

@@ -7,7 +7,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::atomic::Ordering;
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use gonio_drivers::bracket::{auto_bracket, BracketError, BracketRegion, MeteringFrame};
 use gonio_drivers::grbl::ArmAxis;
@@ -16,6 +16,7 @@ use gonio_processing::capture::{sidecar_path, Frame, Sidecar};
 use gonio_processing::geometry::{column_angles, Setup};
 use serde_json::{json, Value};
 
+use super::backoff::{Backoff, Failures};
 use super::step::{self, Flow, Outcome, StepError};
 use crate::commands::serve::calibration;
 use crate::commands::serve::devices::{ArmOpener, Devices, SceneFacts, SidecarDefaults};
@@ -24,19 +25,15 @@ use crate::commands::serve::plan::{
     exposure_stem, mount_reason, theta_dir_name, Lane, ScanPlan, Step,
 };
 use crate::commands::serve::shared::{Shared, EMERGENCY_STOP};
+use crate::commands::serve::storage;
 use crate::commands::serve::store::{
-    now_rfc3339, now_unix, ScanRecord, ScanState, Store, StoreError,
+    now_rfc3339, now_unix, ScanRecord, ScanState, StepState, Store, StoreError,
 };
 use crate::commands::serve::sync::lock;
 use crate::commands::serve::timing::METER_START_S;
 
 /// How often the lane looks at the queue and the devices when nothing wakes it.
 const IDLE_POLL: Duration = Duration::from_millis(500);
-/// Looking for a lost device (arm or camera) again after a failure waits this long,
-/// doubling up to the cap: opening resets an Arduino-based board, so failed opens must
-/// not come in a storm.
-const RECONNECT_BACKOFF: Duration = Duration::from_secs(1);
-const RECONNECT_BACKOFF_MAX: Duration = Duration::from_secs(60);
 
 /// The scan states the hardware lane works in.
 const RUNNING: &[ScanState] = &[ScanState::Running];
@@ -52,7 +49,7 @@ pub struct HardwareLane {
     /// Shutter times the camera allows, seconds.
     allowed_s: Vec<f64>,
     /// When to look for the camera again while it is not ready (`None`: it is).
-    camera_retry: Option<Reconnect>,
+    camera_retry: Option<Backoff>,
     /// A device came back: interrupted scans resume once both are ready.
     resume: bool,
     homed: bool,
@@ -60,7 +57,7 @@ pub struct HardwareLane {
     at_deg: Option<f64>,
     /// Why the arm could not be opened, when it could not; and when to try again.
     arm_error: Option<String>,
-    arm_retry: Reconnect,
+    arm_retry: Backoff,
     setup: Option<Setup>,
     /// Where `setup` comes from (each field's provenance in setup.json).
     setup_source: &'static str,
@@ -70,6 +67,10 @@ pub struct HardwareLane {
     /// Where the carousel goes back to after every homing (the cycle moves it): the
     /// slot of the running scan's sample, its axis.
     carousel_slot: Option<(ArmAxis, f64)>,
+    /// When to look at the free space again while scans wait for it.
+    disk_retry: Backoff,
+    /// Bytes the step being executed will write (what a full disk leaves it short of).
+    need: u64,
 }
 
 impl HardwareLane {
@@ -82,27 +83,30 @@ impl HardwareLane {
             camera: devices.camera,
             camera_model: String::new(),
             allowed_s: Vec::new(),
-            camera_retry: Some(Reconnect::now()),
+            camera_retry: Some(Backoff::now()),
             resume: true,
             homed: false,
             at_deg: None,
             arm_error: None,
-            arm_retry: Reconnect::now(),
+            arm_retry: Backoff::now(),
             setup: devices.setup,
             setup_source: devices.setup_source,
             truth: devices.truth,
             sidecar: devices.sidecar,
             iso: devices.iso,
             carousel_slot: None,
+            disk_retry: Backoff::now(),
+            need: 0,
         }
     }
 
     /// Runs forever on the calling thread.
     pub fn run(mut self) {
+        let mut failures = Failures::default();
         loop {
-            if let Err(err) = self.tick() {
-                tracing::error!("hardware lane: {err}");
-                std::thread::sleep(Duration::from_secs(1));
+            match self.tick() {
+                Ok(()) => failures.ok(),
+                Err(err) => std::thread::sleep(failures.failed("hardware lane", &err)),
             }
         }
     }
@@ -170,6 +174,10 @@ impl HardwareLane {
         let camera_ready = self.connect_camera()?;
         self.answer_position_request()?;
         self.answer_home_request()?;
+        if self.waiting_for_disk()? {
+            self.idle();
+            return Ok(());
+        }
         if !(arm_ready && camera_ready) {
             self.wait_for_devices()?;
             self.idle();
@@ -225,7 +233,7 @@ impl HardwareLane {
                 self.homed = false;
                 self.at_deg = None;
                 self.arm_error = None;
-                self.arm_retry = Reconnect::now();
+                self.arm_retry = Backoff::now();
                 self.log(None, "connect", &self.opener.path().display().to_string())?;
                 {
                     let mut status = lock(&self.shared.hardware);
@@ -316,6 +324,79 @@ impl HardwareLane {
             self.shared.changed(id);
         }
         Ok(())
+    }
+
+    /// While scans wait for disk space nothing starts: the scan next in line waits too,
+    /// and the free space is looked at again with backoff; once the next steps of every
+    /// scan waiting for it fit, those scans are queued again. Returns whether scans
+    /// still wait for space.
+    fn waiting_for_disk(&mut self) -> Result<bool, StoreError> {
+        let waiting: Vec<ScanRecord> = self
+            .store
+            .scans_in(ScanState::Waiting)?
+            .into_iter()
+            .filter(|s| s.error.as_deref().is_some_and(storage::is_disk_wait))
+            .collect();
+        if waiting.is_empty() {
+            self.disk_retry = Backoff::now();
+            return Ok(false);
+        }
+        if !self.disk_retry.due() {
+            return Ok(true);
+        }
+        let mut need = 0;
+        for scan in &waiting {
+            need = need.max(self.scan_need(scan)?);
+        }
+        match self.shared.storage.check(need) {
+            Ok(()) => {
+                self.disk_retry = Backoff::now();
+                self.log(None, "disk", "space for the waiting scans")?;
+                for scan in waiting {
+                    if self.store.transition(
+                        scan.id,
+                        &[ScanState::Waiting],
+                        ScanState::Queued,
+                        None,
+                    )? {
+                        tracing::info!("scan {}: disk space back, queued again", scan.id);
+                        self.shared.changed(scan.id);
+                    }
+                }
+                Ok(false)
+            }
+            Err(reason) => {
+                self.disk_retry = self.disk_retry.later();
+                if let Some(next) = self.store.next_for_hardware(now_unix())? {
+                    waiting_for_space(&self.shared, &mut self.store, &next, &reason)?;
+                }
+                for scan in &waiting {
+                    waiting_for_space(&self.shared, &mut self.store, scan, &reason)?;
+                }
+                Ok(true)
+            }
+        }
+    }
+
+    /// Pixels of the frames of scan `id`: from its own setup, else the current one.
+    fn frame_pixels(&self, id: i64) -> u64 {
+        let own =
+            gonio_processing::extract::read_setup(&self.shared.scan_dir(id).join("setup.json"));
+        storage::frame_pixels(own.ok().or_else(|| self.setup()).as_ref())
+    }
+
+    /// The most that the next hardware step and the next processing step of `scan`
+    /// will write.
+    fn scan_need(&self, scan: &ScanRecord) -> Result<u64, StoreError> {
+        let pixels = self.frame_pixels(scan.id);
+        let steps = self.store.steps(scan.id)?;
+        let pending = || steps.iter().filter(|s| s.state != StepState::Done);
+        Ok([Lane::Hardware, Lane::Processing]
+            .into_iter()
+            .filter_map(|lane| pending().find(|s| s.step.lane() == lane))
+            .map(|s| storage::step_need(&s.step, &scan.plan, pixels))
+            .max()
+            .unwrap_or(0))
     }
 
     /// Applies an operator's declared arm position, if one is pending, and answers it.
@@ -452,12 +533,21 @@ impl HardwareLane {
         }
         let dir = self.shared.scan_dir(id);
         if let Err(err) = self.prepare_dir(&dir) {
+            if storage::is_disk_full(&err) {
+                let reason = self.shared.storage.full_reason(0);
+                let now = self.store.scan(id)?;
+                if let Some(scan) = now {
+                    waiting_for_space(&self.shared, &mut self.store, &scan, &reason)?;
+                }
+                return Ok(());
+            }
             let reason = format!("preparing {}: {err}", dir.display());
             self.store
                 .transition(id, RUNNING, ScanState::Failed, Some(&reason))?;
             self.shared.changed(id);
             return Ok(());
         }
+        let pixels = self.frame_pixels(id);
         while self.still_running(id)? {
             // Re-read each time: a metering step plans the captures after it.
             let Some(step) = self.store.next_step(id, Lane::Hardware)? else {
@@ -469,6 +559,17 @@ impl HardwareLane {
                 break;
             };
             if matches!(step.step, Step::Move { .. }) && !self.wait_for_processing(id)? {
+                break;
+            }
+            // What the step writes (before a move: the bracket and its map) must fit
+            // above the journal's reserve, else the scan waits for space.
+            self.need = storage::step_need(&step.step, &scan.plan, pixels);
+            if let Err(reason) = self.shared.storage.check(self.need) {
+                let now = self.store.scan(id)?;
+                if let Some(scan) = now {
+                    waiting_for_space(&self.shared, &mut self.store, &scan, &reason)?;
+                }
+                self.disk_retry = Backoff::now().later();
                 break;
             }
             step::begin(&self.shared, &mut self.store, id, step.index)?;
@@ -905,12 +1006,20 @@ impl HardwareLane {
                     status.camera.error = None;
                     return Ok(value);
                 }
+                Err(err) if storage::says_disk_full(&err.to_string()) => {
+                    // The camera did its part: the host's disk is full.
+                    status.camera.state = "idle";
+                    tracing::warn!("scan {id}: camera {what}: {err}");
+                    return Err(StepError::Waiting(
+                        self.shared.storage.full_reason(self.need),
+                    ));
+                }
                 Err(err) => {
                     tracing::warn!("scan {id}: camera {what} (try {}): {err}", attempt + 1);
                     status.camera.state = camera_state_after(&err);
                     status.camera.error = Some(err.to_string());
                     if is_camera_gone(&err) {
-                        self.camera_retry = Some(Reconnect::now());
+                        self.camera_retry = Some(Backoff::now());
                         return Err(StepError::Interrupted(format!(
                             "camera {what}: {err}; waiting for the camera to come back"
                         )));
@@ -965,7 +1074,7 @@ impl HardwareLane {
                     c.set_exposure(requested)
                 })?;
                 std::fs::create_dir_all(&frame_dir)
-                    .map_err(|e| StepError::Failed(format!("{}: {e}", frame_dir.display())))?;
+                    .map_err(|e| self.write_error(format!("{}: {e}", frame_dir.display())))?;
                 let target = frame_dir.join(format!("{stem}.tiff"));
                 let capture =
                     self.camera_op(id, &format!("capture {what}"), |c| c.capture_to(&target))?;
@@ -974,8 +1083,19 @@ impl HardwareLane {
             }
         };
         self.write_sidecar(&sidecar_path, exposure, theta_l)
-            .map_err(StepError::Failed)?;
+            .map_err(|e| self.write_error(e))?;
         Ok(frame_result(dir, &image, false))
+    }
+
+    /// The step error of a write that failed with `message`: waiting for space when the
+    /// disk is full, else a failure.
+    fn write_error(&self, message: String) -> StepError {
+        if storage::says_disk_full(&message) {
+            tracing::warn!("{message}");
+            StepError::Waiting(self.shared.storage.full_reason(self.need))
+        } else {
+            StepError::Failed(message)
+        }
     }
 
     /// Writes the JSON sidecar of a capture (docs/ARCHITECTURE.md, "File formats") atomically at `path`.
@@ -990,6 +1110,7 @@ impl HardwareLane {
             white_level: self.sidecar.white_level,
             response: self.sidecar.response,
             significant_bits: self.sidecar.significant_bits,
+            aperture: None,
             width: None,
             height: None,
         };
@@ -1005,6 +1126,31 @@ fn home_with_carousel(arm: &mut dyn Arm, slot: Option<(ArmAxis, f64)>) -> Result
         Some((axis, position)) => arm.move_axis(axis, position),
         None => Ok(()),
     }
+}
+
+/// Scan `scan` waits for disk space with `reason` (from the queue, or running, or
+/// waiting with another reason; a scan waiting for space has its reason brought up to
+/// date).
+fn waiting_for_space(
+    shared: &Shared,
+    store: &mut Store,
+    scan: &ScanRecord,
+    reason: &str,
+) -> Result<(), StoreError> {
+    if scan.state == ScanState::Waiting && scan.error.as_deref() == Some(reason) {
+        return Ok(());
+    }
+    let from = [ScanState::Queued, ScanState::Running, ScanState::Waiting];
+    if store.transition(scan.id, &from, ScanState::Waiting, Some(reason))? {
+        if !(scan.state == ScanState::Waiting
+            && scan.error.as_deref().is_some_and(storage::is_disk_wait))
+        {
+            tracing::warn!("scan {}: waiting: {reason}", scan.id);
+            store.log(shared.boot, Some(scan.id), "wait", reason)?;
+        }
+        shared.changed(scan.id);
+    }
+    Ok(())
 }
 
 /// Metering captures before giving up on a scene that clips.
@@ -1058,36 +1204,6 @@ fn strip_region(setup: &Setup, theta_l: f64, frame: &Frame) -> BracketRegion {
 /// Backoff before try `attempt` (1-based after the first): base · 2^(attempt−1).
 fn backoff(base_ms: u64, attempt: u32) -> Duration {
     Duration::from_millis(base_ms.saturating_mul(1 << (attempt - 1).min(10)))
-}
-
-/// When to look for a lost device again: at once, then after [`RECONNECT_BACKOFF`],
-/// doubling after each failure up to [`RECONNECT_BACKOFF_MAX`].
-#[derive(Debug, Clone, Copy)]
-struct Reconnect {
-    at: Instant,
-    delay: Duration,
-}
-
-impl Reconnect {
-    fn now() -> Self {
-        Self {
-            at: Instant::now(),
-            delay: Duration::ZERO,
-        }
-    }
-
-    fn due(&self) -> bool {
-        Instant::now() >= self.at
-    }
-
-    /// The next try after a failed one.
-    fn later(self) -> Self {
-        let delay = (self.delay * 2).clamp(RECONNECT_BACKOFF, RECONNECT_BACKOFF_MAX);
-        Self {
-            at: Instant::now() + delay,
-            delay,
-        }
-    }
 }
 
 /// Whether a camera error means the camera is gone (unplugged, switched off).

@@ -3,6 +3,7 @@
 //! brackets into results meanwhile. Both work from the journal of steps in the store,
 //! each with its own connection; a scan is done when both are.
 
+mod backoff;
 mod hardware;
 mod processing;
 mod step;
@@ -13,49 +14,50 @@ use std::sync::Arc;
 use anyhow::Context;
 
 use super::devices::Devices;
-use super::files::remove_partials;
+use super::files::{remove_partials, Writers};
+use super::plan::Lane;
 use super::shared::Shared;
+use super::step_guard;
 use super::store::Store;
 use hardware::HardwareLane;
 use processing::ProcessingLane;
 
-/// Removes the temporary files a crash left in the scans that are not finished and in
-/// the metering directory, then starts both lanes on `devices`, with connections to
-/// the database at `db_path`.
+/// Removes the temporary files that writers no longer running left anywhere in the data
+/// directory (every scan's, whatever its state, the metering frames, the calibrated
+/// setup), then starts both lanes on `devices`, with connections to the database at
+/// `db_path`.
 pub fn start(shared: Arc<Shared>, devices: Devices, db_path: &Path) -> anyhow::Result<()> {
+    let data = &shared.config.data_dir;
+    let removed = remove_partials(data, Writers::RunningOthers)
+        .with_context(|| format!("cleaning {}", data.display()))?;
+    if removed > 0 {
+        tracing::info!("{}: removed {removed} partial file(s)", data.display());
+    }
     let hardware_store = Store::open(db_path)?;
-    let mut dirs = vec![shared.config.data_dir.join("metering")];
-    for scan in hardware_store.scans()? {
-        if !scan.state.is_final() {
-            dirs.push(shared.scan_dir(scan.id));
-        }
-    }
-    for dir in dirs {
-        let removed =
-            remove_partials(&dir).with_context(|| format!("cleaning {}", dir.display()))?;
-        if removed > 0 {
-            tracing::info!("{}: removed {removed} partial file(s)", dir.display());
-        }
-    }
     let hardware = HardwareLane::new(shared.clone(), hardware_store, devices);
     let processing = ProcessingLane::new(shared, Store::open(db_path)?);
-    spawn_watched("hardware", move || hardware.run())?;
-    spawn_watched("processing", move || processing.run())
+    spawn_watched(Lane::Hardware, move || hardware.run())?;
+    spawn_watched(Lane::Processing, move || processing.run())
 }
 
-/// Runs `lane` on a thread named `name`. A lane only ends by panicking: then the
-/// process ends too, so that a supervisor restarts it and the journal resumes the
-/// scans, rather than serve without it.
-fn spawn_watched(name: &str, lane: impl FnOnce() + Send + 'static) -> anyhow::Result<()> {
+/// Runs `run` on a thread named for `lane`, marked as that lane's. A lane only ends by
+/// panicking: then the fault is recorded against it and the process ends too, so that
+/// a supervisor restarts it and the journal resumes the scans, rather than serve
+/// without it.
+fn spawn_watched(lane: Lane, run: impl FnOnce() + Send + 'static) -> anyhow::Result<()> {
+    let name = lane.name();
     let thread = std::thread::Builder::new()
         .name(name.to_owned())
-        .spawn(lane)
+        .spawn(move || {
+            step_guard::mark_lane(lane);
+            run()
+        })
         .with_context(|| format!("starting the {name} lane"))?;
-    let name = name.to_owned();
     std::thread::Builder::new()
         .name(format!("{name}-watch"))
         .spawn(move || {
             let _ = thread.join();
+            step_guard::record_lane_death(lane);
             tracing::error!("the {name} lane stopped; exiting");
             std::process::exit(2);
         })

@@ -14,12 +14,14 @@ use std::path::{Path, PathBuf};
 use std::sync::{mpsc, Arc};
 use std::time::Duration;
 
+use super::backoff::{Backoff, Failures};
 use super::step::{self, Outcome, StepError};
-use crate::commands::serve::plan::{ScanPlan, Step};
+use crate::commands::serve::plan::{Lane, ScanPlan, Step};
 use crate::commands::serve::process::{self, Prefetched};
 use crate::commands::serve::shared::Shared;
 use crate::commands::serve::step_guard;
-use crate::commands::serve::store::{StepRecord, Store, StoreError, PROCESSABLE};
+use crate::commands::serve::storage::{self, Probe};
+use crate::commands::serve::store::{ScanState, StepRecord, Store, StoreError, PROCESSABLE};
 
 /// How often the lane looks for ready steps when nothing wakes it.
 const IDLE_POLL: Duration = Duration::from_millis(500);
@@ -38,6 +40,8 @@ pub struct ProcessingLane {
     store: Store,
     prefetched: Prefetched,
     background: Option<Background>,
+    /// When to look at the free space again after a step did not fit.
+    disk_retry: Backoff,
 }
 
 impl ProcessingLane {
@@ -47,6 +51,7 @@ impl ProcessingLane {
             store,
             prefetched: Prefetched::default(),
             background: None,
+            disk_retry: Backoff::now(),
         }
     }
 
@@ -59,7 +64,10 @@ impl ProcessingLane {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .thread_name(|n| format!("processing-{n}"))
-            .start_handler(|_| lower_priority())
+            .start_handler(|_| {
+                step_guard::mark_lane(Lane::Processing);
+                lower_priority()
+            })
             .build();
         match pool {
             Ok(pool) => pool.install(|| self.work()),
@@ -71,10 +79,11 @@ impl ProcessingLane {
     }
 
     fn work(mut self) {
+        let mut failures = Failures::default();
         loop {
-            if let Err(err) = self.turn() {
-                tracing::error!("processing lane: {err}");
-                std::thread::sleep(Duration::from_secs(1));
+            match self.turn() {
+                Ok(()) => failures.ok(),
+                Err(err) => std::thread::sleep(failures.failed("processing lane", &err)),
             }
         }
     }
@@ -86,6 +95,9 @@ impl ProcessingLane {
         self.collect(false)?;
         if self.background.is_none() {
             if let Some((id, step)) = self.store.next_hdr()? {
+                if !self.fits(id, &step)? {
+                    return self.wait_for_space();
+                }
                 self.start_background(id, &step)?;
             }
         }
@@ -93,6 +105,7 @@ impl ProcessingLane {
         match self.store.next_for_processing(running)? {
             // One HDR step at a time: the next waits for the running one.
             Some((_, record)) if matches!(record.step, Step::Hdr { .. }) => self.collect(true),
+            Some((id, record)) if !self.fits(id, &record)? => self.wait_for_space(),
             Some((id, record)) => self.run_step(id, &record),
             // Nothing else to do: wait for the background step.
             None if self.background.is_some() => self.collect(true),
@@ -104,6 +117,49 @@ impl ProcessingLane {
                 Ok(())
             }
         }
+    }
+
+    /// Whether what step `record` of scan `id` writes fits above the journal's reserve;
+    /// if not, the scan waits for space (the hardware lane queues it again once there
+    /// is), and the lane looks again with backoff.
+    fn fits(&mut self, id: i64, record: &StepRecord) -> Result<bool, StoreError> {
+        if !self.disk_retry.due() {
+            return Ok(false);
+        }
+        let Some(scan) = self.store.scan(id)? else {
+            return Ok(false);
+        };
+        let setup =
+            gonio_processing::extract::read_setup(&self.shared.scan_dir(id).join("setup.json"));
+        let pixels = storage::frame_pixels(setup.ok().as_ref());
+        let need = storage::step_need(&record.step, &scan.plan, pixels);
+        match self.shared.storage.check(need) {
+            Ok(()) => {
+                self.disk_retry = Backoff::now();
+                Ok(true)
+            }
+            Err(reason) => {
+                self.disk_retry = self.disk_retry.later();
+                let waits = scan.state == ScanState::Waiting
+                    && scan.error.as_deref().is_some_and(storage::is_disk_wait);
+                if !waits {
+                    tracing::warn!("scan {id} waiting: {reason}");
+                    self.store
+                        .log(self.shared.boot, Some(id), "wait", &reason)?;
+                    self.store
+                        .transition(id, &PROCESSABLE, ScanState::Waiting, Some(&reason))?;
+                    self.shared.changed(id);
+                }
+                Ok(false)
+            }
+        }
+    }
+
+    /// Waits while no step fits on the disk (the background step, if any, goes on).
+    fn wait_for_space(&mut self) -> Result<(), StoreError> {
+        self.collect(false)?;
+        self.shared.processing_wake.take(IDLE_POLL);
+        Ok(())
     }
 
     /// Decodes one frame awaiting its HDR step ahead of it; returns whether it did.
@@ -127,9 +183,10 @@ impl ProcessingLane {
         let dir = self.shared.scan_dir(id);
         let mut prefetched = std::mem::take(&mut self.prefetched);
         let step = record.step.clone();
+        let storage = self.shared.storage.clone();
         let (sender, outcome) = mpsc::channel();
         rayon::spawn(move || {
-            let outcome = run(&step, &dir, &scan.plan, &mut prefetched);
+            let outcome = run(&step, &dir, &scan.plan, &mut prefetched, &storage);
             // The lane only drops the receiver when it stops.
             let _ = sender.send((outcome, prefetched));
         });
@@ -168,7 +225,13 @@ impl ProcessingLane {
         };
         step::begin(&self.shared, &mut self.store, id, record.index)?;
         let dir = self.shared.scan_dir(id);
-        let outcome = run(&record.step, &dir, &scan.plan, &mut self.prefetched);
+        let outcome = run(
+            &record.step,
+            &dir,
+            &scan.plan,
+            &mut self.prefetched,
+            &self.shared.storage,
+        );
         self.finish(id, record.index, outcome)
     }
 
@@ -189,13 +252,28 @@ impl ProcessingLane {
 }
 
 /// Runs processing step `step` of a scan planned as `plan` in `dir`; a panic fails
-/// the step, not the daemon.
-fn run(step: &Step, dir: &Path, plan: &ScanPlan, prefetched: &mut Prefetched) -> Outcome {
+/// the step, not the daemon, and a full disk makes the scan wait for space.
+fn run(
+    step: &Step,
+    dir: &Path,
+    plan: &ScanPlan,
+    prefetched: &mut Prefetched,
+    storage: &Probe,
+) -> Outcome {
     step_guard::run_processing(&step.describe(), || {
         process::run(step, dir, plan, prefetched)
     })
     .map(|result| (result, Vec::new()))
-    .map_err(StepError::Failed)
+    .map_err(|message| {
+        if storage::says_disk_full(&message) {
+            tracing::warn!("{message}");
+            let setup = gonio_processing::extract::read_setup(&dir.join("setup.json"));
+            let pixels = storage::frame_pixels(setup.ok().as_ref());
+            StepError::Waiting(storage.full_reason(storage::step_need(step, plan, pixels)))
+        } else {
+            StepError::Failed(message)
+        }
+    })
 }
 
 /// The outcome of a background step whose worker ended without one.
