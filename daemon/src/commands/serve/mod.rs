@@ -78,6 +78,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(data) = args.data {
         config.data_dir = data;
     }
+    // The port first: a daemon that cannot listen creates nothing (no data directory,
+    // no token) and has started no step.
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
+    let listener = {
+        let _context = runtime.enter();
+        listen(config.bind).with_context(|| format!("binding {}", config.bind))?
+    };
     private_data_dir(&config.data_dir)?;
     gonio_processing::capture::set_max_pixels(config.max_frame_pixels);
     // One daemon per data directory: the OS drops the lock when the process ends,
@@ -101,16 +112,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Store::open(&db_path).with_context(|| format!("opening {}", db_path.display()))?;
     let boot = api_store.begin_boot()?;
     let devices = devices::open(&config)?;
-    // Listening before the queue runs: a daemon that cannot bind has started no step.
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .context("starting the async runtime")?;
-    let listener = {
-        let _context = runtime.enter();
-        listen(config.bind).with_context(|| format!("binding {}", config.bind))?
-    };
 
     let (events, _) = broadcast::channel(256);
     let shared = Arc::new(Shared {
