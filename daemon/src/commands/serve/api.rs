@@ -15,6 +15,7 @@ use axum::response::{IntoResponse, Response};
 use axum::routing::{delete, get, post};
 use axum::{Json, Router};
 use futures_util::{Stream, StreamExt};
+use gonio_drivers::ArmState;
 use serde::Deserialize;
 use serde_json::{json, Value};
 use tokio_stream::wrappers::BroadcastStream;
@@ -132,6 +133,7 @@ pub fn router(shared: Arc<Shared>) -> Router {
         .route("/api/scans/{id}/calibrate", post(calibrate_scan))
         .route("/api/setup", delete(forget_calibration))
         .route("/api/arm/stop", post(stop_arm))
+        .route("/api/arm/reconnect", post(reconnect_arm))
         .merge(json_bodies)
         .route_layer(token());
     let reads = Router::new()
@@ -538,6 +540,23 @@ async fn stop_arm(State(shared): AppState) -> ApiResult<Json<Value>> {
     Ok(Json(json!({ "stopped": true, "paused": paused })))
 }
 
+/// Opens the arm again now: one that is disconnected (instead of waiting for its next
+/// try) or refused for its settings (after they were changed on the board). 409 while
+/// the arm is connected: reopening would reset it.
+async fn reconnect_arm(State(shared): AppState) -> ApiResult<Json<Value>> {
+    let state = lock(&shared.hardware).arm.state;
+    if !matches!(state, ArmState::Disconnected | ArmState::Refused) {
+        return Err(ApiError::new(
+            StatusCode::CONFLICT,
+            "the arm is connected: nothing to reconnect (opening it again would reset it)",
+        ));
+    }
+    shared.arm_reconnect.store(true, Ordering::Release);
+    shared.wake();
+    tracing::info!("arm reconnect asked for");
+    Ok(Json(json!({ "reconnecting": true })))
+}
+
 /// How long a declared position may wait for the hardware lane (busy with a step).
 const DECLARE_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(30);
 
@@ -677,8 +696,10 @@ async fn list_sweeps(State(shared): AppState) -> ApiResult<Json<Value>> {
 
 async fn hardware(State(shared): AppState) -> Json<Value> {
     let mut status = lock(&shared.hardware).clone();
-    if let Some(angle) = lock(&shared.arm_angle).as_ref().and_then(|a| a.get()) {
-        // As the arm reported it, also while a move is under way.
+    let live = lock(&shared.arm_angle).as_ref().and_then(|a| a.get());
+    if let Some(angle) = live.filter(|_| status.arm.homed) {
+        // As the arm reported it, also while a move is under way; none while the
+        // position is unknown.
         status.arm.angle_deg = Some(angle);
     }
     Json(json!({

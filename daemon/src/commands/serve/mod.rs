@@ -24,7 +24,7 @@ mod web;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::AtomicU64;
+use std::sync::atomic::{AtomicBool, AtomicU64};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -129,6 +129,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 homed: false,
                 device: devices.arm.path().display().to_string(),
                 error: None,
+                settings: Vec::new(),
             },
             camera: CameraView {
                 model: None,
@@ -143,6 +144,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         arm_angle: Mutex::new(None),
         stops: AtomicU64::new(0),
         arm_position: Mutex::new(None),
+        arm_reconnect: AtomicBool::new(false),
         timing: devices.timing,
         emulators: devices.emulators.clone(),
         config,

@@ -3,7 +3,7 @@
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::AtomicU64;
+use std::sync::atomic::{AtomicBool, AtomicU64};
 use std::sync::{mpsc, Arc, Mutex};
 
 use gonio_drivers::{ArmState, DeviceError, EmergencyStop, LiveAngle};
@@ -29,12 +29,16 @@ pub struct HardwareStatus {
 #[derive(Debug, Clone, Serialize)]
 pub struct ArmView {
     pub state: ArmState,
-    /// Last known angle θL, degrees.
+    /// Angle θL, degrees; `None` while the position is unknown (not homed or declared
+    /// since the controller powered up or reset).
     pub angle_deg: Option<f64>,
+    /// Whether the position is known (homed, or declared).
     pub homed: bool,
     pub device: String,
     /// The last fault, if the arm is not healthy.
     pub error: Option<String>,
+    /// While `refused`: each setting that differs from the configuration, one line each.
+    pub settings: Vec<String>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -91,6 +95,9 @@ pub struct Shared {
     pub stops: AtomicU64,
     /// A declared arm position waiting for the hardware lane (one at a time).
     pub arm_position: Mutex<Option<PositionRequest>>,
+    /// The operator asked to open the arm again (`POST /api/arm/reconnect`), also a
+    /// refused one.
+    pub arm_reconnect: AtomicBool,
     /// What the devices' steps are expected to take.
     pub timing: Timing,
     /// Present when the devices are emulated.

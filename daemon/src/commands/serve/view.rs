@@ -113,7 +113,8 @@ pub fn scan_view(
         "sample": scan.plan.sample,
         "state": scan.state,
         "error": scan.error,
-        "reason": (scan.state == ScanState::Waiting).then_some(&scan.error),
+        "reason": matches!(scan.state, ScanState::Waiting | ScanState::Interrupted)
+            .then_some(&scan.error),
         "sweep_id": scan.sweep_id,
         "theta_l": scan.plan.theta_l,
         "bracket": { "shutter_s": scan.plan.shutter_s, "auto": scan.plan.auto_bracket },
