@@ -3,19 +3,11 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-# ---- numpy and OpenCV: the Debevec–Malik test compares our merge with OpenCV's ----
-if ! python3 -c 'import cv2, numpy' 2>/dev/null; then
-    echo "installing numpy and opencv-python-headless"
-    python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore \
-        numpy==2.2.6 opencv-python-headless==4.12.0.88 </dev/null
-fi
-export GONIO_REQUIRE_OPENCV=1
-
 # Debian packages the tests need: Chromium for the page's browser test
 # (tests/tests/page_browser.rs); libgphoto2-dev, libclang-dev (bindgen) and pkg-config
-# to build the `gphoto2` feature.
+# to build the `gphoto2` feature; python3-venv for the tests' own Python below.
 missing=()
-for pkg in chromium libgphoto2-dev libclang-dev pkg-config; do
+for pkg in chromium libgphoto2-dev libclang-dev pkg-config python3-venv; do
     dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")
 done
 if ((${#missing[@]})); then
@@ -24,6 +16,24 @@ if ((${#missing[@]})); then
     apt-get update -q </dev/null
     apt-get install -y -q --no-install-recommends "${missing[@]}" </dev/null
 fi
+
+# ---- The tests' Python: a virtual environment of its own, .venv-test at the root ----
+# (git-ignored, created once and reused), never the system interpreter's packages.
+# numpy and OpenCV: the Debevec–Malik test compares our merge with OpenCV's; Mitsuba 3
+# (the PyPI wheel mitsuba, with drjit, whose scalar variants run on the CPU) loads and
+# evaluates `gonio export --format mitsuba` output. Tests run GONIO_PYTHON.
+venv="$PWD/.venv-test"
+if [ ! -x "$venv/bin/python" ]; then
+    echo "creating $venv"
+    python3 -m venv "$venv"
+fi
+if ! "$venv/bin/python" -c 'import cv2, numpy, mitsuba' 2>/dev/null; then
+    echo "installing numpy, opencv-python-headless and mitsuba into $venv"
+    "$venv/bin/python" -m pip install --quiet --disable-pip-version-check \
+        numpy==2.2.6 opencv-python-headless==4.12.0.88 mitsuba==3.9.1 </dev/null
+fi
+export GONIO_PYTHON="$venv/bin/python"
+export GONIO_REQUIRE_OPENCV=1
 
 # The workspace, including the README's offline commands (daemon/tests/readme_commands.rs)
 # and the page in Chromium.
@@ -39,9 +49,9 @@ cargo test -p gonio-drivers --features gphoto2 --locked --no-run
 # own dependencies resolve through their RPATH into the wheel's gphoto2.libs/).
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
-python3 -m pip download --quiet --disable-pip-version-check --no-deps --only-binary=:all: \
-    gphoto2==2.6.4 -d "$work/wheel" </dev/null
-python3 -m zipfile -e "$work"/wheel/gphoto2-2.6.4-*.whl "$work/wheel/unzipped"
+"$GONIO_PYTHON" -m pip download --quiet --disable-pip-version-check --no-deps \
+    --only-binary=:all: gphoto2==2.6.4 -d "$work/wheel" </dev/null
+"$GONIO_PYTHON" -m zipfile -e "$work"/wheel/gphoto2-2.6.4-*.whl "$work/wheel/unzipped"
 lib="$work/wheel/unzipped/gphoto2/libgphoto2"
 test -f "$lib/vusb/vusb.so" -a -f "$lib/libgphoto2.so.6" || {
     echo "gphoto2 wheel layout changed: no $lib/vusb/vusb.so" >&2
@@ -56,11 +66,6 @@ RUSTUP_HOME="${RUSTUP_HOME:-$HOME/.rustup}" CARGO_HOME="${CARGO_HOME:-$HOME/.car
     CAMLIBS="$lib/camlibs" IOLIBS="$lib/vusb" VCAMERADIR="$work/vcamera" \
     cargo test -p gonio-drivers --features gphoto2 --locked
 
-# ---- Mitsuba 3 loads and evaluates `gonio export --format mitsuba` output ----
-# The PyPI wheel mitsuba==3.9.1 (with drjit) runs its scalar variants on the CPU; it is
-# installed beside the other downloads, only for this test.
-python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore \
-    --target "$work/mitsuba" mitsuba==3.9.1 </dev/null
-GONIO_MITSUBA_PYTHONPATH="$work/mitsuba" \
-    # --workspace: the features the suite was built with, so nothing is compiled again.
-    cargo test --workspace --test cli_export --locked -- --ignored
+# ---- Mitsuba 3 (in .venv-test) loads and evaluates `gonio export --format mitsuba` output ----
+# --workspace: the features the suite was built with, so nothing is compiled again.
+cargo test --workspace --test cli_export --locked -- --ignored

@@ -50,7 +50,7 @@ fn main() {
         Some("serve" | "emulate-arm") | None => {}
         Some(name) => interrupt::install(name.to_owned()),
     }
-    let result = guard::catch(|| match cli.command {
+    let outcome = guard::catch(|| match cli.command {
         Command::Serve(args) => commands::serve::run(args),
         Command::Simulate(args) => commands::simulate::run(args),
         Command::Hdr(args) => commands::hdr::run(args),
@@ -61,15 +61,50 @@ fn main() {
         Command::Tradeoff(args) => commands::tradeoff::run(args),
         Command::EmulateArm(args) => commands::emulate_arm::run(args),
         Command::Export(args) => commands::export::run(args),
-    })
-    .unwrap_or_else(|panic| {
-        Err(anyhow::anyhow!(
-            "internal error (a bug; please report): {panic}"
-        ))
     });
+    let result = match outcome {
+        Ok(result) => result,
+        // `println!` panics when its write fails.
+        Err(panic) if panic.starts_with("failed printing to stdout") && stdout_closed() => {
+            std::process::exit(EXIT_STDOUT_CLOSED)
+        }
+        Err(panic) => Err(anyhow::anyhow!(
+            "internal error (a bug; please report): {panic}"
+        )),
+    };
     if let Err(err) = result {
+        if is_broken_pipe(&err) && stdout_closed() {
+            std::process::exit(EXIT_STDOUT_CLOSED);
+        }
         // One line, whatever a cause's message holds.
         eprintln!("error: {}", guard::one_line(&format!("{err:#}")));
         std::process::exit(1);
     }
+}
+
+/// Exit status of a command whose stdout its reader closed (`gonio fit … | head -1`):
+/// what a shell reports for a process ended by SIGPIPE (128 + 13). The command stops
+/// there, quietly; outputs it wrote before are whole (each is written atomically).
+const EXIT_STDOUT_CLOSED: i32 = 141;
+
+/// Whether `err` is, or was caused by, a write to a pipe with no reader.
+fn is_broken_pipe(err: &anyhow::Error) -> bool {
+    err.chain().any(|cause| {
+        cause
+            .downcast_ref::<std::io::Error>()
+            .is_some_and(|e| e.kind() == std::io::ErrorKind::BrokenPipe)
+    })
+}
+
+/// Whether stdout is a pipe or socket whose reader has gone: `poll` reports an error
+/// (or hang-up) condition on it. A terminal, a file or an open pipe report none.
+fn stdout_closed() -> bool {
+    let mut fd = libc::pollfd {
+        fd: libc::STDOUT_FILENO,
+        events: 0,
+        revents: 0,
+    };
+    // SAFETY: `fd` is one valid pollfd for the duration of the call; no wait.
+    let ready = unsafe { libc::poll(&mut fd, 1, 0) };
+    ready == 1 && fd.revents & (libc::POLLERR | libc::POLLHUP) != 0
 }

@@ -148,3 +148,39 @@ fn bad_input_fails_with_one_line() {
     );
     assert!(!out.exists(), "no fit JSON is written on failure");
 }
+
+/// A reader that closes stdout early (`gonio fit … | head -1`) ends the command
+/// quietly: exit 141 (as a shell reports SIGPIPE) or 0, nothing on stderr (it once
+/// said "internal error (a bug; please report): failed printing to stdout: Broken
+/// pipe"), and the fit written before the summary is whole.
+#[test]
+fn a_closed_stdout_ends_fit_quietly() {
+    use std::process::Stdio;
+    let dir = tempfile::tempdir().unwrap();
+    let truth = Params::shared([5.0, 4.0, 3.0], [2.0, 2.5, 1.0], 0.12);
+    let csv = dir.path().join("samples.csv");
+    write_csv(&csv, &cook_torrance_samples(&truth, &[-20.0, -30.0])).unwrap();
+    let out = dir.path().join("fit.json");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_gonio"))
+        .arg("fit")
+        .arg(&csv)
+        .args(["--model", "cook-torrance", "--out"])
+        .arg(&out)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("gonio runs");
+    // The reader goes away before gonio prints anything.
+    drop(child.stdout.take());
+    let output = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        matches!(output.status.code(), Some(0 | 141)),
+        "{:?}: {stderr}",
+        output.status
+    );
+    assert_eq!(stderr, "");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(json["model"], "cook-torrance");
+}

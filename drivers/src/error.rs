@@ -30,6 +30,16 @@ pub enum DeviceError {
     /// The controller (or the configuration) refuses the request; one line per reason.
     #[error("refused: {0}")]
     Refused(String),
+    /// The controller answers but its settings differ from what the configuration
+    /// expects: one line per differing setting (`$100 (X steps per degree) is 250,
+    /// configuration expects 80`). It stays so until the settings or the configuration
+    /// change.
+    #[error(
+        "refused: controller settings differ from the configuration (set them, or let the \
+         driver write them with apply_settings):\n{}",
+        .0.join("\n")
+    )]
+    SettingsDiffer(Vec<String>),
     #[error("disconnected: {0}")]
     Disconnected(String),
     #[error("{what} {value} out of range [{min}, {max}]")]

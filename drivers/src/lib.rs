@@ -41,6 +41,9 @@ pub enum ArmState {
     /// Position unknown and the controller does not home: declare where the arm is.
     NeedsPosition,
     Disconnected,
+    /// The controller answers but its settings differ from the configuration: it is
+    /// not opened (nor reset) again until that changes.
+    Refused,
 }
 
 /// A snapshot of the arm: state and angle θL (degrees; for a GRBL arm its work

@@ -129,7 +129,8 @@ impl From<&DeviceError> for WireError {
             // Arm faults never come from a camera; should one, its message travels.
             DeviceError::PositionUnknown(_)
             | DeviceError::HomingFailed { .. }
-            | DeviceError::Refused(_) => WireError::Protocol {
+            | DeviceError::Refused(_)
+            | DeviceError::SettingsDiffer(_) => WireError::Protocol {
                 message: error.to_string(),
             },
         }

@@ -1,6 +1,6 @@
 //! The daemon's HTTP contract on emulated hardware: authentication, validation of every
 //! field, the queue (two concurrent POSTs run one after the other), operator controls,
-//! and the page and API description.
+//! and the page and API description; a busy port refused before anything is created.
 
 use std::fs::Permissions;
 use std::os::unix::fs::PermissionsExt;
@@ -276,5 +276,33 @@ fn sweep_waits_for_its_start_time_and_shows_one_progress_view() {
             .all(|e| e["action"] != "capture"),
         "nothing may run before the start time: {log}"
     );
+    std::fs::remove_dir_all(dir).ok();
+}
+
+/// `gonio serve` on a port another program listens on fails at once with one line
+/// naming the address, and creates nothing: no data directory, no token (it once made
+/// both, and started the emulators, before trying the port).
+#[test]
+fn busy_port_fails_in_one_line_and_creates_nothing() {
+    let dir = temp_dir("api-busy-port");
+    let busy = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = busy.local_addr().unwrap().to_string();
+    let data = dir.join("data");
+    let output = std::process::Command::new(gonio_tests::gonio_bin())
+        .args(["serve", "--bind", &addr, "--data"])
+        .arg(&data)
+        .env_remove("GONIO_TOKEN")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(1), "{stderr}");
+    let error = stderr
+        .lines()
+        .find(|l| l.starts_with("error: "))
+        .unwrap_or_else(|| panic!("no error line: {stderr}"));
+    assert!(error.contains(&format!("binding {addr}")), "{error}");
+    assert!(error.contains("in use"), "{error}");
+    assert!(!data.exists(), "{} was created", data.display());
+    drop(busy);
     std::fs::remove_dir_all(dir).ok();
 }

@@ -3,10 +3,15 @@
 //! queued or failing, and the board is not reset in a storm meanwhile.
 //!
 //! - A stock board (`$100=250`, `$22=0`) under `homing = "off"`: each differing setting
-//!   listed as the reason; with `apply_settings` the board is set up, the scan waits for
-//!   the declared position, `POST /api/arm/position` declares it, and the scan is done.
+//!   listed as the reason; `/api/hardware` shows the arm `refused` with those settings
+//!   and no angle, and the board is opened (reset) again only when it is unplugged and
+//!   plugged in or the operator asks (`POST /api/arm/reconnect`); with `apply_settings`
+//!   the board is set up, the scan waits for the declared position, `POST
+//!   /api/arm/position` declares it, and the scan is done.
 //! - A board whose homing cannot pull off its switch (`$27=0`): the typed homing
 //!   failure (ALARM:8, with the advice on `$27`) as the reason, homing not retried.
+//! - `[arm] reply_timeout_s` is how long the driver waits for an answer: a board that
+//!   goes silent is reported timed out after that long.
 
 use std::io::{BufRead, BufReader};
 use std::path::Path;
@@ -38,6 +43,9 @@ time_scale = 0.01
 [retry]
 attempts = 3
 backoff_ms = 50
+
+[emulator]
+fault_injection = true
 "#,
         board_path.display(),
         scene.display()
@@ -96,15 +104,74 @@ fn stock_board_waits_with_each_setting_then_for_the_declared_position() {
         assert!(reason.contains(line), "{reason}");
     }
     assert_eq!(scan["error"], scan["reason"]);
-    // Refused, the board is reopened with a backoff (1 s, 2 s, …), not in a storm.
-    std::thread::sleep(Duration::from_millis(2500));
-    let attempts = actions(&daemon)
+    let hardware = daemon.get("/api/hardware").json;
+    let arm = &hardware["arm"];
+    assert_eq!(arm["state"], "refused", "{hardware}");
+    assert_eq!(
+        arm["settings"],
+        json!([
+            "$100 (X steps per degree) is 250, configuration expects 80",
+            "$130 (X max travel, degrees) is 200, configuration expects 180",
+        ]),
+        "{hardware}"
+    );
+    assert_eq!(arm["angle_deg"], Value::Null, "{hardware}");
+    // Refused, the board is not opened (reset) again by itself: once in 3.5 s, where
+    // a backoff of 1 s, 2 s, … would have opened it three times.
+    let attempts = |daemon: &Daemon| {
+        actions(daemon)
+            .iter()
+            .filter(|a| *a == "connect failed")
+            .count()
+    };
+    std::thread::sleep(Duration::from_millis(3500));
+    assert_eq!(attempts(&daemon), 1, "{:?}", actions(&daemon));
+    // Unplugged and plugged in: opened once more, refused again (the same board).
+    let fault = |daemon: &Daemon, fault: &str| {
+        let answer = daemon.post("/api/emulator/fault", &json!({ "fault": fault }));
+        assert_eq!(answer.status, 200, "{fault}: {:?}", answer.json);
+    };
+    fault(&daemon, "unplug");
+    fault(&daemon, "reconnect");
+    let deadline = std::time::Instant::now() + Duration::from_secs(10);
+    while attempts(&daemon) < 2 {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "{:?}",
+            actions(&daemon)
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    std::thread::sleep(Duration::from_millis(1500));
+    assert_eq!(attempts(&daemon), 2, "{:?}", actions(&daemon));
+    assert_eq!(daemon.get("/api/hardware").json["arm"]["state"], "refused");
+    // The operator asks: once more. The route needs the token.
+    assert_eq!(daemon.post_raw("/api/arm/reconnect", None, "").status, 401);
+    let asked = daemon.post("/api/arm/reconnect", &json!({}));
+    assert_eq!(asked.status, 200, "{:?}", asked.json);
+    let deadline = std::time::Instant::now() + Duration::from_secs(10);
+    while attempts(&daemon) < 3 {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "{:?}",
+            actions(&daemon)
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    std::thread::sleep(Duration::from_millis(1500));
+    assert_eq!(attempts(&daemon), 3, "{:?}", actions(&daemon));
+    let reconnects: Vec<String> = daemon
+        .get("/api/hardware/log")
+        .json
+        .as_array()
+        .unwrap()
         .iter()
-        .filter(|a| *a == "connect failed")
-        .count();
-    assert!(
-        (1..=3).contains(&attempts),
-        "{attempts} connection attempts"
+        .filter(|e| e["action"] == "reconnect")
+        .map(|e| e["detail"].as_str().unwrap_or_default().to_owned())
+        .collect();
+    assert_eq!(
+        reconnects,
+        ["the board was plugged in again", "asked by the operator"]
     );
     drop(daemon);
 
@@ -129,6 +196,10 @@ fn stock_board_waits_with_each_setting_then_for_the_declared_position() {
     );
     let hardware = daemon.get("/api/hardware").json;
     assert_eq!(hardware["arm"]["state"], "needs_position", "{hardware}");
+    assert_eq!(hardware["arm"]["angle_deg"], Value::Null, "{hardware}");
+    assert_eq!(hardware["arm"]["settings"], json!([]), "{hardware}");
+    // Connected: nothing to reconnect (it would reset the board).
+    assert_eq!(daemon.post("/api/arm/reconnect", &json!({})).status, 409);
     // Declaring needs the token, and a proper angle; the emulated arm rests at 0°.
     let path = "/api/arm/position";
     assert_eq!(daemon.post_raw(path, None, r#"{"angle": 0}"#).status, 401);
@@ -201,4 +272,26 @@ fn homing_failure_waits_with_its_alarm_and_advice_without_retrying() {
     // Declaring is refused where homing is required.
     let refused = daemon.post("/api/arm/position", &json!({"angle": -5}));
     assert_eq!(refused.status, 409, "{:?}", refused.json);
+}
+
+#[test]
+fn reply_timeout_from_the_configuration_bounds_the_wait_for_an_answer() {
+    let dir = temp_dir("arm-reply-timeout");
+    // A board set up as expected (homing off: the position is declared), that goes
+    // silent 2 s after it starts: the idle lane's status query then times out.
+    let board = "steps_per_deg = 80.0\nmax_travel_deg = 180.0\n\
+                 [[faults]]\nat_s = 2.0\nfault = \"silent\"\n";
+    std::fs::write(
+        dir.join("gonio.toml"),
+        config(&dir, board, "homing = \"off\"\nreply_timeout_s = 0.3"),
+    )
+    .unwrap();
+    let daemon = Daemon::restart(&dir);
+    let hardware = daemon.wait_for("/api/hardware", Duration::from_secs(30), |hw| {
+        hw["arm"]["error"]
+            .as_str()
+            .is_some_and(|e| e.contains("timed out"))
+    });
+    let error = hardware["arm"]["error"].as_str().unwrap();
+    assert!(error.contains("timed out after 0.3 s"), "{error}");
 }

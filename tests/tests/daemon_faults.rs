@@ -64,7 +64,7 @@ fn post_scan(daemon: &Daemon, theta_l: &[f64]) -> i64 {
     answer.json["id"].as_i64().unwrap()
 }
 
-/// Waits until scan `id` is interrupted; returns why.
+/// Waits until scan `id` is interrupted; returns why (its `reason`, also its `error`).
 fn wait_interrupted(daemon: &Daemon, id: i64) -> String {
     let scan = daemon.wait_state(
         id,
@@ -72,7 +72,9 @@ fn wait_interrupted(daemon: &Daemon, id: i64) -> String {
         Duration::from_secs(60),
     );
     assert_eq!(scan["state"], "interrupted", "{scan}");
-    scan["error"].as_str().unwrap().to_owned()
+    assert!(scan["reason"].is_string(), "{scan}");
+    assert_eq!(scan["reason"], scan["error"], "{scan}");
+    scan["reason"].as_str().unwrap().to_owned()
 }
 
 /// Scan `id` is still interrupted after `wait` (no hang, no busy failure meanwhile).
@@ -101,6 +103,7 @@ fn serial_unplug_mid_move_interrupts_then_resumes_after_reconnect() {
     assert!(reason.contains("move to θL -50.0°"), "{reason}");
     let hardware = daemon.get("/api/hardware").json;
     assert_eq!(hardware["arm"]["state"], "disconnected", "{hardware}");
+    assert_eq!(hardware["arm"]["angle_deg"], Value::Null, "{hardware}");
     // It stays interrupted while the cable is out.
     stays_interrupted(&daemon, id, Duration::from_millis(500));
 
@@ -212,15 +215,19 @@ fn emergency_stop_pauses_mid_move_and_resume_finishes() {
     let stopped = daemon.post("/api/arm/stop", &json!({}));
     assert_eq!(stopped.status, 200, "{:?}", stopped.json);
     assert_eq!(stopped.json["paused"], json!([id]));
-    // The controller reports the arm still, and its position unknown after the reset:
-    // no angle is given until it is homed.
+    // The reset lost the position: the controller reports the arm at rest, and no
+    // angle is shown until it is homed again.
     std::thread::sleep(Duration::from_millis(600));
-    let arm = daemon.get("/api/hardware").json["arm"].clone();
+    let hardware = daemon.wait_for("/api/hardware", Duration::from_secs(10), |hw| {
+        hw["arm"]["state"] != "idle"
+    });
+    let arm = &hardware["arm"];
     assert!(
-        arm["state"] != "moving" && arm["state"] != "idle",
-        "the arm kept moving or claims a position: {arm}"
+        ["needs_homing", "alarm"].contains(&arm["state"].as_str().unwrap()),
+        "the arm kept moving: {hardware}"
     );
-    assert_eq!(arm["angle_deg"], Value::Null, "{arm}");
+    assert_eq!(arm["angle_deg"], Value::Null, "{hardware}");
+    assert_eq!(arm["homed"], false, "{hardware}");
     let scan = daemon.get(&format!("/api/scans/{id}")).json;
     assert_eq!(scan["state"], "paused", "{scan}");
     assert!(scan["error"].as_str().unwrap().contains("emergency stop"));

@@ -314,11 +314,11 @@ fn stock_board(arm_deg: f64) -> (GrblEmulator, World) {
 #[test]
 fn stock_settings_are_listed_one_line_each_or_written_and_read_back() {
     let (emulator, world) = stock_board(-10.0);
-    let Err(DeviceError::Refused(message)) = GrblArm::open(emulator.device_path(), driver_config())
+    let Err(DeviceError::SettingsDiffer(lines)) =
+        GrblArm::open(emulator.device_path(), driver_config())
     else {
         panic!("stock settings accepted")
     };
-    let lines: Vec<&str> = message.lines().skip(1).collect();
     assert_eq!(
         lines,
         [

@@ -13,7 +13,7 @@
 //! same path. Opening resets an Arduino-based board (DTR): every open starts unreferenced.
 //!
 //! On connecting, the settings that differ from [`GrblArmConfig`] are listed one line
-//! each and the controller is refused ([`DeviceError::Refused`]), unless
+//! each and the controller is refused ([`DeviceError::SettingsDiffer`]), unless
 //! `apply_settings` writes them (`$N=`) and `$$` reads them back.
 //!
 //! Fault handling, all blocking with bounded waits:
@@ -360,7 +360,11 @@ impl GrblArm {
             match self.connect() {
                 Ok(()) => return Ok(()),
                 // A controller that answers but is refused will not get better.
-                Err(e @ (DeviceError::Refused(_) | DeviceError::Protocol(_))) => return Err(e),
+                Err(
+                    e @ (DeviceError::Refused(_)
+                    | DeviceError::SettingsDiffer(_)
+                    | DeviceError::Protocol(_)),
+                ) => return Err(e),
                 Err(e) => last = e,
             }
         }
@@ -589,12 +593,7 @@ impl GrblArm {
 
 /// The refusal listing each differing setting on its own line.
 fn refusal(mismatches: &[Mismatch]) -> DeviceError {
-    let lines: Vec<String> = mismatches.iter().map(ToString::to_string).collect();
-    DeviceError::Refused(format!(
-        "controller settings differ from the configuration (set them, or let the driver \
-         write them with apply_settings):\n{}",
-        lines.join("\n")
-    ))
+    DeviceError::SettingsDiffer(mismatches.iter().map(ToString::to_string).collect())
 }
 
 impl Arm for GrblArm {

@@ -251,10 +251,9 @@ fn settings_mismatches_are_listed_or_applied() {
     let fake = fake();
     fake.script.lock().unwrap().settings.insert(100, 250.0);
     fake.script.lock().unwrap().settings.insert(22, 0.0);
-    let Err(DeviceError::Refused(message)) = GrblArm::open(&fake.path, config()) else {
+    let Err(DeviceError::SettingsDiffer(lines)) = GrblArm::open(&fake.path, config()) else {
         panic!("mismatch not reported")
     };
-    let lines: Vec<&str> = message.lines().skip(1).collect();
     assert_eq!(
         lines,
         [

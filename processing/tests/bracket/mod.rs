@@ -10,8 +10,9 @@
 //! out of all).
 //!
 //! OpenCV (`CalibrateDebevec` + `MergeDebevec` with its documented defaults: 70 samples,
-//! λ = 10, grid sampling) runs through `tests/opencv_debevec.py` (python3 with
-//! opencv-python-headless and numpy, which scripts/test.sh installs). Where it cannot
+//! λ = 10, grid sampling) runs through `tests/opencv_debevec.py` under `GONIO_PYTHON`
+//! (else python3), with opencv-python-headless and numpy (scripts/test.sh installs them
+//! in .venv-test and sets it). Where it cannot
 //! run, [`opencv_or_skip`] says why and the comparison is skipped, unless
 //! `GONIO_REQUIRE_OPENCV` is set (scripts/test.sh sets it).
 
@@ -201,10 +202,12 @@ pub fn opencv_merge(brackets: &[&Bracket], dir: &Path) -> Result<Vec<Vec<f64>>, 
         }
         outputs.push(out);
     }
-    let run = Command::new("python3")
+    // The tests' own interpreter (scripts/test.sh: .venv-test), else python3 on PATH.
+    let python = std::env::var("GONIO_PYTHON").unwrap_or_else(|_| "python3".into());
+    let run = Command::new(&python)
         .args(&args)
         .output()
-        .map_err(|e| format!("python3: {e}"))?;
+        .map_err(|e| format!("{python}: {e}"))?;
     if !run.status.success() {
         return Err(String::from_utf8_lossy(&run.stderr).trim().to_string());
     }

@@ -142,6 +142,7 @@ pub fn router(shared: Arc<Shared>) -> Router {
         .route("/api/setup", delete(forget_calibration))
         .route("/api/arm/stop", post(stop_arm))
         .route("/api/arm/home", post(home_arm))
+        .route("/api/arm/reconnect", post(reconnect_arm))
         .merge(json_bodies)
         .route_layer(token());
     let reads = Router::new()
@@ -631,6 +632,7 @@ fn position_known(state: ArmState) -> bool {
             | ArmState::NeedsHoming
             | ArmState::NeedsPosition
             | ArmState::Disconnected
+            | ArmState::Refused
     )
 }
 
@@ -672,6 +674,23 @@ async fn home_arm(State(shared): AppState) -> ApiResult<impl IntoResponse> {
     shared.hardware_wake.post(|wake| *wake = true);
     tracing::info!("homing asked by the operator");
     Ok((StatusCode::ACCEPTED, Json(json!({ "homing": true }))))
+}
+
+/// Opens the arm again now: one that is disconnected (instead of waiting for its next
+/// try) or refused for its settings (after they were changed on the board). 409 while
+/// the arm is connected: reopening would reset it.
+async fn reconnect_arm(State(shared): AppState) -> ApiResult<Json<Value>> {
+    let state = lock(&shared.hardware).arm.state;
+    if !matches!(state, ArmState::Disconnected | ArmState::Refused) {
+        return Err(ApiError::new(
+            StatusCode::CONFLICT,
+            "the arm is connected: nothing to reconnect (opening it again would reset it)",
+        ));
+    }
+    shared.arm_reconnect.store(true, Ordering::Release);
+    shared.wake();
+    tracing::info!("arm reconnect asked for");
+    Ok(Json(json!({ "reconnecting": true })))
 }
 
 /// How long a declared position may wait for the hardware lane (busy with a step).
@@ -813,8 +832,10 @@ async fn list_sweeps(State(shared): AppState) -> ApiResult<Json<Value>> {
 
 async fn hardware(State(shared): AppState) -> Json<Value> {
     let mut status = lock(&shared.hardware).clone();
-    if let Some(angle) = lock(&shared.arm_angle).as_ref().and_then(|a| a.get()) {
-        // As the arm reported it, also while a move is under way.
+    let live = lock(&shared.arm_angle).as_ref().and_then(|a| a.get());
+    if let Some(angle) = live.filter(|_| status.arm.homed) {
+        // As the arm reported it, also while a move is under way; none while the
+        // position is unknown.
         status.arm.angle_deg = Some(angle);
     }
     if !position_known(status.arm.state) {

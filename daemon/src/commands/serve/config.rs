@@ -30,6 +30,7 @@
 //! # accel_deg_per_s2 = 40.0         $120 (default: any)
 //! homing = "required"          # $22=1; "off": $22=0, declare the position; "optional"
 //! apply_settings = false       # write differing settings instead of refusing the board
+//! reply_timeout_s = 2.0        # wait for GRBL's answer to a line (0.1..=60; moves wait longer)
 //!
 //! [camera]                     # or: kind = "gphoto2"
 //! kind = "emulator"
@@ -66,7 +67,7 @@ use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use gonio_drivers::grbl::ArmAxis;
+use gonio_drivers::grbl::{ArmAxis, GrblArmConfig};
 use gonio_files::input::{read_input_to_string, MAX_SMALL_FILE_BYTES};
 use gonio_processing::geometry::Setup;
 use serde::Deserialize;
@@ -195,6 +196,9 @@ pub struct ArmConfig {
     pub homing: HomingMode,
     /// Write the settings that differ (`$N=`) and read them back, instead of refusing.
     pub apply_settings: bool,
+    /// How long the driver waits for the answer to a line that does not wait for
+    /// motion, seconds (moves and homing get their own, longer, waits).
+    pub reply_timeout_s: f64,
 }
 
 impl Default for ArmConfig {
@@ -211,9 +215,14 @@ impl Default for ArmConfig {
             accel_deg_per_s2: None,
             homing: HomingMode::Required,
             apply_settings: false,
+            // The driver's own default.
+            reply_timeout_s: GrblArmConfig::default().reply_timeout.as_secs_f64(),
         }
     }
 }
+
+/// The bounds of `[arm] reply_timeout_s`, seconds.
+const REPLY_TIMEOUT_RANGE_S: std::ops::RangeInclusive<f64> = 0.1..=60.0;
 
 /// The camera: a gphoto2 body, or the emulator rendering a scene.
 #[derive(Debug, Clone, Deserialize)]
@@ -528,7 +537,19 @@ impl ArmConfig {
                 );
             }
         }
+        anyhow::ensure!(
+            REPLY_TIMEOUT_RANGE_S.contains(&self.reply_timeout_s),
+            "arm.reply_timeout_s must be {} to {} seconds, got {}",
+            REPLY_TIMEOUT_RANGE_S.start(),
+            REPLY_TIMEOUT_RANGE_S.end(),
+            self.reply_timeout_s
+        );
         Ok(())
+    }
+
+    /// How long the driver waits for the answer to a line.
+    pub fn reply_timeout(&self) -> std::time::Duration {
+        std::time::Duration::from_secs_f64(self.reply_timeout_s)
     }
 
     /// The axis as the driver names it.
@@ -567,6 +588,7 @@ mod tests {
         assert_eq!(example.arm.homing, default.arm.homing);
         assert_eq!(example.arm.axis, default.arm.axis);
         assert_eq!(example.arm.apply_settings, default.arm.apply_settings);
+        assert_eq!(example.arm.reply_timeout_s, default.arm.reply_timeout_s);
         assert_eq!(example.limits.max_deg, default.limits.max_deg);
     }
 
@@ -585,6 +607,10 @@ mod tests {
             ("[arm]\nhoming = \"sometimes\"\n", "homing"),
             ("[arm]\naxis = \"A\"\n", "arm.axis"),
             ("[arm]\nsteps_per_deg = 0\n", "arm.steps_per_deg"),
+            ("[arm]\nreply_timeout_s = 0.05\n", "arm.reply_timeout_s"),
+            ("[arm]\nreply_timeout_s = 61\n", "arm.reply_timeout_s"),
+            ("[arm]\nreply_timeout_s = nan\n", "arm.reply_timeout_s"),
+            ("[arm]\nreply_timeout_s = inf\n", "arm.reply_timeout_s"),
             (
                 "[arm]\nkind = \"grbl\"\npath = \"/x\"\nboard = \"b.toml\"\n",
                 "board",

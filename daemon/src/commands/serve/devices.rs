@@ -47,6 +47,34 @@ impl ArmOpener {
     pub fn path(&self) -> &Path {
         &self.path
     }
+
+    /// Which device the path names now, without opening it (opening resets the
+    /// board); `None` while it is absent (unplugged).
+    pub fn link(&self) -> Option<LinkId> {
+        LinkId::of(&self.path)
+    }
+}
+
+/// What a device path names: the path itself (a `/dev/serial/by-id` link, or the
+/// device node, is made anew when the board is plugged in: its inode and change time)
+/// and the device it leads to. Two differ when the board was unplugged and plugged in
+/// meanwhile, even where the new link reuses the old one's inode and device number.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LinkId {
+    path: (u64, u64, i64, i64),
+    device: u64,
+}
+
+impl LinkId {
+    fn of(path: &Path) -> Option<LinkId> {
+        use std::os::unix::fs::MetadataExt;
+        let own = std::fs::symlink_metadata(path).ok()?;
+        let device = std::fs::metadata(path).ok()?;
+        Some(LinkId {
+            path: (own.dev(), own.ino(), own.ctime(), own.ctime_nsec()),
+            device: device.rdev(),
+        })
+    }
 }
 
 /// The running emulators, kept alive for the daemon's life and reachable for fault
@@ -123,6 +151,7 @@ fn grbl_arm_config(arm: &ArmConfig, limits: Limits) -> GrblArmConfig {
             HomingMode::Off => Homing::Off,
         },
         apply_settings: arm.apply_settings,
+        reply_timeout: arm.reply_timeout(),
         ..GrblArmConfig::default()
     }
 }

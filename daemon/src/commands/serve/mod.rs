@@ -81,6 +81,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(data) = args.data {
         config.data_dir = data;
     }
+    // The port first: a daemon that cannot listen creates nothing (no data directory,
+    // no token) and has started no step.
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
+    let listener = {
+        let _context = runtime.enter();
+        listen(config.bind).with_context(|| format!("binding {}", config.bind))?
+    };
     private_data_dir(&config.data_dir)?;
     gonio_processing::capture::set_max_pixels(config.max_frame_pixels);
     // One daemon per data directory: the OS drops the lock when the process ends,
@@ -105,16 +116,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Store::open(&db_path).with_context(|| format!("opening {}", db_path.display()))?;
     let boot = api_store.begin_boot()?;
     let devices = devices::open(&config)?;
-    // Listening before the queue runs: a daemon that cannot bind has started no step.
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .context("starting the async runtime")?;
-    let listener = {
-        let _context = runtime.enter();
-        listen(config.bind).with_context(|| format!("binding {}", config.bind))?
-    };
 
     let (events, _) = broadcast::channel(256);
     let shared = Arc::new(Shared {
@@ -132,6 +133,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 homed: false,
                 device: devices.arm.path().display().to_string(),
                 error: None,
+                settings: Vec::new(),
             },
             camera: CameraView {
                 model: None,
@@ -147,6 +149,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         stops: AtomicU64::new(0),
         arm_position: Mutex::new(None),
         home_requested: AtomicBool::new(false),
+        arm_reconnect: AtomicBool::new(false),
         timing: devices.timing,
         emulators: devices.emulators.clone(),
         mount: devices.mount.clone(),

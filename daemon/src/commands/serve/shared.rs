@@ -31,12 +31,16 @@ pub struct HardwareStatus {
 #[derive(Debug, Clone, Serialize)]
 pub struct ArmView {
     pub state: ArmState,
-    /// Last known angle θL, degrees.
+    /// Angle θL, degrees; `None` while the position is unknown (not homed or declared
+    /// since the controller powered up or reset).
     pub angle_deg: Option<f64>,
+    /// Whether the position is known (homed, or declared).
     pub homed: bool,
     pub device: String,
     /// The last fault, if the arm is not healthy.
     pub error: Option<String>,
+    /// While `refused`: each setting that differs from the configuration, one line each.
+    pub settings: Vec<String>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -96,6 +100,9 @@ pub struct Shared {
     /// The operator asked to home the arm (`POST /api/arm/home`); the hardware lane
     /// homes it when no scan runs and clears this.
     pub home_requested: AtomicBool,
+    /// The operator asked to open the arm again (`POST /api/arm/reconnect`), also a
+    /// refused one.
+    pub arm_reconnect: AtomicBool,
     /// What the devices' steps are expected to take.
     pub timing: Timing,
     /// Present when the devices are emulated.

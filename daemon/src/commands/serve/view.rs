@@ -150,7 +150,8 @@ pub fn scan_view(
         "sample": scan.plan.sample,
         "state": scan.state,
         "error": scan.error,
-        "reason": (scan.state == ScanState::Waiting).then_some(&scan.error),
+        "reason": matches!(scan.state, ScanState::Waiting | ScanState::Interrupted)
+            .then_some(&scan.error),
         "sweep_id": scan.sweep_id,
         "theta_l": scan.plan.theta_l,
         "bracket": bracket,

@@ -19,7 +19,9 @@ use serde_json::{json, Value};
 use super::backoff::{Backoff, Failures};
 use super::step::{self, Flow, Outcome, StepError};
 use crate::commands::serve::calibration;
-use crate::commands::serve::devices::{ArmOpener, Devices, SceneFacts, SidecarDefaults};
+use crate::commands::serve::devices::{
+    ArmOpener, Devices, LinkId, SceneFacts, SidecarDefaults,
+};
 use crate::commands::serve::files::write_atomic;
 use crate::commands::serve::plan::{
     exposure_stem, mount_reason, theta_dir_name, Lane, ScanPlan, Step,
@@ -58,6 +60,9 @@ pub struct HardwareLane {
     /// Why the arm could not be opened, when it could not; and when to try again.
     arm_error: Option<String>,
     arm_retry: Backoff,
+    /// The board answered but its settings differ: it is not opened again until the
+    /// operator asks or it is unplugged and plugged in.
+    arm_refused: Option<Refusal>,
     setup: Option<Setup>,
     /// Where `setup` comes from (each field's provenance in setup.json).
     setup_source: &'static str,
@@ -89,6 +94,7 @@ impl HardwareLane {
             at_deg: None,
             arm_error: None,
             arm_retry: Backoff::now(),
+            arm_refused: None,
             setup: devices.setup,
             setup_source: devices.setup_source,
             truth: devices.truth,
@@ -217,10 +223,29 @@ impl HardwareLane {
         self.shared.hardware_wake.take(IDLE_POLL);
     }
 
-    /// Opens the arm, at most once per backoff period; on success, interrupted scans go
-    /// back to running (at the next pass) and waiting ones to the queue. Returns
-    /// whether the arm is connected.
+    /// Opens the arm, at most once per backoff period (at once when the operator asks);
+    /// a refused board only when the operator asks or it was plugged in again. On
+    /// success, interrupted scans go back to running (at the next pass) and waiting
+    /// ones to the queue. Returns whether the arm is connected.
     fn connect_arm(&mut self) -> Result<bool, StoreError> {
+        let asked = self.shared.arm_reconnect.swap(false, Ordering::AcqRel);
+        if let Some(refusal) = &mut self.arm_refused {
+            let replugged = refusal.replugged(self.opener.link());
+            if !(asked || replugged) {
+                return Ok(false);
+            }
+            let why = if asked {
+                "asked by the operator"
+            } else {
+                "the board was plugged in again"
+            };
+            self.arm_refused = None;
+            self.arm_retry = Backoff::now();
+            self.log(None, "reconnect", why)?;
+        }
+        if asked {
+            self.arm_retry = Backoff::now();
+        }
         if !self.arm_retry.due() {
             return Ok(false);
         }
@@ -239,7 +264,9 @@ impl HardwareLane {
                     let mut status = lock(&self.shared.hardware);
                     status.arm.state = state;
                     status.arm.homed = false;
+                    status.arm.angle_deg = None;
                     status.arm.error = None;
+                    status.arm.settings.clear();
                 }
                 self.resume = true;
                 self.requeue_waiting("arm connected")?;
@@ -252,10 +279,15 @@ impl HardwareLane {
                 }
                 self.log(None, "connect failed", &reason)?;
                 self.arm_retry = self.arm_retry.later();
-                let mut status = lock(&self.shared.hardware);
-                status.arm.state = ArmState::Disconnected;
-                status.arm.error = Some(reason.clone());
-                self.arm_error = Some(reason);
+                if let DeviceError::SettingsDiffer(settings) = err {
+                    self.refuse_arm(settings, &reason);
+                } else {
+                    let mut status = lock(&self.shared.hardware);
+                    status.arm.state = ArmState::Disconnected;
+                    status.arm.angle_deg = None;
+                    status.arm.error = Some(reason.clone());
+                    self.arm_error = Some(reason);
+                }
                 Ok(false)
             }
         }
@@ -478,8 +510,14 @@ impl HardwareLane {
                 }
                 let mut status = lock(&self.shared.hardware);
                 status.arm.state = s.state;
-                status.arm.angle_deg = Some(s.angle_deg);
+                status.arm.angle_deg = self.homed.then_some(s.angle_deg);
                 status.arm.homed = self.homed;
+            }
+            Err(DeviceError::SettingsDiffer(settings)) => {
+                // Reopened by the driver after a reset or unplug, and refused.
+                let reason = DeviceError::SettingsDiffer(settings.clone()).to_string();
+                tracing::warn!("arm: {reason}");
+                self.refuse_arm(settings, &reason);
             }
             Err(err @ (DeviceError::Disconnected(_) | DeviceError::NotFound(_))) => {
                 tracing::warn!("arm status: {err}; reconnecting");
@@ -502,7 +540,23 @@ impl HardwareLane {
         let mut status = lock(&self.shared.hardware);
         status.arm.state = ArmState::Disconnected;
         status.arm.homed = false;
+        status.arm.angle_deg = None;
         status.arm.error = Some(reason.to_owned());
+    }
+
+    /// The board answers but its `settings` differ from the configuration: it is let
+    /// go and not opened again (each open resets it) until the operator asks or it is
+    /// unplugged and plugged in; `/api/hardware` shows it `refused` with the settings.
+    fn refuse_arm(&mut self, settings: Vec<String>, reason: &str) {
+        self.disconnect_arm(reason);
+        self.arm_error = Some(reason.to_owned());
+        self.arm_refused = Some(Refusal {
+            link: self.opener.link(),
+            unplugged: false,
+        });
+        let mut status = lock(&self.shared.hardware);
+        status.arm.state = ArmState::Refused;
+        status.arm.settings = settings;
     }
 
     fn log(&mut self, scan: Option<i64>, action: &str, detail: &str) -> Result<(), StoreError> {
@@ -877,6 +931,11 @@ impl HardwareLane {
                         self.at_deg = None;
                         return self.halt_after_stop(id);
                     }
+                    if let DeviceError::SettingsDiffer(settings) = &err {
+                        let reason = err.to_string();
+                        self.refuse_arm(settings.clone(), &reason);
+                        return Err(StepError::Waiting(format!("{what}: {reason}")));
+                    }
                     if matches!(err, DeviceError::Disconnected(_) | DeviceError::NotFound(_)) {
                         // The driver already tried to reconnect: wait for the device.
                         return Err(StepError::Interrupted(format!(
@@ -976,7 +1035,7 @@ impl HardwareLane {
         status.arm.state = ArmState::Idle;
         status.arm.homed = self.homed;
         status.arm.error = None;
-        status.arm.angle_deg = angle.or(Some(0.0));
+        status.arm.angle_deg = angle.or(Some(0.0)).filter(|_| self.homed);
     }
 
     /// Runs `op` on the camera with bounded retries of transient faults (busy, timeout,
@@ -1204,6 +1263,29 @@ fn strip_region(setup: &Setup, theta_l: f64, frame: &Frame) -> BracketRegion {
 /// Backoff before try `attempt` (1-based after the first): base · 2^(attempt−1).
 fn backoff(base_ms: u64, attempt: u32) -> Duration {
     Duration::from_millis(base_ms.saturating_mul(1 << (attempt - 1).min(10)))
+}
+
+/// A refused board's device path as it was when refused.
+#[derive(Debug, Clone, Copy)]
+struct Refusal {
+    /// What the path named then.
+    link: Option<LinkId>,
+    /// The path was seen absent since (the board unplugged).
+    unplugged: bool,
+}
+
+impl Refusal {
+    /// Whether the board was unplugged and plugged in since the refusal, given what its
+    /// path names `now`: the path went away and came back, or names another device.
+    fn replugged(&mut self, now: Option<LinkId>) -> bool {
+        match now {
+            None => {
+                self.unplugged = true;
+                false
+            }
+            Some(now) => self.unplugged || self.link != Some(now),
+        }
+    }
 }
 
 /// Whether a camera error means the camera is gone (unplugged, switched off).
