@@ -19,9 +19,7 @@ use serde_json::{json, Value};
 use super::backoff::{Backoff, Failures};
 use super::step::{self, Flow, Outcome, StepError};
 use crate::commands::serve::calibration;
-use crate::commands::serve::devices::{
-    ArmOpener, Devices, LinkId, SceneFacts, SidecarDefaults,
-};
+use crate::commands::serve::devices::{ArmOpener, Devices, LinkId, SceneFacts, SidecarDefaults};
 use crate::commands::serve::files::write_atomic;
 use crate::commands::serve::plan::{
     exposure_stem, mount_reason, theta_dir_name, Lane, ScanPlan, Step,
