@@ -5,8 +5,9 @@
 //! with the fit plot (ticks on round values, legend inside the figure, markers, both
 //! scales), and a finished scan's controls are disabled. A second test walks scans
 //! through every state (scheduled, queued, running, paused, interrupted, cancelled,
-//! waiting, done) and checks what the page shows in each, then the downloads, the
-//! calibration, STOP ARM and Home, and the page at 390 px width.
+//! waiting for a device or for a sample change and confirmed, done) and checks what the
+//! page shows in each, then the downloads, the calibration, STOP ARM and Home, and the
+//! page at 390 px width.
 //!
 //! Chromium comes from Debian's `chromium` package, which `scripts/test.sh` installs;
 //! without it this test fails saying so (set `GONIO_CHROMIUM` to use another binary).
@@ -845,6 +846,25 @@ fn page_tells_the_truth_in_every_state() {
         assert_eq!(cancelled.status, 200, "{:?}", cancelled.json);
     }
     daemon.post("/api/emulator/fault", &json!({"fault": "camera_replug"}));
+
+    // Waiting for a sample change: a scan of another sample than the one mounted waits
+    // with its reason and a Confirm button; confirming lets it run to the end.
+    let red = json!({"sample": "red", "theta_l": [-20], "bracket": {"shutter_s": [0.1]}});
+    let red_id = daemon.post("/api/scans", &red).json["id"].as_i64().unwrap();
+    let shown = select_and_wait(
+        &mut page,
+        red_id,
+        "waiting",
+        |s| s["why"].as_str().unwrap().contains("mount sample red"),
+        Duration::from_secs(60),
+    );
+    assert!(no_time_left(&shown), "{shown}");
+    assert_eq!(shown["confirmHidden"], json!(false), "{shown}");
+    assert_eq!(shown["frame"], Value::Null, "{shown}");
+    page.eval("document.querySelector('#detail button[data-act=confirm]').click()");
+    let shown = wait_shown(&mut page, red_id, "done", |_| true, Duration::from_secs(120));
+    assert_eq!(shown["confirmHidden"], json!(true), "{shown}");
+    assert!(no_time_left(&shown), "{shown}");
 
     // At 390 px (a phone): nothing wider than the screen, with the plot and the file
     // list on show.
