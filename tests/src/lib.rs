@@ -445,6 +445,32 @@ fault_injection = true
     )
 }
 
+/// The small gold scene with another material: a red, rougher sample.
+pub fn small_red_scene() -> String {
+    let red = SMALL_GOLD_SCENE
+        .replace("name = \"small-gold\"", "name = \"small-red\"")
+        .replace("kd = [9.0, 6.5, 2.0]", "kd = [12.0, 2.5, 1.5]")
+        .replace("ks = [25.0, 20.0, 7.0]", "ks = [18.0, 5.0, 3.0]")
+        .replace("m = [0.07]", "m = [0.1]");
+    assert_ne!(red, SMALL_GOLD_SCENE);
+    red
+}
+
+/// `config` (an emulator configuration) with the small gold scene mounted as `gold` and
+/// the small red scene (written into `dir`) as the sample `red`.
+pub fn with_small_red_sample(config: &str, dir: &Path) -> String {
+    let red = dir.join("red.toml");
+    std::fs::create_dir_all(dir).expect("creating the test directory");
+    std::fs::write(&red, small_red_scene()).expect("writing the red scene");
+    config.replace(
+        "scene = \"SCENE\"",
+        &format!(
+            "scene = \"SCENE\"\nsample = \"gold\"\nsamples = {{ red = \"{}\" }}",
+            red.display()
+        ),
+    )
+}
+
 /// Every file under `dir`, relative, sorted.
 pub fn files_under(dir: &Path) -> Vec<String> {
     fn walk(base: &Path, dir: &Path, out: &mut Vec<String>) {

@@ -7,33 +7,10 @@ use std::io::{BufRead, BufReader};
 use std::time::Duration;
 
 use gonio_mock_hw::scene::Scene;
-use gonio_tests::{emulator_config, temp_dir, Daemon, SMALL_GOLD_SCENE};
+use gonio_tests::{
+    emulator_config, small_red_scene, temp_dir, with_small_red_sample, Daemon, SMALL_GOLD_SCENE,
+};
 use serde_json::{json, Value};
-
-/// The small gold scene with another material: a red, rougher sample.
-fn small_red_scene() -> String {
-    let red = SMALL_GOLD_SCENE
-        .replace("name = \"small-gold\"", "name = \"small-red\"")
-        .replace("kd = [9.0, 6.5, 2.0]", "kd = [12.0, 2.5, 1.5]")
-        .replace("ks = [25.0, 20.0, 7.0]", "ks = [18.0, 5.0, 3.0]")
-        .replace("m = [0.07]", "m = [0.1]");
-    assert_ne!(red, SMALL_GOLD_SCENE);
-    red
-}
-
-/// The emulator configuration with the small gold scene mounted as `gold` and the
-/// small red scene (written into `dir`) as the sample `red`.
-fn two_sample_config(dir: &std::path::Path) -> String {
-    let red = dir.join("red.toml");
-    std::fs::write(&red, small_red_scene()).unwrap();
-    emulator_config(0.01).replace(
-        "scene = \"SCENE\"",
-        &format!(
-            "scene = \"SCENE\"\nsample = \"gold\"\nsamples = {{ red = \"{}\" }}",
-            red.display()
-        ),
-    )
-}
 
 /// The JSON of every event of a scan's stream, until it ends.
 fn read_events(url: &str) -> Vec<Value> {
@@ -90,7 +67,7 @@ fn captures_of(daemon: &Daemon, id: i64) -> usize {
 #[test]
 fn a_two_sample_sweep_waits_for_the_change_and_images_the_sample_confirmed() {
     let dir = temp_dir("samples-sweep");
-    let daemon = Daemon::start(&dir, &two_sample_config(&dir));
+    let daemon = Daemon::start(&dir, &with_small_red_sample(&emulator_config(0.01), &dir));
     let created = daemon.post(
         "/api/sweeps",
         &json!({"samples": ["gold", "red"], "theta_l_sets": [[-20, -30, -40]],
@@ -204,7 +181,7 @@ fn a_two_sample_sweep_waits_for_the_change_and_images_the_sample_confirmed() {
 #[test]
 fn a_sample_the_emulator_has_no_scene_for_is_refused() {
     let dir = temp_dir("samples-unknown");
-    let daemon = Daemon::start(&dir, &two_sample_config(&dir));
+    let daemon = Daemon::start(&dir, &with_small_red_sample(&emulator_config(0.01), &dir));
     let answer = daemon.post(
         "/api/scans",
         &json!({"sample": "teal", "theta_l": [-20], "bracket": {"shutter_s": [0.1]}}),
@@ -226,7 +203,7 @@ fn a_carousel_brings_each_sample_itself_and_no_scan_waits() {
     let dir = temp_dir("samples-carousel");
     let config = format!(
         "{}\n[carousel]\naxis = \"Y\"\nslots = {{ gold = -10.0, red = -100.0 }}\n",
-        two_sample_config(&dir)
+        with_small_red_sample(&emulator_config(0.01), &dir)
     );
     let daemon = Daemon::start(&dir, &config);
     // A sample the carousel does not hold is refused.

@@ -17,7 +17,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use gonio_tests::{emulator_config, emulator_config_scaled, temp_dir, Daemon, TOKEN};
+use gonio_tests::{
+    emulator_config, emulator_config_scaled, temp_dir, with_small_red_sample, Daemon, TOKEN,
+};
 use serde_json::{json, Value};
 use tungstenite::stream::MaybeTlsStream;
 use tungstenite::{Message, WebSocket};
@@ -529,7 +531,9 @@ const ZONE_OFFSET_MIN: i64 = 330;
 fn page_tells_the_truth_in_every_state() {
     let dir = temp_dir("browser-states");
     // Slow enough devices that a running scan can be watched, paused and unplugged.
-    let daemon = Daemon::start(&dir, &emulator_config_scaled(0.3, 0.3));
+    // `red`: the small scene with another material, as a second sample.
+    let config = with_small_red_sample(&emulator_config_scaled(0.3, 0.3), &dir);
+    let daemon = Daemon::start(&dir, &config);
     let browser = Browser::launch(&dir.join("profile"));
     let mut page = browser.page();
     page.call("Emulation.setTimezoneOverride", json!({"timezoneId": ZONE}));
@@ -862,7 +866,13 @@ fn page_tells_the_truth_in_every_state() {
     assert_eq!(shown["confirmHidden"], json!(false), "{shown}");
     assert_eq!(shown["frame"], Value::Null, "{shown}");
     page.eval("document.querySelector('#detail button[data-act=confirm]').click()");
-    let shown = wait_shown(&mut page, red_id, "done", |_| true, Duration::from_secs(120));
+    let shown = wait_shown(
+        &mut page,
+        red_id,
+        "done",
+        |_| true,
+        Duration::from_secs(120),
+    );
     assert_eq!(shown["confirmHidden"], json!(true), "{shown}");
     assert!(no_time_left(&shown), "{shown}");
 
