@@ -28,6 +28,36 @@ fn read_events(url: &str) -> Vec<Value> {
         .collect()
 }
 
+/// Scans `gold` and `red` each imaged their own sample: the truth each wrote is its
+/// sample's, and its Cook–Torrance fit lands within 10 % of that truth and not of the
+/// other sample's.
+fn each_scan_imaged_its_sample(daemon: &Daemon, gold: i64, red: i64) {
+    let gold_truth = Scene::from_toml_str(SMALL_GOLD_SCENE).unwrap().truth_json();
+    let red_truth = Scene::from_toml_str(&small_red_scene())
+        .unwrap()
+        .truth_json();
+    for (id, truth, other) in [
+        (gold, &gold_truth, &red_truth),
+        (red, &red_truth, &gold_truth),
+    ] {
+        let scan_dir = daemon.data.join(format!("scans/{id}"));
+        let written: Value =
+            serde_json::from_slice(&std::fs::read(scan_dir.join("truth.json")).unwrap()).unwrap();
+        for key in ["scene", "kd", "ks", "m"] {
+            assert_eq!(written[key], truth[key], "scan {id}: {key}");
+        }
+        let fit: Value = serde_json::from_slice(
+            &std::fs::read(scan_dir.join("fit-cook-torrance.json")).unwrap(),
+        )
+        .unwrap();
+        fit_matches(&fit, truth, 0.1).unwrap_or_else(|e| panic!("scan {id}: {e}"));
+        assert!(
+            fit_matches(&fit, other, 0.1).is_err(),
+            "scan {id}: its fit also matches the other sample: {fit}"
+        );
+    }
+}
+
 /// Whether each fitted Kd, Ks and m of `fit` is within `rel` of `truth`'s.
 fn fit_matches(fit: &Value, truth: &Value, rel: f64) -> Result<(), String> {
     let mut keys: Vec<(String, f64, f64)> = Vec::new();
@@ -142,30 +172,7 @@ fn a_two_sample_sweep_waits_for_the_change_and_images_the_sample_confirmed() {
     assert_eq!(events.last().unwrap()["state"], "done");
 
     // Each scan imaged its own sample: truth and fits.
-    let gold_truth = Scene::from_toml_str(SMALL_GOLD_SCENE).unwrap().truth_json();
-    let red_truth = Scene::from_toml_str(&small_red_scene())
-        .unwrap()
-        .truth_json();
-    for (id, truth, other) in [
-        (gold, &gold_truth, &red_truth),
-        (red, &red_truth, &gold_truth),
-    ] {
-        let scan_dir = daemon.data.join(format!("scans/{id}"));
-        let written: Value =
-            serde_json::from_slice(&std::fs::read(scan_dir.join("truth.json")).unwrap()).unwrap();
-        for key in ["scene", "kd", "ks", "m"] {
-            assert_eq!(written[key], truth[key], "scan {id}: {key}");
-        }
-        let fit: Value = serde_json::from_slice(
-            &std::fs::read(scan_dir.join("fit-cook-torrance.json")).unwrap(),
-        )
-        .unwrap();
-        fit_matches(&fit, truth, 0.1).unwrap_or_else(|e| panic!("scan {id}: {e}"));
-        assert!(
-            fit_matches(&fit, other, 0.1).is_err(),
-            "scan {id}: its fit also matches the other sample: {fit}"
-        );
-    }
+    each_scan_imaged_its_sample(&daemon, gold, red);
     let log = daemon.get("/api/hardware/log").json;
     assert!(
         log.as_array()
@@ -258,27 +265,7 @@ fn a_carousel_brings_each_sample_itself_and_no_scan_waits() {
             .unwrap();
         assert!(turned < first_capture, "{log}");
     }
-    let gold_truth = Scene::from_toml_str(SMALL_GOLD_SCENE).unwrap().truth_json();
-    let red_truth = Scene::from_toml_str(&small_red_scene())
-        .unwrap()
-        .truth_json();
-    for (id, truth, other) in [
-        (red, &red_truth, &gold_truth),
-        (gold, &gold_truth, &red_truth),
-    ] {
-        let scan_dir = daemon.data.join(format!("scans/{id}"));
-        let written: Value =
-            serde_json::from_slice(&std::fs::read(scan_dir.join("truth.json")).unwrap()).unwrap();
-        for key in ["scene", "kd", "ks", "m"] {
-            assert_eq!(written[key], truth[key], "scan {id}: {key}");
-        }
-        let fit: Value = serde_json::from_slice(
-            &std::fs::read(scan_dir.join("fit-cook-torrance.json")).unwrap(),
-        )
-        .unwrap();
-        fit_matches(&fit, truth, 0.1).unwrap_or_else(|e| panic!("scan {id}: {e}"));
-        assert!(fit_matches(&fit, other, 0.1).is_err(), "scan {id}: {fit}");
-    }
+    each_scan_imaged_its_sample(&daemon, gold, red);
     drop(daemon);
     std::fs::remove_dir_all(dir).ok();
 }
