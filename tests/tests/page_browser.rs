@@ -7,7 +7,8 @@
 //! through every state (scheduled, queued, running, paused, interrupted, cancelled,
 //! waiting for a device or for a sample change and confirmed, done) and checks what the
 //! page shows in each, then the downloads, the calibration, STOP ARM and Home, and the
-//! page at 390 px width.
+//! page at 390 px width. A third shows a scan waiting for the arm's position (a
+//! controller that does not home) until it is declared.
 //!
 //! Chromium comes from Debian's `chromium` package, which `scripts/test.sh` installs;
 //! without it this test fails saying so (set `GONIO_CHROMIUM` to use another binary).
@@ -940,6 +941,60 @@ fn page_tells_the_truth_in_every_state() {
         "note"
     );
 
+    assert_eq!(page.errors(), Vec::<String>::new(), "console errors");
+    drop(browser);
+    drop(daemon);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Waiting for the arm's position (a controller that does not home): the page gives the
+/// reason, no time left, no frame and no Confirm; once the position is declared the scan
+/// runs to the end.
+#[test]
+fn page_shows_a_scan_waiting_for_the_arm_position() {
+    let dir = temp_dir("browser-position");
+    let config = emulator_config(0.01).replace(
+        "[arm]\nkind = \"emulator\"",
+        "[arm]\nkind = \"emulator\"\nhoming = \"off\"",
+    );
+    assert!(config.contains("homing = \"off\""), "{config}");
+    let daemon = Daemon::start(&dir, &config);
+    let browser = Browser::launch(&dir.join("profile"));
+    let mut page = browser.page();
+    page.call("Page.navigate", json!({"url": format!("{}/", daemon.url)}));
+    page.wait_for(
+        "the page and its hardware line",
+        "document.readyState === 'complete' && !document.getElementById('arm').textContent.includes('…')",
+        Duration::from_secs(30),
+    );
+    let scan = json!({"sample": "gold", "theta_l": [-20], "bracket": {"shutter_s": [0.1]}});
+    let id = daemon.post("/api/scans", &scan).json["id"]
+        .as_i64()
+        .unwrap();
+    let shown = select_and_wait(
+        &mut page,
+        id,
+        "waiting",
+        |s| {
+            s["why"]
+                .as_str()
+                .unwrap()
+                .contains("declare where the arm is")
+        },
+        Duration::from_secs(60),
+    );
+    assert!(no_time_left(&shown), "{shown}");
+    assert_eq!(shown["confirmHidden"], json!(true), "{shown}");
+    assert_eq!(shown["frame"], Value::Null, "{shown}");
+    assert_eq!(
+        daemon.get("/api/hardware").json["arm"]["angle_deg"],
+        Value::Null
+    );
+    let declared = daemon.post("/api/arm/position", &json!({"angle": 0.0}));
+    assert_eq!(declared.status, 200, "{:?}", declared.json);
+    let shown = wait_shown(&mut page, id, "done", |_| true, Duration::from_secs(120));
+    assert!(no_time_left(&shown), "{shown}");
+    assert_eq!(shown["frame"], json!(id), "{shown}");
     assert_eq!(page.errors(), Vec::<String>::new(), "console errors");
     drop(browser);
     drop(daemon);
