@@ -479,6 +479,21 @@ fn wait_shown(
     }
 }
 
+/// Selects scan `id` and waits until the detail shows it waiting with a reason that
+/// contains `why`: no time left, no frame, and Confirm only when `confirm`.
+fn shown_waiting(page: &mut Cdp, id: i64, why: &str, confirm: bool) {
+    let shown = select_and_wait(
+        page,
+        id,
+        "waiting",
+        |s| s["why"].as_str().unwrap().contains(why),
+        Duration::from_secs(60),
+    );
+    assert!(no_time_left(&shown), "{shown}");
+    assert_eq!(shown["confirmHidden"], json!(!confirm), "{shown}");
+    assert_eq!(shown["frame"], Value::Null, "{shown}");
+}
+
 /// No time left anywhere for the scan: the queue row and the detail agree.
 fn no_time_left(shown: &Value) -> bool {
     let lefts = shown["lefts"].as_array().unwrap();
@@ -836,16 +851,7 @@ fn page_tells_the_truth_in_every_state() {
     let waiting_id = daemon.post("/api/scans", &one_frame).json["id"]
         .as_i64()
         .unwrap();
-    let shown = select_and_wait(
-        &mut page,
-        waiting_id,
-        "waiting",
-        |s| s["why"].as_str().unwrap().contains("camera not available"),
-        Duration::from_secs(60),
-    );
-    assert!(no_time_left(&shown), "{shown}");
-    assert_eq!(shown["confirmHidden"], json!(true), "{shown}");
-    assert_eq!(shown["frame"], Value::Null, "{shown}");
+    shown_waiting(&mut page, waiting_id, "camera not available", false);
     for id in [interrupted_id, waiting_id] {
         let cancelled = daemon.post(&format!("/api/scans/{id}/cancel"), &json!({}));
         assert_eq!(cancelled.status, 200, "{:?}", cancelled.json);
@@ -856,16 +862,7 @@ fn page_tells_the_truth_in_every_state() {
     // with its reason and a Confirm button; confirming lets it run to the end.
     let red = json!({"sample": "red", "theta_l": [-20], "bracket": {"shutter_s": [0.1]}});
     let red_id = daemon.post("/api/scans", &red).json["id"].as_i64().unwrap();
-    let shown = select_and_wait(
-        &mut page,
-        red_id,
-        "waiting",
-        |s| s["why"].as_str().unwrap().contains("mount sample red"),
-        Duration::from_secs(60),
-    );
-    assert!(no_time_left(&shown), "{shown}");
-    assert_eq!(shown["confirmHidden"], json!(false), "{shown}");
-    assert_eq!(shown["frame"], Value::Null, "{shown}");
+    shown_waiting(&mut page, red_id, "mount sample red", true);
     page.eval("document.querySelector('#detail button[data-act=confirm]').click()");
     let shown = wait_shown(
         &mut page,
@@ -971,21 +968,7 @@ fn page_shows_a_scan_waiting_for_the_arm_position() {
     let id = daemon.post("/api/scans", &scan).json["id"]
         .as_i64()
         .unwrap();
-    let shown = select_and_wait(
-        &mut page,
-        id,
-        "waiting",
-        |s| {
-            s["why"]
-                .as_str()
-                .unwrap()
-                .contains("declare where the arm is")
-        },
-        Duration::from_secs(60),
-    );
-    assert!(no_time_left(&shown), "{shown}");
-    assert_eq!(shown["confirmHidden"], json!(true), "{shown}");
-    assert_eq!(shown["frame"], Value::Null, "{shown}");
+    shown_waiting(&mut page, id, "declare where the arm is", false);
     assert_eq!(
         daemon.get("/api/hardware").json["arm"]["angle_deg"],
         Value::Null
