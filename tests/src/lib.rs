@@ -471,6 +471,16 @@ pub fn with_small_red_sample(config: &str, dir: &Path) -> String {
     )
 }
 
+/// The ids of a created sweep's scans (`POST /api/sweeps`' answer), in order.
+pub fn sweep_scans(sweep: &Value) -> Vec<i64> {
+    sweep["scans"]
+        .as_array()
+        .expect("the sweep's scans")
+        .iter()
+        .map(|v| v.as_i64().expect("a scan id"))
+        .collect()
+}
+
 /// Every file under `dir`, relative, sorted.
 pub fn files_under(dir: &Path) -> Vec<String> {
     fn walk(base: &Path, dir: &Path, out: &mut Vec<String>) {

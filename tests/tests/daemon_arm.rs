@@ -64,6 +64,30 @@ fn actions(daemon: &Daemon) -> Vec<String> {
         .collect()
 }
 
+/// How often the daemon opened the board and was refused.
+fn attempts(daemon: &Daemon) -> usize {
+    actions(daemon)
+        .iter()
+        .filter(|a| *a == "connect failed")
+        .count()
+}
+
+/// Waits (at most 10 s) until the board was opened `n` times, then checks that 1.5 s
+/// later it still was opened exactly `n` times (no reset storm).
+fn opened_exactly(daemon: &Daemon, n: usize) {
+    let deadline = std::time::Instant::now() + Duration::from_secs(10);
+    while attempts(daemon) < n {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "{:?}",
+            actions(daemon)
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    std::thread::sleep(Duration::from_millis(1500));
+    assert_eq!(attempts(daemon), n, "{:?}", actions(daemon));
+}
+
 /// The first server-sent event of scan `id` that `wanted` accepts.
 fn first_event(daemon: &Daemon, id: i64, wanted: impl Fn(&Value) -> bool) -> Value {
     let response = ureq::get(&format!("{}/api/scans/{id}/events", daemon.url))
@@ -118,12 +142,6 @@ fn stock_board_waits_with_each_setting_then_for_the_declared_position() {
     assert_eq!(arm["angle_deg"], Value::Null, "{hardware}");
     // Refused, the board is not opened (reset) again by itself: once in 3.5 s, where
     // a backoff of 1 s, 2 s, … would have opened it three times.
-    let attempts = |daemon: &Daemon| {
-        actions(daemon)
-            .iter()
-            .filter(|a| *a == "connect failed")
-            .count()
-    };
     std::thread::sleep(Duration::from_millis(3500));
     assert_eq!(attempts(&daemon), 1, "{:?}", actions(&daemon));
     // Unplugged and plugged in: opened once more, refused again (the same board).
@@ -133,33 +151,13 @@ fn stock_board_waits_with_each_setting_then_for_the_declared_position() {
     };
     fault(&daemon, "unplug");
     fault(&daemon, "reconnect");
-    let deadline = std::time::Instant::now() + Duration::from_secs(10);
-    while attempts(&daemon) < 2 {
-        assert!(
-            std::time::Instant::now() < deadline,
-            "{:?}",
-            actions(&daemon)
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    std::thread::sleep(Duration::from_millis(1500));
-    assert_eq!(attempts(&daemon), 2, "{:?}", actions(&daemon));
+    opened_exactly(&daemon, 2);
     assert_eq!(daemon.get("/api/hardware").json["arm"]["state"], "refused");
     // The operator asks: once more. The route needs the token.
     assert_eq!(daemon.post_raw("/api/arm/reconnect", None, "").status, 401);
     let asked = daemon.post("/api/arm/reconnect", &json!({}));
     assert_eq!(asked.status, 200, "{:?}", asked.json);
-    let deadline = std::time::Instant::now() + Duration::from_secs(10);
-    while attempts(&daemon) < 3 {
-        assert!(
-            std::time::Instant::now() < deadline,
-            "{:?}",
-            actions(&daemon)
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    std::thread::sleep(Duration::from_millis(1500));
-    assert_eq!(attempts(&daemon), 3, "{:?}", actions(&daemon));
+    opened_exactly(&daemon, 3);
     let reconnects: Vec<String> = daemon
         .get("/api/hardware/log")
         .json

@@ -5,7 +5,7 @@
 use std::collections::HashMap;
 use std::time::{Duration, Instant};
 
-use gonio_tests::{emulator_config, files_under, temp_dir, Daemon};
+use gonio_tests::{emulator_config, files_under, sweep_scans, temp_dir, Daemon};
 use serde_json::{json, Value};
 
 fn captures(log: &Value) -> usize {
@@ -29,12 +29,7 @@ fn kill_9_mid_sweep_then_restart_resumes_with_every_frame_once() {
     );
     assert_eq!(created.status, 201, "{:?}", created.json);
     let sweep = created.json["id"].as_i64().unwrap();
-    let scans: Vec<i64> = created.json["scans"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_i64().unwrap())
-        .collect();
+    let scans = sweep_scans(&created.json);
     assert_eq!(scans.len(), 2);
 
     // Kill it once a few frames of the first scan have landed.

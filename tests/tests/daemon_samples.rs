@@ -8,7 +8,8 @@ use std::time::Duration;
 
 use gonio_mock_hw::scene::Scene;
 use gonio_tests::{
-    emulator_config, small_red_scene, temp_dir, with_small_red_sample, Daemon, SMALL_GOLD_SCENE,
+    emulator_config, small_red_scene, sweep_scans, temp_dir, with_small_red_sample, Daemon,
+    SMALL_GOLD_SCENE,
 };
 use serde_json::{json, Value};
 
@@ -104,12 +105,7 @@ fn a_two_sample_sweep_waits_for_the_change_and_images_the_sample_confirmed() {
                 "bracket": {"shutter_s": [0.5, 0.125, 1.0 / 30.0, 0.01]}}),
     );
     assert_eq!(created.status, 201, "{:?}", created.json);
-    let ids: Vec<i64> = created.json["scans"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_i64().unwrap())
-        .collect();
+    let ids = sweep_scans(&created.json);
     let (gold, red) = (ids[0], ids[1]);
     let events_url = format!("{}/api/scans/{red}/events", daemon.url);
     let events = std::thread::spawn(move || read_events(&events_url));
@@ -227,12 +223,7 @@ fn a_carousel_brings_each_sample_itself_and_no_scan_waits() {
     );
     assert_eq!(created.status, 201, "{:?}", created.json);
     let sweep = created.json["id"].as_i64().unwrap();
-    let ids: Vec<i64> = created.json["scans"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_i64().unwrap())
-        .collect();
+    let ids = sweep_scans(&created.json);
     let (red, gold) = (ids[0], ids[1]);
     let deadline = std::time::Instant::now() + Duration::from_secs(180);
     loop {
