@@ -267,31 +267,24 @@ impl Daemon {
             0,
             "signalling the daemon"
         );
-        let deadline = Instant::now() + timeout;
-        loop {
-            if let Some(status) = self.child.try_wait().expect("waiting for the daemon") {
-                return status;
-            }
-            assert!(
-                Instant::now() < deadline,
-                "the daemon still runs {timeout:?} after signal {signal}"
-            );
-            std::thread::sleep(Duration::from_millis(50));
-        }
+        self.ended_within(timeout, &format!("{timeout:?} after signal {signal}"))
     }
 
     /// Waits for the process to end by itself, at most `timeout`; returns its exit
     /// status.
     pub fn wait_exit(mut self, timeout: Duration) -> std::process::ExitStatus {
+        self.ended_within(timeout, &format!("after {timeout:?}"))
+    }
+
+    /// The exit status once the process has ended, at most `timeout` from now; panics
+    /// with "the daemon still runs `when`" otherwise.
+    fn ended_within(&mut self, timeout: Duration, when: &str) -> std::process::ExitStatus {
         let deadline = Instant::now() + timeout;
         loop {
             if let Some(status) = self.child.try_wait().expect("waiting for the daemon") {
                 return status;
             }
-            assert!(
-                Instant::now() < deadline,
-                "the daemon still runs after {timeout:?}"
-            );
+            assert!(Instant::now() < deadline, "the daemon still runs {when}");
             std::thread::sleep(Duration::from_millis(50));
         }
     }
