@@ -7,7 +7,10 @@
 //! wanted as files ([`ExtractOptions::hdr_dir`]). Each pixel column gives one sample:
 //! the mean of the [`STRIP_ROWS`] rows around each strip's centre row, with the mean of
 //! the true 3D geometry of those sample pixels (the point on the cylinder, its normal,
-//! the light and the camera: [`Setup::pixel_geometry`]); then per channel c
+//! the light and the camera: [`Setup::pixel_geometry`]). Where the sample strip lies on
+//! a peak too sharp to average (β curves across the rows so that their mean is off the
+//! centre row's value by more than 0.1 % and more than the rows' noise explains), the
+//! sample is the centre row alone, with that pixel's geometry. Then per channel c
 //!
 //! β_c = (L̄_sample,c / L̄_white,c) · (Ē_white / Ē_sample) · ρ_white · W_c,
 //!
@@ -216,6 +219,9 @@ pub struct ThetaSummary {
     pub theta_l: f64,
     pub frames: usize,
     pub samples: usize,
+    /// Of the samples, those read from their strip's centre row alone (on a peak too
+    /// sharp to average over the rows).
+    pub centre_rows: usize,
     pub dropped: DropCounts,
 }
 
@@ -349,12 +355,13 @@ pub fn extract_scan_with_progress(
             map.write_exr(&hdr_dir.join(format!("theta_l_{theta_l:.1}.exr")))
                 .map_err(|error| ExtractError::Hdr { theta_l, error })?;
         }
-        let (samples, dropped) =
+        let (samples, dropped, centre_rows) =
             extract_theta(&setup, &map, &layout, theta_l, options, white_reflectance);
         extraction.per_theta.push(ThetaSummary {
             theta_l,
             frames: frames.len(),
             samples: samples.len(),
+            centre_rows,
             dropped,
         });
         extraction.dropped.add(&dropped);
@@ -431,28 +438,149 @@ fn find_captures(dir: &Path, out: &mut Vec<PathBuf>) -> Result<(), ExtractError>
     Ok(())
 }
 
-/// The mean radiance of one strip's rows at one column, with each channel's flags
-/// (OR over the rows).
+/// One strip's rows at one column: each row's radiance and flags.
 #[derive(Debug, Clone, Copy)]
-struct StripMean {
+struct StripRows {
+    rgb: [[f64; 3]; STRIP_ROWS],
+    flags: [[u8; 3]; STRIP_ROWS],
+}
+
+impl StripRows {
+    fn read(map: &HdrImage, x: usize, centre: usize) -> Self {
+        let mut rows = StripRows {
+            rgb: [[0.0; 3]; STRIP_ROWS],
+            flags: [[0; 3]; STRIP_ROWS],
+        };
+        for (i, y) in (centre - STRIP_ROWS / 2..=centre + STRIP_ROWS / 2).enumerate() {
+            rows.rgb[i] = map.pixel(x, y).map(f64::from);
+            for c in 0..3 {
+                rows.flags[i][c] = map.channel_flags(x, y, c);
+            }
+        }
+        rows
+    }
+
+    /// The rows' mean, each channel's flags OR-ed over the rows.
+    fn mean(&self) -> StripValue {
+        let mut value = StripValue::default();
+        for (rgb, flags) in self.rgb.iter().zip(&self.flags) {
+            for c in 0..3 {
+                value.rgb[c] += rgb[c] / STRIP_ROWS as f64;
+                value.flags[c] |= flags[c];
+            }
+        }
+        value
+    }
+
+    /// The centre row alone.
+    fn centre(&self) -> StripValue {
+        StripValue {
+            rgb: self.rgb[STRIP_ROWS / 2],
+            flags: self.flags[STRIP_ROWS / 2],
+        }
+    }
+
+    /// Channel `c` over the rows as radiance per unit irradiance (the rows' own
+    /// `irradiance`), `None` if a row is flagged or unlit.
+    fn reflected(&self, c: usize, irradiance: &[f64; STRIP_ROWS]) -> Option<[f64; STRIP_ROWS]> {
+        let mut v = [0.0; STRIP_ROWS];
+        for i in 0..STRIP_ROWS {
+            if self.flags[i][c] != 0 || irradiance[i] <= 0.0 {
+                return None;
+            }
+            v[i] = self.rgb[i][c] / irradiance[i];
+        }
+        Some(v)
+    }
+}
+
+/// A strip's radiance at one column (the mean of its rows, or one row) with each
+/// channel's flags.
+#[derive(Debug, Clone, Copy, Default)]
+struct StripValue {
     rgb: [f64; 3],
     flags: [u8; 3],
 }
 
-fn strip_mean(map: &HdrImage, x: usize, centre: usize) -> StripMean {
-    let mut rgb = [0.0; 3];
-    let mut flags = [0; 3];
-    for y in centre - STRIP_ROWS / 2..=centre + STRIP_ROWS / 2 {
-        let p = map.pixel(x, y);
-        for c in 0..3 {
-            rgb[c] += f64::from(p[c]);
-            flags[c] |= map.channel_flags(x, y, c);
-        }
+/// How β curves across a strip's five rows, from a least-squares parabola
+/// v(t) = a + b·t + k·t² over the rows t = −2…2: the five-row mean is a + 2k, so 2k/a is
+/// the relative error of the mean against the value at the centre row's geometry. The
+/// parabola's residual estimates the noise of one row: σ̂² = (P3·v)²/10 + (P4·v)²/70 over
+/// its two degrees of freedom, with P3, P4 the cubic and quartic discrete orthogonal
+/// polynomials.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Curvature {
+    /// 2k/a: the five-row mean's relative excess over the centre value.
+    mean_excess: f64,
+    /// σ̂/a: one row's relative noise.
+    row_noise: f64,
+}
+
+impl Curvature {
+    /// `None` when the centre value is not positive.
+    fn of(v: &[f64; STRIP_ROWS]) -> Option<Self> {
+        let dot = |w: [f64; STRIP_ROWS]| w.iter().zip(v).map(|(w, v)| w * v).sum::<f64>();
+        let two_k = dot([2.0, -1.0, -2.0, -1.0, 2.0]) / 7.0;
+        let a = dot([-3.0, 12.0, 17.0, 12.0, -3.0]) / 35.0;
+        let p3 = dot([-1.0, 2.0, 0.0, -2.0, 1.0]);
+        let p4 = dot([1.0, -4.0, 6.0, -4.0, 1.0]);
+        let sigma = ((p3 * p3 / 10.0 + p4 * p4 / 70.0) / 2.0).sqrt();
+        (a > 0.0 && a.is_finite()).then(|| Curvature {
+            mean_excess: two_k / a,
+            row_noise: sigma / a,
+        })
     }
-    StripMean {
-        rgb: rgb.map(|s| s / STRIP_ROWS as f64),
-        flags,
-    }
+}
+
+/// Below this relative error of the five-row mean, a column is averaged whatever the
+/// noise: far below what a fit or a colour difference can see.
+const SHARP_LIMIT: f64 = 1e-3;
+
+/// Standard errors of 2k/a that noise alone rarely reaches (Gaussian: 6·10⁻⁵).
+const SHARP_SIGMAS: f64 = 4.0;
+
+/// Standard error of 2k/a per unit of one row's relative noise: var(2k) = 4σ²/14.
+const CURVATURE_SE_PER_NOISE: f64 = 0.534_522_483_824_848_8;
+
+/// The median of σ̂ (two degrees of freedom) over σ: √(χ²₂ median / 2) = √ln 2.
+const MEDIAN_SIGMA_HAT: f64 = 0.832_554_611_157_697_8;
+
+/// Columns each side whose noise estimates are pooled with a column's own.
+const NOISE_NEIGHBOURS: usize = 8;
+
+/// Per column and channel, one row's relative noise pooled over the column and its
+/// [`NOISE_NEIGHBOURS`] each side (the median of their own estimates, scaled to σ):
+/// neighbours see about the same signal, so about the same relative noise. 0 where no
+/// column can tell.
+fn pooled_row_noise(curvatures: &[[Option<Curvature>; 3]]) -> Vec<[f64; 3]> {
+    let mut noise = Vec::with_capacity(2 * NOISE_NEIGHBOURS + 1);
+    (0..curvatures.len())
+        .map(|x| {
+            let near = &curvatures[x.saturating_sub(NOISE_NEIGHBOURS)
+                ..(x + NOISE_NEIGHBOURS + 1).min(curvatures.len())];
+            std::array::from_fn(|c| {
+                noise.clear();
+                noise.extend(near.iter().filter_map(|k| k[c].map(|k| k.row_noise)));
+                if noise.is_empty() {
+                    return 0.0;
+                }
+                let mid = noise.len() / 2;
+                let (_, median, _) = noise.select_nth_unstable_by(mid, f64::total_cmp);
+                *median / MEDIAN_SIGMA_HAT
+            })
+        })
+        .collect()
+}
+
+/// Whether a column's sample strip lies on a peak too sharp to average: in some
+/// channel the five-row mean is off the centre value by more than [`SHARP_LIMIT`] and
+/// by more than [`SHARP_SIGMAS`] standard errors of what the rows' noise could make of it.
+fn is_sharp(curvature: &[Option<Curvature>; 3], noise: &[f64; 3]) -> bool {
+    (0..3).any(|c| {
+        curvature[c].is_some_and(|k| {
+            k.mean_excess.abs() > SHARP_LIMIT.max(SHARP_SIGMAS * CURVATURE_SE_PER_NOISE * noise[c])
+        })
+    })
 }
 
 /// Sensor pixels per pixel of a `width`×`height` capture of `setup`'s sensor: 1 for
@@ -560,8 +688,8 @@ impl StripLayout {
     }
 }
 
-/// The mean geometry of a column's sample pixels, and the irradiance ratio
-/// Ē_white / Ē_sample of its two strips.
+/// The geometry of a column's sample (the mean of its strip pixels', or the centre
+/// pixel's), and the irradiance ratio Ē_white / E_sample of its two strips.
 #[derive(Debug, Clone, Copy)]
 struct ColumnGeometry {
     theta_i: f64,
@@ -589,6 +717,37 @@ impl ColumnGeometry {
     }
 }
 
+/// One column before the samples are made: its strips' pixel geometry (`None` off the
+/// cylinder or unlit), its strips' rows, and how the sample strip curves per channel.
+struct Column {
+    geometry: Option<(Vec<PixelGeometry>, Vec<PixelGeometry>)>,
+    sample: StripRows,
+    white: StripRows,
+    curvature: [Option<Curvature>; 3],
+}
+
+impl Column {
+    /// The sample's geometry and the two strips' values: five-row means, or on a
+    /// sharp peak the sample strip's centre row with that pixel's geometry.
+    fn read(&self, sharp: bool) -> Option<(ColumnGeometry, StripValue, StripValue)> {
+        let (sample, white) = self.geometry.as_ref()?;
+        Some(if sharp {
+            let centre = std::slice::from_ref(&sample[STRIP_ROWS / 2]);
+            (
+                ColumnGeometry::new(centre, white),
+                self.sample.centre(),
+                self.white.mean(),
+            )
+        } else {
+            (
+                ColumnGeometry::new(sample, white),
+                self.sample.mean(),
+                self.white.mean(),
+            )
+        })
+    }
+}
+
 /// Why one value (a channel of a column) is dropped.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum DropReason {
@@ -600,7 +759,7 @@ enum DropReason {
 impl DropReason {
     /// Why channel `c` of a column with these strips is dropped, if it is; `threshold`
     /// is the channel's too-dark white level.
-    fn of(sample: &StripMean, white: &StripMean, c: usize, threshold: f64) -> Option<Self> {
+    fn of(sample: &StripValue, white: &StripValue, c: usize, threshold: f64) -> Option<Self> {
         if (sample.flags[c] | white.flags[c]) & SATURATED != 0 {
             Some(Self::Saturated)
         } else if white.flags[c] & UNDEREXPOSED != 0
@@ -633,26 +792,49 @@ fn extract_theta(
     theta_l: f64,
     options: &ExtractOptions,
     white_reflectance: f64,
-) -> (Vec<Sample>, DropCounts) {
-    let columns: Vec<_> = (0..map.width)
+) -> (Vec<Sample>, DropCounts, usize) {
+    let columns: Vec<Column> = (0..map.width)
         .into_par_iter()
         .map(|x| {
             let geometry = layout
                 .strip_geometry(setup, x, layout.sample_row, theta_l)
-                .zip(layout.strip_geometry(setup, x, layout.white_row, theta_l))
-                .map(|(sample, white)| ColumnGeometry::new(&sample, &white));
-            (
+                .zip(layout.strip_geometry(setup, x, layout.white_row, theta_l));
+            let sample = StripRows::read(map, x, layout.sample_map_row);
+            let curvature = match &geometry {
+                Some((pixels, _)) => {
+                    let irradiance = std::array::from_fn(|i| pixels[i].irradiance);
+                    std::array::from_fn(|c| {
+                        sample
+                            .reflected(c, &irradiance)
+                            .and_then(|v| Curvature::of(&v))
+                    })
+                }
+                None => [None; 3],
+            };
+            Column {
                 geometry,
-                strip_mean(map, x, layout.sample_map_row),
-                strip_mean(map, x, layout.white_map_row),
-            )
+                sample,
+                white: StripRows::read(map, x, layout.white_map_row),
+                curvature,
+            }
         })
+        .collect();
+    let noise = pooled_row_noise(&columns.iter().map(|c| c.curvature).collect::<Vec<_>>());
+    let sharp: Vec<bool> = columns
+        .iter()
+        .zip(&noise)
+        .map(|(column, noise)| is_sharp(&column.curvature, noise))
+        .collect();
+    let columns: Vec<_> = columns
+        .iter()
+        .zip(&sharp)
+        .map(|(column, &sharp)| column.read(sharp).map(|read| (read, sharp)))
         .collect();
     // The brightest usable white of each channel, for the too-dark threshold.
     let mut brightest_white = [0.0f64; 3];
-    for (geometry, _, white) in &columns {
+    for ((_, _, white), _) in columns.iter().flatten() {
         for (c, brightest) in brightest_white.iter_mut().enumerate() {
-            if geometry.is_some() && white.flags[c] == 0 {
+            if white.flags[c] == 0 {
                 *brightest = brightest.max(white.rgb[c]);
             }
         }
@@ -663,8 +845,9 @@ fn extract_theta(
 
     let mut samples = Vec::new();
     let mut dropped = DropCounts::default();
-    for (geometry, sample, white) in columns {
-        let Some(g) = geometry else {
+    let mut centre_rows = 0;
+    for column in columns {
+        let Some(((g, sample, white), sharp)) = column else {
             dropped.off_cylinder += 1;
             continue;
         };
@@ -696,8 +879,59 @@ fn extract_theta(
         if point.dropped.iter().all(|&d| d) {
             dropped.no_channel += 1;
         } else {
+            centre_rows += usize::from(sharp);
             samples.push(point);
         }
     }
-    (samples, dropped)
+    (samples, dropped, centre_rows)
+}
+
+#[cfg(test)]
+mod tests {
+    use std::f64::consts::PI;
+
+    use super::*;
+
+    #[test]
+    fn a_parabola_through_the_rows_gives_its_mean_excess_and_no_noise() {
+        let (a, b, k) = (50.0, 3.0, -0.7);
+        let v = [-2.0, -1.0, 0.0, 1.0, 2.0].map(|t: f64| a + b * t + k * t * t);
+        let curvature = Curvature::of(&v).unwrap();
+        let mean = v.iter().sum::<f64>() / 5.0;
+        assert!((curvature.mean_excess - (mean - a) / a).abs() < 1e-15);
+        assert!(curvature.row_noise < 1e-15);
+        assert_eq!(Curvature::of(&[0.0; 5]), None);
+    }
+
+    #[test]
+    fn pooled_noise_recovers_the_rows_noise() {
+        // Flat rows with Gaussian noise of relative σ = 1 % (Box–Muller over a fixed
+        // sequence): the pooled estimate is within 15 % of it, and noise alone marks
+        // few columns as sharp.
+        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+        let mut uniform = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let curvatures: Vec<[Option<Curvature>; 3]> = (0..4000)
+            .map(|_| {
+                let v: [f64; 5] = std::array::from_fn(|_| {
+                    let (u1, u2) = (uniform().max(1e-300), uniform());
+                    100.0 * (1.0 + 0.01 * (-2.0 * u1.ln()).sqrt() * (2.0 * PI * u2).cos())
+                });
+                [Curvature::of(&v); 3]
+            })
+            .collect();
+        let noise = pooled_row_noise(&curvatures);
+        let mean = noise.iter().map(|n| n[0]).sum::<f64>() / noise.len() as f64;
+        assert!((mean / 0.01 - 1.0).abs() < 0.15, "{mean}");
+        let sharp = curvatures
+            .iter()
+            .zip(&noise)
+            .filter(|(k, n)| is_sharp(k, n))
+            .count();
+        assert!(sharp * 100 < curvatures.len(), "{sharp}");
+    }
 }

@@ -78,6 +78,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         rgb(d.underexposed),
         rgb(d.dark_white),
     );
+    let centre_rows: usize = extraction.per_theta.iter().map(|t| t.centre_rows).sum();
+    if centre_rows > 0 {
+        println!(
+            "{centre_rows} samples on a peak too sharp to average over the strip's rows read from its centre row"
+        );
+    }
     let source = match extraction.white_source {
         WhiteSource::Option => "--white-reflectance",
         WhiteSource::Setup => "setup.json",
