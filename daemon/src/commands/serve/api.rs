@@ -622,20 +622,6 @@ async fn stop_arm(State(shared): AppState) -> ApiResult<Json<Value>> {
     Ok(Json(json!({ "stopped": true, "paused": paused })))
 }
 
-/// Whether an arm in `state` knows where it is (not in an alarm, nor after a reset or a
-/// stop until it is homed or its position declared, nor while homing or disconnected).
-fn position_known(state: ArmState) -> bool {
-    !matches!(
-        state,
-        ArmState::Alarm
-            | ArmState::Homing
-            | ArmState::NeedsHoming
-            | ArmState::NeedsPosition
-            | ArmState::Disconnected
-            | ArmState::Refused
-    )
-}
-
 /// Homes the arm (after a stop or a reset): 202 at once, the hardware lane homes it
 /// before it runs anything else; 409 while a scan runs or when the controller does not
 /// home, 503 without an arm.
@@ -833,14 +819,8 @@ async fn list_sweeps(State(shared): AppState) -> ApiResult<Json<Value>> {
 async fn hardware(State(shared): AppState) -> Json<Value> {
     let mut status = lock(&shared.hardware).clone();
     let live = lock(&shared.arm_angle).as_ref().and_then(|a| a.get());
-    if let Some(angle) = live.filter(|_| status.arm.homed) {
-        // As the arm reported it, also while a move is under way; none while the
-        // position is unknown.
-        status.arm.angle_deg = Some(angle);
-    }
-    if !position_known(status.arm.state) {
-        status.arm.angle_deg = None;
-    }
+    // As the arm reported it, also while a move is under way.
+    status.arm.angle_deg = status.arm.shown_angle(live.or(status.arm.angle_deg));
     Json(json!({
         "arm": status.arm,
         "camera": status.camera,

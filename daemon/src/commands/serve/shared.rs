@@ -43,6 +43,24 @@ pub struct ArmView {
     pub settings: Vec<String>,
 }
 
+impl ArmView {
+    /// The angle to show for a `reported` one: none while the position is unknown (not
+    /// homed or declared, or in a state that loses it: an alarm, homing, after a reset or
+    /// a stop, disconnected, refused).
+    pub fn shown_angle(&self, reported: Option<f64>) -> Option<f64> {
+        let lost = matches!(
+            self.state,
+            ArmState::Alarm
+                | ArmState::Homing
+                | ArmState::NeedsHoming
+                | ArmState::NeedsPosition
+                | ArmState::Disconnected
+                | ArmState::Refused
+        );
+        reported.filter(|_| self.homed && !lost)
+    }
+}
+
 #[derive(Debug, Clone, Serialize)]
 pub struct CameraView {
     pub model: Option<String>,

@@ -508,8 +508,8 @@ impl HardwareLane {
                 }
                 let mut status = lock(&self.shared.hardware);
                 status.arm.state = s.state;
-                status.arm.angle_deg = self.homed.then_some(s.angle_deg);
                 status.arm.homed = self.homed;
+                status.arm.angle_deg = status.arm.shown_angle(Some(s.angle_deg));
             }
             Err(DeviceError::SettingsDiffer(settings)) => {
                 // Reopened by the driver after a reset or unplug, and refused.
@@ -1033,7 +1033,7 @@ impl HardwareLane {
         status.arm.state = ArmState::Idle;
         status.arm.homed = self.homed;
         status.arm.error = None;
-        status.arm.angle_deg = angle.or(Some(0.0)).filter(|_| self.homed);
+        status.arm.angle_deg = status.arm.shown_angle(angle.or(Some(0.0)));
     }
 
     /// Runs `op` on the camera with bounded retries of transient faults (busy, timeout,
