@@ -349,7 +349,8 @@ fn hdr_running(daemon: &Daemon, id: i64) -> bool {
 /// kill -9 while the background HDR merges of a six-θL scan run, three times, each once
 /// more maps are done: the maps made before each kill are kept (same inode, same
 /// modification time: not merged again), the scan ends done, and every map is exactly
-/// what `gonio hdr` makes of its frames, as an uninterrupted merge would be.
+/// what `gonio hdr` makes of its frames, as an uninterrupted merge would be, and
+/// `samples.csv` what `gonio extract` makes of the scan.
 #[test]
 fn kills_during_the_hdr_merges_keep_the_maps_already_made() {
     let dir = temp_dir("harden-hdr-kills");
@@ -418,6 +419,14 @@ fn kills_during_the_hdr_merges_keep_the_maps_already_made() {
             "θL {theta}: the map differs"
         );
     }
+    // And the samples are those of the whole scan extracted in one go.
+    let extracted = dir.join("extracted.csv");
+    let scan_arg = scan_dir.display().to_string();
+    gonio_tests::gonio(&["extract", &scan_arg, "--out", extracted.to_str().unwrap()]);
+    assert!(
+        std::fs::read(scan_dir.join("samples.csv")).unwrap() == std::fs::read(&extracted).unwrap(),
+        "samples.csv differs from gonio extract's"
+    );
     std::fs::remove_dir_all(dir).ok();
 }
 
