@@ -197,7 +197,8 @@ impl HdrImage {
     /// units of the values), `capDate`, and `gonio.*` custom attributes with the merge
     /// method, θL, the frames' shutter times and ISOs, and the flagged pixel counts.
     /// RLE-compressed 64×64 tiles, which are laid out and compressed in parallel on
-    /// the current thread pool.
+    /// the current thread pool. The attributes are in name order: the same map is the
+    /// same bytes.
     pub fn write_exr(&self, path: &Path) -> Result<(), HdrError> {
         use exr::meta::attribute::{AttributeValue, ChannelDescription, SampleType, Text};
         use exr::meta::header::{Header, LayerAttributes};
@@ -351,8 +352,78 @@ impl HdrImage {
             },
         )
         .map_err(|e| exr_error(e.to_string()))?;
-        out.flush().map_err(|e| exr_error(e.to_string()))
+        let file = out.into_inner().map_err(|e| exr_error(e.to_string()))?;
+        // A device or a FIFO gets the bytes as written; a file its header in order.
+        if file.metadata().is_ok_and(|m| m.is_file()) {
+            std::fs::OpenOptions::new()
+                .read(true)
+                .write(true)
+                .open(path)
+                .and_then(|mut file| sort_header_attributes(&mut file))
+                .map_err(|e| exr_error(e.to_string()))?;
+        }
+        Ok(())
     }
+}
+
+/// Most bytes of an OpenEXR header [`sort_header_attributes`] reads (ours are about
+/// 1 KB).
+const EXR_HEADER_MAX_BYTES: u64 = 1 << 20;
+
+/// Puts the header attributes of the single-part OpenEXR file `file` in name order, in
+/// place. The exr crate writes custom attributes in the order of a hash map, which
+/// differs from one write to the next, and the same map must be the same bytes. The
+/// header keeps its length, so the offset table after it still holds.
+fn sort_header_attributes(file: &mut std::fs::File) -> std::io::Result<()> {
+    use std::io::{Read, Seek, SeekFrom};
+    let invalid = |what: &str| std::io::Error::new(std::io::ErrorKind::InvalidData, what);
+    let mut head = Vec::new();
+    file.seek(SeekFrom::Start(0))?;
+    Read::by_ref(file)
+        .take(EXR_HEADER_MAX_BYTES)
+        .read_to_end(&mut head)?;
+    // Magic number and version flags, then attributes (name NUL, type NUL, size as a
+    // little-endian i32, value) up to an empty name.
+    let flags = head
+        .get(4..8)
+        .ok_or_else(|| invalid("no OpenEXR version"))?;
+    const MULTIPART: u8 = 0x10;
+    if flags[1] & MULTIPART != 0 {
+        return Err(invalid("a multi-part OpenEXR file"));
+    }
+    let nul = |from: usize| {
+        head.get(from..)
+            .and_then(|rest| rest.iter().position(|&b| b == 0))
+            .map(|n| from + n)
+            .ok_or_else(|| invalid("an OpenEXR header cut short"))
+    };
+    let mut attributes: Vec<&[u8]> = Vec::new();
+    let mut at = 8;
+    loop {
+        let name_end = nul(at)?;
+        if name_end == at {
+            break;
+        }
+        let size_at = nul(name_end + 1)? + 1;
+        let size = head
+            .get(size_at..size_at + 4)
+            .and_then(|b| <[u8; 4]>::try_from(b).ok())
+            .map(i32::from_le_bytes)
+            .and_then(|n| usize::try_from(n).ok())
+            .ok_or_else(|| invalid("an OpenEXR attribute size"))?;
+        let end = size_at + 4 + size;
+        attributes.push(
+            head.get(at..end)
+                .ok_or_else(|| invalid("an OpenEXR header cut short"))?,
+        );
+        at = end;
+    }
+    // Names are unique and end in NUL: byte order of the records is name order.
+    attributes.sort_unstable();
+    let sorted = attributes.concat();
+    file.seek(SeekFrom::Start(8))?;
+    file.write_all(&sorted)?;
+    file.flush()
 }
 
 /// Tiles compressed in parallel before they are written: 1024 tiles of 64×64 RGB
@@ -754,7 +825,40 @@ fn merge_debevec_malik(
 
 #[cfg(test)]
 mod tests {
-    use super::predicted_mean;
+    use super::*;
+
+    /// The same map written twice is the same bytes (the exr crate alone orders custom
+    /// attributes differently each time), and reads back as written.
+    #[test]
+    fn the_same_map_is_written_as_the_same_bytes() {
+        let dir = tempfile::tempdir().unwrap();
+        let (width, height) = (70, 5);
+        let image = HdrImage {
+            width,
+            height,
+            rgb: (0..3 * width * height).map(|v| v as f32 * 0.25).collect(),
+            mask: vec![0; width * height],
+            info: HdrInfo {
+                method: "linear",
+                shutter_s: vec![0.1, 0.01],
+                iso: vec![100.0, 100.0],
+                theta_l: -20.0,
+                camera: "test".into(),
+                time: "2026-01-01T00:00:00Z".into(),
+            },
+        };
+        let written: Vec<Vec<u8>> = (0..6)
+            .map(|n| {
+                let path = dir.path().join(format!("map_{n}.exr"));
+                image.write_exr(&path).unwrap();
+                std::fs::read(&path).unwrap()
+            })
+            .collect();
+        assert!(written.iter().all(|w| *w == written[0]));
+        let (w, h, rgb) = read_exr_rgb(&dir.path().join("map_0.exr")).unwrap();
+        assert_eq!((w, h), (width, height));
+        assert_eq!(rgb, image.rgb);
+    }
 
     /// Constant variance, readings usable from 0.01 to 0.9.
     fn mean(exposures: &[f64], readings: &[Option<f64>], reference: f64) -> f64 {

@@ -319,6 +319,117 @@ fn kills_while_a_step_runs_are_not_crashes() {
     std::fs::remove_dir_all(dir).ok();
 }
 
+/// The HDR maps of scan `id` whose step is done, with their inode and modification time.
+fn maps_done(daemon: &Daemon, id: i64) -> Vec<(String, (u64, std::time::SystemTime))> {
+    use std::os::unix::fs::MetadataExt;
+    let steps = daemon.get(&format!("/api/scans/{id}/steps")).json;
+    steps
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|s| s["step"]["kind"] == "hdr" && s["state"] == "done")
+        .map(|s| {
+            let rel = s["result"]["path"].as_str().unwrap().to_owned();
+            let meta = std::fs::metadata(daemon.data.join(format!("scans/{id}/{rel}"))).unwrap();
+            (rel, (meta.ino(), meta.modified().unwrap()))
+        })
+        .collect()
+}
+
+/// Whether an HDR step of scan `id` runs now.
+fn hdr_running(daemon: &Daemon, id: i64) -> bool {
+    let steps = daemon.get(&format!("/api/scans/{id}/steps")).json;
+    steps
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|s| s["step"]["kind"] == "hdr" && s["state"] == "started")
+}
+
+/// kill -9 while the background HDR merges of a six-θL scan run, three times, each once
+/// more maps are done: the maps made before each kill are kept (same inode, same
+/// modification time: not merged again), the scan ends done, and every map is exactly
+/// what `gonio hdr` makes of its frames, as an uninterrupted merge would be, and
+/// `samples.csv` what `gonio extract` makes of the scan.
+#[test]
+fn kills_during_the_hdr_merges_keep_the_maps_already_made() {
+    let dir = temp_dir("harden-hdr-kills");
+    let mut daemon = Daemon::start(&dir, &emulator_config(0.05));
+    let theta_l = [-20.0, -25.0, -30.0, -35.0, -40.0, -45.0];
+    let id = post_scan(&daemon, &theta_l, &[0.5, 0.1, 0.02]);
+    let mut kept: Vec<(String, (u64, std::time::SystemTime))> = Vec::new();
+    let mut during_merge = 0;
+    for round in 0..3 {
+        let deadline = Instant::now() + Duration::from_secs(60);
+        let done = loop {
+            let done = maps_done(&daemon, id);
+            if done.len() > kept.len() && hdr_running(&daemon, id) {
+                break done;
+            }
+            assert!(
+                done.len() < theta_l.len() && Instant::now() < deadline,
+                "round {round}: no merge to kill after {} maps: {done:?}",
+                kept.len()
+            );
+            std::thread::sleep(Duration::from_millis(5));
+        };
+        daemon.kill9();
+        during_merge += 1;
+        kept = done;
+        daemon = Daemon::restart(&dir);
+        // What was done before the kill is still done, and the map is the same file.
+        let now = maps_done(&daemon, id);
+        for map in &kept {
+            assert!(
+                now.contains(map),
+                "round {round}: {map:?} not kept in {now:?}"
+            );
+        }
+    }
+    let scan = daemon.wait_state(id, &["done", "failed"], Duration::from_secs(120));
+    assert_eq!(scan["state"], "done", "{scan}");
+    assert_eq!(during_merge, 3);
+    let all = maps_done(&daemon, id);
+    assert_eq!(all.len(), theta_l.len(), "{all:?}");
+    for map in &kept {
+        assert!(all.contains(map), "{map:?} merged again: {all:?}");
+    }
+    // Every map equals a merge of its frames in one go.
+    let scan_dir = daemon.data.join(format!("scans/{id}"));
+    for theta in theta_l {
+        let frames: Vec<String> =
+            gonio_tests::files_under(&scan_dir.join(format!("theta_l_{theta:.1}")))
+                .into_iter()
+                .filter(|f| f.ends_with(".tiff"))
+                .map(|f| {
+                    scan_dir
+                        .join(format!("theta_l_{theta:.1}/{f}"))
+                        .display()
+                        .to_string()
+                })
+                .collect();
+        assert_eq!(frames.len(), 3, "{frames:?}");
+        let fresh = dir.join(format!("fresh_{theta:.1}.exr"));
+        let mut args = vec!["hdr", "--out", fresh.to_str().unwrap()];
+        args.extend(frames.iter().map(String::as_str));
+        gonio_tests::gonio(&args);
+        let made = std::fs::read(scan_dir.join(format!("hdr/theta_l_{theta:.1}.exr"))).unwrap();
+        assert!(
+            made == std::fs::read(&fresh).unwrap(),
+            "θL {theta}: the map differs"
+        );
+    }
+    // And the samples are those of the whole scan extracted in one go.
+    let extracted = dir.join("extracted.csv");
+    let scan_arg = scan_dir.display().to_string();
+    gonio_tests::gonio(&["extract", &scan_arg, "--out", extracted.to_str().unwrap()]);
+    assert!(
+        std::fs::read(scan_dir.join("samples.csv")).unwrap() == std::fs::read(&extracted).unwrap(),
+        "samples.csv differs from gonio extract's"
+    );
+    std::fs::remove_dir_all(dir).ok();
+}
+
 /// A step that crashes the daemon (the camera library aborts at its capture) three
 /// times fails its scan at the next start ("crashed the daemon 3 times"), and the next
 /// scan runs. The daemon records each fault with the lane it happened in.

@@ -204,16 +204,29 @@ fn free_bytes(path: &Path) -> u64 {
     stat.f_bavail * stat.f_frsize
 }
 
+/// A tmpfs of `bytes` mounted at `dir`/data, the test's data directory; `None`, with
+/// the reason printed, where mounting is not permitted (not root): the caller skips.
+fn small_data_disk(dir: &Path, bytes: u64) -> Option<Tmpfs> {
+    let data = dir.join("data");
+    let tmpfs = Tmpfs::mount(&data, bytes);
+    if tmpfs.is_none() {
+        eprintln!(
+            "skipped: mounting a tmpfs at {} is not permitted here (it needs root)",
+            data.display()
+        );
+    }
+    tmpfs
+}
+
 /// The same on a real small filesystem: the data directory on a 48 MiB tmpfs that a
-/// file fills while the scan captures, then is removed. Mounting needs root: run with
-/// `cargo test -p gonio-tests --test daemon_storage -- --ignored` as root.
+/// file fills while the scan captures, then is removed. Mounting needs root: skipped
+/// (with a message) where it is not permitted.
 #[test]
-#[ignore = "mounts a tmpfs: needs root"]
 fn a_full_tmpfs_makes_the_scan_wait_until_space_returns() {
     let dir = temp_dir("storage-tmpfs");
     let data = dir.join("data");
-    let Some(_tmpfs) = Tmpfs::mount(&data, 48 << 20) else {
-        panic!("mounting a tmpfs at {} failed (not root?)", data.display());
+    let Some(_tmpfs) = small_data_disk(&dir, 48 << 20) else {
+        return;
     };
     let reserve = 8u64 << 20;
     let config =
@@ -250,6 +263,137 @@ fn a_full_tmpfs_makes_the_scan_wait_until_space_returns() {
     std::fs::remove_file(&ballast).unwrap();
     let scan = daemon.wait_state(id, &["done", "failed"], Duration::from_secs(120));
     assert_eq!(scan["state"], "done", "{scan}");
+    drop(daemon);
+    drop(_tmpfs);
+    std::fs::remove_dir_all(dir).ok();
+}
+
+/// Fills the filesystem of `dir` to the last byte with the file `dir`/`name`, as
+/// another process would; returns its path.
+fn fill(dir: &Path, name: &str) -> PathBuf {
+    use std::io::Write;
+    let path = dir.join(name);
+    let mut file = std::fs::File::create(&path).unwrap();
+    let chunk = vec![7u8; 4096];
+    loop {
+        match file.write(&chunk) {
+            Ok(0) => break,
+            Ok(_) => {}
+            Err(e) if e.raw_os_error() == Some(libc::ENOSPC) => break,
+            Err(e) => panic!("filling {}: {e}", path.display()),
+        }
+    }
+    let _ = file.sync_all();
+    path
+}
+
+/// Lines of the daemon's log at `log` that say the disk or the database is full.
+fn full_disk_lines(log: &Path) -> Vec<String> {
+    std::fs::read_to_string(log)
+        .unwrap_or_default()
+        .lines()
+        .filter(|l| l.contains("database or disk is full"))
+        .map(str::to_owned)
+        .collect()
+}
+
+/// Another process fills the data directory's disk (a 24 MiB tmpfs) to the last byte
+/// while a scan captures, past the reserve the steps keep: SQLite itself finds the disk
+/// full ("database or disk is full"). The journal writes in the space it held
+/// (`DATA/journal.reserve`, deleted for it): the scan waits, "disk full", neither failed
+/// nor left `running`; the controls answer, 503 with an error saying the disk is full
+/// when the journal cannot write, never 500; the lanes do not log the full disk every
+/// second. Once the file is removed, the scan completes by itself with every frame and
+/// map, and the journal's reserve is made again. Skipped where mounting is not
+/// permitted.
+#[test]
+fn a_disk_filled_by_another_process_leaves_the_journal_writing() {
+    let dir = temp_dir("storage-filled");
+    let data = dir.join("data");
+    let Some(_tmpfs) = small_data_disk(&dir, 24 << 20) else {
+        return;
+    };
+    let journal_reserve = 2u64 << 20;
+    let config = emulator_config_scaled(0.05, 1.0)
+        + &format!(
+            "\n[storage]\nreserve_bytes = {}\njournal_reserve_bytes = {journal_reserve}\n",
+            4u64 << 20
+        );
+    let daemon = Daemon::start(&dir, &config);
+    let reserve = data.join("journal.reserve");
+    assert_eq!(std::fs::metadata(&reserve).unwrap().len(), journal_reserve);
+    let theta_l = [-20.0, -25.0];
+    let id = post_scan(&daemon, &theta_l, &[1.0, 0.5]);
+    daemon.wait_for(
+        &format!("/api/scans/{id}/steps"),
+        Duration::from_secs(60),
+        |steps| {
+            steps.as_array().is_some_and(|steps| {
+                steps
+                    .iter()
+                    .any(|s| s["step"]["kind"] == "capture" && s["state"] == "done")
+            })
+        },
+    );
+    let ballast = fill(&data, "ballast");
+    let waiting = daemon.wait_state(id, &["waiting", "failed", "done"], Duration::from_secs(30));
+    assert_eq!(waiting["state"], "waiting", "{waiting}");
+    let reason = waiting["reason"].as_str().unwrap_or("");
+    assert!(reason.starts_with("disk full: "), "{waiting}");
+    // The journal wrote in the reserve's space.
+    assert!(!reserve.exists(), "the journal's reserve was not used");
+    // Nothing changes by itself while the disk stays full, and the log stays quiet.
+    std::thread::sleep(Duration::from_secs(3));
+    let scan = daemon.get(&format!("/api/scans/{id}")).json;
+    assert_eq!(scan["state"], "waiting", "{scan}");
+    let lines = full_disk_lines(&daemon.log);
+    assert!(lines.len() <= 4, "{lines:#?}");
+    // Fill what the reserve freed too: the journal cannot write at all.
+    let more = fill(&data, "ballast-2");
+    for verb in ["pause", "resume"] {
+        let answer = daemon.post(&format!("/api/scans/{id}/{verb}"), &json!({}));
+        match answer.status {
+            200 => {}
+            503 => {
+                let error = answer.json["error"].as_str().unwrap();
+                assert!(error.starts_with("the disk is full"), "{error}");
+            }
+            other => panic!("{verb}: {other} {:?}", answer.json),
+        }
+    }
+    assert_eq!(daemon.get("/api/health").status, 200);
+    std::thread::sleep(Duration::from_secs(2));
+    let lines = full_disk_lines(&daemon.log);
+    assert!(lines.len() <= 4, "{lines:#?}");
+
+    std::fs::remove_file(&ballast).unwrap();
+    std::fs::remove_file(&more).unwrap();
+    // Resumed if the pause went through.
+    if daemon.get(&format!("/api/scans/{id}")).json["state"] == "paused" {
+        let answer = daemon.post(&format!("/api/scans/{id}/resume"), &json!({}));
+        assert_eq!(answer.status, 200, "{:?}", answer.json);
+    }
+    let scan = daemon.wait_state(id, &["done", "failed"], Duration::from_secs(120));
+    assert_eq!(scan["state"], "done", "{scan}");
+    let scan_dir = data.join(format!("scans/{id}"));
+    let files = gonio_tests::files_under(&scan_dir);
+    for theta in theta_l {
+        for file in ["exp_00.tiff", "exp_01.tiff"] {
+            let frame = format!("theta_l_{theta:.1}/{file}");
+            assert!(files.contains(&frame), "{frame} missing: {files:?}");
+        }
+        let map = format!("hdr/theta_l_{theta:.1}.exr");
+        assert!(files.contains(&map), "{map} missing: {files:?}");
+    }
+    assert!(files.iter().all(|f| !f.contains(".partial")), "{files:?}");
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while std::fs::metadata(&reserve).map_or(0, |m| m.len()) != journal_reserve {
+        assert!(
+            Instant::now() < deadline,
+            "the journal's reserve not made again"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
     drop(daemon);
     drop(_tmpfs);
     std::fs::remove_dir_all(dir).ok();

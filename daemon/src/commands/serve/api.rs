@@ -67,7 +67,16 @@ impl IntoResponse for ApiError {
 }
 
 impl From<StoreError> for ApiError {
+    /// A journal that finds the disk full is a state, not a fault: 503 saying so (the
+    /// lanes log it, once).
     fn from(err: StoreError) -> Self {
+        if err.is_disk_full() {
+            return Self::new(
+                StatusCode::SERVICE_UNAVAILABLE,
+                "the disk is full: the journal cannot be written; \
+                 try again once space is freed on the data directory's disk",
+            );
+        }
         tracing::error!("store: {err}");
         Self::new(StatusCode::INTERNAL_SERVER_ERROR, err.to_string())
     }

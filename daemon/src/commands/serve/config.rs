@@ -56,6 +56,7 @@
 //!
 //! [storage]
 //! reserve_bytes = 67108864     # free space kept for the journal: no step runs below it
+//! journal_reserve_bytes = 16777216  # held in DATA/journal.reserve, freed when the disk is full
 //!
 //! [emulator]
 //! fault_injection = false      # test hook: POST /api/emulator/fault
@@ -371,6 +372,10 @@ pub struct StorageConfig {
     /// Free space kept for the journal, bytes: a step runs only while its output fits
     /// above it (else its scan waits for space).
     pub reserve_bytes: u64,
+    /// Space held for the journal in `DATA/journal.reserve`, bytes, against other
+    /// processes that fill the disk: deleted when the journal finds the disk full, made
+    /// again once it fits above `reserve_bytes`; 0 for none.
+    pub journal_reserve_bytes: u64,
 }
 
 impl Default for StorageConfig {
@@ -378,6 +383,8 @@ impl Default for StorageConfig {
         Self {
             // The journal (SQLite and its write-ahead log) and the daemon's small files.
             reserve_bytes: 64 << 20,
+            // Thousands of journal transactions.
+            journal_reserve_bytes: 16 << 20,
         }
     }
 }

@@ -157,9 +157,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             dir: config.data_dir.clone(),
             reserve_bytes: config.storage.reserve_bytes,
             emulated: config.emulator.free_space_file.clone(),
+            journal_reserve_bytes: config.storage.journal_reserve_bytes,
         },
         config,
     });
+    if let Err(err) = shared.storage.keep_journal_reserve() {
+        tracing::warn!("the journal's reserve file could not be made: {err}");
+    }
     step_guard::fail_crash_looping_scans(&shared, &mut lock(&shared.store), fault.as_ref())?;
     view::start_publisher(shared.clone(), &db_path)?;
     lanes::start(shared.clone(), devices, &db_path)?;

@@ -142,6 +142,17 @@ pub fn theta_fits_path(theta_l: f64) -> String {
     format!("samples/{}.fits.json", theta_dir_name(theta_l))
 }
 
+/// HDR map of one θL inside a scan directory.
+pub fn theta_map_path(theta_l: f64) -> String {
+    format!("hdr/{}.exr", theta_dir_name(theta_l))
+}
+
+/// What one θL's HDR map was made from and its checksum, beside the map: a map whose
+/// record matches its frames and its bytes is kept when its step runs again.
+pub fn theta_map_record_path(theta_l: f64) -> String {
+    format!("{}.json", theta_map_path(theta_l))
+}
+
 /// File stem of bracket exposure `index`.
 pub fn exposure_stem(index: usize) -> String {
     format!("exp_{index:02}")
@@ -248,5 +259,7 @@ mod tests {
         assert_eq!(theta_dir_name(-32.5), "theta_l_-32.5");
         assert_eq!(exposure_stem(3), "exp_03");
         assert_eq!(theta_samples_path(-20.0), "samples/theta_l_-20.0.csv");
+        assert_eq!(theta_map_path(-20.0), "hdr/theta_l_-20.0.exr");
+        assert_eq!(theta_map_record_path(-20.0), "hdr/theta_l_-20.0.exr.json");
     }
 }

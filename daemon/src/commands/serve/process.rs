@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use gonio_files::input::{read_input, MAX_SMALL_FILE_BYTES};
 use gonio_processing::brdf::Model;
-use gonio_processing::capture::{is_capture_path, CaptureError, Frame};
+use gonio_processing::capture::{is_capture_path, sidecar_path, CaptureError, Frame};
 use gonio_processing::extract::{extract_scan, ExtractOptions};
 use gonio_processing::fit::{fit, FitOptions, FitResult};
 use gonio_processing::hdr::{merge, MergeOptions};
@@ -21,7 +21,8 @@ use serde_json::{json, Value};
 
 use super::files::{write_atomic, write_atomic_with};
 use super::plan::{
-    theta_dir_name, theta_fits_path, theta_samples_path, ScanPlan, Step, FIT_MODELS,
+    theta_dir_name, theta_fits_path, theta_map_path, theta_map_record_path, theta_samples_path,
+    ScanPlan, Step, FIT_MODELS,
 };
 
 /// Most frames decoded ahead of their HDR step (a full-size 16-bit frame is 60 MB).
@@ -250,6 +251,9 @@ fn live_entry(
     })
 }
 
+/// θL's HDR map. A map made before a restart is kept as it is when its record says it
+/// was made from exactly these frames and its bytes are intact ([`MapRecord`]); else it
+/// is merged again.
 fn hdr(dir: &Path, theta_l: f64, prefetched: &mut Prefetched) -> anyhow::Result<Value> {
     let frame_dir = dir.join(theta_dir_name(theta_l));
     let mut paths: Vec<PathBuf> = std::fs::read_dir(&frame_dir)
@@ -259,11 +263,96 @@ fn hdr(dir: &Path, theta_l: f64, prefetched: &mut Prefetched) -> anyhow::Result<
         .filter(|p| is_capture_path(p))
         .collect();
     paths.sort();
+    let rel = theta_map_path(theta_l);
+    let map = dir.join(&rel);
+    let record_path = dir.join(theta_map_record_path(theta_l));
+    let inputs = map_inputs(&paths);
+    if MapRecord::read(&record_path).is_some_and(|r| r.holds(&inputs, &map)) {
+        tracing::info!("{rel}: kept, made from the same frames before the restart");
+        return Ok(json!({ "path": rel, "frames": paths.len(), "kept": true }));
+    }
     let frames = prefetched.take(&paths)?;
     let image = merge(&frames, &MergeOptions::default())?;
-    let rel = format!("hdr/{}.exr", theta_dir_name(theta_l));
-    write_atomic_with(&dir.join(&rel), |tmp| image.write_exr(tmp))?;
+    write_atomic_with(&map, |tmp| image.write_exr(tmp))?;
+    let record = MapRecord::of(inputs, &map).with_context(|| rel.clone())?;
+    write_atomic(&record_path, &serde_json::to_vec(&record)?)
+        .with_context(|| theta_map_record_path(theta_l))?;
     Ok(json!({ "path": rel, "frames": frames.len() }))
+}
+
+/// The files an HDR map is made from (each capture and its sidecar, those that exist):
+/// name, length and modification time (nanoseconds since the epoch). Captures are
+/// written atomically and never rewritten, so equal stamps mean the same frames.
+type MapInputs = Vec<(String, u64, u64)>;
+
+/// The [`MapInputs`] of the captures at `paths`.
+fn map_inputs(paths: &[PathBuf]) -> MapInputs {
+    paths
+        .iter()
+        .flat_map(|capture| [capture.clone(), sidecar_path(capture)])
+        .filter_map(|path| {
+            let meta = std::fs::metadata(&path).ok()?;
+            let modified = meta
+                .modified()
+                .ok()
+                .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+                .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX));
+            let name = path.file_name()?.to_string_lossy().into_owned();
+            Some((name, meta.len(), modified))
+        })
+        .collect()
+}
+
+/// The record written beside an HDR map once it is in place
+/// (`hdr/theta_l_<θL>.exr.json`): the stamps of the frames it was made from, its length
+/// and its CRC-32.
+#[derive(Debug, PartialEq, Serialize, Deserialize)]
+struct MapRecord {
+    inputs: MapInputs,
+    bytes: u64,
+    crc32: u32,
+}
+
+impl MapRecord {
+    /// The record of the map at `map`, made from `inputs`.
+    fn of(inputs: MapInputs, map: &Path) -> std::io::Result<MapRecord> {
+        let (bytes, crc32) = checksum(map)?;
+        Ok(MapRecord {
+            inputs,
+            bytes,
+            crc32,
+        })
+    }
+
+    /// The record at `path`; none when it cannot be read.
+    fn read(path: &Path) -> Option<MapRecord> {
+        let bytes = read_input(path, MAX_SMALL_FILE_BYTES).ok()?;
+        serde_json::from_slice(&bytes).ok()
+    }
+
+    /// Whether the map at `map` is the one recorded, made from `inputs`.
+    fn holds(&self, inputs: &MapInputs, map: &Path) -> bool {
+        self.inputs == *inputs
+            && std::fs::metadata(map).is_ok_and(|m| m.is_file() && m.len() == self.bytes)
+            && checksum(map).is_ok_and(|sum| sum == (self.bytes, self.crc32))
+    }
+}
+
+/// The length and CRC-32 of the file at `path`.
+fn checksum(path: &Path) -> std::io::Result<(u64, u32)> {
+    use std::io::Read;
+    let mut file = std::fs::File::open(path)?;
+    let mut hasher = crc32fast::Hasher::new();
+    let mut buffer = vec![0u8; 1 << 20];
+    let mut bytes = 0u64;
+    loop {
+        let n = file.read(&mut buffer)?;
+        if n == 0 {
+            return Ok((bytes, hasher.finalize()));
+        }
+        hasher.update(&buffer[..n]);
+        bytes += n as u64;
+    }
 }
 
 /// `samples.csv`: the samples of every θL in ascending θL, as `gonio extract` orders
@@ -365,6 +454,51 @@ mod tests {
         assert!(prefetched.frames.is_empty());
         assert!(!prefetched.advance(std::slice::from_ref(&broken)));
         assert!(prefetched.take(&[broken]).is_err());
+    }
+
+    /// A map merged before a restart (its step not recorded done) is kept when its
+    /// frames and its bytes are those recorded, and merged again, to the same bytes,
+    /// when the map is damaged or missing, its record is, or a frame changed.
+    #[test]
+    fn a_map_made_before_a_restart_is_kept_while_its_frames_and_bytes_are_intact() {
+        use std::os::unix::fs::MetadataExt;
+        let dir = tempfile::tempdir().unwrap();
+        let dir = dir.path();
+        let frames = dir.join(theta_dir_name(-20.0));
+        std::fs::create_dir(&frames).unwrap();
+        let paths = write_frames(&frames, 3);
+        let map = dir.join(theta_map_path(-20.0));
+        let record = dir.join(theta_map_record_path(-20.0));
+        let run = || hdr(dir, -20.0, &mut Prefetched::default()).unwrap();
+        let kept = |result: &Value| result.get("kept") == Some(&json!(true));
+        assert!(!kept(&run()));
+        let made = std::fs::read(&map).unwrap();
+        let inode = std::fs::metadata(&map).unwrap().ino();
+        assert!(kept(&run()));
+        assert_eq!(std::fs::metadata(&map).unwrap().ino(), inode);
+        assert_eq!(std::fs::read(&map).unwrap(), made);
+        // Damaged in place at the same length, cut short, missing, unrecorded.
+        let mut damaged = made.clone();
+        damaged[made.len() / 2] ^= 0x40;
+        let spoil: [&dyn Fn(); 4] = [
+            &|| std::fs::write(&map, &damaged).unwrap(),
+            &|| std::fs::write(&map, &made[..made.len() - 1]).unwrap(),
+            &|| std::fs::remove_file(&map).unwrap(),
+            &|| std::fs::remove_file(&record).unwrap(),
+        ];
+        for (k, spoil) in spoil.iter().enumerate() {
+            spoil();
+            assert!(!kept(&run()), "case {k}");
+            assert_eq!(std::fs::read(&map).unwrap(), made, "case {k}");
+            assert!(kept(&run()), "case {k}");
+        }
+        // A frame taken again (another exposure): merged again, from it.
+        let sidecar = sidecar_path(&paths[1]);
+        let mut text: Value = serde_json::from_slice(&std::fs::read(&sidecar).unwrap()).unwrap();
+        text["shutter_s"] = json!(0.04);
+        std::fs::write(&sidecar, serde_json::to_vec(&text).unwrap()).unwrap();
+        assert!(!kept(&run()));
+        assert_ne!(std::fs::read(&map).unwrap(), made);
     }
 
     fn theta_samples(theta_l: f64) -> Vec<Sample> {

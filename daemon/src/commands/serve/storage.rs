@@ -1,7 +1,9 @@
 //! Free space as a state (docs/ARCHITECTURE.md, "Daemon"): what a step will write,
 //! the free space of the data directory's filesystem, and whether an error means the
 //! disk is full. A step runs only while its output fits above the reserve kept for the
-//! journal; otherwise its scan waits ("disk full: N GB free, M GB needed").
+//! journal; otherwise its scan waits ("disk full: N GB free, M GB needed"). Another
+//! process may still fill the disk: the journal then writes into space held for it, a
+//! preallocated file it deletes when it finds the disk full ([`JOURNAL_RESERVE_FILE`]).
 
 use std::io;
 use std::path::{Path, PathBuf};
@@ -20,6 +22,16 @@ const FRAME_OVERHEAD_BYTES: u64 = 1 << 20;
 /// Outputs of the steps that write tables and fits (samples, extraction, fits).
 const SMALL_OUTPUT_BYTES: u64 = 16 << 20;
 
+/// The file that holds space for the journal, beside the database in the data
+/// directory: its blocks are allocated, so other writers cannot take them. The store
+/// deletes it when a write of the journal finds the disk full, and writes again.
+pub const JOURNAL_RESERVE_FILE: &str = "journal.reserve";
+
+/// The journal's reserve file of the database at `db`.
+pub fn journal_reserve_path(db: &Path) -> PathBuf {
+    db.with_file_name(JOURNAL_RESERVE_FILE)
+}
+
 /// Where the free space is read from.
 #[derive(Debug, Clone)]
 pub struct Probe {
@@ -31,6 +43,8 @@ pub struct Probe {
     /// A file holding the free space in bytes, read instead of the filesystem (the
     /// emulator's test hook for a disk that fills up and empties).
     pub emulated: Option<PathBuf>,
+    /// Size of the journal's reserve file ([`JOURNAL_RESERVE_FILE`]), bytes; 0 for none.
+    pub journal_reserve_bytes: u64,
 }
 
 impl Probe {
@@ -63,11 +77,53 @@ impl Probe {
         }
     }
 
+    /// Makes the journal's reserve file in the data directory when it is missing or
+    /// not whole (the store deleted it when the disk was full) and the free space holds
+    /// it above [`Probe::reserve_bytes`]; returns whether it made it. One `stat` when
+    /// the file is in place.
+    pub fn keep_journal_reserve(&self) -> io::Result<bool> {
+        let bytes = self.journal_reserve_bytes;
+        let path = self.dir.join(JOURNAL_RESERVE_FILE);
+        if bytes == 0 || std::fs::metadata(&path).is_ok_and(|m| m.len() == bytes) {
+            return Ok(false);
+        }
+        let held = std::fs::metadata(&path).map_or(0, |m| m.len());
+        if self.free_bytes()?.saturating_add(held) < bytes.saturating_add(self.reserve_bytes) {
+            return Ok(false);
+        }
+        allocate(&path, bytes).inspect_err(|_| {
+            let _ = std::fs::remove_file(&path);
+        })?;
+        Ok(true)
+    }
+
     /// The reason a step waits after a write found the disk full, `need` bytes to go.
     pub fn full_reason(&self, need: u64) -> String {
         let needed = need.saturating_add(self.reserve_bytes);
         disk_full(self.free_bytes().unwrap_or(0), needed)
     }
+}
+
+/// Makes `path` a file of `bytes` allocated bytes (posix_fallocate: blocks taken, not a
+/// sparse file), synced.
+fn allocate(path: &Path, bytes: u64) -> io::Result<()> {
+    use std::os::fd::AsRawFd;
+    use std::os::unix::fs::OpenOptionsExt;
+    let file = std::fs::OpenOptions::new()
+        .write(true)
+        .create(true)
+        .truncate(true)
+        .mode(0o600)
+        .open(path)?;
+    let len =
+        libc::off_t::try_from(bytes).map_err(|e| io::Error::new(io::ErrorKind::InvalidInput, e))?;
+    // SAFETY: posix_fallocate only allocates blocks of the open descriptor it is given;
+    // it reports errors through its return value.
+    let err = unsafe { libc::posix_fallocate(file.as_raw_fd(), 0, len) };
+    if err != 0 {
+        return Err(io::Error::from_raw_os_error(err));
+    }
+    file.sync_all()
 }
 
 /// "disk full: N GB free, M GB needed".
@@ -210,6 +266,7 @@ mod tests {
             dir: dir.path().to_path_buf(),
             reserve_bytes: 64 << 20,
             emulated: Some(free.clone()),
+            journal_reserve_bytes: 0,
         };
         std::fs::write(&free, "1000000000").unwrap();
         assert_eq!(probe.check(900_000_000), Ok(()));
@@ -228,6 +285,39 @@ mod tests {
             ..probe
         };
         assert!(real.free_bytes().unwrap() > 0);
+    }
+
+    #[test]
+    fn the_journal_reserve_is_made_again_once_it_fits_above_the_reserve() {
+        let dir = tempfile::tempdir().unwrap();
+        let free = dir.path().join("free");
+        let probe = Probe {
+            dir: dir.path().to_path_buf(),
+            reserve_bytes: 1000,
+            emulated: Some(free.clone()),
+            journal_reserve_bytes: 4096,
+        };
+        let reserve = journal_reserve_path(&dir.path().join("gonio.sqlite"));
+        assert_eq!(reserve, dir.path().join(JOURNAL_RESERVE_FILE));
+        // Not above the reserve: not made.
+        std::fs::write(&free, "5095").unwrap();
+        assert!(!probe.keep_journal_reserve().unwrap());
+        assert!(!reserve.exists());
+        std::fs::write(&free, "5096").unwrap();
+        assert!(probe.keep_journal_reserve().unwrap());
+        assert_eq!(std::fs::metadata(&reserve).unwrap().len(), 4096);
+        // In place: left alone; cut short: made whole.
+        assert!(!probe.keep_journal_reserve().unwrap());
+        std::fs::write(&reserve, b"short").unwrap();
+        assert!(probe.keep_journal_reserve().unwrap());
+        assert_eq!(std::fs::metadata(&reserve).unwrap().len(), 4096);
+        let none = Probe {
+            journal_reserve_bytes: 0,
+            ..probe
+        };
+        std::fs::remove_file(&reserve).unwrap();
+        assert!(!none.keep_journal_reserve().unwrap());
+        assert!(!reserve.exists());
     }
 
     #[test]

@@ -1,7 +1,7 @@
 //! The durable queue: scans, their steps, sweeps and the hardware log in SQLite
 //! (WAL journal, `synchronous = FULL`, so a committed step survives power loss).
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use rusqlite::{params, Connection, OptionalExtension, Transaction, TransactionBehavior};
@@ -9,6 +9,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
 use super::plan::{mount_reason, Lane, ScanPlan, Step};
+use super::storage;
 
 /// Errors of the store.
 #[derive(Debug, thiserror::Error)]
@@ -29,6 +30,14 @@ pub enum StoreError {
 /// Planned steps are numbered this far apart, leaving room for the steps a step adds
 /// after itself (the captures of a metered bracket).
 const STEP_SPACING: u32 = 1000;
+
+impl StoreError {
+    /// Whether SQLite found the disk full (`SQLITE_FULL`, "database or disk is full").
+    pub fn is_disk_full(&self) -> bool {
+        matches!(self, StoreError::Sql(rusqlite::Error::SqliteFailure(e, _))
+            if e.code == rusqlite::ErrorCode::DiskFull)
+    }
+}
 
 impl From<rusqlite::Error> for StoreError {
     fn from(error: rusqlite::Error) -> Self {
@@ -284,6 +293,9 @@ fn scan_columns() -> String {
 /// A connection to the store. Each thread opens its own.
 pub struct Store {
     conn: Connection,
+    /// The journal's reserve file ([`storage::JOURNAL_RESERVE_FILE`]), deleted when a
+    /// write finds the disk full.
+    reserve: PathBuf,
 }
 
 impl Store {
@@ -311,7 +323,30 @@ impl Store {
                 ))?;
             }
         }
-        Ok(Self { conn })
+        Ok(Self {
+            conn,
+            reserve: storage::journal_reserve_path(path),
+        })
+    }
+
+    /// Runs `write`; when it finds the disk full, deletes the journal's reserve file, if
+    /// there is one, and runs it again in the space that frees (a write that failed
+    /// changed nothing). The reserve is made again once there is room
+    /// (`storage::Probe::keep_journal_reserve`).
+    fn writing<T>(
+        &mut self,
+        mut write: impl FnMut(&mut Self) -> Result<T, StoreError>,
+    ) -> Result<T, StoreError> {
+        match write(self) {
+            Err(err) if err.is_disk_full() && std::fs::remove_file(&self.reserve).is_ok() => {
+                tracing::warn!(
+                    "the disk is full: {} deleted to let the journal write",
+                    self.reserve.display()
+                );
+                write(self)
+            }
+            result => result,
+        }
     }
 
     /// Called once at start, after [`Store::begin_boot`] and before anything runs.
@@ -326,68 +361,70 @@ impl Store {
         limit: u32,
         faulted: Option<Lane>,
     ) -> Result<Vec<i64>, StoreError> {
-        let tx = self.write_transaction()?;
-        if let Some(lane) = faulted {
-            let previous: i64 =
-                tx.query_row("SELECT value - 1 FROM meta WHERE key = 'boot'", [], |r| {
-                    r.get(0)
-                })?;
-            // Steps started before boots were recorded on them count too.
-            let started: Vec<(i64, u32, String)> = {
+        self.writing(|store| {
+            let tx = store.write_transaction()?;
+            if let Some(lane) = faulted {
+                let previous: i64 =
+                    tx.query_row("SELECT value - 1 FROM meta WHERE key = 'boot'", [], |r| {
+                        r.get(0)
+                    })?;
+                // Steps started before boots were recorded on them count too.
+                let started: Vec<(i64, u32, String)> = {
+                    let mut stmt = tx.prepare(
+                        "SELECT scan_id, idx, step FROM steps WHERE state = 'started'
+                         AND (started_boot = ?1 OR started_boot IS NULL)",
+                    )?;
+                    let rows = stmt
+                        .query_map([previous], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?)))?
+                        .collect::<Result<_, _>>()?;
+                    rows
+                };
+                for (scan_id, idx, step) in started {
+                    let step: Step = serde_json::from_str(&step).map_err(json_err("step"))?;
+                    if step.lane() == lane {
+                        tx.execute(
+                            "UPDATE steps SET crashes = crashes + 1 WHERE scan_id = ?1 AND idx = ?2",
+                            params![scan_id, idx],
+                        )?;
+                    }
+                }
+            }
+            let looping: Vec<(i64, u32, String, u32)> = {
                 let mut stmt = tx.prepare(
-                    "SELECT scan_id, idx, step FROM steps WHERE state = 'started'
-                     AND (started_boot = ?1 OR started_boot IS NULL)",
+                    "SELECT scan_id, idx, step, crashes FROM steps
+                     WHERE state = 'started' AND crashes >= ?1 ORDER BY scan_id, idx",
                 )?;
                 let rows = stmt
-                    .query_map([previous], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?)))?
+                    .query_map([limit], |r| {
+                        Ok((r.get(0)?, r.get(1)?, r.get(2)?, r.get(3)?))
+                    })?
                     .collect::<Result<_, _>>()?;
                 rows
             };
-            for (scan_id, idx, step) in started {
+            let now = now_rfc3339();
+            let mut failed = Vec::new();
+            for (scan_id, idx, step, crashes) in looping {
                 let step: Step = serde_json::from_str(&step).map_err(json_err("step"))?;
-                if step.lane() == lane {
-                    tx.execute(
-                        "UPDATE steps SET crashes = crashes + 1 WHERE scan_id = ?1 AND idx = ?2",
-                        params![scan_id, idx],
-                    )?;
+                let reason = format!(
+                    "step \"{}\" crashed the daemon {crashes} times",
+                    step.describe()
+                );
+                tx.execute(
+                    "UPDATE steps SET state = 'pending', started = NULL WHERE scan_id = ?1 AND idx = ?2",
+                    params![scan_id, idx],
+                )?;
+                let changed = tx.execute(
+                    "UPDATE scans SET state = 'failed', error = ?2, finished = ?3
+                     WHERE id = ?1 AND state NOT IN ('done', 'failed', 'cancelled')",
+                    params![scan_id, reason, now],
+                )?;
+                if changed > 0 {
+                    failed.push(scan_id);
                 }
             }
-        }
-        let looping: Vec<(i64, u32, String, u32)> = {
-            let mut stmt = tx.prepare(
-                "SELECT scan_id, idx, step, crashes FROM steps
-                 WHERE state = 'started' AND crashes >= ?1 ORDER BY scan_id, idx",
-            )?;
-            let rows = stmt
-                .query_map([limit], |r| {
-                    Ok((r.get(0)?, r.get(1)?, r.get(2)?, r.get(3)?))
-                })?
-                .collect::<Result<_, _>>()?;
-            rows
-        };
-        let now = now_rfc3339();
-        let mut failed = Vec::new();
-        for (scan_id, idx, step, crashes) in looping {
-            let step: Step = serde_json::from_str(&step).map_err(json_err("step"))?;
-            let reason = format!(
-                "step \"{}\" crashed the daemon {crashes} times",
-                step.describe()
-            );
-            tx.execute(
-                "UPDATE steps SET state = 'pending', started = NULL WHERE scan_id = ?1 AND idx = ?2",
-                params![scan_id, idx],
-            )?;
-            let changed = tx.execute(
-                "UPDATE scans SET state = 'failed', error = ?2, finished = ?3
-                 WHERE id = ?1 AND state NOT IN ('done', 'failed', 'cancelled')",
-                params![scan_id, reason, now],
-            )?;
-            if changed > 0 {
-                failed.push(scan_id);
-            }
-        }
-        tx.commit()?;
-        Ok(failed)
+            tx.commit()?;
+            Ok(failed)
+        })
     }
 
     /// A transaction that takes the write lock at once (`BEGIN IMMEDIATE`): one that
@@ -401,25 +438,29 @@ impl Store {
 
     /// Counts a daemon start and returns its number.
     pub fn begin_boot(&mut self) -> Result<i64, StoreError> {
-        let tx = self.write_transaction()?;
-        tx.execute(
-            "INSERT INTO meta (key, value) VALUES ('boot', 1)
-             ON CONFLICT(key) DO UPDATE SET value = value + 1",
-            [],
-        )?;
-        let boot = tx.query_row("SELECT value FROM meta WHERE key = 'boot'", [], |r| {
-            r.get(0)
-        })?;
-        tx.commit()?;
-        Ok(boot)
+        self.writing(|store| {
+            let tx = store.write_transaction()?;
+            tx.execute(
+                "INSERT INTO meta (key, value) VALUES ('boot', 1)
+                 ON CONFLICT(key) DO UPDATE SET value = value + 1",
+                [],
+            )?;
+            let boot = tx.query_row("SELECT value FROM meta WHERE key = 'boot'", [], |r| {
+                r.get(0)
+            })?;
+            tx.commit()?;
+            Ok(boot)
+        })
     }
 
     /// Queues scans, plans and steps included, in one transaction.
     pub fn insert_scans(&mut self, scans: &[NewScan]) -> Result<Vec<i64>, StoreError> {
-        let tx = self.write_transaction()?;
-        let ids = insert_scans_tx(&tx, scans)?;
-        tx.commit()?;
-        Ok(ids)
+        self.writing(|store| {
+            let tx = store.write_transaction()?;
+            let ids = insert_scans_tx(&tx, scans)?;
+            tx.commit()?;
+            Ok(ids)
+        })
     }
 
     /// Stores a sweep and queues its scans, in one transaction.
@@ -429,23 +470,25 @@ impl Store {
         start_at: Option<i64>,
         plans: Vec<ScanPlan>,
     ) -> Result<(i64, Vec<i64>), StoreError> {
-        let tx = self.write_transaction()?;
-        tx.execute(
-            "INSERT INTO sweeps (request, created, start_at) VALUES (?1, ?2, ?3)",
-            params![request.to_string(), now_rfc3339(), start_at],
-        )?;
-        let sweep_id = tx.last_insert_rowid();
-        let scans: Vec<NewScan> = plans
-            .into_iter()
-            .map(|plan| NewScan {
-                plan,
-                sweep_id: Some(sweep_id),
-                not_before: start_at,
-            })
-            .collect();
-        let ids = insert_scans_tx(&tx, &scans)?;
-        tx.commit()?;
-        Ok((sweep_id, ids))
+        self.writing(|store| {
+            let tx = store.write_transaction()?;
+            tx.execute(
+                "INSERT INTO sweeps (request, created, start_at) VALUES (?1, ?2, ?3)",
+                params![request.to_string(), now_rfc3339(), start_at],
+            )?;
+            let sweep_id = tx.last_insert_rowid();
+            let scans: Vec<NewScan> = plans
+                .iter()
+                .map(|plan| NewScan {
+                    plan: plan.clone(),
+                    sweep_id: Some(sweep_id),
+                    not_before: start_at,
+                })
+                .collect();
+            let ids = insert_scans_tx(&tx, &scans)?;
+            tx.commit()?;
+            Ok((sweep_id, ids))
+        })
     }
 
     pub fn sweep(&self, id: i64) -> Result<Option<SweepRecord>, StoreError> {
@@ -682,28 +725,30 @@ impl Store {
         to: ScanState,
         error: Option<&str>,
     ) -> Result<bool, StoreError> {
-        let tx = self.write_transaction()?;
-        let current: Option<String> = tx
-            .query_row("SELECT state FROM scans WHERE id = ?1", [id], |r| r.get(0))
-            .optional()?;
-        let Some(current) = current else {
-            return Ok(false);
-        };
-        if !from.contains(&ScanState::parse(&current)?) {
-            return Ok(false);
-        }
-        let now = now_rfc3339();
-        tx.execute(
-            "UPDATE scans SET state = ?2, error = ?3,
-                started = CASE WHEN ?2 = 'running' AND started IS NULL THEN ?4 ELSE started END,
-                finished = CASE WHEN ?2 IN ('done', 'failed', 'cancelled') THEN ?4
-                                WHEN ?2 IN ('queued', 'running') THEN NULL
-                                ELSE finished END
-             WHERE id = ?1",
-            params![id, to.as_str(), error, now],
-        )?;
-        tx.commit()?;
-        Ok(true)
+        self.writing(|store| {
+            let tx = store.write_transaction()?;
+            let current: Option<String> = tx
+                .query_row("SELECT state FROM scans WHERE id = ?1", [id], |r| r.get(0))
+                .optional()?;
+            let Some(current) = current else {
+                return Ok(false);
+            };
+            if !from.contains(&ScanState::parse(&current)?) {
+                return Ok(false);
+            }
+            let now = now_rfc3339();
+            tx.execute(
+                "UPDATE scans SET state = ?2, error = ?3,
+                    started = CASE WHEN ?2 = 'running' AND started IS NULL THEN ?4 ELSE started END,
+                    finished = CASE WHEN ?2 IN ('done', 'failed', 'cancelled') THEN ?4
+                                    WHEN ?2 IN ('queued', 'running') THEN NULL
+                                    ELSE finished END
+                 WHERE id = ?1",
+                params![id, to.as_str(), error, now],
+            )?;
+            tx.commit()?;
+            Ok(true)
+        })
     }
 
     /// Moves every scan in state `from` to `to` with reason `error` (e.g. interrupted ->
@@ -714,20 +759,22 @@ impl Store {
         to: ScanState,
         error: Option<&str>,
     ) -> Result<Vec<i64>, StoreError> {
-        let tx = self.write_transaction()?;
-        let ids: Vec<i64> = {
-            let mut stmt = tx.prepare("SELECT id FROM scans WHERE state = ?1")?;
-            let ids = stmt
-                .query_map([from.as_str()], |r| r.get(0))?
-                .collect::<Result<_, _>>()?;
-            ids
-        };
-        tx.execute(
-            "UPDATE scans SET state = ?2, error = ?3 WHERE state = ?1",
-            params![from.as_str(), to.as_str(), error],
-        )?;
-        tx.commit()?;
-        Ok(ids)
+        self.writing(|store| {
+            let tx = store.write_transaction()?;
+            let ids: Vec<i64> = {
+                let mut stmt = tx.prepare("SELECT id FROM scans WHERE state = ?1")?;
+                let ids = stmt
+                    .query_map([from.as_str()], |r| r.get(0))?
+                    .collect::<Result<_, _>>()?;
+                ids
+            };
+            tx.execute(
+                "UPDATE scans SET state = ?2, error = ?3 WHERE state = ?1",
+                params![from.as_str(), to.as_str(), error],
+            )?;
+            tx.commit()?;
+            Ok(ids)
+        })
     }
 
     pub fn steps(&self, scan_id: i64) -> Result<Vec<StepRecord>, StoreError> {
@@ -775,13 +822,15 @@ impl Store {
     /// Records that a step begins (committed before the hardware is touched), in this
     /// daemon start.
     pub fn step_started(&mut self, scan_id: i64, index: u32) -> Result<(), StoreError> {
-        self.conn.execute(
-            "UPDATE steps SET state = ?3, started = ?4,
-                started_boot = (SELECT value FROM meta WHERE key = 'boot')
-             WHERE scan_id = ?1 AND idx = ?2",
-            params![scan_id, index, StepState::Started.as_str(), now_rfc3339()],
-        )?;
-        Ok(())
+        self.writing(|store| {
+            store.conn.execute(
+                "UPDATE steps SET state = ?3, started = ?4,
+                    started_boot = (SELECT value FROM meta WHERE key = 'boot')
+                 WHERE scan_id = ?1 AND idx = ?2",
+                params![scan_id, index, StepState::Started.as_str(), now_rfc3339()],
+            )?;
+            Ok(())
+        })
     }
 
     /// Records a step as done with its result and inserts the steps it planned
@@ -795,41 +844,45 @@ impl Store {
         result: &Value,
         followers: &[Step],
     ) -> Result<bool, StoreError> {
-        if followers.len() >= STEP_SPACING as usize {
-            return Err(StoreError::TooManySteps(followers.len()));
-        }
-        let tx = self.write_transaction()?;
-        let now = now_rfc3339();
-        for (k, step) in (1..).zip(followers) {
-            let step = serde_json::to_string(step).map_err(json_err("step"))?;
+        self.writing(|store| {
+            if followers.len() >= STEP_SPACING as usize {
+                return Err(StoreError::TooManySteps(followers.len()));
+            }
+            let tx = store.write_transaction()?;
+            let now = now_rfc3339();
+            for (k, step) in (1..).zip(followers) {
+                let step = serde_json::to_string(step).map_err(json_err("step"))?;
+                tx.execute(
+                    "INSERT INTO steps (scan_id, idx, step, state) VALUES (?1, ?2, ?3, 'pending')",
+                    params![scan_id, index + k, step],
+                )?;
+            }
             tx.execute(
-                "INSERT INTO steps (scan_id, idx, step, state) VALUES (?1, ?2, ?3, 'pending')",
-                params![scan_id, index + k, step],
+                "UPDATE steps SET state = ?3, finished = ?4, result = ?5
+                 WHERE scan_id = ?1 AND idx = ?2",
+                params![
+                    scan_id,
+                    index,
+                    StepState::Done.as_str(),
+                    now,
+                    result.to_string()
+                ],
             )?;
-        }
-        tx.execute(
-            "UPDATE steps SET state = ?3, finished = ?4, result = ?5
-             WHERE scan_id = ?1 AND idx = ?2",
-            params![
-                scan_id,
-                index,
-                StepState::Done.as_str(),
-                now,
-                result.to_string()
-            ],
-        )?;
-        let completed = tx.execute(COMPLETE_SCAN, params![scan_id, now])? > 0;
-        tx.commit()?;
-        Ok(completed)
+            let completed = tx.execute(COMPLETE_SCAN, params![scan_id, now])? > 0;
+            tx.commit()?;
+            Ok(completed)
+        })
     }
 
     /// Marks a running scan with every step done as done (its last step was done
     /// while it was paused); returns whether it was.
     pub fn complete_if_done(&mut self, scan_id: i64) -> Result<bool, StoreError> {
-        Ok(self
-            .conn
-            .execute(COMPLETE_SCAN, params![scan_id, now_rfc3339()])?
-            > 0)
+        self.writing(|store| {
+            Ok(store
+                .conn
+                .execute(COMPLETE_SCAN, params![scan_id, now_rfc3339()])?
+                > 0)
+        })
     }
 
     /// Appends to the hardware log.
@@ -840,12 +893,14 @@ impl Store {
         action: &str,
         detail: &str,
     ) -> Result<(), StoreError> {
-        self.conn.execute(
-            "INSERT INTO hardware_log (boot, time, scan_id, action, detail)
-             VALUES (?1, ?2, ?3, ?4, ?5)",
-            params![boot, now_rfc3339(), scan_id, action, detail],
-        )?;
-        Ok(())
+        self.writing(|store| {
+            store.conn.execute(
+                "INSERT INTO hardware_log (boot, time, scan_id, action, detail)
+                 VALUES (?1, ?2, ?3, ?4, ?5)",
+                params![boot, now_rfc3339(), scan_id, action, detail],
+            )?;
+            Ok(())
+        })
     }
 
     /// The hardware log entries after `after_id`, oldest first.
@@ -977,6 +1032,56 @@ mod tests {
 
     fn next(store: &Store, id: i64, lane: Lane) -> Option<Step> {
         store.next_step(id, lane).unwrap().map(|s| s.step)
+    }
+
+    /// A write that finds the disk full deletes the journal's reserve file and runs
+    /// once more in the space it frees; with no reserve left, the full disk is the
+    /// error, told from others (as SQLite reports it: here at its page limit).
+    #[test]
+    fn a_full_disk_frees_the_journal_reserve_for_one_more_try() {
+        let (dir, mut store) = temp_store("reserve");
+        let reserve = dir.join(storage::JOURNAL_RESERVE_FILE);
+        std::fs::write(&reserve, vec![0u8; 4096]).unwrap();
+        let full = || {
+            StoreError::Sql(rusqlite::Error::SqliteFailure(
+                rusqlite::ffi::Error::new(rusqlite::ffi::SQLITE_FULL),
+                None,
+            ))
+        };
+        let mut tries = 0;
+        let written = store.writing(|_| {
+            tries += 1;
+            if tries == 1 {
+                Err(full())
+            } else {
+                Ok(tries)
+            }
+        });
+        assert_eq!(written.unwrap(), 2);
+        assert!(!reserve.exists());
+        tries = 0;
+        let failed = store.writing(|_| -> Result<(), StoreError> {
+            tries += 1;
+            Err(full())
+        });
+        assert!(failed.unwrap_err().is_disk_full());
+        assert_eq!(tries, 1);
+        // What SQLite says when the database cannot grow.
+        let pages: i64 = store
+            .conn
+            .query_row("PRAGMA page_count", [], |r| r.get(0))
+            .unwrap();
+        store
+            .conn
+            .pragma_update(None, "max_page_count", pages)
+            .unwrap();
+        let detail = "x".repeat(4000);
+        let err = (0..100)
+            .find_map(|_| store.log(1, None, "test", &detail).err())
+            .expect("the page limit is reached");
+        assert!(err.is_disk_full(), "{err}");
+        assert!(!StoreError::State("?".into()).is_disk_full());
+        std::fs::remove_dir_all(dir).ok();
     }
 
     #[test]

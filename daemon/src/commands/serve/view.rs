@@ -10,7 +10,7 @@ use std::time::Duration;
 use serde_json::{json, Value};
 
 use super::files::{remove_partials, Writers};
-use super::plan::{theta_dir_name, Step, FIT_MODELS};
+use super::plan::{theta_dir_name, theta_map_path, Step, FIT_MODELS};
 use super::progress::{metered_bracket, progress};
 use super::shared::{ScanEvent, Shared};
 use super::store::{ScanRecord, ScanState, StepRecord, StepState, Store, StoreError};
@@ -103,7 +103,7 @@ pub fn scan_view(
         .plan
         .theta_l
         .iter()
-        .filter_map(|t| file(&format!("hdr/{}.exr", theta_dir_name(*t))))
+        .filter_map(|t| file(&theta_map_path(*t)))
         .collect();
     // A frame to preview once a capture has landed in a θL directory.
     let has_frame = scan.plan.theta_l.iter().any(|t| {

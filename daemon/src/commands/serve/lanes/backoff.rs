@@ -42,41 +42,34 @@ impl Backoff {
 }
 
 /// A lane's pauses after turns that failed: [`FIRST`] doubling up to [`MAX`] while they
-/// keep failing, the error logged when it is new and then only as the pause grows (a
-/// journal that cannot write once logged its error every second).
+/// keep failing. One line per change: the error when it is new, and that the lane works
+/// again after the first turn that goes well (a journal that cannot write once logged
+/// its error every second).
 #[derive(Debug, Default)]
 pub struct Failures {
     last: Option<String>,
-    repeats: u64,
     pause: Duration,
 }
 
 impl Failures {
-    /// A turn went well.
-    pub fn ok(&mut self) {
+    /// A turn of `lane` went well.
+    pub fn ok(&mut self, lane: &str) {
+        if let Some(last) = self.last.take() {
+            tracing::info!("{lane}: working again after \"{last}\"");
+        }
         *self = Self::default();
     }
 
-    /// A turn of `lane` failed with `err`: logs it if due, and returns how long to
+    /// A turn of `lane` failed with `err`: logs it if it is new, and returns how long to
     /// pause.
     pub fn failed(&mut self, lane: &str, err: &dyn std::fmt::Display) -> Duration {
         let message = err.to_string();
-        let longer = (self.pause * 2).clamp(FIRST, MAX);
         if self.last.as_deref() != Some(message.as_str()) {
-            tracing::error!("{lane}: {message}");
-            self.repeats = 0;
-        } else {
-            self.repeats += 1;
-            if longer > self.pause || self.repeats.is_multiple_of(10) {
-                tracing::error!(
-                    "{lane}: {message} (again, {} times; next try in {longer:?})",
-                    self.repeats
-                );
-            }
+            tracing::error!("{lane}: {message} (trying again with backoff, up to {MAX:?})");
         }
         self.last = Some(message);
-        self.pause = longer;
-        longer
+        self.pause = (self.pause * 2).clamp(FIRST, MAX);
+        self.pause
     }
 }
 
@@ -110,7 +103,7 @@ mod tests {
         assert_eq!(pauses, [1, 2, 4, 8, 16, 32, 60, 60]);
         // Another error starts no new schedule; a good turn does.
         assert_eq!(failures.failed("lane", &"another").as_secs(), 60);
-        failures.ok();
+        failures.ok("lane");
         assert_eq!(failures.failed("lane", &"another").as_secs(), 1);
     }
 }

@@ -109,7 +109,7 @@ impl HardwareLane {
         let mut failures = Failures::default();
         loop {
             match self.tick() {
-                Ok(()) => failures.ok(),
+                Ok(()) => failures.ok("hardware lane"),
                 Err(err) => std::thread::sleep(failures.failed("hardware lane", &err)),
             }
         }

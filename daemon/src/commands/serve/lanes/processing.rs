@@ -82,16 +82,25 @@ impl ProcessingLane {
         let mut failures = Failures::default();
         loop {
             match self.turn() {
-                Ok(()) => failures.ok(),
+                Ok(()) => failures.ok("processing lane"),
                 Err(err) => std::thread::sleep(failures.failed("processing lane", &err)),
             }
         }
     }
 
-    /// One turn of the lane: records a finished background step, starts the next
+    /// One turn of the lane: makes the journal's reserve again if the store used it and
+    /// there is room, records a finished background step, starts the next
     /// captured bracket's map in the background (the longest step, so first), then runs
     /// the next other step, or waits for the background one, or decodes ahead.
     fn turn(&mut self) -> Result<(), StoreError> {
+        if self
+            .shared
+            .storage
+            .keep_journal_reserve()
+            .is_ok_and(|made| made)
+        {
+            tracing::info!("space held for the journal again");
+        }
         self.collect(false)?;
         if self.background.is_none() {
             if let Some((id, step)) = self.store.next_hdr()? {
