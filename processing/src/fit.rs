@@ -41,7 +41,8 @@ use crate::samples::Sample;
 use data::{Data, Found};
 
 pub use choice::{
-    fit_auto, specular_uv_change, Candidate, Criterion, Selection, COLOUR_SHIFT_MIN_UV,
+    choose_held_out, fit_auto, specular_uv_change, Candidate, Criterion, Selection,
+    COLOUR_SHIFT_GAIN,
 };
 pub use data::fits_colour_shift;
 pub use error::FitError;

@@ -194,10 +194,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     if let Some(shift) = result.colour_shift {
+        // Only a choice on held-out θL tells a colour shift from a change of brightness.
+        let judged = match &result.selection {
+            Some(s) if s.colour_shift => ": a colour shift",
+            Some(_) => ": not a colour shift (see the choice above)",
+            None => ": the specular's colour or brightness changes with angle (--model auto tells which)",
+        };
         match (shift.fitted, shift.p_value) {
-            (true, Some(p)) if p < 1e-16 => println!("  colour shift fitted (Wald p < 1e-16)"),
-            (true, Some(p)) => println!("  colour shift fitted (Wald p = {p:.1e})"),
-            (true, None) => println!("  colour shift fitted (noise-free data)"),
+            (true, Some(p)) if p < 1e-16 => println!("  Ks_90 ≠ Ks kept (Wald p < 1e-16){judged}"),
+            (true, Some(p)) => println!("  Ks_90 ≠ Ks kept (Wald p = {p:.1e}){judged}"),
+            (true, None) => println!("  Ks_90 ≠ Ks kept (noise-free data){judged}"),
             (false, Some(p)) => println!("  no significant colour shift (p = {p:.2}): Ks_90 = Ks"),
             (false, None) => println!("  one θL: colour shift not observable, Ks_90 = Ks"),
         }

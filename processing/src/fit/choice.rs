@@ -14,13 +14,16 @@
 //! Candidates are listed simplest first; a later one wins only with a score lower by
 //! more than [`TIE`] (relative), so equal scores keep the simpler model.
 //!
-//! A colour shift is reported only when the chosen fit keeps one (Cook–Torrance–Fresnel,
-//! Wald test) **and** its specular colour F_c changes chromaticity over the scanned
-//! angles: the u′v′ distance between F at the smallest and at the largest |θL| (light and
-//! camera γ = |θL| apart, F = Ks + (1 − cos γ)(Ks_90 − Ks)) is at least
-//! [`COLOUR_SHIFT_MIN_UV`]. A Ks_90 of Ks's chromaticity changes the highlight's
-//! brightness only (a Fresnel factor, or the lobe's misfit between θL): not a colour
-//! shift.
+//! A colour shift is reported only when the choice was made on held-out θL, the chosen
+//! fit keeps one (Cook–Torrance–Fresnel, Wald test) **and** it predicts the chromaticity
+//! of the highlight at the θL it did not see at least [`COLOUR_SHIFT_GAIN`] times better
+//! than every candidate without one: its median held-out ΔE_u′v′ over the specular lobe
+//! is at most 1/[`COLOUR_SHIFT_GAIN`] of theirs. A Ks_90 that only changes the
+//! highlight's brightness (a Fresnel factor, or the lobe's misfit between θL, which the
+//! Wald test also rejects Ks_90 = Ks for) does not predict a new chromaticity, and is not
+//! a colour shift. With fewer than three θL no chromaticity is predicted unseen and no
+//! colour shift is reported. The fit's u′v′ change of its specular colour between the
+//! smallest and the largest |θL| is recorded beside ([`specular_uv_change`]).
 
 use serde::{Deserialize, Serialize};
 
@@ -34,10 +37,9 @@ use crate::samples::{distinct_theta_l, Sample};
 /// fraction of it (BIC: of the best's |BIC|).
 pub const TIE: f64 = 1e-6;
 
-/// Smallest u′v′ distance between the specular colours at the smallest and largest |θL|
-/// of a scan that counts as a colour shift: about a just-noticeable difference of
-/// chromaticity (0.004, the one-step MacAdam ellipse's scale used for lamp tolerances).
-pub const COLOUR_SHIFT_MIN_UV: f64 = 0.004;
+/// How many times lower than every candidate without a colour shift the chosen fit's
+/// held-out ΔE_u′v′ over the specular lobe must be for its colour shift to be reported.
+pub const COLOUR_SHIFT_GAIN: f64 = 2.0;
 
 /// How the candidates were compared.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -82,6 +84,10 @@ pub struct Selection {
     pub chosen: usize,
     /// Whether a colour shift is reported (see the module's rule).
     pub colour_shift: bool,
+    /// The best held-out ΔE_u′v′ over the lobe of the candidates without a colour shift
+    /// over the chosen one's; `None` when undefined (or the choice was by BIC).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub chromatic_gain: Option<f64>,
     /// u′v′ distance between the chosen fit's specular colours at the smallest and
     /// largest |θL|; `None` without a fitted shift.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -180,34 +186,62 @@ pub fn fit_auto(
         return Err(FitError::InvalidOptions("no candidate model".into()));
     }
     let theta_l = distinct_theta_l(samples);
-    let (criterion, candidates, mut fits) = if theta_l.len() >= 3 {
+    if theta_l.len() >= 3 {
         let held = leave_one_theta_l_out(samples, variants, camera)?;
-        let candidates: Vec<Candidate> = held.iter().map(held_out_candidate).collect();
-        (Criterion::LeaveOneThetaLOut, candidates, Vec::new())
-    } else {
-        let fits: Vec<Result<FitResult, FitError>> = variants
-            .iter()
-            .map(|v| fit(samples, &v.options()))
-            .collect();
-        let candidates = variants
-            .iter()
-            .zip(&fits)
-            .map(|(&variant, f)| Candidate {
-                variant,
-                parameters: f.as_ref().map_or_else(
-                    |_| parameter_count(variant.model, variant.roughness),
-                    fitted_parameters,
-                ),
-                score: f.as_ref().ok().map(|r| bic(r, samples.len())),
-                held_out_delta_e_uv: None,
-                held_out_delta_e_uv_lobe: None,
-                held_out_err_p: None,
-                held_out_err_p_lobe: None,
-                error: f.as_ref().err().map(|e| e.to_string()),
-            })
-            .collect();
-        (Criterion::Bic, candidates, fits)
-    };
+        return choose_held_out(samples, &held, camera);
+    }
+    let fits: Vec<Result<FitResult, FitError>> = variants
+        .iter()
+        .map(|v| fit(samples, &v.options()))
+        .collect();
+    let candidates = variants
+        .iter()
+        .zip(&fits)
+        .map(|(&variant, f)| Candidate {
+            variant,
+            parameters: f.as_ref().map_or_else(
+                |_| parameter_count(variant.model, variant.roughness),
+                fitted_parameters,
+            ),
+            score: f.as_ref().ok().map(|r| bic(r, samples.len())),
+            held_out_delta_e_uv: None,
+            held_out_delta_e_uv_lobe: None,
+            held_out_err_p: None,
+            held_out_err_p_lobe: None,
+            error: f.as_ref().err().map(|e| e.to_string()),
+        })
+        .collect();
+    choose(samples, Criterion::Bic, candidates, fits, camera)
+}
+
+/// The choice among variants already judged by leave-one-θL-out (`held`, from
+/// [`leave_one_theta_l_out`] on `samples`): the chosen variant fitted to every sample,
+/// with the choice recorded.
+pub fn choose_held_out(
+    samples: &[Sample],
+    held: &[HeldOut],
+    camera: &CameraModel,
+) -> Result<FitResult, FitError> {
+    let candidates = held.iter().map(held_out_candidate).collect();
+    choose(
+        samples,
+        Criterion::LeaveOneThetaLOut,
+        candidates,
+        Vec::new(),
+        camera,
+    )
+}
+
+/// The best of `candidates` (fitted to every sample in `fits` when already done) with
+/// the choice recorded in its `selection`.
+fn choose(
+    samples: &[Sample],
+    criterion: Criterion,
+    candidates: Vec<Candidate>,
+    fits: Vec<Result<FitResult, FitError>>,
+    camera: &CameraModel,
+) -> Result<FitResult, FitError> {
+    let theta_l = distinct_theta_l(samples);
     let scores: Vec<Option<f64>> = candidates.iter().map(|c| c.score).collect();
     let Some(chosen) = best(&scores) else {
         let why = candidates
@@ -219,22 +253,38 @@ pub fn fit_auto(
             "no candidate model could be scored ({why})"
         )));
     };
-    let mut result = match fits.get_mut(chosen) {
-        Some(Ok(f)) => f.clone(),
-        _ => fit(samples, &variants[chosen].options())?,
+    let mut result = match fits.into_iter().nth(chosen) {
+        Some(Ok(f)) => f,
+        _ => fit(samples, &candidates[chosen].variant.options())?,
     };
     let change = specular_uv_change(&result, &theta_l, camera);
-    let colour_shift = change.is_some_and(|d| d >= COLOUR_SHIFT_MIN_UV);
-    let reason = reason(criterion, &candidates, chosen, &result, change);
+    let gain = chromatic_gain(&candidates, chosen);
+    let colour_shift = criterion == Criterion::LeaveOneThetaLOut
+        && result.colour_shift.is_some_and(|c| c.fitted)
+        && gain.is_some_and(|g| g >= COLOUR_SHIFT_GAIN);
+    let reason = reason(criterion, &candidates, chosen, &result, gain, change);
     result.selection = Some(Selection {
         criterion,
         candidates,
         chosen,
         colour_shift,
+        chromatic_gain: gain,
         specular_uv_change: change,
         reason,
     });
     Ok(result)
+}
+
+/// The best held-out lobe ΔE_u′v′ among the candidates without a colour shift over the
+/// chosen candidate's.
+fn chromatic_gain(candidates: &[Candidate], chosen: usize) -> Option<f64> {
+    let own = candidates[chosen].held_out_delta_e_uv_lobe?;
+    let others = candidates
+        .iter()
+        .filter(|c| !c.variant.model.has_fresnel_colour())
+        .filter_map(|c| c.held_out_delta_e_uv_lobe)
+        .fold(f64::INFINITY, f64::min);
+    (others.is_finite() && own > 0.0).then(|| others / own)
 }
 
 /// The choice in words: the winner's score against the runner-up's, and the colour
@@ -244,6 +294,7 @@ fn reason(
     candidates: &[Candidate],
     chosen: usize,
     result: &FitResult,
+    gain: Option<f64>,
     change: Option<f64>,
 ) -> String {
     let winner = &candidates[chosen];
@@ -279,17 +330,23 @@ fn reason(
         ),
     };
     if result.model.has_fresnel_colour() {
-        text.push_str(&match (result.colour_shift.map(|c| c.fitted), change) {
-            (Some(true), Some(d)) if d >= COLOUR_SHIFT_MIN_UV => format!(
-                "; its specular colour changes over the scanned angles by Δu′v′ = {d:.4} \
-                 (≥ {COLOUR_SHIFT_MIN_UV}): a colour shift"
+        let uv = change.map_or(String::new(), |d| {
+            format!(" (its specular colour moves by Δu′v′ = {d:.4} over the scanned angles)")
+        });
+        text.push_str(&match (result.colour_shift.map(|c| c.fitted), gain, criterion) {
+            (Some(true), Some(g), Criterion::LeaveOneThetaLOut) if g >= COLOUR_SHIFT_GAIN => {
+                format!(
+                    "; it predicts the unseen highlight's chromaticity {g:.2}× better than any \
+                     model without a shift (≥ {COLOUR_SHIFT_GAIN}×){uv}: a colour shift"
+                )
+            }
+            (Some(true), Some(g), Criterion::LeaveOneThetaLOut) => format!(
+                "; its Ks_90 ≠ Ks predicts the unseen highlight's chromaticity only {g:.2}× \
+                 better than a model without a shift (< {COLOUR_SHIFT_GAIN}×){uv}: a change of \
+                 brightness or of the lobe, not a colour shift"
             ),
-            (Some(true), Some(d)) => format!(
-                "; its Ks_90 changes the highlight's brightness, its chromaticity only by \
-                 Δu′v′ = {d:.4} (< {COLOUR_SHIFT_MIN_UV}): no colour shift"
-            ),
-            (Some(true), None) => {
-                "; its specular colour has no chromaticity: no colour shift".into()
+            (Some(true), _, _) => {
+                format!("; no chromaticity judged unseen (fewer than 3 θL){uv}: no colour shift reported")
             }
             _ => "; no significant change of the specular colour: no colour shift".into(),
         });
