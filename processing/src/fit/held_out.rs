@@ -289,3 +289,29 @@ pub fn leave_one_theta_l_out(
         })
         .collect())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_lobe_is_what_rises_a_tenth_of_the_peak_above_the_floor() {
+        let rgb = [
+            [1.0; 3],
+            [1.2, 1.2, 1.2],
+            [1.4, 1.4, 1.4],
+            [11.0, 11.0, 11.0],
+        ];
+        // Excesses 0, 0.6, 1.2, 30 (R + G + B): the threshold is 3.
+        assert_eq!(lobe(&rgb), [false, false, false, true]);
+        // A flat θL has no lobe.
+        assert_eq!(lobe(&[[2.0; 3]; 3]), [false; 3]);
+    }
+
+    #[test]
+    fn medians_skip_non_finite_values() {
+        assert_eq!(median(&[3.0, 1.0, 2.0]), Some(2.0));
+        assert_eq!(median(&[4.0, 1.0, f64::NAN, 2.0, 3.0]), Some(2.5));
+        assert_eq!(median(&[]), None);
+    }
+}
