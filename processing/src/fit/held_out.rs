@@ -202,6 +202,15 @@ fn fold(
     let mut options = variant.options();
     options.uncertainty = false;
     let fitted = fit(&split(samples, theta_l, false), &options).map_err(|e| e.to_string())?;
+    let held = known(samples, theta_l)?;
+    let estimated: Vec<[f64; 3]> = held.iter().map(|s| fitted.predict_sample(s)).collect();
+    let mut scored = score(theta_l, &held, &estimated, camera)?;
+    scored.colour_shift = fitted.colour_shift.map(|c| c.fitted);
+    Ok(scored)
+}
+
+/// The samples of θL `theta_l` whose three channels are known.
+fn known(samples: &[Sample], theta_l: f64) -> Result<Vec<Sample>, String> {
     let held: Vec<Sample> = split(samples, theta_l, true)
         .into_iter()
         .filter(|s| !s.dropped.contains(&true))
@@ -211,10 +220,19 @@ fn fold(
             "θL {theta_l} has no point with every channel known"
         ));
     }
+    Ok(held)
+}
+
+/// The fold of θL `theta_l`: `estimated` scored against the samples `held`.
+fn score(
+    theta_l: f64,
+    held: &[Sample],
+    estimated: &[[f64; 3]],
+    camera: &CameraModel,
+) -> Result<Fold, String> {
     let measured: Vec<[f64; 3]> = held.iter().map(|s| s.rgb).collect();
     let measured_xyz: Vec<[f64; 3]> = measured.iter().map(|&v| camera.xyz(v)).collect();
-    let estimated: Vec<[f64; 3]> = held.iter().map(|s| fitted.predict_sample(s)).collect();
-    let all = errors(&measured, &measured_xyz, &estimated, camera).map_err(|e| e.to_string())?;
+    let all = errors(&measured, &measured_xyz, estimated, camera).map_err(|e| e.to_string())?;
     let in_lobe = lobe(&measured);
     let pick = |values: &[[f64; 3]]| -> Vec<[f64; 3]> {
         values
@@ -227,11 +245,11 @@ fn fold(
     let lobe_errors = errors(
         &pick(&measured),
         &pick(&measured_xyz),
-        &pick(&estimated),
+        &pick(estimated),
         camera,
     )
     .ok();
-    let loss = metrics::loss(&measured, &estimated).map_err(|e| e.to_string())?;
+    let loss = metrics::loss(&measured, estimated).map_err(|e| e.to_string())?;
     let scale = measured
         .iter()
         .map(|v| metrics::point_loss(v, &[0.0; 3]))
@@ -245,8 +263,89 @@ fn fold(
         scale,
         all,
         lobe: lobe_errors,
-        colour_shift: fitted.colour_shift.map(|c| c.fitted),
+        colour_shift: None,
     })
+}
+
+/// A sample's half-vector and difference angles (radians): θh signed by the side of the
+/// specular peak it lies on (the sign of θi − θr), θd = acos(v·h).
+fn half_difference(s: &Sample) -> (f64, f64) {
+    let c = s.cosines();
+    let theta_h = c.n_dot_h.clamp(-1.0, 1.0).acos();
+    let side = if s.theta_i >= s.theta_r { 1.0 } else { -1.0 };
+    (side * theta_h, c.v_dot_h.clamp(-1.0, 1.0).acos())
+}
+
+/// β of one θL's points (sorted by signed θh) at signed θh `h`: linear between the two
+/// points around it, the end point's beyond.
+fn along(points: &[(f64, [f64; 3])], h: f64) -> [f64; 3] {
+    let k = points.partition_point(|p| p.0 <= h);
+    if k == 0 {
+        return points[0].1;
+    }
+    if k == points.len() {
+        return points[k - 1].1;
+    }
+    let (a, b) = (points[k - 1], points[k]);
+    let w = if b.0 > a.0 {
+        (h - a.0) / (b.0 - a.0)
+    } else {
+        0.0
+    };
+    std::array::from_fn(|c| a.1[c] + w * (b.1[c] - a.1[c]))
+}
+
+/// The model-free bound of a model's held-out error: each θL predicted from the other
+/// θL's own samples, as a table in (θh, θd) (an isotropic BRDF is nearly bivariate in
+/// them; Romeiro et al. 2008): along each other θL linear in signed θh, then linear in θd
+/// between the two θL whose mean θd bracket the point's (the nearest θL beyond the ends).
+/// No model reaches below what its own data interpolate to, except by extrapolating
+/// better beyond the measured θd.
+pub fn interpolation_folds(samples: &[Sample], camera: &CameraModel) -> Vec<Result<Fold, String>> {
+    let theta_l = distinct_theta_l(samples);
+    let tables: Vec<(f64, Vec<(f64, [f64; 3])>)> = theta_l
+        .iter()
+        .filter_map(|&t| {
+            let held = known(samples, t).ok()?;
+            let mut points: Vec<(f64, [f64; 3])> =
+                held.iter().map(|s| (half_difference(s).0, s.rgb)).collect();
+            points.sort_by(|a, b| a.0.total_cmp(&b.0));
+            let mean_d = held.iter().map(|s| half_difference(s).1).sum::<f64>() / held.len() as f64;
+            Some((mean_d, points))
+        })
+        .collect();
+    theta_l
+        .iter()
+        .enumerate()
+        .map(|(i, &t)| {
+            let held = known(samples, t)?;
+            let mut others: Vec<&(f64, Vec<(f64, [f64; 3])>)> = tables
+                .iter()
+                .enumerate()
+                .filter(|(j, _)| *j != i)
+                .map(|(_, table)| table)
+                .collect();
+            others.sort_by(|a, b| a.0.total_cmp(&b.0));
+            if others.is_empty() {
+                return Err("no other θL to interpolate".into());
+            }
+            let estimated: Vec<[f64; 3]> = held
+                .iter()
+                .map(|s| {
+                    let (h, d) = half_difference(s);
+                    let k = others.partition_point(|o| o.0 <= d);
+                    if k == 0 || k == others.len() {
+                        return along(&others[k.min(others.len() - 1)].1, h);
+                    }
+                    let (lo, hi) = (others[k - 1], others[k]);
+                    let (a, b) = (along(&lo.1, h), along(&hi.1, h));
+                    let w = (d - lo.0) / (hi.0 - lo.0);
+                    std::array::from_fn(|c| a[c] + w * (b[c] - a[c]))
+                })
+                .collect();
+            score(t, &held, &estimated, camera)
+        })
+        .collect()
 }
 
 /// Every variant judged at every θL of `samples` in turn, fits in parallel. Needs two
@@ -306,6 +405,33 @@ mod tests {
         assert_eq!(lobe(&rgb), [false, false, false, true]);
         // A flat θL has no lobe.
         assert_eq!(lobe(&[[2.0; 3]; 3]), [false; 3]);
+    }
+
+    #[test]
+    fn interpolation_predicts_a_brdf_of_the_half_angle_alone() {
+        // β depends on signed θh only: every θL, interior or at an end of the θd range,
+        // is predicted from the others to the accuracy of linear interpolation along θh.
+        let beta = |h: f64| {
+            let lobe = 50.0 * (-(h / 0.08).powi(2)).exp();
+            [2.0 + lobe, 3.0 + 0.8 * lobe, 1.0 + 0.5 * lobe]
+        };
+        let mut samples = Vec::new();
+        for theta_l in [-20.0, -25.0, -30.0, -35.0, -40.0, -45.0] {
+            // Every θL covers the lobe's θh (|θh| ≤ 17.5°): no extrapolation along θh.
+            for k in 0..=320 {
+                let theta_i = -40.0 + 0.25 * f64::from(k);
+                let theta_r = theta_l - theta_i;
+                let h = ((theta_i - theta_r) / 2.0f64).to_radians();
+                samples.push(Sample::in_plane(theta_l, theta_i, theta_r, beta(h)));
+            }
+        }
+        let folds = interpolation_folds(&samples, &CameraModel::builtin());
+        assert_eq!(folds.len(), 6);
+        for fold in folds {
+            let fold = fold.unwrap();
+            assert!(fold.all.err_p.iter().all(|&e| e < 1e-3), "{fold:?}");
+            assert!(fold.lobe.is_some(), "{fold:?}");
+        }
     }
 
     #[test]

@@ -1,11 +1,12 @@
 //! `gonio study --held-out`: every variant judged by leave-one-θL-out on the samples'
-//! own θL (`gonio_processing::fit::held_out`), and the model `--model auto` chooses.
+//! own θL (`gonio_processing::fit::held_out`), the model `--model auto` chooses, and the
+//! model-free bound: each θL interpolated from the others in (θh, θd).
 
 use std::fmt::Write as _;
 
 use anyhow::Context;
 use gonio_processing::color::CameraModel;
-use gonio_processing::fit::held_out::{Errors, HeldOut};
+use gonio_processing::fit::held_out::{interpolation_folds, median, Errors, Fold, HeldOut};
 use gonio_processing::fit::{choose_held_out, leave_one_theta_l_out, parameter_count, Variant};
 use gonio_processing::samples::Sample;
 
@@ -88,8 +89,13 @@ pub fn run(args: &Args, samples: &[Sample], variants: &[Variant]) -> anyhow::Res
     });
     spinner.finish_and_clear();
     let (held, chosen) = judged.with_context(|| format!("judging {}", args.samples.display()))?;
+    let bound = interpolation_folds(samples, &camera);
     let summary = serde_json::json!({
         "samples": samples.len(),
+        "interpolation": bound.iter().map(|f| match f {
+            Ok(fold) => serde_json::json!(fold),
+            Err(e) => serde_json::json!({"error": e}),
+        }).collect::<Vec<_>>(),
         "variants": held.iter().map(|h| serde_json::json!({
             "model": h.variant.model,
             "roughness": h.variant.roughness,
@@ -142,6 +148,39 @@ pub fn run(args: &Args, samples: &[Sample], variants: &[Variant]) -> anyhow::Res
             },
         );
     }
+    let folds: Vec<&Fold> = bound.iter().filter_map(|f| f.as_ref().ok()).collect();
+    let median_of = |f: &dyn Fn(&Fold) -> Option<f64>| {
+        median(&folds.iter().filter_map(|x| f(x)).collect::<Vec<_>>())
+    };
+    let rgb_of = |lobe: bool| -> Option<[f64; 3]> {
+        let channel = |c: usize| {
+            median_of(&|f: &Fold| {
+                if lobe {
+                    f.lobe.as_ref().map(|e| e.err_p[c])
+                } else {
+                    Some(f.all.err_p[c])
+                }
+            })
+        };
+        Some([channel(0)?, channel(1)?, channel(2)?])
+    };
+    let (loss, scale) = folds
+        .iter()
+        .fold((0.0, 0.0), |(l, s), f| (l + f.loss, s + f.scale));
+    println!(
+        "{:<35} {:>12}  {:>11} {:>6}  {:<22} {:<22} ({} of {} θL)",
+        "interpolation of the other θL",
+        value((scale > 0.0).then(|| loss / scale)),
+        value(median_of(&|f: &Fold| f.all.delta_e_uv)),
+        value(median_of(&|f: &Fold| f
+            .lobe
+            .as_ref()
+            .and_then(|e| e.delta_e_uv))),
+        rgb(rgb_of(false)),
+        rgb(rgb_of(true)),
+        folds.len(),
+        bound.len(),
+    );
     if let Some(selection) = &chosen.selection {
         println!("--model auto: {}", selection.reason);
     }
