@@ -267,6 +267,9 @@ fn score(
     })
 }
 
+/// One θL as a table: its mean θd (radians) and its points' (signed θh, β), sorted by θh.
+type ThetaTable = (f64, Vec<(f64, [f64; 3])>);
+
 /// A sample's half-vector and difference angles (radians): θh signed by the side of the
 /// specular peak it lies on (the sign of θi − θr), θd = acos(v·h).
 fn half_difference(s: &Sample) -> (f64, f64) {
@@ -303,7 +306,7 @@ fn along(points: &[(f64, [f64; 3])], h: f64) -> [f64; 3] {
 /// better beyond the measured θd.
 pub fn interpolation_folds(samples: &[Sample], camera: &CameraModel) -> Vec<Result<Fold, String>> {
     let theta_l = distinct_theta_l(samples);
-    let tables: Vec<(f64, Vec<(f64, [f64; 3])>)> = theta_l
+    let tables: Vec<ThetaTable> = theta_l
         .iter()
         .filter_map(|&t| {
             let held = known(samples, t).ok()?;
@@ -319,7 +322,7 @@ pub fn interpolation_folds(samples: &[Sample], camera: &CameraModel) -> Vec<Resu
         .enumerate()
         .map(|(i, &t)| {
             let held = known(samples, t)?;
-            let mut others: Vec<&(f64, Vec<(f64, [f64; 3])>)> = tables
+            let mut others: Vec<&ThetaTable> = tables
                 .iter()
                 .enumerate()
                 .filter(|(j, _)| *j != i)
