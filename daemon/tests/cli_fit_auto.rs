@@ -108,12 +108,16 @@ fn auto_reports_a_colour_shift_only_where_the_specular_changes_colour() {
                 fit["model"], "cook-torrance-fresnel",
                 "{scene}: {selection}"
             );
-            // It won on held-out error: no simpler candidate predicts better.
+            // It won on held-out error: no candidate predicts better (beyond a tie).
             let best = candidates
                 .iter()
                 .filter_map(|c| c["score"].as_f64())
                 .fold(f64::INFINITY, f64::min);
-            assert_eq!(chosen["score"].as_f64().unwrap(), best, "{scene}");
+            let score = chosen["score"].as_f64().unwrap();
+            assert!(
+                score <= best * (1.0 + 1e-6),
+                "{scene}: {score} against {best}"
+            );
         }
     }
     // Two θL: the information criterion decides.
