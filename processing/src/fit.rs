@@ -20,8 +20,10 @@
 //!
 //! β are in the camera-RGB domain (a white gives G = 100), so Kd is typically 0–100.
 
+mod choice;
 mod data;
 mod error;
+pub mod held_out;
 mod linear;
 mod nelder_mead;
 mod options;
@@ -38,8 +40,13 @@ use crate::metrics;
 use crate::samples::Sample;
 use data::{Data, Found};
 
+pub use choice::{
+    choose_held_out, fit_auto, specular_uv_change, Candidate, Criterion, Selection,
+    COLOUR_SHIFT_GAIN,
+};
 pub use data::fits_colour_shift;
 pub use error::FitError;
+pub use held_out::{leave_one_theta_l_out, Variant, CANDIDATES};
 pub use options::{FitMethod, FitOptions, NelderMeadOptions, RobustOptions};
 pub use uncertainty::{chi2_3_survival, ColourShift, Correlation, ParameterSet, Z95};
 
@@ -105,6 +112,9 @@ pub struct FitResult {
     /// that ends above it reports no uncertainty.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub global_minimum: Option<GlobalMinimum>,
+    /// `--model auto` only: the candidates' scores and why this model was chosen.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub selection: Option<Selection>,
 }
 
 /// Where a local method (Nelder–Mead) ended, against the global minimum of the eq. 10
@@ -350,6 +360,7 @@ pub fn fit(samples: &[Sample], options: &FitOptions) -> Result<FitResult, FitErr
         correlation,
         colour_shift,
         global_minimum,
+        selection: None,
     })
 }
 

@@ -29,7 +29,7 @@ use std::time::Instant;
 use rayon::prelude::*;
 
 use crate::color::CameraModel;
-use crate::fit::{self, FitMethod, FitOptions};
+use crate::fit::{self, held_out, FitMethod};
 use crate::metrics;
 use crate::reference::Reference;
 pub use crate::samples::distinct_theta_l;
@@ -198,8 +198,7 @@ fn score_combination(
     options: &StudyOptions,
 ) -> Result<Scores, String> {
     let subset = samples_at(samples, combo);
-    let mut fit_options = FitOptions::new(variant.model);
-    fit_options.roughness = variant.roughness;
+    let mut fit_options = variant.options();
     let robust = fit::fit(&subset, &fit_options).map_err(|e| e.to_string())?;
     // Nelder–Mead is the baseline of the paper's two models only.
     let nelder_mead_loss = (options.compare_nelder_mead && !variant.model.has_fresnel_colour())
@@ -240,15 +239,9 @@ fn errors(
 ) -> Result<Errors, String> {
     let chosen: Vec<usize> = (0..points.len()).filter(|&i| keep(&points[i])).collect();
     let pick = |values: &[[f64; 3]]| chosen.iter().map(|&i| values[i]).collect::<Vec<_>>();
-    let (measured, estimated) = (pick(measured), pick(estimated));
-    let err_p = metrics::err_p(&measured, &estimated).map_err(|e| e.to_string())?;
     let reference_xyz: Vec<[f64; 3]> = chosen.iter().map(|&i| points[i].reference_xyz).collect();
-    let estimated_xyz: Vec<[f64; 3]> = estimated.iter().map(|&rgb| camera.xyz(rgb)).collect();
-    Ok(Errors {
-        points: chosen.len(),
-        err_p,
-        delta_e_uv: metrics::delta_e_uv(&reference_xyz, &estimated_xyz).ok(),
-    })
+    held_out::errors(&pick(measured), &reference_xyz, &pick(estimated), camera)
+        .map_err(|e| e.to_string())
 }
 
 /// Writes the tables and the figures of `report` into `dir` (created if missing);

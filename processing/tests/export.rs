@@ -35,6 +35,7 @@ fn fit_of(model: Model, kd: [f64; 3], ks: [f64; 3], m: f64) -> FitResult {
         correlation: None,
         colour_shift: None,
         global_minimum: None,
+        selection: None,
     }
 }
 

@@ -5,7 +5,8 @@ use std::path::PathBuf;
 use anyhow::{bail, Context};
 use clap::ValueEnum;
 use gonio_processing::brdf::{Model, Roughness};
-use gonio_processing::fit::{self, FitMethod, FitOptions};
+use gonio_processing::color::CameraModel;
+use gonio_processing::fit::{self, Criterion, FitMethod, FitOptions, Selection, CANDIDATES};
 use gonio_processing::samples::{self, Sample};
 
 use super::output::write_output;
@@ -21,6 +22,9 @@ enum ModelArg {
     Ward,
     /// Cook–Torrance with a specular colour that varies with the facet incidence θd.
     CookTorranceFresnel,
+    /// The model (and roughness form) that best predicts each θL from the others (three
+    /// θL or more), else the lowest BIC; the choice is recorded in the fit JSON.
+    Auto,
 }
 
 /// One roughness for all channels or one per channel.
@@ -47,7 +51,7 @@ pub struct Args {
     /// Reflection model.
     #[arg(long, value_enum)]
     model: ModelArg,
-    /// Roughness m shared by R, G, B or one per channel.
+    /// Roughness m shared by R, G, B or one per channel (`--model auto` tries both).
     #[arg(long, value_enum, default_value = "shared")]
     roughness: RoughnessArg,
     /// Minimisation method of the eq. 10 loss.
@@ -97,11 +101,13 @@ fn select_theta_l(all: Vec<Sample>, wanted: &[f64]) -> anyhow::Result<Vec<Sample
 pub fn run(args: Args) -> anyhow::Result<()> {
     let all = samples::read_csv(&args.samples)?;
     let selected = select_theta_l(all, &args.theta_l)?;
-    let mut options = FitOptions::new(match args.model {
-        ModelArg::CookTorrance => Model::CookTorrance,
-        ModelArg::Ward => Model::Ward,
-        ModelArg::CookTorranceFresnel => Model::CookTorranceFresnel,
-    });
+    let model = match args.model {
+        ModelArg::CookTorrance => Some(Model::CookTorrance),
+        ModelArg::Ward => Some(Model::Ward),
+        ModelArg::CookTorranceFresnel => Some(Model::CookTorranceFresnel),
+        ModelArg::Auto => None,
+    };
+    let mut options = FitOptions::new(model.unwrap_or(Model::CookTorrance));
     options.roughness = match args.roughness {
         RoughnessArg::Shared => Roughness::Shared,
         RoughnessArg::PerChannel => Roughness::PerChannel,
@@ -111,11 +117,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         MethodArg::NelderMead => FitMethod::NelderMead,
     };
     options.robust.polish = args.polish;
+    if model.is_none() && (options.method != FitMethod::Robust || args.polish) {
+        bail!("--model auto compares robust fits: --method nelder-mead and --polish do not apply");
+    }
     let spinner = progress::spinner(format!("fitting {} samples", selected.len()));
-    let result = fit::fit(&selected, &options)
-        .with_context(|| format!("fitting {}", args.samples.display()));
+    let result = match model {
+        Some(_) => fit::fit(&selected, &options),
+        None => fit::fit_auto(&selected, &CANDIDATES, &CameraModel::builtin()),
+    }
+    .with_context(|| format!("fitting {}", args.samples.display()));
     spinner.finish_and_clear();
     let result = result?;
+    if let Some(selection) = &result.selection {
+        print_selection(selection);
+    }
     let json = serde_json::to_string_pretty(&result).context("serialising the fit")?;
     write_output(&args.out, |path| std::fs::write(path, json + "\n"))?;
     let m = result.params().m;
@@ -140,7 +155,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "  Kd {}  Ks {}  m {}",
         rgb(&result.kd, 3),
         rgb(&result.ks, 3),
-        rgb(&m[..options.roughness.count()], 4)
+        rgb(&m[..result.roughness.count()], 4)
     );
     if let Some(ks_90) = &result.ks_90 {
         println!("  Ks at 90° between light and camera {}", rgb(ks_90, 3));
@@ -179,13 +194,50 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     if let Some(shift) = result.colour_shift {
+        // Only a choice on held-out θL tells a colour shift from a change of brightness.
+        let judged = match &result.selection {
+            Some(s) if s.colour_shift => ": a colour shift",
+            Some(_) => ": not a colour shift (see the choice above)",
+            None => ": the specular's colour or brightness changes with angle (--model auto tells which)",
+        };
         match (shift.fitted, shift.p_value) {
-            (true, Some(p)) if p < 1e-16 => println!("  colour shift fitted (Wald p < 1e-16)"),
-            (true, Some(p)) => println!("  colour shift fitted (Wald p = {p:.1e})"),
-            (true, None) => println!("  colour shift fitted (noise-free data)"),
+            (true, Some(p)) if p < 1e-16 => println!("  Ks_90 ≠ Ks kept (Wald p < 1e-16){judged}"),
+            (true, Some(p)) => println!("  Ks_90 ≠ Ks kept (Wald p = {p:.1e}){judged}"),
+            (true, None) => println!("  Ks_90 ≠ Ks kept (noise-free data){judged}"),
             (false, Some(p)) => println!("  no significant colour shift (p = {p:.2}): Ks_90 = Ks"),
             (false, None) => println!("  one θL: colour shift not observable, Ks_90 = Ks"),
         }
     }
     Ok(())
+}
+
+/// The candidates' scores and the reason for the choice.
+fn print_selection(selection: &Selection) {
+    let score = match selection.criterion {
+        Criterion::LeaveOneThetaLOut => "held-out loss",
+        Criterion::Bic => "BIC",
+    };
+    let value = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.4}"));
+    println!(
+        "candidate                            params  {score:>13}  held out: ΔE_u′v′ (all, lobe)  \
+         ΔErr_p R G B (all)"
+    );
+    for (i, c) in selection.candidates.iter().enumerate() {
+        let err_p = c
+            .held_out_err_p
+            .map_or("-".to_string(), |e| e.map(|x| format!("{x:.4}")).join(" "));
+        println!(
+            "{} {:<35} {:>6}  {:>13}  {:>8} {:>8}  {err_p}{}",
+            if i == selection.chosen { "*" } else { " " },
+            c.variant.label(),
+            c.parameters,
+            c.score.map_or("failed".to_string(), |s| format!("{s:.6}")),
+            value(c.held_out_delta_e_uv),
+            value(c.held_out_delta_e_uv_lobe),
+            c.error
+                .as_ref()
+                .map_or(String::new(), |e| format!("  ({e})")),
+        );
+    }
+    println!("chosen: {}", selection.reason);
 }

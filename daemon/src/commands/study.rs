@@ -16,6 +16,8 @@ use crate::progress;
 
 use super::output::write_output_files;
 
+mod held_out;
+
 /// Which roughness forms a study fits.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum RoughnessChoice {
@@ -43,8 +45,14 @@ pub struct Args {
     /// Samples CSV (`theta_l,theta_i,theta_r,r,g,b`).
     pub samples: PathBuf,
     /// Reference CSV (`theta_i,theta_r,390,...,730` spectral radiance factor).
+    #[arg(long, required_unless_present = "held_out")]
+    pub reference: Option<PathBuf>,
+    /// Instead of every combination against a reference: leave each θL out in turn, fit
+    /// the others and score the left-out θL's own samples (all points and the specular
+    /// lobe), then choose the model as `gonio fit --model auto` does. Writes
+    /// `held_out.csv` and `held_out.json`.
     #[arg(long)]
-    pub reference: PathBuf,
+    pub held_out: bool,
     /// Output directory for the tables and figures (created if missing).
     #[arg(long)]
     pub out: PathBuf,
@@ -82,7 +90,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     // Both readers name the file in their errors.
     let samples = samples::read_csv(&args.samples)?;
-    let reference = Reference::read_csv(&args.reference)?;
     let mut variants = Vec::new();
     for &model in &args.models {
         for &roughness in args.roughness.forms() {
@@ -92,6 +99,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             }
         }
     }
+    let Some(reference) = &args.reference.as_ref().filter(|_| !args.held_out) else {
+        return held_out::run(&args, &samples, &variants);
+    };
+    let reference = Reference::read_csv(reference)?;
     let options = StudyOptions {
         variants,
         compare_nelder_mead: !args.no_nelder_mead,

@@ -32,8 +32,9 @@ use std::time::Instant;
 use anyhow::Context;
 use gonio_mock_hw::scene::Scene;
 use gonio_processing::brdf::{Model, Roughness};
+use gonio_processing::color::CameraModel;
 use gonio_processing::extract::ExtractOptions;
-use gonio_processing::fit::{self, FitMethod, FitOptions, FitResult};
+use gonio_processing::fit::{self, FitMethod, FitOptions, FitResult, CANDIDATES};
 use gonio_processing::metrics;
 use gonio_processing::samples::Sample;
 use gonio_processing::study::figures::{xy_svg, Mark, XyPlot, XySeries};
@@ -66,7 +67,8 @@ pub struct Args {
     #[arg(long, default_value_t = 1, conflicts_with = "scan")]
     pub binning: u32,
     /// Model to fit; default: the scene's own when it is cook-torrance or ward, else
-    /// (a goniochromatic or measured sample) cook-torrance-fresnel.
+    /// (a goniochromatic or measured sample) the one `gonio fit --model auto` chooses on
+    /// the full scan (with its roughness form).
     #[arg(long)]
     pub model: Option<Model>,
     /// Roughness form to fit; default: the scene's own, else shared.
@@ -191,14 +193,38 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .map(|p| p.exposures.len())
         .min()
         .unwrap_or(1);
+    let extracted = extract_all(&scan_dir, &args.out, &positions, bracket_len)?;
+    let full: Vec<Sample> = extracted[bracket_len - 1]
+        .iter()
+        .flat_map(|e| e.samples.iter().copied())
+        .collect();
+    let points = TruthPoints::new(&truth, &full, &scan_dir.join("reference.csv"))?;
+    // A scene without a model of ours (goniochromatic or measured): the model and
+    // roughness `gonio fit --model auto` chooses on the full scan.
+    let chosen = match (args.model, truth.model) {
+        (None, None) => {
+            let spinner = progress::spinner("choosing the model by the θL it did not see");
+            let fit = fit::fit_auto(&full, &CANDIDATES, &CameraModel::builtin());
+            spinner.finish_and_clear();
+            let fit = fit.context("choosing the model")?;
+            if let Some(selection) = &fit.selection {
+                eprintln!("model: {}", selection.reason);
+            }
+            Some((fit.model, fit.roughness))
+        }
+        _ => None,
+    };
     let model = args
         .model
         .or(truth.model.map(|(m, _, _)| m))
-        .unwrap_or(Model::CookTorranceFresnel);
+        .or(chosen.map(|(m, _)| m))
+        .unwrap_or(Model::CookTorrance);
     let roughness = args
         .roughness
         .or(truth.model.map(|(_, r, _)| r))
+        .or(chosen.map(|(_, r)| r))
         .unwrap_or(Roughness::Shared);
+
     // Nelder–Mead is the baseline of the paper's two models only.
     let methods: Vec<FitMethod> = args
         .methods
@@ -212,13 +238,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if methods.is_empty() {
         anyhow::bail!("--methods: {model} is fitted by the robust method only");
     }
-
-    let extracted = extract_all(&scan_dir, &args.out, &positions, bracket_len)?;
-    let full: Vec<Sample> = extracted[bracket_len - 1]
-        .iter()
-        .flat_map(|e| e.samples.iter().copied())
-        .collect();
-    let points = TruthPoints::new(&truth, &full, &scan_dir.join("reference.csv"))?;
 
     let timing = HardwareTiming::default();
     let settings = positions.len() * bracket_len * args.strides.len() * args.methods.len();

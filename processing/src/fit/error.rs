@@ -17,6 +17,8 @@ pub enum FitError {
     },
     #[error("channel {channel} has no signal (sum of β ≤ 0)")]
     NoSignal { channel: char },
+    #[error("{count} distinct θL in the samples; at least {needed} needed")]
+    TooFewThetaL { count: usize, needed: usize },
     #[error("invalid fit options: {0}")]
     InvalidOptions(String),
     #[error("optimiser failed: {0}")]

@@ -4,24 +4,9 @@
 use super::boxplot::BoxStats;
 use crate::brdf::{Model, Roughness};
 use crate::color::CameraModel;
+pub use crate::fit::held_out::Errors;
 use crate::fit::FitResult;
-
-/// A model with its roughness form: one fitted variant of a study.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub struct Variant {
-    pub model: Model,
-    pub roughness: Roughness,
-}
-
-impl Variant {
-    /// `cook-torrance` for shared roughness, `cook-torrance/per-channel` otherwise.
-    pub fn label(&self) -> String {
-        match self.roughness {
-            Roughness::Shared => self.model.name().to_string(),
-            Roughness::PerChannel => format!("{}/{}", self.model, self.roughness),
-        }
-    }
-}
+pub use crate::fit::Variant;
 
 /// What a study fits.
 #[derive(Debug, Clone, PartialEq)]
@@ -65,17 +50,6 @@ pub struct EvalPoint {
     pub reference: [f64; 3],
     /// CIE XYZ of `reference`.
     pub reference_xyz: [f64; 3],
-}
-
-/// Errors of a fit against the reference on a set of evaluation points.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Errors {
-    /// Number of evaluation points.
-    pub points: usize,
-    /// ΔErr_p (eq. 11) per channel.
-    pub err_p: [f64; 3],
-    /// Mean ΔE_u′v′ (eq. 13) over the points with a defined chromaticity; `None` if none.
-    pub delta_e_uv: Option<f64>,
 }
 
 /// The scores of one successful fit.

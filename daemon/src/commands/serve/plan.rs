@@ -25,6 +25,13 @@ pub const FIT_MODELS: [(&str, &str); 3] = [
     ("cook-torrance-fresnel", "fit-cook-torrance-fresnel.json"),
 ];
 
+/// The last fit of every scan, after the [`FIT_MODELS`]: the model and roughness form
+/// the scan's θL choose (`gonio fit --model auto`), with its result file name.
+pub const AUTO_FIT: (&str, &str) = ("auto", "fit-auto.json");
+
+/// Number of fit steps at the end of every scan: the [`FIT_MODELS`] and the [`AUTO_FIT`].
+pub const FINAL_FITS: usize = FIT_MODELS.len() + 1;
+
 /// Which thread runs a step.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Lane {
@@ -173,9 +180,14 @@ impl ScanPlan {
             steps.push(Step::Hdr { theta_l });
         }
         steps.push(Step::Extract);
-        steps.extend(FIT_MODELS.iter().map(|(model, _)| Step::Fit {
-            model: (*model).to_owned(),
-        }));
+        steps.extend(
+            FIT_MODELS
+                .iter()
+                .chain([&AUTO_FIT])
+                .map(|(model, _)| Step::Fit {
+                    model: (*model).to_owned(),
+                }),
+        );
         steps
     }
 
@@ -206,7 +218,7 @@ mod tests {
             auto_bracket: false,
         };
         let steps = plan.steps();
-        assert_eq!(steps.len(), 1 + 2 * (1 + 3 + 2) + 1 + 3);
+        assert_eq!(steps.len(), 1 + 2 * (1 + 3 + 2) + 1 + 4);
         assert_eq!(steps[0], Step::Home);
         assert_eq!(steps[1], Step::Move { theta_l: -20.0 });
         assert_eq!(
@@ -222,11 +234,12 @@ mod tests {
         assert_eq!(steps[13], Step::Extract);
         assert!(matches!(&steps[15], Step::Fit { model } if model == "ward"));
         assert!(matches!(&steps[16], Step::Fit { model } if model == "cook-torrance-fresnel"));
+        assert!(matches!(&steps[17], Step::Fit { model } if model == "auto"));
         // Hardware steps move and capture; everything after a bracket is processing.
         let lanes: Vec<Lane> = steps.iter().map(Step::lane).collect();
         assert_eq!(lanes[..5], [Lane::Hardware; 5]);
         assert_eq!(lanes[5..7], [Lane::Processing; 2]);
-        assert_eq!(lanes[13..], [Lane::Processing; 4]);
+        assert_eq!(lanes[13..], [Lane::Processing; 5]);
         assert_eq!(steps[6].theta_l(), Some(-20.0));
         assert_eq!(steps[13].theta_l(), None);
     }
@@ -250,7 +263,7 @@ mod tests {
                 Step::Hdr { theta_l: -20.0 }
             ]
         );
-        assert_eq!(steps.len(), 1 + 2 * 4 + 4);
+        assert_eq!(steps.len(), 1 + 2 * 4 + 5);
     }
 
     #[test]

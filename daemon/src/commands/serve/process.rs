@@ -11,8 +11,9 @@ use anyhow::Context;
 use gonio_files::input::{read_input, MAX_SMALL_FILE_BYTES};
 use gonio_processing::brdf::Model;
 use gonio_processing::capture::{is_capture_path, sidecar_path, CaptureError, Frame};
+use gonio_processing::color::CameraModel;
 use gonio_processing::extract::{extract_scan, ExtractOptions};
-use gonio_processing::fit::{fit, FitOptions, FitResult};
+use gonio_processing::fit::{fit, fit_auto, FitOptions, FitResult, CANDIDATES};
 use gonio_processing::hdr::{merge, MergeOptions};
 use gonio_processing::metrics::err_p;
 use gonio_processing::samples::{read_csv, write_csv, Sample};
@@ -22,7 +23,7 @@ use serde_json::{json, Value};
 use super::files::{write_atomic, write_atomic_with};
 use super::plan::{
     theta_dir_name, theta_fits_path, theta_map_path, theta_map_record_path, theta_samples_path,
-    ScanPlan, Step, FIT_MODELS,
+    ScanPlan, Step, AUTO_FIT, FIT_MODELS,
 };
 
 /// Most frames decoded ahead of their HDR step (a full-size 16-bit frame is 60 MB).
@@ -380,26 +381,39 @@ fn gather(dir: &Path, plan: &ScanPlan) -> anyhow::Result<Value> {
 }
 
 /// Fits `model` to `samples.csv`; the last θL's live fit is taken as it is when it
-/// was made on exactly those samples (as it is once every θL is processed).
+/// was made on exactly those samples (as it is once every θL is processed). The
+/// [`AUTO_FIT`] chooses among the models by the θL each fit did not see.
 fn fit_model(dir: &Path, plan: &ScanPlan, model: &str) -> anyhow::Result<Value> {
     let name = FIT_MODELS
         .iter()
+        .chain([&AUTO_FIT])
         .find(|(m, _)| *m == model)
         .map(|(_, name)| *name)
         .with_context(|| format!("unknown model {model:?}"))?;
     let samples = read_csv(&dir.join("samples.csv"))?;
-    let live = plan
-        .theta_l
-        .last()
-        .and_then(|&last| SavedFits::read(dir, last))
-        .and_then(|saved| saved.of(model, &fingerprint(&samples)).cloned());
-    let result = match live {
-        Some(result) => result,
-        None => fit(&samples, &FitOptions::new(model.parse::<Model>()?))?,
+    let result = if model == AUTO_FIT.0 {
+        fit_auto(&samples, &CANDIDATES, &CameraModel::builtin())?
+    } else {
+        let live = plan
+            .theta_l
+            .last()
+            .and_then(|&last| SavedFits::read(dir, last))
+            .and_then(|saved| saved.of(model, &fingerprint(&samples)).cloned());
+        match live {
+            Some(result) => result,
+            None => fit(&samples, &FitOptions::new(model.parse::<Model>()?))?,
+        }
     };
     write_atomic(&dir.join(name), &serde_json::to_vec_pretty(&result)?)
         .with_context(|| name.to_owned())?;
-    Ok(json!({ "path": name, "loss": result.loss }))
+    let mut record = json!({ "path": name, "loss": result.loss });
+    if let Some(selection) = &result.selection {
+        record["model"] = json!(result.model);
+        record["roughness"] = json!(result.roughness);
+        record["colour_shift"] = json!(selection.colour_shift);
+        record["reason"] = json!(selection.reason);
+    }
+    Ok(record)
 }
 
 #[cfg(test)]
@@ -582,5 +596,16 @@ mod tests {
         assert!(same(&scan_fits(dir), &fresh));
         std::fs::write(&path, b"{").unwrap();
         assert!(same(&scan_fits(dir), &fresh));
+        // The last fit chooses among the models, and says why, in its file and record.
+        let record = fit_model(dir, &plan, AUTO_FIT.0).unwrap();
+        let auto: FitResult =
+            serde_json::from_slice(&std::fs::read(dir.join(AUTO_FIT.1)).unwrap()).unwrap();
+        let selection = auto.selection.expect("an auto fit records its choice");
+        assert_eq!(selection.candidates.len(), CANDIDATES.len());
+        assert_eq!(
+            selection.candidates[selection.chosen].variant.model,
+            auto.model
+        );
+        assert_eq!(record["reason"], json!(selection.reason));
     }
 }

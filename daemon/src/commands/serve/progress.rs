@@ -220,7 +220,7 @@ fn theta_progress(steps: &[StepRecord]) -> ThetaProgress {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::commands::serve::plan::{ScanPlan, FIT_MODELS};
+    use crate::commands::serve::plan::{ScanPlan, AUTO_FIT, FINAL_FITS, FIT_MODELS};
     use serde_json::json;
     use time::Duration;
 
@@ -300,6 +300,7 @@ mod tests {
             + timing.prior_s(&Step::Extract, 0.0)
             + FIT_MODELS
                 .iter()
+                .chain([&AUTO_FIT])
                 .map(|(model, _)| {
                     timing.prior_s(
                         &Step::Fit {
@@ -361,7 +362,7 @@ mod tests {
             }
         }
         let informed = progress(&fresh, &earlier, &timing, now).eta_s;
-        let fits = FIT_MODELS.len() as f64;
+        let fits = FINAL_FITS as f64;
         let prior = |step: Step| timing.prior_s(&step, 0.0);
         let fit_prior = prior(Step::Fit {
             model: "ward".into(),

@@ -215,7 +215,7 @@ fn step_count(theta_l: &[f64], shutter_s: &[f64], auto_bracket: bool) -> usize {
     };
     // Home, then per θL: move, meter (auto), captures, HDR; then extract and the fits.
     let per_theta = 2 + usize::from(auto_bracket) + captures;
-    1 + theta_l.len() * per_theta + 1 + super::plan::FIT_MODELS.len()
+    1 + theta_l.len() * per_theta + 1 + super::plan::FINAL_FITS
 }
 
 /// A checked sweep: its scans in queue order and its start time (Unix seconds).

@@ -1,0 +1,207 @@
+//! `gonio fit --model auto` chooses the model by the θL it did not see, and reports a
+//! colour shift only where the specular's chromaticity changes with angle. Each scene
+//! is simulated with the sensor binned 8×8 and a noise seed drawn by the test (printed),
+//! extracted, and fitted with `--model auto`:
+//! - `gold` and `red` (constant specular colour): no colour shift reported;
+//! - `blue-green` (thin film) and `opal` (Bragg flakes): Cook–Torrance–Fresnel chosen,
+//!   with a colour shift;
+//! - two θL of a scan: the choice falls back to the BIC.
+//!
+//! Real RGL-EPFL materials are tested when `GONIO_RGL_DIR` names a directory of their
+//! `*_rgb.bsdf` files (the test says it is skipped otherwise): each is rendered, and on
+//! the materials whose specular has no colour of its own (white paper, wall paint) no
+//! colour shift is reported, from all six θL nor from any five.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn gonio(args: &[&str]) -> String {
+    let out = Command::new(env!("CARGO_BIN_EXE_gonio"))
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "gonio {args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+fn path(p: &Path) -> String {
+    p.to_str().unwrap().to_owned()
+}
+
+/// A noise seed the test draws: the claims must hold on scans it did not pick.
+fn seed() -> u64 {
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .subsec_nanos();
+    u64::from(nanos % 1_000_000)
+}
+
+/// Simulates `scene` (built-in name or TOML path) binned 8×8 and extracts its samples.
+fn scan(scene: &str, name: &str, dir: &Path, seed: u64) -> PathBuf {
+    let scan = dir.join(name);
+    let samples = scan.join("samples.csv");
+    gonio(&[
+        "simulate",
+        "--scene",
+        scene,
+        "--binning",
+        "8",
+        "--seed",
+        &seed.to_string(),
+        "--out",
+        &path(&scan),
+    ]);
+    gonio(&["extract", &path(&scan), "--out", &path(&samples)]);
+    samples
+}
+
+/// `gonio fit --model auto` on `samples` (only θL `theta_l` when not empty): the fit JSON.
+fn auto(samples: &Path, theta_l: &[f64], out: &Path) -> serde_json::Value {
+    let mut args = vec![
+        "fit".to_owned(),
+        path(samples),
+        "--model".into(),
+        "auto".into(),
+        "--out".into(),
+        path(out),
+    ];
+    if !theta_l.is_empty() {
+        let list: Vec<String> = theta_l.iter().map(|t| t.to_string()).collect();
+        args.push(format!("--theta-l={}", list.join(",")));
+    }
+    let printed = gonio(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(printed.contains("chosen: "), "{printed}");
+    serde_json::from_str(&std::fs::read_to_string(out).unwrap()).unwrap()
+}
+
+#[test]
+fn auto_reports_a_colour_shift_only_where_the_specular_changes_colour() {
+    let dir = tempfile::tempdir().unwrap();
+    let seed = seed();
+    eprintln!("noise seed {seed}");
+    for (scene, shifts) in [
+        ("gold", false),
+        ("red", false),
+        ("blue-green", true),
+        ("opal", true),
+    ] {
+        let samples = scan(scene, scene, dir.path(), seed);
+        let fit = auto(&samples, &[], &dir.path().join(format!("{scene}.json")));
+        let selection = &fit["selection"];
+        assert_eq!(selection["criterion"], "leave-one-theta-l-out", "{scene}");
+        let candidates = selection["candidates"].as_array().unwrap();
+        assert_eq!(candidates.len(), 6, "{scene}: {selection}");
+        for c in candidates {
+            assert!(c["score"].as_f64().unwrap() > 0.0, "{scene}: {c}");
+            assert!(c["held_out_delta_e_uv"].as_f64().is_some(), "{scene}: {c}");
+        }
+        let chosen = &candidates[selection["chosen"].as_u64().unwrap() as usize];
+        assert_eq!(chosen["model"], fit["model"], "{scene}");
+        assert_eq!(selection["colour_shift"], shifts, "{scene}: {selection}");
+        if shifts {
+            assert_eq!(
+                fit["model"], "cook-torrance-fresnel",
+                "{scene}: {selection}"
+            );
+            // It won on held-out error: no candidate predicts better (beyond a tie).
+            let best = candidates
+                .iter()
+                .filter_map(|c| c["score"].as_f64())
+                .fold(f64::INFINITY, f64::min);
+            let score = chosen["score"].as_f64().unwrap();
+            assert!(
+                score <= best * (1.0 + 1e-6),
+                "{scene}: {score} against {best}"
+            );
+        }
+    }
+    // Two θL: the information criterion decides.
+    let samples = dir.path().join("red").join("samples.csv");
+    let fit = auto(&samples, &[-20.0, -45.0], &dir.path().join("red-two.json"));
+    assert_eq!(fit["selection"]["criterion"], "bic", "{fit}");
+    assert_eq!(fit["selection"]["colour_shift"], false, "{fit}");
+}
+
+/// A scene of the built-in `gold` geometry whose sample is the RGL file `bsdf`, with a
+/// bracket wide enough for a film's specular (β up to ~5e5 against a white's 100).
+fn rgl_scene(name: &str, bsdf: &Path) -> String {
+    let gold = include_str!("../../mock-hw/scenes/gold.toml");
+    let mut out = String::new();
+    let mut in_sample = false;
+    for line in gold.lines() {
+        if line.starts_with('[') {
+            in_sample = line == "[sample]";
+            if in_sample {
+                out.push_str(&format!(
+                    "[sample]\nmodel = \"rgl\"\nbsdf = {:?}\n",
+                    path(bsdf)
+                ));
+                continue;
+            }
+        }
+        if in_sample {
+            continue;
+        }
+        let line = if line.starts_with("name = ") {
+            format!("name = {name:?}")
+        } else if line.starts_with("bracket_s = ") {
+            "bracket_s = [32.0, 8.0, 2.0, 0.5, 0.125, 0.03125, 0.0078125, 0.001953125, \
+             0.00048828125, 0.0001220703125, 0.000030517578125]"
+                .to_owned()
+        } else {
+            line.to_owned()
+        };
+        out.push_str(&line);
+        out.push('\n');
+    }
+    out
+}
+
+#[test]
+fn real_materials_without_a_coloured_specular_report_no_colour_shift() {
+    let Some(rgl_dir) = std::env::var_os("GONIO_RGL_DIR") else {
+        eprintln!("skipped: GONIO_RGL_DIR does not name a directory of RGL-EPFL .bsdf files");
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let seed = seed();
+    eprintln!("noise seed {seed}");
+    let theta_l = [-20.0, -25.0, -30.0, -35.0, -40.0, -45.0];
+    let mut tested = 0;
+    for name in ["paper_white", "colodur_napoli_4f"] {
+        let bsdf = Path::new(&rgl_dir).join(format!("{name}_rgb.bsdf"));
+        if !bsdf.exists() {
+            eprintln!("{name}: {} missing, not tested", bsdf.display());
+            continue;
+        }
+        let scene = dir.path().join(format!("{name}.toml"));
+        std::fs::write(&scene, rgl_scene(name, &bsdf)).unwrap();
+        let samples = scan(&path(&scene), name, dir.path(), seed);
+        let mut subsets: Vec<Vec<f64>> = vec![Vec::new()];
+        for left_out in theta_l {
+            subsets.push(theta_l.iter().copied().filter(|&t| t != left_out).collect());
+        }
+        for (k, subset) in subsets.iter().enumerate() {
+            let fit = auto(
+                &samples,
+                subset,
+                &dir.path().join(format!("{name}-{k}.json")),
+            );
+            assert_eq!(
+                fit["selection"]["colour_shift"], false,
+                "{name}, θL {subset:?}: {}",
+                fit["selection"]
+            );
+        }
+        tested += 1;
+    }
+    assert!(
+        tested > 0,
+        "GONIO_RGL_DIR names no file of the materials tested"
+    );
+}
