@@ -167,18 +167,24 @@ pub struct Prepared {
     inv_m2: [f64; 3],
     /// Whether the three channels have the same m (one lobe evaluation per point).
     shared: bool,
+    /// Whether m is shared and Ks_90 = Ks (as in the loss of Cook–Torrance and Ward).
+    plain: bool,
 }
 
 impl Prepared {
     /// `params` with the specular colour at 90° `ks_90`.
     pub fn new(params: &Params, ks_90: &[f64; 3]) -> Self {
         let [m0, m1, m2] = params.m;
+        let shift = std::array::from_fn(|c| ks_90[c] - params.ks[c]);
+        let shared = m1 == m0 && m2 == m0;
         Prepared {
             kd: params.kd,
             ks: params.ks,
-            shift: std::array::from_fn(|c| ks_90[c] - params.ks[c]),
+            shift,
             inv_m2: params.m.map(inverse_square),
-            shared: m1 == m0 && m2 == m0,
+            shared,
+            // Ks + w·0 is Ks exactly for a finite Ks.
+            plain: shared && shift == [0.0; 3] && params.ks.iter().all(|k| k.is_finite()),
         }
     }
 }
@@ -247,6 +253,11 @@ impl Basis {
     /// β per channel of parameters prepared once for many points.
     #[inline]
     pub fn evaluate_prepared(&self, p: &Prepared) -> [f64; 3] {
+        if p.plain {
+            // One lobe, and a specular colour Ks + w·0 = Ks.
+            let s = self.lobe(p.inv_m2[0]).0;
+            return std::array::from_fn(|c| p.kd[c] * self.diffuse + p.ks[c] * s);
+        }
         let s0 = self.lobe(p.inv_m2[0]).0;
         // A shared roughness needs one lobe evaluation for all channels.
         let s = if p.shared {
