@@ -92,16 +92,19 @@ peer_benches() {
         echo "peers not installed: their rows say so"
         return 0
     fi
-    .venv-bench/bin/python scripts/bench_peers.py fit "$work/gold/samples.csv" | record peers_fit
+    .venv-bench/bin/python scripts/bench_peers.py fit "$work/gold/samples.csv" --repeats 3 |
+        record peers_fit
     .venv-bench/bin/python scripts/bench_peers.py hdr --gonio "$gonio" \
         "$work/gold-8bit/theta_l_-20.0/"*.tiff | record peers_hdr
 }
 
+started=$(date +%s)
 conditions
 inputs
 criterion_benches
 hdr_memory
 process_benches
 peer_benches
+echo "{\"seconds\": $(($(date +%s) - started))}" | record duration
 python3 scripts/bench_table.py "$results" --criterion "$target/criterion"
 echo "README.md's table rewritten from $results"

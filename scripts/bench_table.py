@@ -89,8 +89,8 @@ def fit_rows(t):
     bare = t.median("fit_1000/cook-torrance/robust/shared/no-uncertainty")
     t.row("robust Cook–Torrance fit, 1,000 points, shared m", [duration(ct)], "≤ 5 ms", FIT)
     t.row(
-        "same without its uncertainty: with / without",
-        [f"{duration(bare)}: {ratio(ct, bare, 3)}" if bare else None],
+        "same without its uncertainty; the fit with it / without it",
+        [f"{duration(bare)}; {ratio(ct, bare, 3)}" if bare and ct else None],
         "≤ 1.1",
         "same",
     )
@@ -128,7 +128,7 @@ def peer_fit_rows(t):
     )
     peer = t.results.get("peers_fit")
     if peer is None:
-        t.row("scipy on the same samples and model", None, "", PEERS_FIT + " (scipy not installed)")
+        t.row("scipy on the same samples and model", None, "", PEERS_FIT + " (not run: `--no-peers`, or scipy not installable)")
         return
     ls, sp = peer["least_squares"], peer["nelder_mead"]
     above = lambda loss: f"{100 * (loss / global_loss - 1):.1f} %" if global_loss else "?"
@@ -191,11 +191,11 @@ def hdr_rows(t):
     )
     peer = t.results.get("peers_hdr")
     if peer is None:
-        t.row("OpenCV's Debevec merge on the same frames", None, "", PEERS_HDR + " (OpenCV not installed)")
+        t.row("OpenCV's Debevec merge on the same frames", None, "", PEERS_HDR + " (not run: `--no-peers`, or OpenCV not installable)")
     else:
         g, o = peer["gonio"], peer["opencv"]
         t.row(
-            f"`gonio hdr` / OpenCV {peer['opencv']} CalibrateDebevec + MergeDebevec, "
+            f"`gonio hdr` / OpenCV {peer['opencv_version']} CalibrateDebevec + MergeDebevec, "
             f"{peer['frames']} 8-bit frames of the `gold` scene, whole process",
             [
                 f"{duration(g['seconds'])}, {megabytes(g['peak_bytes'])} / "
@@ -245,10 +245,12 @@ def conditions(results):
     c = results.get("conditions")
     if not c:
         return "Measured conditions unknown."
+    took = results.get("duration")
+    took = f"; the run took {took['seconds'] / 60:.0f} min" if took else ""
     return (
         f"Measured by `bash scripts/bench.sh` on {c['date']}: {c['cpu']}, {c['cores']} cores, "
-        f"load average {c['load']} when it started; criterion medians, and medians of the "
-        "other benchmarks' own runs."
+        f"load average {c['load']} when it started{took}; criterion medians, and medians of "
+        "the other benchmarks' own runs."
     )
 
 
@@ -262,7 +264,7 @@ def main():
     t = Table(criterion_medians(args.criterion), results)
     for rows in (fit_rows, peer_fit_rows, study_rows, hdr_rows, scan_rows):
         rows(t)
-    block = conditions(results) + "\n\n" + t.markdown() + "\n"
+    block = t.markdown() + "\n\n" + conditions(results) + "\n"
     readme = Path(args.readme)
     text = readme.read_text(encoding="utf-8")
     pattern = re.compile(r"(<!-- bench: costs -->\n)(.*?)(<!-- /bench: costs -->)", re.S)

@@ -155,29 +155,79 @@ pub struct Basis {
     shift_weight: f64,
 }
 
+/// Parameters prepared for evaluating a model at many points: each channel's roughness
+/// clamped and turned into 1/m² once, and the specular colour's change Ks_90 − Ks.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Prepared {
+    kd: [f64; 3],
+    ks: [f64; 3],
+    /// Ks_90 − Ks per channel.
+    shift: [f64; 3],
+    /// 1/m² per channel, m clamped as [`Basis::specular_and_slope`] clamps it.
+    inv_m2: [f64; 3],
+    /// Whether the three channels have the same m (one lobe evaluation per point).
+    shared: bool,
+    /// Whether m is shared and Ks_90 = Ks (as in the loss of Cook–Torrance and Ward).
+    plain: bool,
+}
+
+impl Prepared {
+    /// `params` with the specular colour at 90° `ks_90`.
+    pub fn new(params: &Params, ks_90: &[f64; 3]) -> Self {
+        let [m0, m1, m2] = params.m;
+        let shift = std::array::from_fn(|c| ks_90[c] - params.ks[c]);
+        let shared = m1 == m0 && m2 == m0;
+        Prepared {
+            kd: params.kd,
+            ks: params.ks,
+            shift,
+            inv_m2: params.m.map(inverse_square),
+            shared,
+            // Ks + w·0 is Ks exactly for a finite Ks.
+            plain: shared && shift == [0.0; 3] && params.ks.iter().all(|k| k.is_finite()),
+        }
+    }
+}
+
+/// 1/m² of the roughness m clamped to [[`M_MIN`], [`M_MAX`]] (NaN taken as [`M_MAX`]).
+#[inline]
+fn inverse_square(m: f64) -> f64 {
+    let m = if m.is_nan() {
+        M_MAX
+    } else {
+        m.clamp(M_MIN, M_MAX)
+    };
+    1.0 / (m * m)
+}
+
 impl Basis {
     /// Specular basis s(m) = g·exp(−tan²α/m²)/m², finite and ≥ 0.
     #[inline]
     pub fn specular(&self, m: f64) -> f64 {
-        self.specular_and_slope(m).0
+        self.lobe(inverse_square(m)).0
     }
 
     /// s(m) and its derivative with respect to ln m, ∂s/∂ln m = 2·s·(tan²α/m² − 1), both
     /// finite (m clamped to [[`M_MIN`], [`M_MAX`]], NaN taken as [`M_MAX`]).
     #[inline]
     pub fn specular_and_slope(&self, m: f64) -> (f64, f64) {
-        let m = if m.is_nan() {
-            M_MAX
-        } else {
-            m.clamp(M_MIN, M_MAX)
-        };
-        let inv_m2 = 1.0 / (m * m);
-        let x = self.tan2_alpha * inv_m2;
-        if self.gain == 0.0 || x > EXP_UNDERFLOW {
+        let (s, x) = self.lobe(inverse_square(m));
+        if s == 0.0 {
             (0.0, 0.0)
         } else {
-            let s = self.gain * (-x).exp() * inv_m2;
             (s, 2.0 * s * (x - 1.0))
+        }
+    }
+
+    /// s and x = tan²α/m² at 1/m² = `inv_m2`; s is 0 at or past grazing and where
+    /// exp(−x) would leave the normal range.
+    #[inline]
+    fn lobe(&self, inv_m2: f64) -> (f64, f64) {
+        let x = self.tan2_alpha * inv_m2;
+        if self.gain == 0.0 || x > EXP_UNDERFLOW {
+            (0.0, x)
+        } else {
+            (self.gain * (-x).exp() * inv_m2, x)
         }
     }
 
@@ -197,16 +247,28 @@ impl Basis {
 
     /// β per channel with the specular colour Ks·(1 − w) + `ks_90`·w.
     pub fn evaluate_fresnel(&self, params: &Params, ks_90: &[f64; 3]) -> [f64; 3] {
-        let [m0, m1, m2] = params.m;
-        let s0 = self.specular(m0);
+        self.evaluate_prepared(&Prepared::new(params, ks_90))
+    }
+
+    /// β per channel of parameters prepared once for many points.
+    #[inline]
+    pub fn evaluate_prepared(&self, p: &Prepared) -> [f64; 3] {
+        if p.plain {
+            // One lobe, and a specular colour Ks + w·0 = Ks.
+            let s = self.lobe(p.inv_m2[0]).0;
+            return std::array::from_fn(|c| p.kd[c] * self.diffuse + p.ks[c] * s);
+        }
+        let s0 = self.lobe(p.inv_m2[0]).0;
         // A shared roughness needs one lobe evaluation for all channels.
-        let s1 = if m1 == m0 { s0 } else { self.specular(m1) };
-        let s2 = if m2 == m0 { s0 } else { self.specular(m2) };
-        let s = [s0, s1, s2];
+        let s = if p.shared {
+            [s0; 3]
+        } else {
+            [s0, self.lobe(p.inv_m2[1]).0, self.lobe(p.inv_m2[2]).0]
+        };
         let w = self.shift_weight;
         std::array::from_fn(|c| {
-            let colour = params.ks[c] + w * (ks_90[c] - params.ks[c]);
-            params.kd[c] * self.diffuse + colour * s[c]
+            let colour = p.ks[c] + w * p.shift[c];
+            p.kd[c] * self.diffuse + colour * s[c]
         })
     }
 }

@@ -186,32 +186,42 @@ pub const COLOUR_SHIFT_LEVEL: f64 = 0.01;
 /// noise leave the covariance singular), by whether the shift lowers the loss by more than
 /// 1e-6 of the data's scale Σ‖y‖.
 /// When it is dropped, `data` loses its shift weights and the fit is redone with
-/// Ks_90 = Ks (`found`, `ks_90` replaced).
+/// Ks_90 = Ks (`found`, `ks_90` replaced), or `tied` (that fit, done already, and its
+/// seconds) is taken. Returns the test and the seconds of `tied` when it was taken.
 fn test_colour_shift(
     data: &mut Data,
     options: &FitOptions,
     found: &mut Found,
     ks_90: &mut [f64; 3],
-) -> Result<ColourShift, FitError> {
+    tied: Option<(Found, f64)>,
+) -> Result<(ColourShift, f64), FitError> {
     if data.shift_weight.is_none() {
-        return Ok(ColourShift {
+        let untested = ColourShift {
             fitted: false,
             chi2: None,
             p_value: None,
-        });
+        };
+        return Ok((untested, 0.0));
     }
     let chi2 = uncertainty::shift_statistic(data, options, &found.params, ks_90);
     let p_value = chi2.map(chi2_3_survival);
     if p_value.is_some_and(|p| p < COLOUR_SHIFT_LEVEL) {
-        return Ok(ColourShift {
+        let kept = ColourShift {
             fitted: true,
             chi2,
             p_value,
-        });
+        };
+        return Ok((kept, 0.0));
     }
     let shifted_loss = data.loss_fresnel(&found.params, ks_90);
     let weights = data.shift_weight.take();
-    let (mut tied, tied_90) = robust::fit(data, options)?;
+    let ((mut tied, tied_90), reused_seconds) = match tied {
+        Some((tied, seconds)) => {
+            let ks = tied.params.ks;
+            ((tied, ks), seconds)
+        }
+        None => (robust::fit(data, options)?, 0.0),
+    };
     tied.evaluations += found.evaluations;
     // Without a test (no noise), a real decrease of the loss keeps the shift.
     let fitted =
@@ -222,11 +232,12 @@ fn test_colour_shift(
     } else {
         (*found, *ks_90) = (tied, tied_90);
     }
-    Ok(ColourShift {
+    let tested = ColourShift {
         fitted,
         chi2,
         p_value,
-    })
+    };
+    Ok((tested, reused_seconds))
 }
 
 /// Number of fitted parameters of `model` with `roughness`.
@@ -242,10 +253,17 @@ struct Minimised {
     found: Found,
     ks_90: [f64; 3],
     colour_shift: Option<ColourShift>,
+    /// Seconds of the given tied fit, when the colour-shift test used it.
+    reused_seconds: f64,
 }
 
-/// Runs `options.method` on `samples`, and the colour-shift test where the model has one.
-fn minimise(samples: &[Sample], options: &FitOptions) -> Result<Minimised, FitError> {
+/// Runs `options.method` on `samples`, and the colour-shift test where the model has one
+/// (with the fit it falls back to, `tied`, when given).
+fn minimise(
+    samples: &[Sample],
+    options: &FitOptions,
+    tied: Option<(Found, f64)>,
+) -> Result<Minimised, FitError> {
     if options.model.has_fresnel_colour() {
         if options.method == FitMethod::NelderMead {
             return Err(FitError::InvalidOptions(format!(
@@ -271,18 +289,18 @@ fn minimise(samples: &[Sample], options: &FitOptions) -> Result<Minimised, FitEr
             (found, ks)
         }
     };
-    let colour_shift = if options.model.has_fresnel_colour() {
-        Some(test_colour_shift(
-            &mut data, options, &mut found, &mut ks_90,
-        )?)
+    let (colour_shift, reused_seconds) = if options.model.has_fresnel_colour() {
+        let (test, seconds) = test_colour_shift(&mut data, options, &mut found, &mut ks_90, tied)?;
+        (Some(test), seconds)
     } else {
-        None
+        (None, 0.0)
     };
     Ok(Minimised {
         data,
         found,
         ks_90,
         colour_shift,
+        reused_seconds,
     })
 }
 
@@ -292,7 +310,7 @@ fn minimise(samples: &[Sample], options: &FitOptions) -> Result<Minimised, FitEr
 pub fn loss_reached(samples: &[Sample], options: &FitOptions) -> Result<f64, FitError> {
     let Minimised {
         data, found, ks_90, ..
-    } = minimise(samples, options)?;
+    } = minimise(samples, options, None)?;
     let loss = data.loss_fresnel(&found.params, &ks_90);
     if !loss.is_finite() {
         return Err(FitError::Overflow("loss"));
@@ -302,13 +320,51 @@ pub fn loss_reached(samples: &[Sample], options: &FitOptions) -> Result<f64, Fit
 
 /// Fits `options.model` to `samples`.
 pub fn fit(samples: &[Sample], options: &FitOptions) -> Result<FitResult, FitError> {
+    fit_given(samples, options, None)
+}
+
+/// [`fit`] of Cook–Torrance–Fresnel given `tied`, the robust Cook–Torrance fit of the
+/// same samples with the same options but the model: the fit its colour-shift test falls
+/// back to when the shift is not significant, taken as it is instead of fitted again (its
+/// evaluations and seconds are counted in the result's).
+pub fn fit_fresnel_given(
+    samples: &[Sample],
+    options: &FitOptions,
+    tied: &FitResult,
+) -> Result<FitResult, FitError> {
+    let consistent = options.model == Model::CookTorranceFresnel
+        && options.method == FitMethod::Robust
+        && tied.model == Model::CookTorrance
+        && tied.method == FitMethod::Robust
+        && tied.roughness == options.roughness;
+    if !consistent {
+        return Err(FitError::InvalidOptions(format!(
+            "a {} fit by the {} method with {} roughness is not the tied form of a robust {} \
+             fit with {} roughness",
+            tied.model, tied.method, tied.roughness, options.model, options.roughness
+        )));
+    }
+    let found = Found {
+        params: tied.params(),
+        evaluations: tied.evaluations,
+    };
+    fit_given(samples, options, Some((found, tied.seconds)))
+}
+
+/// [`fit`], with the colour-shift test's tied fit and its seconds when given.
+fn fit_given(
+    samples: &[Sample],
+    options: &FitOptions,
+    tied: Option<(Found, f64)>,
+) -> Result<FitResult, FitError> {
     let start = Instant::now();
     let Minimised {
         data,
         found,
         ks_90,
         colour_shift,
-    } = minimise(samples, options)?;
+        reused_seconds,
+    } = minimise(samples, options, tied)?;
     let params = found.params;
     let m = match options.roughness {
         Roughness::Shared => FittedRoughness::Shared([params.m[0]]),
@@ -354,7 +410,8 @@ pub fn fit(samples: &[Sample], options: &FitOptions) -> Result<FitResult, FitErr
         err_p,
         method: options.method,
         evaluations: found.evaluations,
-        seconds: start.elapsed().as_secs_f64() - global_minimum.map_or(0.0, |g| g.seconds),
+        seconds: start.elapsed().as_secs_f64() - global_minimum.map_or(0.0, |g| g.seconds)
+            + reused_seconds,
         stderr,
         ci95,
         correlation,

@@ -24,12 +24,14 @@ mod tables;
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::OnceLock;
 use std::time::Instant;
 
 use rayon::prelude::*;
 
+use crate::brdf::{Model, Roughness};
 use crate::color::CameraModel;
-use crate::fit::{self, held_out, FitMethod};
+use crate::fit::{self, held_out, FitMethod, FitOptions, FitResult};
 use crate::metrics;
 use crate::reference::Reference;
 pub use crate::samples::distinct_theta_l;
@@ -119,16 +121,24 @@ pub fn run_study_with_progress(
     // ΔErr_p needs signal in every reference channel: check once, not per fit.
     metrics::err_p(&measured, &measured)?;
 
-    let jobs: Vec<(&Vec<f64>, Variant)> = combos
+    let jobs: Vec<(usize, &Vec<f64>, Variant)> = combos
         .iter()
-        .flat_map(|c| options.variants.iter().map(move |v| (c, *v)))
+        .enumerate()
+        .flat_map(|(k, c)| options.variants.iter().map(move |v| (k, c, *v)))
         .collect();
+    let context = Context {
+        samples: &fitted,
+        points: &points,
+        measured: &measured,
+        camera,
+        options,
+    };
+    let shared_fits: Vec<SharedFits> = combos.iter().map(|_| SharedFits::default()).collect();
     let done = AtomicUsize::new(0);
     let results = jobs
         .par_iter()
-        .map(|&(combo, variant)| {
-            let outcome =
-                score_combination(&fitted, combo, variant, &points, &measured, camera, options);
+        .map(|&(k, combo, variant)| {
+            let outcome = score_combination(&context, combo, variant, &shared_fits[k]);
             progress(done.fetch_add(1, Ordering::Relaxed) + 1, jobs.len());
             CombinationResult {
                 theta_l: combo.clone(),
@@ -188,25 +198,89 @@ pub fn samples_at(samples: &[Sample], combo: &[f64]) -> Vec<Sample> {
         .collect()
 }
 
+/// The robust Cook–Torrance fit of one combination per roughness, made once: the
+/// Cook–Torrance variant reports it, and Cook–Torrance–Fresnel takes it when its colour
+/// shift is not significant ([`fit::fit_fresnel_given`]) instead of fitting it again.
+#[derive(Default)]
+struct SharedFits {
+    cook_torrance: [OnceLock<Result<FitResult, String>>; 2],
+}
+
+impl SharedFits {
+    /// The robust fit of `variant` to `subset`, sharing Cook–Torrance's between the two
+    /// variants that need it when both are in `variants`.
+    fn robust(
+        &self,
+        subset: &[Sample],
+        variant: Variant,
+        variants: &[Variant],
+    ) -> Result<FitResult, String> {
+        let options = |model| FitOptions {
+            roughness: variant.roughness,
+            ..FitOptions::new(model)
+        };
+        let present = |model| variants.contains(&Variant { model, ..variant });
+        let cell = &self.cook_torrance[usize::from(variant.roughness == Roughness::PerChannel)];
+        let cook_torrance = || {
+            cell.get_or_init(|| {
+                fit::fit(subset, &options(Model::CookTorrance)).map_err(|e| e.to_string())
+            })
+        };
+        let both = present(Model::CookTorrance) && present(Model::CookTorranceFresnel);
+        let fitted = match variant.model {
+            Model::CookTorrance if both => return cook_torrance().clone(),
+            Model::CookTorranceFresnel if both => match cook_torrance() {
+                Ok(tied) => fit::fit_fresnel_given(subset, &options(variant.model), tied),
+                Err(_) => fit::fit(subset, &options(variant.model)),
+            },
+            model => fit::fit(subset, &options(model)),
+        };
+        fitted.map_err(|e| e.to_string())
+    }
+}
+
+/// What every combination is fitted to and scored against.
+struct Context<'a> {
+    /// The samples fitted (subsampled by the stride).
+    samples: &'a [Sample],
+    points: &'a [EvalPoint],
+    /// The reference β at `points`.
+    measured: &'a [[f64; 3]],
+    camera: &'a CameraModel,
+    options: &'a StudyOptions,
+}
+
 fn score_combination(
-    samples: &[Sample],
+    context: &Context,
     combo: &[f64],
     variant: Variant,
-    points: &[EvalPoint],
-    measured: &[[f64; 3]],
-    camera: &CameraModel,
-    options: &StudyOptions,
+    shared: &SharedFits,
 ) -> Result<Scores, String> {
+    let &Context {
+        samples,
+        points,
+        measured,
+        camera,
+        options,
+    } = context;
     let subset = samples_at(samples, combo);
-    let mut fit_options = variant.options();
-    let robust = fit::fit(&subset, &fit_options).map_err(|e| e.to_string())?;
-    // Nelder–Mead is the baseline of the paper's two models only.
-    let nelder_mead_loss = (options.compare_nelder_mead && !variant.model.has_fresnel_colour())
-        .then(|| {
-            fit_options.method = FitMethod::NelderMead;
-            fit::loss_reached(&subset, &fit_options).ok()
-        })
-        .flatten();
+    // Nelder–Mead is the baseline of the paper's two models only; it runs beside the
+    // robust fit (either takes the other core when the combinations run out).
+    let compare = options.compare_nelder_mead && !variant.model.has_fresnel_colour();
+    let nelder_mead = FitOptions {
+        method: FitMethod::NelderMead,
+        roughness: variant.roughness,
+        ..FitOptions::new(variant.model)
+    };
+    let (robust, nelder_mead_loss) = rayon::join(
+        || shared.robust(&subset, variant, &options.variants),
+        || {
+            compare
+                .then(|| fit::loss_reached(&subset, &nelder_mead).ok())
+                .flatten()
+        },
+    );
+    let robust = robust?;
     let estimated: Vec<[f64; 3]> = points
         .iter()
         .map(|p| robust.predict(p.theta_i, p.theta_r))

@@ -6,8 +6,8 @@
 
 use gonio_processing::brdf::{Model, Params, Roughness};
 use gonio_processing::fit::{
-    fit, loss_reached, solve_at_roughness, FitError, FitMethod, FitOptions, FitResult,
-    FittedRoughness, LOCAL_MINIMUM_MARGIN,
+    fit, fit_fresnel_given, loss_reached, solve_at_roughness, FitError, FitMethod, FitOptions,
+    FitResult, FittedRoughness, LOCAL_MINIMUM_MARGIN,
 };
 use gonio_processing::metrics;
 use gonio_processing::samples::Sample;
@@ -722,4 +722,95 @@ fn fresnel_is_fitted_by_the_robust_method_only() {
         fit(&samples, &polish),
         Err(FitError::InvalidOptions(_))
     ));
+}
+
+/// Cook–Torrance–Fresnel given the Cook–Torrance fit it falls back to is the fit it makes
+/// alone, field for field but its time: on Cook–Torrance scans (shift tied, the given fit
+/// taken) and on goniochromatic ones (shift kept, the given fit unused), with shared and
+/// per-channel roughness and random parameters and noise.
+#[test]
+fn fresnel_given_its_tied_fit_is_the_fit_alone() {
+    let mut rng = Rng(0x51_7cc1_b727_220a);
+    let mut taken = 0;
+    for case in 0..6 {
+        let roughness = [Roughness::Shared, Roughness::PerChannel][case % 2];
+        let truth = Params::shared(
+            std::array::from_fn(|_| 2.0 + 20.0 * rng.uniform()),
+            std::array::from_fn(|_| 5.0 + 40.0 * rng.uniform()),
+            0.05 + 0.3 * rng.uniform(),
+        );
+        // Half the scans without a colour shift, half with one.
+        let ks_90 = if case < 3 {
+            truth.ks
+        } else {
+            std::array::from_fn(|c| truth.ks[c] * (0.3 + 1.4 * rng.uniform()))
+        };
+        let samples = synthetic::scan(
+            Model::CookTorranceFresnel,
+            &truth,
+            &ks_90,
+            &[-20.0, -35.0, -45.0],
+            1.0,
+            Noise {
+                relative: 0.005 + 0.02 * rng.uniform(),
+                absolute: 0.0,
+            },
+            &mut rng,
+        );
+        let fresnel = options(Model::CookTorranceFresnel, roughness, FitMethod::Robust);
+        let ct = fit(
+            &samples,
+            &options(Model::CookTorrance, roughness, FitMethod::Robust),
+        )
+        .unwrap();
+        let alone = fit(&samples, &fresnel).unwrap();
+        let given = fit_fresnel_given(&samples, &fresnel, &ct).unwrap();
+        taken += usize::from(!alone.colour_shift.unwrap().fitted);
+        assert_eq!(
+            FitResult {
+                seconds: 0.0,
+                ..given
+            },
+            FitResult {
+                seconds: 0.0,
+                ..alone
+            },
+            "case {case}"
+        );
+    }
+    assert!(
+        (1..6).contains(&taken),
+        "the given fit was taken in {taken} of 6"
+    );
+    // Only a robust Cook–Torrance fit of the same roughness is the tied form.
+    let samples = synthetic(
+        Model::CookTorrance,
+        &fresnel_truth().0,
+        &[-20.0, -40.0],
+        0.01,
+    );
+    let fresnel = options(
+        Model::CookTorranceFresnel,
+        Roughness::Shared,
+        FitMethod::Robust,
+    );
+    for other in [
+        options(Model::Ward, Roughness::Shared, FitMethod::Robust),
+        options(
+            Model::CookTorrance,
+            Roughness::PerChannel,
+            FitMethod::Robust,
+        ),
+        options(
+            Model::CookTorrance,
+            Roughness::Shared,
+            FitMethod::NelderMead,
+        ),
+    ] {
+        let other = fit(&samples, &other).unwrap();
+        assert!(matches!(
+            fit_fresnel_given(&samples, &fresnel, &other),
+            Err(FitError::InvalidOptions(_))
+        ));
+    }
 }

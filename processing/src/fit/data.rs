@@ -1,7 +1,7 @@
 //! Samples prepared for fitting, and what a method finds in them.
 
 use super::error::FitError;
-use crate::brdf::{Basis, Model, Params};
+use crate::brdf::{Basis, Model, Params, Prepared};
 use crate::metrics;
 use crate::samples::{distinct_theta_l, Sample};
 
@@ -94,20 +94,18 @@ impl Data {
     }
 
     /// Eq. 10 loss of `params` with the specular colour at 90° `ks_90`, over the measured
-    /// values.
+    /// values (the inner loop of Nelder–Mead: the parameters are prepared once).
     pub fn loss_fresnel(&self, params: &Params, ks_90: &[f64; 3]) -> f64 {
-        let loss = |(b, y): (&Basis, &[f64; 3])| {
-            metrics::point_loss(y, &b.evaluate_fresnel(params, ks_90))
-        };
+        let prepared = Prepared::new(params, ks_90);
+        let points = self.bases.iter().zip(&self.y);
         match &self.keep {
-            None => self.bases.iter().zip(&self.y).map(loss).sum(),
-            Some(keep) => self
-                .bases
-                .iter()
-                .zip(&self.y)
+            None => points
+                .map(|(b, y)| metrics::point_loss(y, &b.evaluate_prepared(&prepared)))
+                .sum(),
+            Some(keep) => points
                 .zip(keep)
                 .map(|((b, y), keep)| {
-                    let estimate = b.evaluate_fresnel(params, ks_90);
+                    let estimate = b.evaluate_prepared(&prepared);
                     metrics::point_loss(y, &std::array::from_fn(|c| estimate[c] * keep[c]))
                 })
                 .sum(),
@@ -117,10 +115,11 @@ impl Data {
     /// The model's β at every point, 0 where the measured value was dropped (so dropped
     /// values count in neither the loss nor ΔErr_p).
     pub fn estimates(&self, params: &Params, ks_90: &[f64; 3]) -> Vec<[f64; 3]> {
+        let prepared = Prepared::new(params, ks_90);
         let mut estimates: Vec<[f64; 3]> = self
             .bases
             .iter()
-            .map(|b| b.evaluate_fresnel(params, ks_90))
+            .map(|b| b.evaluate_prepared(&prepared))
             .collect();
         if let Some(keep) = &self.keep {
             for (estimate, keep) in estimates.iter_mut().zip(keep) {

@@ -198,13 +198,15 @@ fn fresnel_loss_of(
     );
     let s = [&spec[0][..n], &spec[1][..n], &spec[2][..n]];
     let shift: [f64; 3] = std::array::from_fn(|c| kg[c] - ks[c]);
+    let keep = data.keep.as_ref().map(|keep| &keep[..n]);
     let mut loss = 0.0;
     for p in 0..n {
         // Dropped values (y = 0, keep = 0) leave no residual.
-        let keep = data.keep.as_ref().map_or([1.0; 3], |keep| keep[p]);
-        let r: [f64; 3] = std::array::from_fn(|c| {
-            y[p][c] - keep[c] * (kd[c] * a[p] + (ks[c] + x[p] * shift[c]) * s[c][p])
-        });
+        let keep = keep.map_or([1.0; 3], |keep| keep[p]);
+        let mut r = [0.0; 3];
+        for (c, rc) in r.iter_mut().enumerate() {
+            *rc = y[p][c] - keep[c] * (kd[c] * a[p] + (ks[c] + x[p] * shift[c]) * s[c][p]);
+        }
         let norm = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
         out[p] = norm;
         loss += norm;
