@@ -44,6 +44,8 @@ pub const PIXELS_PER_CPU_SECOND: u64 = 2_000_000;
 pub const WALL_SLACK: Duration = Duration::from_secs(10);
 /// Idle children kept for later decodes.
 const MAX_IDLE: usize = 8;
+/// Capacity asked for the pipe a child's frames come through.
+const PIPE_BYTES: libc::c_int = 1 << 20;
 /// First bytes of a child's stderr kept, to tell why it died.
 const STDERR_HEAD: usize = 4096;
 
@@ -191,6 +193,13 @@ impl Worker {
             let _ = child.wait();
             return Err(io::Error::other("decoder started without pipes"));
         };
+        // A larger pipe buffer moves a frame in fewer turns between the processes
+        // (best effort: the default works too).
+        // SAFETY: fcntl on a descriptor this function owns.
+        unsafe {
+            use std::os::fd::AsRawFd;
+            libc::fcntl(stdout.as_raw_fd(), libc::F_SETPIPE_SZ, PIPE_BYTES);
+        }
         let stderr = thread::spawn(move || {
             // The first lines say why (an allocation that failed, a stack overflow);
             // the rest is read and dropped, so the child never blocks on its stderr.

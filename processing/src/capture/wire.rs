@@ -34,8 +34,22 @@ const STOP: u8 = b'X';
 const FRAME: u8 = b'F';
 const ERROR: u8 = b'E';
 
-/// Counts moved between the pipe and memory at a time.
+/// Counts converted to bytes at a time where memory is not little-endian already.
 const CHUNK_VALUES: usize = 32 << 10;
+
+/// The bytes of `values` in memory (their little-endian encoding on a little-endian
+/// machine), without a copy.
+fn as_bytes(values: &[u16]) -> &[u8] {
+    // SAFETY: the view covers exactly the memory of `values`, u8 has no alignment
+    // needs, and the borrow keeps `values` alive and unchanged.
+    unsafe { std::slice::from_raw_parts(values.as_ptr().cast::<u8>(), 2 * values.len()) }
+}
+
+/// As [`as_bytes`], to fill `values` from bytes: any two bytes are a valid u16.
+fn as_bytes_mut(values: &mut [u16]) -> &mut [u8] {
+    // SAFETY: as in `as_bytes`; every bit pattern is a u16, and the borrow is unique.
+    unsafe { std::slice::from_raw_parts_mut(values.as_mut_ptr().cast::<u8>(), 2 * values.len()) }
+}
 
 fn invalid(what: String) -> io::Error {
     io::Error::new(io::ErrorKind::InvalidData, what)
@@ -205,13 +219,9 @@ fn read_frame(from: &mut impl Read, max: u64, width: usize, rows: usize) -> io::
         return Err(invalid(format!("{values} counts for {expected}")));
     }
     let mut data = vec![0u16; expected as usize];
-    let mut bytes = vec![0u8; 2 * CHUNK_VALUES];
-    for chunk in data.chunks_mut(CHUNK_VALUES) {
-        let bytes = &mut bytes[..2 * chunk.len()];
-        from.read_exact(bytes)?;
-        for (v, b) in chunk.iter_mut().zip(bytes.chunks_exact(2)) {
-            *v = u16::from_le_bytes([b[0], b[1]]);
-        }
+    from.read_exact(as_bytes_mut(&mut data))?;
+    for v in &mut data {
+        *v = u16::from_le(*v);
     }
     Ok(Decoded {
         width,
@@ -324,6 +334,9 @@ fn send_frame(output: &mut impl Write, d: &Decoded) -> io::Result<()> {
     }
     message.extend((d.data.len() as u64).to_le_bytes());
     output.write_all(&message)?;
+    if cfg!(target_endian = "little") {
+        return output.write_all(as_bytes(&d.data));
+    }
     let mut bytes = Vec::with_capacity(2 * CHUNK_VALUES);
     for chunk in d.data.chunks(CHUNK_VALUES) {
         bytes.clear();
