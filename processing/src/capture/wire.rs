@@ -403,7 +403,7 @@ mod tests {
 
     #[test]
     fn sizes_are_checked_before_anything_is_allocated() {
-        let mut all = |_: usize, h: usize| Some(vec![0..h]);
+        let mut all = |_: usize, h: usize| Some(std::iter::once(0..h).collect::<Vec<_>>());
         // More pixels than allowed.
         let huge = max_pixels() + 1;
         assert!(run(&reply(huge, 1, &[]), &mut all).1.is_err());
@@ -443,7 +443,9 @@ mod tests {
         assert_eq!(got.unwrap().unwrap(), None);
         assert_eq!(to.last(), Some(&STOP));
         // Rows outside the image are refused here, not sent.
-        let (to, got) = run(&reply(4, 2, &[]), &mut |_, _| Some(vec![1..9]));
+        let (to, got) = run(&reply(4, 2, &[]), &mut |_, _| {
+            Some(std::iter::once(1..9).collect::<Vec<_>>())
+        });
         assert!(matches!(got.unwrap(), Err(CaptureError::Layout { .. })));
         assert_eq!(to.last(), Some(&STOP));
     }
@@ -467,7 +469,7 @@ mod tests {
         let mut from = &output[..];
         for _ in 0..2 {
             let got = request(&mut Vec::new(), &mut from, &missing, &mut |_, h| {
-                Some(vec![0..h])
+                Some(std::iter::once(0..h).collect::<Vec<_>>())
             });
             let error = got.unwrap().unwrap_err().to_string();
             assert!(error.ends_with("no such file"), "{error}");
