@@ -891,7 +891,9 @@ fn decode_raw(path: &Path) -> Result<Decoded, CaptureError> {
     let bytes = read_input(path, max_file_bytes()).map_err(|e| image_error(path, e))?;
     // Only the containers of the formats above reach rawler: TIFF-structured files
     // (checked below), CR3 (ISO BMFF) and RAF. rawler's other readers (JPEG/Exif, MRW,
-    // X3F, CRW…) are for formats not listed, and some allocate or spin on a damaged file.
+    // X3F, CRW…) are for formats not listed, and some allocate or spin on a damaged file;
+    // a CRW heap starts "II" too and still reaches its reader, as CR3 boxes reach theirs
+    // unchecked: `gonio` decodes in a child whose limits bound them.
     let tiff = bytes.starts_with(b"II") || bytes.starts_with(b"MM");
     let bmff = bytes.get(4..8) == Some(&b"ftyp"[..]);
     let raf = bytes.starts_with(b"FUJIFILM");
