@@ -1,6 +1,7 @@
 //! `gonio`: the measurement daemon (`serve`) and the offline processing commands.
 
 mod commands;
+mod decode_workers;
 mod interrupt;
 mod progress;
 
@@ -37,6 +38,9 @@ enum Command {
     EmulateArm(commands::emulate_arm::Args),
     /// Write a fit for a renderer (Mitsuba 3 BSDF) or as a BRDF table.
     Export(commands::export::Args),
+    /// Decode captures asked for on stdin (a child of the other commands).
+    #[command(hide = true)]
+    DecodeWorker(decode_workers::Args),
 }
 
 fn main() {
@@ -48,7 +52,13 @@ fn main() {
     match matches.subcommand_name() {
         // Servers: an interrupt is how they end; they handle it themselves.
         Some("serve" | "emulate-arm") | None => {}
+        // A child: its parent handles an interrupt.
+        Some("decode-worker") => {}
         Some(name) => interrupt::install(name.to_owned()),
+    }
+    if matches.subcommand_name() != Some("decode-worker") {
+        // Captures are decoded in child processes that may die of a file.
+        decode_workers::install();
     }
     let outcome = guard::catch(|| match cli.command {
         Command::Serve(args) => commands::serve::run(args),
@@ -61,6 +71,7 @@ fn main() {
         Command::Tradeoff(args) => commands::tradeoff::run(args),
         Command::EmulateArm(args) => commands::emulate_arm::run(args),
         Command::Export(args) => commands::export::run(args),
+        Command::DecodeWorker(args) => decode_workers::serve(args),
     });
     let result = match outcome {
         Ok(result) => result,

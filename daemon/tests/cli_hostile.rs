@@ -102,6 +102,59 @@ fn hdr_refuses_crafted_captures_with_one_line() {
     assert_clean_failure(&output, "Caught a panic while decoding. Please file a bug");
 }
 
+/// A CRW (CIFF) heap whose directory lists `k` sub-heaps, each the heap itself, after
+/// `padding` bytes of value data: rawler's reader follows them 10 levels deep, copying
+/// the heap at each of k^10 entries, which takes hours. It starts "II" like a TIFF but
+/// has no TIFF directory, so nothing refuses it before the decoder meets it.
+fn ciff_bomb(k: u16, padding: usize) -> Vec<u8> {
+    let mut heap = vec![0u8; padding];
+    let heap_len = (padding + 2 + 10 * usize::from(k) + 4) as u32;
+    heap.extend(k.to_le_bytes());
+    for _ in 0..k {
+        // A sub-heap entry (type 0x2800, data in the value area): its size, at offset 0.
+        heap.extend(0x2801u16.to_le_bytes());
+        heap.extend(heap_len.to_le_bytes());
+        heap.extend(0u32.to_le_bytes());
+    }
+    heap.extend((padding as u32).to_le_bytes());
+    let mut file = b"II".to_vec();
+    file.extend(26u32.to_le_bytes());
+    file.extend(b"HEAPCCDR");
+    file.resize(26, 0);
+    file.extend(heap);
+    file
+}
+
+/// A decoder that would spin for hours is stopped by its time limit (10 s of processor
+/// time for captures of a megapixel), with one line naming the file. Ignored by
+/// default for its 10 s: `cargo test -p gonio-daemon --test cli_hostile -- --ignored`.
+#[test]
+#[ignore]
+fn a_decoder_that_spins_is_stopped_by_its_time_limit() {
+    let dir = tempfile::tempdir().unwrap();
+    let raw = dir.path().join("bomb.cr2");
+    std::fs::write(&raw, ciff_bomb(4, 4 << 20)).unwrap();
+    std::fs::write(
+        dir.path().join("bomb.json"),
+        r#"{"shutter_s":0.01,"iso":100,"theta_l":-20,"camera":"x","time":"t"}"#,
+    )
+    .unwrap();
+    let out = dir.path().join("bomb.exr");
+    let output = gonio(&[
+        "hdr".as_ref(),
+        "--max-frame-pixels".as_ref(),
+        "1000000".as_ref(),
+        "--out".as_ref(),
+        out.as_os_str(),
+        raw.as_os_str(),
+    ]);
+    assert_clean_failure(
+        &output,
+        "bomb.cr2: cannot decode image: the decoder was killed by its processor time limit (10 s)",
+    );
+    assert!(!out.exists());
+}
+
 /// A sidecar's values outside their physical range are refused naming the key (a
 /// shutter of 1e-300 s once gave an EXR of +inf, ISO 1e308 an all-zero one, both exit
 /// 0); a frame whose θL is not its directory's is refused naming the file.

@@ -10,14 +10,19 @@
 //! Hostile files are expected: before any decoder allocates, the image size a file
 //! claims is checked against [`max_pixels`] and against the file's own size (see
 //! docs/ARCHITECTURE.md, "Limits"), and a decoder that panics becomes a
-//! [`CaptureError::Image`].
+//! [`CaptureError::Image`]. A program may have the files decoded elsewhere (in a child
+//! process that can die of a file without taking the program along) by installing a
+//! [`Decoder`]; [`wire`] is the protocol of such a child. Without one, files are
+//! decoded in this process.
 
 mod tiff_ifd;
+pub mod wire;
 
 use std::fs;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::OnceLock;
 
 use gonio_files::input::{open_input, read_input, read_input_to_string, MAX_SMALL_FILE_BYTES};
 use rayon::prelude::*;
@@ -334,8 +339,31 @@ pub fn write_tiff_capture(
     fs::write(&side, json).map_err(|error| CaptureError::SidecarIo { path: side, error })
 }
 
-/// Decoded file contents before the sidecar is applied.
-struct Decoded {
+/// Where the image of a capture is decoded, when not in this process (see [`set_decoder`]).
+pub trait Decoder: Send + Sync {
+    /// Decodes the image at `path` as [`Frame::read_rows`] does: `select(width,
+    /// height)` gets the image's size and returns the rows to keep, or `None` to stop
+    /// (then the result is `Ok(None)`). A decoder that cannot finish fails with a
+    /// one-line [`CaptureError`] naming `path`.
+    fn decode(
+        &self,
+        path: &Path,
+        select: &mut dyn FnMut(usize, usize) -> Option<Vec<Range<usize>>>,
+    ) -> Result<Option<Decoded>, CaptureError>;
+}
+
+static DECODER: OnceLock<Box<dyn Decoder>> = OnceLock::new();
+
+/// Has every later read of this process decode its image through `decoder`; returns
+/// `false` (and changes nothing) if a decoder was installed before.
+pub fn set_decoder(decoder: Box<dyn Decoder>) -> bool {
+    DECODER.set(decoder).is_ok()
+}
+
+/// Decoded image contents before the sidecar is applied: the rows selected, as
+/// counts. Built by a decoder; read by [`Frame::read_rows`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct Decoded {
     width: usize,
     height: usize,
     /// Width and height as stored in the file (sensor size for raw).
@@ -368,54 +396,32 @@ impl Frame {
         path: &Path,
         select: impl FnOnce(usize, usize) -> Result<Vec<Range<usize>>, E>,
     ) -> Result<Frame, E> {
-        // A regular file only (a device or FIFO is refused unopened); its size is
-        // checked below with the reason.
-        let file_len = match open_input(path, u64::MAX).and_then(|file| file.metadata()) {
-            Ok(meta) => meta.len(),
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-                return Err(image_error(path, "no such file").into())
-            }
-            Err(e) => return Err(image_error(path, e).into()),
-        };
-        if file_len > max_file_bytes() {
-            return Err(too_large(
-                path,
-                format!(
-                    "{file_len} bytes is more than a capture of at most {} pixels needs",
-                    max_pixels()
-                ),
-            )
-            .into());
-        }
+        let file_len = checked_len(path)?;
         let sidecar = read_sidecar(path)?;
-        let ext = path
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(|e| e.to_ascii_lowercase())
-            .unwrap_or_default();
-        let decode = || -> Result<Decoded, E> {
-            if TIFF_EXTENSIONS.contains(&ext.as_str()) {
-                match decode_tiff_rows(path, file_len, select)? {
-                    Ok(decoded) => Ok(decoded),
-                    Err(select) => {
-                        let full = decode_tiff(path)?;
-                        let bands = select(full.width, full.height)?;
-                        Ok(full.rows(path, &bands)?)
+        let decoded = match DECODER.get() {
+            None => decode_here(path, file_len, select)?,
+            Some(decoder) => {
+                let mut select = Some(select);
+                let mut declined = None;
+                let result = decoder.decode(path, &mut |width, height| match select.take()?(
+                    width, height,
+                ) {
+                    Ok(bands) => Some(bands),
+                    Err(e) => {
+                        declined = Some(e);
+                        None
                     }
+                });
+                match (result, declined) {
+                    (_, Some(e)) => return Err(e),
+                    (Ok(Some(decoded)), None) => decoded,
+                    (Ok(None), None) => {
+                        return Err(image_error(path, "the decoder stopped without an image").into())
+                    }
+                    (Err(e), None) => return Err(e.into()),
                 }
-            } else {
-                let full = decode_raw(path)?;
-                let bands = select(full.width, full.height)?;
-                Ok(full.rows(path, &bands)?)
             }
         };
-        let decoded = guard::catch(decode).unwrap_or_else(|panic| {
-            Err(CaptureError::Image {
-                path: path.to_path_buf(),
-                reason: format!("the decoder failed on malformed data ({panic})"),
-            }
-            .into())
-        })?;
         Ok(Self::assemble(path, sidecar, decoded)?)
     }
 
@@ -511,6 +517,65 @@ impl Frame {
         let count = f64::from(self.data[3 * (y * self.width + x) + c]);
         (count - self.black_level) / (self.white_level - self.black_level)
     }
+}
+
+/// The length of the capture file at `path`: a regular file (a device or FIFO is
+/// refused unopened) no larger than a capture of [`max_pixels`] needs.
+fn checked_len(path: &Path) -> Result<u64, CaptureError> {
+    let file_len = match open_input(path, u64::MAX).and_then(|file| file.metadata()) {
+        Ok(meta) => meta.len(),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            return Err(image_error(path, "no such file"))
+        }
+        Err(e) => return Err(image_error(path, e)),
+    };
+    if file_len > max_file_bytes() {
+        return Err(too_large(
+            path,
+            format!(
+                "{file_len} bytes is more than a capture of at most {} pixels needs",
+                max_pixels()
+            ),
+        ));
+    }
+    Ok(file_len)
+}
+
+/// Decodes the image at `path` (`file_len` bytes) in this process, keeping the rows
+/// `select` returns; a decoder's panic becomes the error.
+fn decode_here<E: From<CaptureError>>(
+    path: &Path,
+    file_len: u64,
+    select: impl FnOnce(usize, usize) -> Result<Vec<Range<usize>>, E>,
+) -> Result<Decoded, E> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(|e| e.to_ascii_lowercase())
+        .unwrap_or_default();
+    let decode = || -> Result<Decoded, E> {
+        if TIFF_EXTENSIONS.contains(&ext.as_str()) {
+            match decode_tiff_rows(path, file_len, select)? {
+                Ok(decoded) => Ok(decoded),
+                Err(select) => {
+                    let full = decode_tiff(path)?;
+                    let bands = select(full.width, full.height)?;
+                    Ok(full.rows(path, &bands)?)
+                }
+            }
+        } else {
+            let full = decode_raw(path)?;
+            let bands = select(full.width, full.height)?;
+            Ok(full.rows(path, &bands)?)
+        }
+    };
+    guard::catch(decode).unwrap_or_else(|panic| {
+        Err(CaptureError::Image {
+            path: path.to_path_buf(),
+            reason: format!("the decoder failed on malformed data ({panic})"),
+        }
+        .into())
+    })
 }
 
 impl Decoded {
@@ -826,7 +891,9 @@ fn decode_raw(path: &Path) -> Result<Decoded, CaptureError> {
     let bytes = read_input(path, max_file_bytes()).map_err(|e| image_error(path, e))?;
     // Only the containers of the formats above reach rawler: TIFF-structured files
     // (checked below), CR3 (ISO BMFF) and RAF. rawler's other readers (JPEG/Exif, MRW,
-    // X3F, CRW…) are for formats not listed, and some allocate or spin on a damaged file.
+    // X3F, CRW…) are for formats not listed, and some allocate or spin on a damaged file;
+    // a CRW heap starts "II" too and still reaches its reader, as CR3 boxes reach theirs
+    // unchecked: `gonio` decodes in a child whose limits bound them.
     let tiff = bytes.starts_with(b"II") || bytes.starts_with(b"MM");
     let bmff = bytes.get(4..8) == Some(&b"ftyp"[..]);
     let raf = bytes.starts_with(b"FUJIFILM");

@@ -150,17 +150,29 @@ impl Daemon {
     /// As [`Daemon::start`], with the daemon's file-descriptor limit (soft and hard)
     /// set to `fd_limit`, so that it cannot raise it.
     pub fn start_with_fd_limit(dir: &Path, config: &str, fd_limit: Option<u64>) -> Daemon {
+        let config_path = Self::write_config(dir, config);
+        Self::spawn(dir, &config_path, fd_limit, &[])
+    }
+
+    /// As [`Daemon::start`], with `env` added to the daemon's environment.
+    pub fn start_with_env(dir: &Path, config: &str, env: &[(&str, &str)]) -> Daemon {
+        let config_path = Self::write_config(dir, config);
+        Self::spawn(dir, &config_path, None, env)
+    }
+
+    /// Writes the scene and `config` into `dir`; returns the config's path.
+    fn write_config(dir: &Path, config: &str) -> PathBuf {
         let scene = dir.join("scene.toml");
         std::fs::write(&scene, SMALL_GOLD_SCENE).expect("writing the scene");
         let config_path = dir.join("gonio.toml");
         let config = config.replace("SCENE", &scene.display().to_string());
         std::fs::write(&config_path, config).expect("writing the config");
-        Self::spawn(dir, &config_path, fd_limit)
+        config_path
     }
 
     /// Starts the daemon again on the same directory and configuration.
     pub fn restart(dir: &Path) -> Daemon {
-        Self::spawn(dir, &dir.join("gonio.toml"), None)
+        Self::spawn(dir, &dir.join("gonio.toml"), None, &[])
     }
 
     /// The address the daemon listens on, e.g. `127.0.0.1:40123`.
@@ -168,7 +180,7 @@ impl Daemon {
         self.url.trim_start_matches("http://")
     }
 
-    fn spawn(dir: &Path, config: &Path, fd_limit: Option<u64>) -> Daemon {
+    fn spawn(dir: &Path, config: &Path, fd_limit: Option<u64>, env: &[(&str, &str)]) -> Daemon {
         let data = dir.join("data");
         let log_path = dir.join(format!(
             "daemon-{}.log",
@@ -205,6 +217,7 @@ impl Daemon {
             .args(["--bind", "127.0.0.1:0"])
             .env("GONIO_TOKEN", TOKEN)
             .env("RUST_LOG", "info")
+            .envs(env.iter().copied())
             .stdout(Stdio::piped())
             .stderr(Stdio::from(log))
             .spawn()

@@ -1,6 +1,7 @@
-//! The step boundary. A processing step runs under a panic guard, so a panic (a
-//! decoder bug hit by a corrupt capture, say) fails that step with the panic's message
-//! instead of ending the daemon. A step that ends the daemon anyway is counted at the
+//! The step boundary. A processing step runs under a panic guard, so a panic fails
+//! that step with the panic's message instead of ending the daemon (captures are
+//! decoded in child processes, so a corrupt one cannot end it either: see
+//! `decode_workers`). A step that ends the daemon anyway is counted at the
 //! next start, and only then: the daemon records its own fatal faults (a fatal signal
 //! such as an abort or a segmentation fault, or a lane that panicked) with the lane of
 //! the thread at fault, in `DATA/daemon.fault`; a kill, a power cut or an out-of-memory
