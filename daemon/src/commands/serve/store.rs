@@ -1101,10 +1101,11 @@ mod tests {
             }])
             .unwrap()[0];
         let scan = store.next_for_hardware(now_unix()).unwrap().unwrap();
-        // Home, then per θL move, meter, samples, HDR; extract and three fits.
+        // Home, then per θL move, meter, samples, HDR; extract, three fits and the
+        // fit that chooses the model.
         assert_eq!(
             (scan.id, scan.state, scan.done, scan.total),
-            (id, ScanState::Queued, 0, 13)
+            (id, ScanState::Queued, 0, 14)
         );
         assert!(store
             .transition(id, &[ScanState::Queued], ScanState::Running, None)
@@ -1121,7 +1122,7 @@ mod tests {
         let scan = store.scan(id).unwrap().unwrap();
         assert_eq!(
             (scan.done, scan.total, scan.steps_done, scan.steps_total),
-            (2, 13, 3, 15)
+            (2, 14, 3, 16)
         );
         assert_eq!(scan.current_step.as_deref(), Some(&*bracket[0].describe()));
         assert_eq!(next(&store, id, Lane::Processing), None);
@@ -1180,7 +1181,7 @@ mod tests {
         let scan = store.scan(id).unwrap().unwrap();
         assert_eq!(
             (scan.state, scan.done, scan.total, scan.steps_done),
-            (ScanState::Done, 13, 13, 16)
+            (ScanState::Done, 14, 14, 17)
         );
         assert!(scan.finished.is_some() && scan.current_step.is_none());
         std::fs::remove_dir_all(dir).unwrap();
