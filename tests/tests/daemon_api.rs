@@ -265,8 +265,8 @@ fn sweep_waits_for_its_start_time_and_shows_one_progress_view() {
     assert_eq!(sweep["scans_by_state"]["queued"], 8);
     assert_eq!(sweep["progress"]["done"], 0);
     // 2 repeats × (2 scans of 1 θL + 2 scans of 2 θL), each θL move + capture +
-    // samples + HDR, each scan home + extract + 3 fits.
-    assert_eq!(sweep["progress"]["total"], 2 * (2 * (5 + 4) + 2 * (5 + 8)));
+    // samples + HDR, each scan home + extract + 3 fits + the fit that chooses the model.
+    assert_eq!(sweep["progress"]["total"], 2 * (2 * (6 + 4) + 2 * (6 + 8)));
     assert_eq!(sweep["start_at"], "2099-01-01T22:00:00Z");
     let log = daemon.get("/api/hardware/log").json;
     assert!(
