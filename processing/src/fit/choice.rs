@@ -31,7 +31,7 @@ use super::held_out::{leave_one_theta_l_out, HeldOut, Variant};
 use super::{fit, parameter_count, FitError, FitResult};
 use crate::brdf::Roughness;
 use crate::color::CameraModel;
-use crate::samples::{distinct_theta_l, Sample};
+use crate::samples::{distinct_theta_l, Sample, THETA_L_TOLERANCE};
 
 /// A later candidate replaces the best so far only with a score lower by more than this
 /// fraction of it (BIC: of the best's |BIC|).
@@ -92,8 +92,47 @@ pub struct Selection {
     /// largest |θL|; `None` without a fitted shift.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub specular_uv_change: Option<f64>,
+    /// Leave-one-θL-out on a large scan: the candidates were judged on every
+    /// `judged_stride`-th sample of each θL ([`JUDGED_PER_THETA_L`]); `None`: on all.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub judged_stride: Option<usize>,
     /// Why the chosen one won, in words.
     pub reason: String,
+}
+
+/// Most samples of one θL the candidates are judged on by leave-one-θL-out: a larger
+/// scan is judged on every k-th sample of each θL, k the smallest stride that keeps each
+/// θL within it (neighbouring columns differ little in geometry), and the chosen
+/// candidate is then fitted to every sample.
+pub const JUDGED_PER_THETA_L: usize = 500;
+
+/// Every `stride`-th sample of each θL of `samples` (in their order), and the stride:
+/// the smallest that keeps each θL within [`JUDGED_PER_THETA_L`].
+fn judged(samples: &[Sample]) -> (Vec<Sample>, usize) {
+    let theta_l = distinct_theta_l(samples);
+    let at = |s: &Sample| {
+        theta_l
+            .iter()
+            .position(|t| (t - s.theta_l).abs() <= THETA_L_TOLERANCE)
+    };
+    let mut counts = vec![0usize; theta_l.len()];
+    for i in samples.iter().filter_map(at) {
+        counts[i] += 1;
+    }
+    let most = counts.iter().copied().max().unwrap_or(0);
+    let stride = most.div_ceil(JUDGED_PER_THETA_L).max(1);
+    let mut seen = vec![0usize; theta_l.len()];
+    let kept = samples
+        .iter()
+        .filter(|s| {
+            at(s).is_some_and(|i| {
+                seen[i] += 1;
+                (seen[i] - 1).is_multiple_of(stride)
+            })
+        })
+        .copied()
+        .collect();
+    (kept, stride)
 }
 
 /// u′v′ distance between the specular colours of `result` at the smallest and largest
@@ -187,8 +226,13 @@ pub fn fit_auto(
     }
     let theta_l = distinct_theta_l(samples);
     if theta_l.len() >= 3 {
-        let held = leave_one_theta_l_out(samples, variants, camera)?;
-        return choose_held_out(samples, &held, camera);
+        let (judged, stride) = judged(samples);
+        let held = leave_one_theta_l_out(&judged, variants, camera)?;
+        let mut result = choose_held_out(samples, &held, camera)?;
+        if let Some(selection) = result.selection.as_mut() {
+            selection.judged_stride = (stride > 1).then_some(stride);
+        }
+        return Ok(result);
     }
     let fits: Vec<Result<FitResult, FitError>> = variants
         .iter()
@@ -270,6 +314,7 @@ fn choose(
         colour_shift,
         chromatic_gain: gain,
         specular_uv_change: change,
+        judged_stride: None,
         reason,
     });
     Ok(result)
@@ -355,4 +400,40 @@ fn reason(
         text.push_str("; one roughness per channel");
     }
     text
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_large_scan_is_judged_on_every_kth_sample_of_each_theta_l() {
+        let scan = |counts: &[usize]| -> Vec<Sample> {
+            counts
+                .iter()
+                .enumerate()
+                .flat_map(|(i, &n)| {
+                    (0..n).map(move |k| {
+                        Sample::in_plane(-20.0 - 5.0 * i as f64, k as f64 * 0.01, 0.0, [1.0; 3])
+                    })
+                })
+                .collect()
+        };
+        let count = |samples: &[Sample], theta_l: f64| {
+            samples.iter().filter(|s| s.theta_l == theta_l).count()
+        };
+        let (kept, stride) = judged(&scan(&[1200, 300, 1001]));
+        assert_eq!(stride, 3);
+        assert_eq!(
+            [
+                count(&kept, -20.0),
+                count(&kept, -25.0),
+                count(&kept, -30.0)
+            ],
+            [400, 100, 334]
+        );
+        assert_eq!(kept[1].theta_i, 0.03);
+        let small = scan(&[500, 20, 499]);
+        assert_eq!(judged(&small), (small.clone(), 1));
+    }
 }
