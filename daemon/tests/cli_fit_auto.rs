@@ -13,20 +13,10 @@
 //! colour shift is reported, from all six θL nor from any five.
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
-fn gonio(args: &[&str]) -> String {
-    let out = Command::new(env!("CARGO_BIN_EXE_gonio"))
-        .args(args)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "gonio {args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
+mod common;
+
+use common::gonio_ok as gonio;
 
 fn path(p: &Path) -> String {
     p.to_str().unwrap().to_owned()

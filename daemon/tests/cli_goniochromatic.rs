@@ -8,19 +8,10 @@
 //! Cook–Torrance (within 2 %).
 
 use std::path::Path;
-use std::process::Command;
 
-fn gonio(args: &[&str]) {
-    let out = Command::new(env!("CARGO_BIN_EXE_gonio"))
-        .args(args)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "gonio {args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
+mod common;
+
+use common::gonio_ok as gonio;
 
 /// Held-out medians per model: (ΔErr_p R, G, B, ΔE_u′v′).
 fn held_out(scene: &str, dir: &Path) -> Vec<(String, [f64; 4])> {

@@ -1,4 +1,6 @@
-//! Helpers shared by the CLI tests: run the built `gonio` binary.
+//! Helpers shared by the CLI tests: run the built `gonio` binary. Each test file uses
+//! the ones it needs.
+#![allow(dead_code)]
 
 use std::process::{Command, Output};
 
@@ -13,4 +15,16 @@ pub fn gonio(args: &[&str]) -> Output {
 /// Captured output as text (lossy UTF-8).
 pub fn text(bytes: &[u8]) -> String {
     String::from_utf8_lossy(bytes).into_owned()
+}
+
+/// Runs the built `gonio` with `args`; fails the test with its standard error if it
+/// fails, else returns its standard output.
+pub fn gonio_ok(args: &[&str]) -> String {
+    let out = gonio(args);
+    assert!(
+        out.status.success(),
+        "gonio {args:?}: {}",
+        text(&out.stderr)
+    );
+    text(&out.stdout)
 }
