@@ -141,6 +141,28 @@ pub struct Answer {
 }
 
 impl Daemon {
+    /// Submits a scan of the `gold` sample at `theta_l` with the fixed bracket
+    /// `shutter_s` (seconds); asserts 201 and returns the scan's id.
+    pub fn post_gold_scan(&self, theta_l: &[f64], shutter_s: &[f64]) -> i64 {
+        let answer = self.post(
+            "/api/scans",
+            &serde_json::json!({"sample": "gold", "theta_l": theta_l, "bracket": {"shutter_s": shutter_s}}),
+        );
+        assert_eq!(answer.status, 201, "{:?}", answer.json);
+        answer.json["id"].as_i64().unwrap()
+    }
+
+    /// Waits until a capture of scan `id` is done.
+    pub fn wait_for_a_capture(&self, id: i64, timeout: Duration) {
+        self.wait_for(&format!("/api/scans/{id}/steps"), timeout, |steps| {
+            steps.as_array().is_some_and(|steps| {
+                steps
+                    .iter()
+                    .any(|s| s["step"]["kind"] == "capture" && s["state"] == "done")
+            })
+        });
+    }
+
     /// Writes the scene and `config` (TOML; `SCENE` in it is replaced by the scene
     /// file's path) into `dir`, and starts the daemon with data in `dir/data`.
     pub fn start(dir: &Path, config: &str) -> Daemon {

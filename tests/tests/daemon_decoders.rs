@@ -9,15 +9,6 @@ use std::time::Duration;
 use gonio_tests::{emulator_config_scaled, temp_dir, Daemon};
 use serde_json::{json, Value};
 
-fn post_scan(daemon: &Daemon, theta_l: f64, shutter_s: &[f64]) -> i64 {
-    let answer = daemon.post(
-        "/api/scans",
-        &json!({"sample": "gold", "theta_l": [theta_l], "bracket": {"shutter_s": shutter_s}}),
-    );
-    assert_eq!(answer.status, 201, "{:?}", answer.json);
-    answer.json["id"].as_i64().unwrap()
-}
-
 /// A CR3 file (ISO base media) whose Canon metadata box (`CMT1`, in the `moov` box's
 /// Canon `uuid` box) claims `claimed` bytes with a 64-bit size: rawler allocates that
 /// much before it reads the box. No TIFF directory claims anything, so nothing refuses
@@ -49,7 +40,7 @@ fn cr3_claiming(claimed: u64) -> Vec<u8> {
 /// processing steps), lets `plant` write into its `theta_l_-20.0` directory, queues
 /// another scan and resumes. Returns the two scans' final records.
 fn plant_and_finish(daemon: &Daemon, plant: impl FnOnce(&Path)) -> (Value, Value) {
-    let first = post_scan(daemon, -20.0, &[0.01, 2.0]);
+    let first = daemon.post_gold_scan(&[-20.0], &[0.01, 2.0]);
     daemon.wait_for(
         &format!("/api/scans/{first}/steps"),
         Duration::from_secs(60),
@@ -72,7 +63,7 @@ fn plant_and_finish(daemon: &Daemon, plant: impl FnOnce(&Path)) -> (Value, Value
     });
     assert!(!processed, "paused too late: {steps}");
     plant(&daemon.data.join(format!("scans/{first}/theta_l_-20.0")));
-    let second = post_scan(daemon, -25.0, &[0.01, 0.02]);
+    let second = daemon.post_gold_scan(&[-25.0], &[0.01, 0.02]);
     let resume = daemon.post(&format!("/api/scans/{first}/resume"), &json!({}));
     assert_eq!(resume.status, 200, "{:?}", resume.json);
     let first = daemon.wait_state(first, &["done", "failed"], Duration::from_secs(120));

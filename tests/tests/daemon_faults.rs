@@ -32,7 +32,7 @@ fn wait_mid_move(daemon: &Daemon) {
 fn hardware_view_follows_the_arm_during_a_move() {
     let dir = temp_dir("live-angle");
     let daemon = Daemon::start(&dir, &emulator_config(0.4));
-    let id = post_scan(&daemon, &[-50.0]);
+    let id = daemon.post_gold_scan(&[-50.0], &[0.1, 0.01]);
     let mut seen = Vec::new();
     let deadline = Instant::now() + Duration::from_secs(60);
     while seen.last().is_none_or(|a: &f64| *a > -49.9) {
@@ -53,15 +53,6 @@ fn hardware_view_follows_the_arm_during_a_move() {
     assert!(between.len() >= 3, "angles seen mid-move: {between:?}");
     daemon.wait_state(id, &["done", "failed"], Duration::from_secs(60));
     std::fs::remove_dir_all(dir).ok();
-}
-
-fn post_scan(daemon: &Daemon, theta_l: &[f64]) -> i64 {
-    let answer = daemon.post(
-        "/api/scans",
-        &json!({"sample": "gold", "theta_l": theta_l, "bracket": {"shutter_s": [0.1, 0.01]}}),
-    );
-    assert_eq!(answer.status, 201, "{:?}", answer.json);
-    answer.json["id"].as_i64().unwrap()
 }
 
 /// Waits until scan `id` is interrupted; returns why (its `reason`, also its `error`).
@@ -96,7 +87,7 @@ fn serial_unplug_mid_move_interrupts_then_resumes_after_reconnect() {
     let dir = temp_dir("fault-unplug");
     // Slow motion so the move is long enough to pull the cable during it.
     let daemon = Daemon::start(&dir, &emulator_config(0.4));
-    let id = post_scan(&daemon, &[-50.0, -45.0]);
+    let id = daemon.post_gold_scan(&[-50.0, -45.0], &[0.1, 0.01]);
     wait_mid_move(&daemon);
     inject(&daemon, json!({"fault": "unplug"}));
     let reason = wait_interrupted(&daemon, id);
@@ -210,7 +201,7 @@ fn camera_unplugged_mid_scan_interrupts_and_the_scan_completes_once_it_is_back()
 fn emergency_stop_pauses_mid_move_and_resume_finishes() {
     let dir = temp_dir("fault-stop");
     let daemon = Daemon::start(&dir, &emulator_config(0.4));
-    let id = post_scan(&daemon, &[-50.0]);
+    let id = daemon.post_gold_scan(&[-50.0], &[0.1, 0.01]);
     wait_mid_move(&daemon);
     let stopped = daemon.post("/api/arm/stop", &json!({}));
     assert_eq!(stopped.status, 200, "{:?}", stopped.json);
@@ -247,13 +238,13 @@ fn busy_or_timing_out_camera_is_retried_then_fails_clearly() {
 
     // Busy twice: the third attempt succeeds and the scan completes.
     inject(&daemon, json!({"fault": "camera_busy", "count": 2}));
-    let id = post_scan(&daemon, &[-20.0]);
+    let id = daemon.post_gold_scan(&[-20.0], &[0.1, 0.01]);
     let scan = daemon.wait_state(id, &["done", "failed"], Duration::from_secs(60));
     assert_eq!(scan["state"], "done", "{scan}");
 
     // Timing out on every attempt: failed, saying why.
     inject(&daemon, json!({"fault": "camera_timeout", "count": 3}));
-    let id = post_scan(&daemon, &[-20.0]);
+    let id = daemon.post_gold_scan(&[-20.0], &[0.1, 0.01]);
     let scan = daemon.wait_state(id, &["done", "failed"], Duration::from_secs(60));
     assert_eq!(scan["state"], "failed", "{scan}");
     let error = scan["error"].as_str().unwrap();
@@ -262,8 +253,8 @@ fn busy_or_timing_out_camera_is_retried_then_fails_clearly() {
 
     // Busy beyond the retries: failed, saying why; the queue goes on afterwards.
     inject(&daemon, json!({"fault": "camera_busy", "count": 3}));
-    let id = post_scan(&daemon, &[-20.0]);
-    let next = post_scan(&daemon, &[-25.0]);
+    let id = daemon.post_gold_scan(&[-20.0], &[0.1, 0.01]);
+    let next = daemon.post_gold_scan(&[-25.0], &[0.1, 0.01]);
     let scan = daemon.wait_state(id, &["done", "failed"], Duration::from_secs(60));
     assert_eq!(scan["state"], "failed", "{scan}");
     let error = scan["error"].as_str().unwrap();

@@ -10,15 +10,6 @@ use std::time::{Duration, Instant};
 use gonio_tests::{emulator_config, emulator_config_scaled, raw_http, temp_dir, Daemon, TOKEN};
 use serde_json::{json, Value};
 
-fn post_scan(daemon: &Daemon, theta_l: &[f64], shutter_s: &[f64]) -> i64 {
-    let answer = daemon.post(
-        "/api/scans",
-        &json!({"sample": "gold", "theta_l": theta_l, "bracket": {"shutter_s": shutter_s}}),
-    );
-    assert_eq!(answer.status, 201, "{:?}", answer.json);
-    answer.json["id"].as_i64().unwrap()
-}
-
 /// Raises this test process's own descriptor limit so it can hold `n` sockets.
 fn allow_open_files(n: u64) {
     let mut limit = libc::rlimit {
@@ -79,7 +70,7 @@ fn two_thousand_idle_sockets_starve_neither_health_nor_a_scan() {
     assert_eq!(daemon.get("/api/health").json["status"], "ok");
     let health_s = started.elapsed().as_secs_f64();
     let started = Instant::now();
-    let id = post_scan(&daemon, &[-20.0, -30.0], &[0.5, 0.05]);
+    let id = daemon.post_gold_scan(&[-20.0, -30.0], &[0.5, 0.05]);
     let mut held = 0;
     let scan = loop {
         held = held.max(open_sockets(daemon.pid()));
@@ -113,7 +104,7 @@ fn controls_from_eight_threads_during_a_scan_never_error() {
     let dir = temp_dir("harden-controls");
     let daemon = Daemon::start(&dir, &emulator_config(0.05));
     let ids: Vec<i64> = (0..3)
-        .map(|_| post_scan(&daemon, &[-20.0, -25.0, -30.0, -35.0, -40.0], &[0.5, 0.05]))
+        .map(|_| daemon.post_gold_scan(&[-20.0, -25.0, -30.0, -35.0, -40.0], &[0.5, 0.05]))
         .collect();
     daemon.wait_state(ids[0], &["running"], Duration::from_secs(60));
     let steps_done = || -> u64 {
@@ -245,7 +236,7 @@ fn a_corrupt_frame_fails_its_step_and_the_queue_goes_on() {
     let dir = temp_dir("harden-corrupt");
     // The camera in real time: the second exposure (2 s) leaves time to pause.
     let daemon = Daemon::start(&dir, &emulator_config_scaled(0.05, 1.0));
-    let first = post_scan(&daemon, &[-20.0], &[0.01, 2.0]);
+    let first = daemon.post_gold_scan(&[-20.0], &[0.01, 2.0]);
     // Pause during the second capture (it completes, the merge waits), corrupt the
     // first frame, resume.
     wait_step(&daemon, first, |s| {
@@ -278,7 +269,7 @@ fn a_corrupt_frame_fails_its_step_and_the_queue_goes_on() {
     // The seed is a 2-byte sidecar length, the sidecar, then the TIFF.
     let len = usize::from(u16::from_le_bytes([hostile[0], hostile[1]]));
     std::fs::write(&frame, &hostile[2 + len..]).unwrap();
-    let second = post_scan(&daemon, &[-25.0], &[0.01, 0.02]);
+    let second = daemon.post_gold_scan(&[-25.0], &[0.01, 0.02]);
     assert_eq!(
         daemon
             .post(&format!("/api/scans/{first}/resume"), &json!({}))
@@ -312,7 +303,7 @@ fn kills_while_a_step_runs_are_not_crashes() {
     let dir = temp_dir("harden-kills");
     // Slow motion: the move step lasts long enough to be killed in.
     let daemon = Daemon::start(&dir, &emulator_config_scaled(1.0, 0.05));
-    let id = post_scan(&daemon, &[-80.0], &[0.01]);
+    let id = daemon.post_gold_scan(&[-80.0], &[0.01]);
     let daemon = end_three_times_during_the_move(&dir, daemon, id, |daemon, _| daemon.kill9());
     let scan = daemon.wait_state(id, &["done", "failed"], Duration::from_secs(120));
     assert_eq!(scan["state"], "done", "{scan}");
@@ -356,7 +347,7 @@ fn kills_during_the_hdr_merges_keep_the_maps_already_made() {
     let dir = temp_dir("harden-hdr-kills");
     let mut daemon = Daemon::start(&dir, &emulator_config(0.05));
     let theta_l = [-20.0, -25.0, -30.0, -35.0, -40.0, -45.0];
-    let id = post_scan(&daemon, &theta_l, &[0.5, 0.1, 0.02]);
+    let id = daemon.post_gold_scan(&theta_l, &[0.5, 0.1, 0.02]);
     let mut kept: Vec<(String, (u64, std::time::SystemTime))> = Vec::new();
     let mut during_merge = 0;
     for round in 0..3 {
@@ -440,8 +431,8 @@ fn a_step_that_crashes_the_daemon_three_times_fails_its_scan() {
     // A slow arm: after each start it homes and moves for seconds before the capture
     // runs again, time to inject the fault again.
     let mut daemon = Daemon::start(&dir, &emulator_config_scaled(1.0, 0.05));
-    let looping = post_scan(&daemon, &[-80.0], &[0.01]);
-    let next = post_scan(&daemon, &[-20.0], &[0.01]);
+    let looping = daemon.post_gold_scan(&[-80.0], &[0.01]);
+    let next = daemon.post_gold_scan(&[-20.0], &[0.01]);
     for _ in 0..3 {
         let answer = daemon.post("/api/emulator/fault", &json!({"fault": "camera_abort"}));
         assert_eq!(answer.status, 200, "{:?}", answer.json);
@@ -471,7 +462,7 @@ fn stops_on_a_signal_are_not_crashes() {
     let dir = temp_dir("harden-stops");
     // Slow motion: the move step lasts long enough to be stopped in.
     let daemon = Daemon::start(&dir, &emulator_config_scaled(1.0, 0.05));
-    let id = post_scan(&daemon, &[-80.0], &[0.01]);
+    let id = daemon.post_gold_scan(&[-80.0], &[0.01]);
     let daemon = end_three_times_during_the_move(&dir, daemon, id, |daemon, round| {
         let signal = [libc::SIGINT, libc::SIGTERM, libc::SIGINT][round];
         let status = daemon.stop_with(signal, Duration::from_secs(60));
@@ -519,7 +510,7 @@ fn an_amplifying_sweep_is_refused_before_anything_is_inserted() {
 fn the_files_route_follows_no_link() {
     let dir = temp_dir("harden-links");
     let daemon = Daemon::start(&dir, &emulator_config(0.01));
-    let id = post_scan(&daemon, &[-20.0], &[0.5]);
+    let id = daemon.post_gold_scan(&[-20.0], &[0.5]);
     daemon.wait_state(id, &["done", "failed"], Duration::from_secs(60));
     let secret = dir.join("secret");
     std::fs::create_dir_all(&secret).unwrap();
@@ -664,7 +655,7 @@ fn event_streams_beyond_the_cap_get_503() {
     let config = format!("max_event_streams = 2\n{}", emulator_config(0.01));
     let daemon = Daemon::start(&dir, &config);
     // A paused scan: its stream stays open.
-    let id = post_scan(&daemon, &[-20.0], &[0.5]);
+    let id = daemon.post_gold_scan(&[-20.0], &[0.5]);
     daemon.post(&format!("/api/scans/{id}/pause"), &json!({}));
     daemon.wait_state(id, &["paused"], Duration::from_secs(30));
     let request = format!(

@@ -8,15 +8,6 @@ use std::time::{Duration, Instant};
 use gonio_tests::{emulator_config_scaled, temp_dir, Daemon};
 use serde_json::json;
 
-fn post_scan(daemon: &Daemon, theta_l: &[f64], shutter_s: &[f64]) -> i64 {
-    let answer = daemon.post(
-        "/api/scans",
-        &json!({"sample": "gold", "theta_l": theta_l, "bracket": {"shutter_s": shutter_s}}),
-    );
-    assert_eq!(answer.status, 201, "{:?}", answer.json);
-    answer.json["id"].as_i64().unwrap()
-}
-
 /// The id of a process that has ended (free until the system reuses it).
 fn ended_process() -> u32 {
     let mut child = std::process::Command::new("true").spawn().unwrap();
@@ -53,7 +44,7 @@ fn temporaries_of_ended_scans_are_removed() {
     let dir = temp_dir("storage-partials");
     // The camera in real time: a 2 s exposure leaves time to cancel.
     let daemon = Daemon::start(&dir, &emulator_config_scaled(0.05, 1.0));
-    let id = post_scan(&daemon, &[-20.0], &[2.0, 1.0]);
+    let id = daemon.post_gold_scan(&[-20.0], &[2.0, 1.0]);
     daemon.wait_state(id, &["running"], Duration::from_secs(30));
     let scan_dir = daemon.data.join(format!("scans/{id}"));
     let frames = scan_dir.join("theta_l_-20.0");
@@ -111,19 +102,9 @@ fn a_full_disk_makes_the_scans_wait_until_space_returns() {
     // The camera in real time: each 1 s exposure leaves time to fill the disk.
     let daemon = Daemon::start(&dir, &config_with_free_space(1.0, &free));
     assert_eq!(daemon.get("/api/health").json["disk_free_bytes"], plenty);
-    let first = post_scan(&daemon, &[-20.0, -25.0], &[1.0, 0.5]);
-    let second = post_scan(&daemon, &[-30.0], &[0.01]);
-    daemon.wait_for(
-        &format!("/api/scans/{first}/steps"),
-        Duration::from_secs(60),
-        |steps| {
-            steps.as_array().is_some_and(|steps| {
-                steps
-                    .iter()
-                    .any(|s| s["step"]["kind"] == "capture" && s["state"] == "done")
-            })
-        },
-    );
+    let first = daemon.post_gold_scan(&[-20.0, -25.0], &[1.0, 0.5]);
+    let second = daemon.post_gold_scan(&[-30.0], &[0.01]);
+    daemon.wait_for_a_capture(first, Duration::from_secs(60));
     std::fs::write(&free, "1000").unwrap();
     let waiting = daemon.wait_state(
         first,
@@ -232,18 +213,8 @@ fn a_full_tmpfs_makes_the_scan_wait_until_space_returns() {
     let config =
         emulator_config_scaled(0.05, 1.0) + &format!("\n[storage]\nreserve_bytes = {reserve}\n");
     let daemon = Daemon::start(&dir, &config);
-    let id = post_scan(&daemon, &[-20.0, -25.0], &[1.0, 0.5]);
-    daemon.wait_for(
-        &format!("/api/scans/{id}/steps"),
-        Duration::from_secs(60),
-        |steps| {
-            steps.as_array().is_some_and(|steps| {
-                steps
-                    .iter()
-                    .any(|s| s["step"]["kind"] == "capture" && s["state"] == "done")
-            })
-        },
-    );
+    let id = daemon.post_gold_scan(&[-20.0, -25.0], &[1.0, 0.5]);
+    daemon.wait_for_a_capture(id, Duration::from_secs(60));
     // Leave 4 MiB: less than the reserve.
     let ballast = data.join("ballast");
     let fill = free_bytes(&data).saturating_sub(4 << 20);
@@ -323,18 +294,8 @@ fn a_disk_filled_by_another_process_leaves_the_journal_writing() {
     let reserve = data.join("journal.reserve");
     assert_eq!(std::fs::metadata(&reserve).unwrap().len(), journal_reserve);
     let theta_l = [-20.0, -25.0];
-    let id = post_scan(&daemon, &theta_l, &[1.0, 0.5]);
-    daemon.wait_for(
-        &format!("/api/scans/{id}/steps"),
-        Duration::from_secs(60),
-        |steps| {
-            steps.as_array().is_some_and(|steps| {
-                steps
-                    .iter()
-                    .any(|s| s["step"]["kind"] == "capture" && s["state"] == "done")
-            })
-        },
-    );
+    let id = daemon.post_gold_scan(&theta_l, &[1.0, 0.5]);
+    daemon.wait_for_a_capture(id, Duration::from_secs(60));
     let ballast = fill(&data, "ballast");
     let waiting = daemon.wait_state(id, &["waiting", "failed", "done"], Duration::from_secs(30));
     assert_eq!(waiting["state"], "waiting", "{waiting}");
