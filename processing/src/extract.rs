@@ -43,7 +43,8 @@ use crate::capture::{self, CaptureError, Frame};
 use crate::color::CameraModel;
 use crate::geometry::{GeometryError, PixelGeometry, Setup};
 use crate::hdr::{self, HdrError, HdrImage, MergeOptions, SATURATED, UNDEREXPOSED};
-use crate::samples::Sample;
+use crate::samples::{Sample, SampleUncertainty};
+use crate::setup_uncertainty::{Input, Source};
 
 /// Rows averaged around each strip's centre row (paper §2.2).
 pub const STRIP_ROWS: usize = 5;
@@ -69,6 +70,10 @@ pub struct ExtractOptions {
     pub setup: Option<PathBuf>,
     /// When set, only the captures of this θL (degrees) are extracted.
     pub theta_l: Option<f64>,
+    /// Whether each sample gets its uncertainty ([`Sample::uncertainty`]): its noise,
+    /// and its change under each of the setup's uncertain inputs (ten more extractions
+    /// of each θL's strips, one per geometric source and sign).
+    pub uncertainty: bool,
 }
 
 impl Default for ExtractOptions {
@@ -82,6 +87,7 @@ impl Default for ExtractOptions {
             hdr_dir: None,
             setup: None,
             theta_l: None,
+            uncertainty: true,
         }
     }
 }
@@ -247,6 +253,8 @@ pub struct Extraction {
     /// The white reference's reflectance used, and where it came from.
     pub white_reflectance: f64,
     pub white_source: WhiteSource,
+    /// The standard uncertainties the samples' uncertainty was computed with, when it was.
+    pub inputs: Option<[Input; Source::COUNT]>,
 }
 
 /// Extracts the samples of the scan in `dir`.
@@ -325,6 +333,7 @@ pub fn extract_scan_with_progress(
         skipped_without_sidecar,
         white_reflectance,
         white_source,
+        inputs: options.uncertainty.then(|| setup.uncertainty.inputs()),
     };
     for (done, (theta_l, paths)) in groups.into_iter().enumerate() {
         // Without a map to write, only the strip rows are kept and merged.
@@ -355,8 +364,16 @@ pub fn extract_scan_with_progress(
             map.write_exr(&hdr_dir.join(format!("theta_l_{theta_l:.1}.exr")))
                 .map_err(|error| ExtractError::Hdr { theta_l, error })?;
         }
-        let (samples, dropped, centre_rows) =
+        let (mut samples, dropped, centre_rows) =
             extract_theta(&setup, &map, &layout, theta_l, options, white_reflectance);
+        if options.uncertainty {
+            let strips = Strips {
+                map: &map,
+                layout: &layout,
+                theta_l,
+            };
+            add_sensitivities(&setup, &strips, options, white_reflectance, &mut samples);
+        }
         extraction.per_theta.push(ThetaSummary {
             theta_l,
             frames: frames.len(),
@@ -458,6 +475,15 @@ impl StripRows {
             }
         }
         rows
+    }
+
+    /// How each channel curves over the rows, per unit of their pixels' irradiance.
+    fn curvatures(&self, pixels: &[PixelGeometry]) -> [Option<Curvature>; 3] {
+        let irradiance = std::array::from_fn(|i| pixels[i].irradiance);
+        std::array::from_fn(|c| {
+            self.reflected(c, &irradiance)
+                .and_then(|v| Curvature::of(&v))
+        })
     }
 
     /// The rows' mean, each channel's flags OR-ed over the rows.
@@ -718,12 +744,13 @@ impl ColumnGeometry {
 }
 
 /// One column before the samples are made: its strips' pixel geometry (`None` off the
-/// cylinder or unlit), its strips' rows, and how the sample strip curves per channel.
+/// cylinder or unlit), its strips' rows, and how each strip curves per channel.
 struct Column {
     geometry: Option<(Vec<PixelGeometry>, Vec<PixelGeometry>)>,
     sample: StripRows,
     white: StripRows,
     curvature: [Option<Curvature>; 3],
+    white_curvature: [Option<Curvature>; 3],
 }
 
 impl Column {
@@ -800,26 +827,30 @@ fn extract_theta(
                 .strip_geometry(setup, x, layout.sample_row, theta_l)
                 .zip(layout.strip_geometry(setup, x, layout.white_row, theta_l));
             let sample = StripRows::read(map, x, layout.sample_map_row);
-            let curvature = match &geometry {
-                Some((pixels, _)) => {
-                    let irradiance = std::array::from_fn(|i| pixels[i].irradiance);
-                    std::array::from_fn(|c| {
-                        sample
-                            .reflected(c, &irradiance)
-                            .and_then(|v| Curvature::of(&v))
-                    })
-                }
-                None => [None; 3],
+            let white = StripRows::read(map, x, layout.white_map_row);
+            let (curvature, white_curvature) = match &geometry {
+                Some((sample_pixels, white_pixels)) => (
+                    sample.curvatures(sample_pixels),
+                    white.curvatures(white_pixels),
+                ),
+                None => ([None; 3], [None; 3]),
             };
             Column {
                 geometry,
                 sample,
-                white: StripRows::read(map, x, layout.white_map_row),
+                white,
                 curvature,
+                white_curvature,
             }
         })
         .collect();
     let noise = pooled_row_noise(&columns.iter().map(|c| c.curvature).collect::<Vec<_>>());
+    let white_noise = pooled_row_noise(
+        &columns
+            .iter()
+            .map(|c| c.white_curvature)
+            .collect::<Vec<_>>(),
+    );
     let sharp: Vec<bool> = columns
         .iter()
         .zip(&noise)
@@ -828,11 +859,23 @@ fn extract_theta(
     let columns: Vec<_> = columns
         .iter()
         .zip(&sharp)
-        .map(|(column, &sharp)| column.read(sharp).map(|read| (read, sharp)))
+        .zip(noise.iter().zip(&white_noise))
+        .map(|((column, &sharp), (&noise, &white_noise))| {
+            column.read(sharp).map(|read| {
+                // One row's relative noise over the rows averaged, both strips.
+                let rows = if sharp { 1.0 } else { STRIP_ROWS as f64 };
+                let relative: [f64; 3] = std::array::from_fn(|c| {
+                    (noise[c] * noise[c] / rows
+                        + white_noise[c] * white_noise[c] / STRIP_ROWS as f64)
+                        .sqrt()
+                });
+                (read, sharp, relative)
+            })
+        })
         .collect();
     // The brightest usable white of each channel, for the too-dark threshold.
     let mut brightest_white = [0.0f64; 3];
-    for ((_, _, white), _) in columns.iter().flatten() {
+    for ((_, _, white), _, _) in columns.iter().flatten() {
         for (c, brightest) in brightest_white.iter_mut().enumerate() {
             if white.flags[c] == 0 {
                 *brightest = brightest.max(white.rgb[c]);
@@ -847,7 +890,7 @@ fn extract_theta(
     let mut dropped = DropCounts::default();
     let mut centre_rows = 0;
     for column in columns {
-        let Some(((g, sample, white), sharp)) = column else {
+        let Some(((g, sample, white), sharp, relative_noise)) = column else {
             dropped.off_cylinder += 1;
             continue;
         };
@@ -862,6 +905,7 @@ fn extract_theta(
             cosines: Some(g.cosines),
             ..Sample::default()
         };
+        let mut noise = [0.0; 3];
         for c in 0..3 {
             match DropReason::of(&sample, &white, c, threshold[c]) {
                 Some(reason) => {
@@ -873,6 +917,7 @@ fn extract_theta(
                         * g.irradiance_ratio
                         * white_reflectance
                         * white_rgb[c];
+                    noise[c] = point.rgb[c] * relative_noise[c];
                 }
             }
         }
@@ -880,10 +925,131 @@ fn extract_theta(
             dropped.no_channel += 1;
         } else {
             centre_rows += usize::from(sharp);
+            if options.uncertainty {
+                point.uncertainty = Some(SampleUncertainty {
+                    noise,
+                    ..SampleUncertainty::default()
+                });
+            }
             samples.push(point);
         }
     }
     (samples, dropped, centre_rows)
+}
+
+/// One θL's merged strips, as [`extract_theta`] reads them.
+struct Strips<'a> {
+    map: &'a HdrImage,
+    layout: &'a StripLayout,
+    theta_l: f64,
+}
+
+/// `setup` with `source` moved by `delta` (its unit); the white reflectance is not part
+/// of the geometry and is returned unchanged.
+fn perturbed(setup: &Setup, source: Source, delta: f64) -> Setup {
+    let mut s = setup.clone();
+    match source {
+        Source::WhiteReflectance => {}
+        Source::CameraOffset => s.camera_offset_mm += delta,
+        Source::CameraDistance => s.camera_distance_mm += delta,
+        Source::LightDistance => s.light_distance_mm += delta,
+        Source::CylinderTilt => s.cylinder_tilt_deg += delta,
+        Source::ArmZero | Source::ArmAngle => s.arm_zero_offset_deg += delta,
+    }
+    s
+}
+
+/// One channel of a θL's samples as a profile along signed θh (radians), sorted.
+fn profile(samples: &[Sample], c: usize) -> Vec<(f64, f64)> {
+    let mut points: Vec<(f64, f64)> = samples
+        .iter()
+        .filter_map(|s| Some((s.half_difference().0, s.channel(c)?)))
+        .collect();
+    points.sort_by(|a, b| a.0.total_cmp(&b.0));
+    points
+}
+
+/// The profile's value at signed θh `h`: linear between the points around it, the end
+/// point's beyond; `None` for an empty profile.
+fn profile_at(points: &[(f64, f64)], h: f64) -> Option<f64> {
+    let k = points.partition_point(|p| p.0 <= h);
+    if k == 0 || k == points.len() {
+        return points.get(k.min(points.len().wrapping_sub(1))).map(|p| p.1);
+    }
+    let (a, b) = (points[k - 1], points[k]);
+    let w = if b.0 > a.0 {
+        (h - a.0) / (b.0 - a.0)
+    } else {
+        0.0
+    };
+    Some(a.1 + w * (b.1 - a.1))
+}
+
+/// Fills each sample's [`SampleUncertainty::sources`]: how β at the sample's stated
+/// geometry changes when each uncertain input moves by one standard uncertainty.
+/// The white reflectance scales β. A geometric source changes where each pixel's value is
+/// placed: the strips are extracted again with the setup moved by ±u, each result read at
+/// the samples' stated signed θh (linear along the θL's columns), and half the
+/// difference taken (central difference). The change of θd at a fixed θh (a fraction of
+/// the source's own size) is left out.
+fn add_sensitivities(
+    setup: &Setup,
+    strips: &Strips,
+    options: &ExtractOptions,
+    white_reflectance: f64,
+    samples: &mut [Sample],
+) {
+    let inputs = setup.uncertainty.inputs();
+    let changes: Vec<(usize, Vec<[f64; 3]>)> = inputs
+        .par_iter()
+        .enumerate()
+        .filter(|(_, input)| input.source != Source::WhiteReflectance && input.u[0] > 0.0)
+        .map(|(j, input)| {
+            let [plus, minus] = [1.0, -1.0].map(|sign| {
+                let moved = perturbed(setup, input.source, sign * input.u[0]);
+                let (moved_samples, _, _) = extract_theta(
+                    &moved,
+                    strips.map,
+                    strips.layout,
+                    strips.theta_l,
+                    options,
+                    white_reflectance,
+                );
+                let profiles: [Vec<(f64, f64)>; 3] =
+                    std::array::from_fn(|c| profile(&moved_samples, c));
+                samples
+                    .iter()
+                    .map(|s| {
+                        let h = s.half_difference().0;
+                        std::array::from_fn(|c| profile_at(&profiles[c], h).unwrap_or(s.rgb[c]))
+                    })
+                    .collect::<Vec<[f64; 3]>>()
+            });
+            let change = plus
+                .iter()
+                .zip(&minus)
+                .map(|(p, m)| std::array::from_fn(|c| (p[c] - m[c]) / 2.0))
+                .collect();
+            (j, change)
+        })
+        .collect();
+    let white = inputs[0].u;
+    for (i, sample) in samples.iter_mut().enumerate() {
+        let rgb = sample.rgb;
+        let dropped = sample.dropped;
+        let u = sample
+            .uncertainty
+            .get_or_insert_with(SampleUncertainty::default);
+        u.sources[0] = std::array::from_fn(|c| rgb[c] * white[c]);
+        for (j, change) in &changes {
+            u.sources[*j] = change[i];
+        }
+        for c in (0..3).filter(|&c| dropped[c]) {
+            for source in &mut u.sources {
+                source[c] = 0.0;
+            }
+        }
+    }
 }
 
 #[cfg(test)]

@@ -20,6 +20,7 @@
 //!
 //! β are in the camera-RGB domain (a white gives G = 100), so Kd is typically 0–100.
 
+pub mod budget;
 mod choice;
 mod data;
 mod error;
@@ -115,6 +116,10 @@ pub struct FitResult {
     /// `--model auto` only: the candidates' scores and why this model was chosen.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub selection: Option<Selection>,
+    /// The uncertainty budget ([`budget::budget`]), when the samples carry their
+    /// uncertainty and it was asked for.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub budget: Option<budget::Budget>,
 }
 
 /// Where a local method (Nelder–Mead) ended, against the global minimum of the eq. 10
@@ -418,6 +423,7 @@ fn fit_given(
         colour_shift,
         global_minimum,
         selection: None,
+        budget: None,
     })
 }
 

@@ -16,6 +16,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::brdf::Cosines;
+use crate::setup_uncertainty::SetupUncertainty;
 
 /// The physical setup of one scan. Lengths in millimetres, pixel pitch in micrometres,
 /// angles in degrees; see the module documentation for the frame.
@@ -53,6 +54,10 @@ pub struct Setup {
     /// The light is at θL plus this (the arm's zero is off by this much).
     #[serde(default)]
     pub arm_zero_offset_deg: f64,
+    /// Standard uncertainties of the white reflectance, the geometry and the arm's angle
+    /// (setup.json's `uncertainty` block; absent values take their defaults).
+    #[serde(default, skip_serializing_if = "SetupUncertainty::is_empty")]
+    pub uncertainty: SetupUncertainty,
 }
 
 /// What one pixel column sees on the cylinder, angles in degrees.
@@ -103,6 +108,14 @@ pub enum GeometryError {
     },
     #[error("setup field `{field}` must be 1 to {MAX_IMAGE_SIDE} pixels, got {value}")]
     ImageSize { field: &'static str, value: u32 },
+    #[error(
+        "setup field `uncertainty.{key}` must be a standard uncertainty in [0, {max}], got {value}"
+    )]
+    Uncertainty {
+        key: &'static str,
+        value: f64,
+        max: f64,
+    },
     #[error("setup field `{field}` = {value} is not a row of the {height}-row image")]
     RowOutside {
         field: &'static str,
@@ -340,6 +353,13 @@ impl Setup {
                     max,
                 });
             }
+        }
+        if let Some((key, value)) = self.uncertainty.invalid() {
+            return Err(GeometryError::Uncertainty {
+                key,
+                value,
+                max: crate::setup_uncertainty::MAX_UNCERTAINTY,
+            });
         }
         let frame = self.frame();
         let camera_perp = sub(

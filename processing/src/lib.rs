@@ -13,6 +13,7 @@ pub mod fit;
 pub mod geometry;
 pub mod metrics;
 pub mod samples;
+pub mod setup_uncertainty;
 
 pub mod calibrate;
 pub mod capture;

@@ -6,6 +6,12 @@
 //! ignored on reading. An empty `r`, `g` or `b` field is a value dropped at that point
 //! (clipped or underexposed in every exposure, or a white too dark to divide by): it is
 //! unknown, never 0 ([`Sample::dropped`]).
+//!
+//! Optional uncertainty columns (all or none, see [`uncertainty_columns`]):
+//! `u_noise_r,u_noise_g,u_noise_b`, β's standard uncertainty from the images' noise, then
+//! for each [`Source`] `u_<source>_r,…`: the signed change of β at the point's geometry
+//! for a change of that source by +1 standard uncertainty ([`SampleUncertainty`]). A
+//! dropped channel's fields are empty.
 
 use std::fs::File;
 use std::io::{BufWriter, Read, Write};
@@ -14,6 +20,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use crate::brdf::Cosines;
+use crate::setup_uncertainty::Source;
 
 /// One measured surface point: angles in degrees, β per camera channel.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
@@ -33,6 +40,21 @@ pub struct Sample {
     /// information, and fits and metrics leave them out.
     #[serde(default, skip_serializing_if = "none_dropped")]
     pub dropped: [bool; 3],
+    /// β's uncertainty at this point, when extraction estimated it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uncertainty: Option<SampleUncertainty>,
+}
+
+/// The uncertainty of one sample's β, per channel R, G, B (docs/ARCHITECTURE.md,
+/// "Uncertainty budget"), its components kept apart by how they correlate.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct SampleUncertainty {
+    /// Standard uncertainty from the images' noise: independent from point to point.
+    pub noise: [f64; 3],
+    /// Per [`Source`] (in [`Source::ALL`]'s order), the signed change of β at this
+    /// point's stated geometry when that source changes by +1 standard uncertainty:
+    /// common to every point of the scan (of its θL for [`Source::ArmAngle`]).
+    pub sources: [[f64; 3]; Source::COUNT],
 }
 
 fn none_dropped(dropped: &[bool; 3]) -> bool {
@@ -54,6 +76,20 @@ impl Sample {
     /// β of channel `c`, `None` where it was dropped.
     pub fn channel(&self, c: usize) -> Option<f64> {
         (!self.dropped[c]).then_some(self.rgb[c])
+    }
+
+    /// The half-vector and difference angles (radians) of the point: θh = acos(n·h),
+    /// signed by the side of the specular peak it lies on (the sign of θi − θr), and
+    /// θd = acos(v·h).
+    pub fn half_difference(&self) -> (f64, f64) {
+        let c = self.cosines();
+        let theta_h = c.n_dot_h.clamp(-1.0, 1.0).acos();
+        let side = if self.theta_i >= self.theta_r {
+            1.0
+        } else {
+            -1.0
+        };
+        (side * theta_h, c.v_dot_h.clamp(-1.0, 1.0).acos())
     }
 
     /// The cosines the models are evaluated with: the stored 3D ones, or the in-plane ones.
@@ -108,6 +144,15 @@ pub const HEADER: [&str; 6] = ["theta_l", "theta_i", "theta_r", "r", "g", "b"];
 /// The optional columns of a point's 3D cosines, in the order they are written.
 pub const COSINE_COLUMNS: [&str; 4] = ["n_dot_l", "n_dot_v", "n_dot_h", "v_dot_h"];
 
+/// The optional uncertainty columns, in the order they are written: `u_noise_r`, `…_g`,
+/// `…_b`, then `u_<source>_r`, `…_g`, `…_b` for each [`Source`].
+pub fn uncertainty_columns() -> Vec<String> {
+    std::iter::once("noise")
+        .chain(Source::ALL.iter().map(|s| s.name()))
+        .flat_map(|name| ["r", "g", "b"].map(|c| format!("u_{name}_{c}")))
+        .collect()
+}
+
 /// Why a samples CSV could not be read or written. Lines are 1-based and count the header.
 /// Each message is complete on its own (no separate source chain).
 #[derive(Debug, thiserror::Error)]
@@ -134,6 +179,17 @@ pub enum SamplesError {
 }
 
 impl SamplesError {
+    /// A field error of an uncertainty column, with the column's own name.
+    fn named(self, column: &str) -> Self {
+        match self {
+            SamplesError::Field { line, message, .. } => SamplesError::Row {
+                line,
+                message: format!("column `{column}`: {message}"),
+            },
+            other => other,
+        }
+    }
+
     /// Names the file a reader or writer error came from.
     fn in_file(self, path: &Path) -> Self {
         match self {
@@ -193,6 +249,21 @@ pub fn read_csv_from<R: Read>(reader: R) -> Result<Vec<Sample>, SamplesError> {
             })
         }
     };
+    let names = uncertainty_columns();
+    let uncertainty_index: Vec<usize> = names
+        .iter()
+        .filter_map(|name| header.iter().position(|h| h == name))
+        .collect();
+    let uncertainty_index = match uncertainty_index.len() {
+        0 => None,
+        n if n == names.len() => Some(uncertainty_index),
+        _ => {
+            return Err(SamplesError::Header {
+                expected: format!("all or none of {}", names.join(",")),
+                found: header.iter().collect::<Vec<_>>().join(","),
+            })
+        }
+    };
     let mut samples = Vec::new();
     for record in csv.records() {
         let record = record.map_err(|e| match e.position() {
@@ -246,6 +317,31 @@ pub fn read_csv_from<R: Read>(reader: R) -> Result<Vec<Sample>, SamplesError> {
                 })
             }
         };
+        let uncertainty = match &uncertainty_index {
+            None => None,
+            Some(index) => {
+                let mut u = [[0.0; 3]; 1 + Source::COUNT];
+                for (k, &i) in index.iter().enumerate() {
+                    let text = record.get(i).unwrap_or("");
+                    // A dropped channel has no uncertainty; a kept one needs its value.
+                    if dropped[k % 3] && text.is_empty() {
+                        continue;
+                    }
+                    u[k / 3][k % 3] =
+                        parse_field(text, line, "uncertainty").map_err(|e| e.named(&names[k]))?;
+                }
+                if u[0].iter().any(|&v| v < 0.0) {
+                    return Err(SamplesError::Row {
+                        line,
+                        message: String::from("a noise uncertainty (u_noise_*) is negative"),
+                    });
+                }
+                Some(SampleUncertainty {
+                    noise: u[0],
+                    sources: std::array::from_fn(|j| u[j + 1]),
+                })
+            }
+        };
         samples.push(Sample {
             theta_l: values[0],
             theta_i: values[1],
@@ -253,6 +349,7 @@ pub fn read_csv_from<R: Read>(reader: R) -> Result<Vec<Sample>, SamplesError> {
             rgb: [values[3], values[4], values[5]],
             cosines,
             dropped,
+            uncertainty,
         });
     }
     Ok(samples)
@@ -299,19 +396,53 @@ pub fn write_csv(path: &Path, samples: &[Sample]) -> Result<(), SamplesError> {
 
 /// Writes samples as CSV text to any writer; numbers use Rust's shortest round-trip form.
 /// When any sample carries 3D cosines, every row gets the four cosine columns (in-plane
-/// cosines for samples without). A dropped channel is written as an empty field.
+/// cosines for samples without). When every sample carries its uncertainty, the
+/// uncertainty columns follow. A dropped channel is written as an empty field.
 pub fn write_csv_to<W: Write>(writer: W, samples: &[Sample]) -> Result<(), SamplesError> {
     let with_cosines = samples.iter().any(|s| s.cosines.is_some());
+    let with_uncertainty = !samples.is_empty() && samples.iter().all(|s| s.uncertainty.is_some());
     let mut csv = csv::Writer::from_writer(writer);
     let cosine_header: &[&str] = if with_cosines { &COSINE_COLUMNS } else { &[] };
-    csv.write_record(HEADER.iter().chain(cosine_header))
-        .map_err(SamplesError::Csv)?;
+    let uncertainty_header = if with_uncertainty {
+        uncertainty_columns()
+    } else {
+        Vec::new()
+    };
+    csv.write_record(
+        HEADER
+            .iter()
+            .chain(cosine_header)
+            .map(|h| h.to_string())
+            .chain(uncertainty_header),
+    )
+    .map_err(SamplesError::Csv)?;
     for s in samples {
         let angles = [s.theta_l, s.theta_i, s.theta_r].map(|v| v.to_string());
         let beta = [0, 1, 2].map(|c| s.channel(c).map_or_else(String::new, |v| v.to_string()));
         let cosines = with_cosines.then(|| s.cosines().to_array().map(|v| v.to_string()));
-        csv.write_record(angles.iter().chain(&beta).chain(cosines.iter().flatten()))
-            .map_err(SamplesError::Csv)?;
+        let uncertainty: Vec<String> = match (&s.uncertainty, with_uncertainty) {
+            (Some(u), true) => std::iter::once(&u.noise)
+                .chain(&u.sources)
+                .flat_map(|v| {
+                    [0, 1, 2].map(|c| {
+                        if s.dropped[c] {
+                            String::new()
+                        } else {
+                            v[c].to_string()
+                        }
+                    })
+                })
+                .collect(),
+            _ => Vec::new(),
+        };
+        csv.write_record(
+            angles
+                .iter()
+                .chain(&beta)
+                .chain(cosines.iter().flatten())
+                .chain(&uncertainty),
+        )
+        .map_err(SamplesError::Csv)?;
     }
     csv.flush().map_err(|error| SamplesError::Io {
         path: String::from("samples CSV output"),

@@ -32,6 +32,7 @@ fn setup() -> Setup {
         camera_offset_mm: 0.0,
         cylinder_tilt_deg: 0.0,
         arm_zero_offset_deg: 0.0,
+        uncertainty: Default::default(),
     }
 }
 

@@ -17,6 +17,7 @@ fn setup(radius: f64, camera: f64, light: f64, focal: f64, width: u32) -> Setup 
         camera_offset_mm: 0.0,
         cylinder_tilt_deg: 0.0,
         arm_zero_offset_deg: 0.0,
+        uncertainty: Default::default(),
     }
 }
 

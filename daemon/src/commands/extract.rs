@@ -16,7 +16,8 @@ pub struct Args {
     /// Scan directory: setup.json plus captures (TIFF or camera raw with .json sidecars).
     dir: PathBuf,
     /// Output samples CSV (theta_l,theta_i,theta_r,r,g,b, then the 3D cosines
-    /// n_dot_l,n_dot_v,n_dot_h,v_dot_h; β in camera RGB, empty where dropped).
+    /// n_dot_l,n_dot_v,n_dot_h,v_dot_h and the uncertainty columns u_*; β in camera RGB,
+    /// empty where dropped).
     #[arg(long)]
     out: PathBuf,
     /// Reflectance of the white reference (1 = perfect reflecting diffuser), instead of
@@ -93,6 +94,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "white reference reflectance {} ({source})",
         extraction.white_reflectance
     );
+    if let Some(inputs) = &extraction.inputs {
+        let listed: Vec<String> = inputs.iter().map(|i| i.describe()).collect();
+        println!(
+            "standard uncertainties of the setup (setup.json's `uncertainty`): {}",
+            listed.join(", ")
+        );
+    }
     if !extraction.skipped_without_sidecar.is_empty() {
         eprintln!(
             "warning: skipped {} image files without a .json sidecar (first: {})",

@@ -63,6 +63,11 @@ pub struct Args {
     /// Polish the robust fit with Nelder–Mead over all parameters.
     #[arg(long)]
     polish: bool,
+    /// Also propagate the uncertainty budget by Monte Carlo (JCGM 101) with this many
+    /// draws (at least 2; 1000 or more for a 95 % interval), beside the law of
+    /// propagation.
+    #[arg(long, value_name = "DRAWS")]
+    monte_carlo: Option<usize>,
     /// Output fit JSON.
     #[arg(long)]
     out: PathBuf,
@@ -127,9 +132,36 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     .with_context(|| format!("fitting {}", args.samples.display()));
     spinner.finish_and_clear();
-    let result = result?;
+    let mut result = result?;
     if let Some(selection) = &result.selection {
         print_selection(selection);
+    }
+    let has_uncertainty = selected.iter().all(|s| s.uncertainty.is_some());
+    let spinner = progress::spinner("uncertainty budget".to_string());
+    let budget = fit::budget::budget_if_possible(&selected, &result);
+    spinner.finish_and_clear();
+    if let Some(mut budget) = budget.context("the uncertainty budget")? {
+        if let Some(draws) = args.monte_carlo {
+            let spinner = progress::spinner(format!("Monte Carlo, {draws} draws"));
+            let distribution = fit::budget::monte_carlo(
+                &selected,
+                &result,
+                draws,
+                fit::budget::Draw::All,
+                MONTE_CARLO_SEED,
+            );
+            spinner.finish_and_clear();
+            budget.monte_carlo = Some(fit::budget::MonteCarlo {
+                draws,
+                parameters: distribution.context("the Monte Carlo budget")?,
+            });
+        }
+        result.budget = Some(budget);
+    } else if args.monte_carlo.is_some() {
+        bail!(
+            "--monte-carlo needs samples with uncertainty columns (gonio extract writes them) \
+             and a fit with standard uncertainties"
+        );
     }
     let json = serde_json::to_string_pretty(&result).context("serialising the fit")?;
     write_output(&args.out, |path| std::fs::write(path, json + "\n"))?;
@@ -177,6 +209,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             ci.ks.map(|b| interval(b, 3)).join(" ")
         );
     }
+    match &result.budget {
+        Some(budget) => print_budget(budget),
+        None if !has_uncertainty => println!(
+            "  no uncertainty budget: the samples have no uncertainty columns (gonio extract \
+             writes them); the intervals above are the noise's alone"
+        ),
+        None => {}
+    }
     if let Some(global) = result.global_minimum {
         let times = result.loss / global.loss;
         if global.reached {
@@ -209,6 +249,67 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// Seed of `--monte-carlo`'s draws: the same samples give the same distribution.
+const MONTE_CARLO_SEED: u64 = 0x676f_6e69_6f5f_6d63;
+
+/// The budget as a GUM table: one row per parameter, one column per source.
+fn print_budget(budget: &fit::budget::Budget) {
+    let named = budget.named();
+    let Some((_, first)) = named.first() else {
+        return;
+    };
+    println!(
+        "  uncertainty budget (standard uncertainties; U = {}·u_c; residuals {:.2}× the noise):",
+        budget.coverage_factor, budget.residual_to_noise
+    );
+    let mut header = format!("  {:<8} {:>10}", "", "value");
+    for c in &first.contributions {
+        header += &format!(" {:>10}", short(&c.source));
+    }
+    header += &format!(
+        " {:>10} {:>10}  interval (k = {})",
+        "u_c", "U", budget.coverage_factor
+    );
+    println!("{header}");
+    for (name, b) in &named {
+        let mut row = format!("  {name:<8} {:>10.5}", b.value);
+        for c in &b.contributions {
+            row += &format!(" {:>10.2e}", c.u);
+        }
+        row += &format!(
+            " {:>10.2e} {:>10.2e}  [{:.5}, {:.5}]",
+            b.combined, b.expanded, b.interval[0], b.interval[1]
+        );
+        println!("{row}");
+    }
+    if let Some(mc) = &budget.monte_carlo {
+        println!(
+            "  Monte Carlo ({} draws): standard deviation, 95 % coverage interval",
+            mc.draws
+        );
+        for ((name, _), d) in named.iter().zip(mc.parameters.flat()) {
+            println!(
+                "  {name:<8} {:>10.2e}  [{:.5}, {:.5}]",
+                d.std, d.interval[0], d.interval[1]
+            );
+        }
+    }
+}
+
+/// A budget line's column heading.
+fn short(source: &str) -> &str {
+    match source {
+        "white_reflectance" => "white",
+        "camera_offset" => "cam offset",
+        "camera_distance" => "cam dist",
+        "light_distance" => "light dist",
+        "cylinder_tilt" => "tilt",
+        "arm_zero" => "arm zero",
+        "arm_angle" => "arm angle",
+        other => other,
+    }
 }
 
 /// The candidates' scores and the reason for the choice.

@@ -24,5 +24,6 @@ pub fn d200_setup() -> Setup {
         camera_offset_mm: 0.0,
         cylinder_tilt_deg: 0.0,
         arm_zero_offset_deg: 0.0,
+        uncertainty: Default::default(),
     }
 }

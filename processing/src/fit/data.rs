@@ -16,6 +16,7 @@ pub fn fits_colour_shift(model: Model, samples: &[Sample]) -> bool {
 }
 
 /// Samples prepared for fitting.
+#[derive(Clone)]
 pub(crate) struct Data {
     pub bases: Vec<Basis>,
     /// Diffuse basis per point (copied out of `bases` for the inner loops).
@@ -86,6 +87,24 @@ impl Data {
             residual_floor: 1e-12 * mean_norm + f64::MIN_POSITIVE,
             zero_loss,
         })
+    }
+
+    /// The same points with the measured values `y` (one per point; dropped values stay
+    /// left out).
+    pub fn with_measured(&self, mut y: Vec<[f64; 3]>) -> Data {
+        if let Some(keep) = &self.keep {
+            for (v, keep) in y.iter_mut().zip(keep) {
+                *v = std::array::from_fn(|c| v[c] * keep[c]);
+            }
+        }
+        let zero_loss: f64 = y.iter().map(|v| metrics::point_loss(v, &[0.0; 3])).sum();
+        let mean_norm = zero_loss / y.len().max(1) as f64;
+        Data {
+            y,
+            residual_floor: 1e-12 * mean_norm + f64::MIN_POSITIVE,
+            zero_loss,
+            ..self.clone()
+        }
     }
 
     /// Eq. 10 loss of `params` (specular colour constant) over the measured values.

@@ -54,6 +54,18 @@ pub struct ParameterSet<T> {
     pub m: Vec<T>,
 }
 
+impl<T> ParameterSet<T> {
+    /// Every value in order: Kd, Ks, Ks_90 (when present) per channel, then m.
+    pub fn flat(&self) -> Vec<&T> {
+        self.kd
+            .iter()
+            .chain(&self.ks)
+            .chain(self.ks_90.iter().flatten())
+            .chain(&self.m)
+            .collect()
+    }
+}
+
 /// Correlations between fitted parameters.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Correlation {

@@ -13,6 +13,7 @@ use gonio_processing::brdf::Model;
 use gonio_processing::capture::{is_capture_path, sidecar_path, CaptureError, Frame};
 use gonio_processing::color::CameraModel;
 use gonio_processing::extract::{extract_scan, ExtractOptions};
+use gonio_processing::fit::budget::budget_if_possible;
 use gonio_processing::fit::{fit, fit_auto, FitOptions, FitResult, CANDIDATES};
 use gonio_processing::hdr::{merge, MergeOptions};
 use gonio_processing::metrics::err_p;
@@ -403,6 +404,10 @@ fn fit_model(dir: &Path, plan: &ScanPlan, model: &str) -> anyhow::Result<Value> 
             Some(result) => result,
             None => fit(&samples, &FitOptions::new(model.parse::<Model>()?))?,
         }
+    };
+    let result = FitResult {
+        budget: budget_if_possible(&samples, &result)?,
+        ..result
     };
     write_atomic(&dir.join(name), &serde_json::to_vec_pretty(&result)?)
         .with_context(|| name.to_owned())?;

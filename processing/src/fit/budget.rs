@@ -1,0 +1,532 @@
+//! The uncertainty budget of a fit, as the GUM states one (JCGM 100; docs/ARCHITECTURE.md,
+//! "Uncertainty budget").
+//!
+//! Measurement model: the fitted parameters θ = F(β₁ … β_N) are the eq. 10 minimum over
+//! the samples' β, and each β_p = β̂_p + Σ_j c_pj·z_j + e_p: the value measured, the
+//! inputs of the setup (white reflectance, geometry, arm) each off by z_j standard
+//! uncertainties, with c_pj the change of β_p for z_j = 1 ([`SampleUncertainty::sources`],
+//! common to every point, or to one θL's points for the arm's angle), and e_p the
+//! independent noise. Each source's contribution to a parameter is its sensitivity times
+//! its standard uncertainty, found by fitting again with the samples moved by ±c_·j
+//! (central difference: the law of propagation with numerical sensitivity coefficients,
+//! JCGM 100 §5.1.3). The arm's angle is one source per θL, its contributions added in
+//! quadrature. The noise and the model misfit come from the fit's own residuals (the HC1
+//! sandwich, see [`super::uncertainty`]): its variance is split between them in the ratio
+//! of the residuals' Σ r² to the noise's Σ u² the samples state (what the residuals show
+//! beyond the noise is misfit). The combined standard uncertainty is the root sum of
+//! squares of the lines (the sources are independent); U = k·u_c with k = 2.
+//! Kd, Ks and Ks_90 are reported as they are; the roughness on the log scale (its lines are
+//! m times those of ln m; its interval m·exp(±k·u_c(ln m))).
+//!
+//! [`monte_carlo`] propagates the same model by JCGM 101: every source and the noise drawn
+//! at once, the fit repeated per draw.
+
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use super::data::Data;
+use super::{parameter_count, robust, FitError, FitMethod, FitOptions, FitResult, ParameterSet};
+use crate::brdf::Roughness;
+use crate::samples::{distinct_theta_l, Sample, SampleUncertainty, THETA_L_TOLERANCE};
+use crate::setup_uncertainty::Source;
+
+/// The coverage factor of the expanded uncertainty (≈ 95 % for a normal distribution).
+pub const COVERAGE_FACTOR: f64 = 2.0;
+
+/// One line of a parameter's budget: a source and its contribution (a standard
+/// uncertainty in the parameter's unit).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Contribution {
+    /// `noise`, `misfit`, or a [`Source::name`].
+    pub source: String,
+    pub u: f64,
+}
+
+/// The budget of one parameter.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct ParameterBudget {
+    /// The fitted value.
+    pub value: f64,
+    /// Every line, noise and misfit first, then the sources in [`Source::ALL`]'s order.
+    pub contributions: Vec<Contribution>,
+    /// Combined standard uncertainty u_c.
+    pub combined: f64,
+    /// Expanded uncertainty U = k·u_c.
+    pub expanded: f64,
+    /// The interval value ± U (the roughness: m·exp(±k·u_c(ln m))), its lower end at
+    /// least 0.
+    pub interval: [f64; 2],
+}
+
+/// The uncertainty budget of a fit.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Budget {
+    /// k of U = k·u_c.
+    pub coverage_factor: f64,
+    /// √(Σ r² / Σ u_noise²) over the measured values: the residuals' scatter over the
+    /// noise the samples state (1: the model fits to the noise).
+    pub residual_to_noise: f64,
+    pub parameters: ParameterSet<ParameterBudget>,
+    /// The same propagation by Monte Carlo, when asked for.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub monte_carlo: Option<MonteCarlo>,
+}
+
+/// A Monte Carlo propagation (JCGM 101) of the budget's model.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MonteCarlo {
+    pub draws: usize,
+    pub parameters: ParameterSet<Distribution>,
+}
+
+impl Budget {
+    /// Every parameter's budget with its name (`kd_r`, …, `m` or `m_r`, …), in order.
+    pub fn named(&self) -> Vec<(String, &ParameterBudget)> {
+        let p = &self.parameters;
+        let channel = ["r", "g", "b"];
+        let mut out = Vec::new();
+        for (name, set) in [
+            ("kd", Some(&p.kd)),
+            ("ks", Some(&p.ks)),
+            ("ks_90", p.ks_90.as_ref()),
+        ] {
+            if let Some(set) = set {
+                for (c, b) in set.iter().enumerate() {
+                    out.push((format!("{name}_{}", channel[c]), b));
+                }
+            }
+        }
+        for (c, b) in p.m.iter().enumerate() {
+            let name = if p.m.len() == 1 {
+                "m".to_string()
+            } else {
+                format!("m_{}", channel[c])
+            };
+            out.push((name, b));
+        }
+        out
+    }
+}
+
+/// The parameters of a fit as one vector: Kd, Ks, Ks_90 (models with one) per channel,
+/// then ln m (one or per channel).
+fn vector(kd: [f64; 3], ks: [f64; 3], ks_90: Option<[f64; 3]>, m: &[f64]) -> Vec<f64> {
+    kd.iter()
+        .chain(&ks)
+        .chain(ks_90.iter().flatten())
+        .copied()
+        .chain(m.iter().map(|m| m.ln()))
+        .collect()
+}
+
+/// How many roughness values a fit with `roughness` has.
+fn roughness_count(roughness: Roughness) -> usize {
+    match roughness {
+        Roughness::Shared => 1,
+        Roughness::PerChannel => 3,
+    }
+}
+
+/// The fitter of the perturbed samples: the fit's model, roughness and colour-shift
+/// decision, by the robust method, on the same points with other β.
+struct Refit<'a> {
+    data: Data,
+    options: FitOptions,
+    fresnel: bool,
+    samples: &'a [Sample],
+}
+
+impl Refit<'_> {
+    /// θ of the fit to the measured values `moved` (one per sample).
+    fn fit(&self, moved: &[[f64; 3]]) -> Result<Vec<f64>, FitError> {
+        let data = self.data.with_measured(moved.to_vec());
+        let (found, ks_90) = robust::fit(&data, &self.options)?;
+        let m = &found.params.m[..roughness_count(self.options.roughness)];
+        let ks_90 = self.fresnel.then_some(ks_90);
+        Ok(vector(found.params.kd, found.params.ks, ks_90, m))
+    }
+
+    /// The measured β moved by `scale` × `change(sample)` where `at(sample)`.
+    fn moved(
+        &self,
+        scale: f64,
+        change: impl Fn(&SampleUncertainty) -> [f64; 3],
+        at: impl Fn(&Sample) -> bool,
+    ) -> Vec<[f64; 3]> {
+        self.samples
+            .iter()
+            .zip(&self.data.y)
+            .map(|(s, y)| match (&s.uncertainty, at(s)) {
+                (Some(u), true) => {
+                    let d = change(u);
+                    std::array::from_fn(|c| y[c] + scale * d[c])
+                }
+                _ => *y,
+            })
+            .collect()
+    }
+
+    /// Half the difference of the fits with the samples moved by ±`change` where `at`.
+    fn sensitivity(
+        &self,
+        change: impl Fn(&SampleUncertainty) -> [f64; 3] + Copy,
+        at: impl Fn(&Sample) -> bool + Copy,
+    ) -> Result<Vec<f64>, FitError> {
+        let plus = self.fit(&self.moved(1.0, change, at))?;
+        let minus = self.fit(&self.moved(-1.0, change, at))?;
+        Ok(plus
+            .iter()
+            .zip(&minus)
+            .map(|(p, m)| (p - m) / 2.0)
+            .collect())
+    }
+}
+
+/// [`budget`] when `samples` carry their uncertainty and `result` its standard
+/// uncertainties; `None` otherwise (nothing to propagate).
+pub fn budget_if_possible(
+    samples: &[Sample],
+    result: &FitResult,
+) -> Result<Option<Budget>, FitError> {
+    if result.stderr.is_none() || samples.iter().any(|s| s.uncertainty.is_none()) {
+        return Ok(None);
+    }
+    budget(samples, result).map(Some)
+}
+
+/// Why a budget could not be made.
+fn missing(what: &str) -> FitError {
+    FitError::InvalidOptions(format!("no uncertainty budget: {what}"))
+}
+
+/// The refitter of `result`'s model on `samples`, which must carry their uncertainty.
+fn refitter<'a>(samples: &'a [Sample], result: &FitResult) -> Result<Refit<'a>, FitError> {
+    let mut options = FitOptions::new(result.model);
+    options.roughness = result.roughness;
+    if samples.iter().any(|s| s.uncertainty.is_none()) {
+        return Err(missing(
+            "the samples carry no uncertainty columns (extract them again with this version)",
+        ));
+    }
+    let mut data = Data::new(
+        samples,
+        result.model,
+        parameter_count(result.model, result.roughness),
+    )?;
+    // The colour shift stays as the fit decided it.
+    let fresnel = result.model.has_fresnel_colour();
+    if !result.colour_shift.is_some_and(|c| c.fitted) {
+        data.shift_weight = None;
+    }
+    options.method = FitMethod::Robust;
+    options.uncertainty = false;
+    options.robust.polish = false;
+    Ok(Refit {
+        data,
+        options,
+        fresnel,
+        samples,
+    })
+}
+
+/// The budget of `result`, a fit of `samples` (its model and roughness; the refits are
+/// robust). The samples must carry their uncertainty ([`Sample::uncertainty`]) and the
+/// fit its standard uncertainties (`stderr`, the noise and misfit lines).
+pub fn budget(samples: &[Sample], result: &FitResult) -> Result<Budget, FitError> {
+    let stderr = result
+        .stderr
+        .as_ref()
+        .ok_or_else(|| missing("the fit has no standard uncertainties"))?;
+    let refit = refitter(samples, result)?;
+    let m = result.m.per_channel();
+    let m = &m[..roughness_count(result.roughness)];
+    let value = vector(result.kd, result.ks, result.ks_90, m);
+    // The HC1 standard uncertainties in the same layout (stderr.m is m·σ(ln m)).
+    let scatter: Vec<f64> = stderr
+        .kd
+        .iter()
+        .chain(&stderr.ks)
+        .chain(
+            result
+                .ks_90
+                .map(|_| stderr.ks_90.unwrap_or(stderr.ks))
+                .iter()
+                .flatten(),
+        )
+        .copied()
+        .chain(stderr.m.iter().zip(m).map(|(s, m)| s / m))
+        .collect();
+
+    // The residuals' scatter against the noise the samples state.
+    let estimates: Vec<[f64; 3]> = samples.iter().map(|s| result.predict_sample(s)).collect();
+    let (mut residual2, mut noise2) = (0.0, 0.0);
+    for (s, e) in samples.iter().zip(&estimates) {
+        let u = s.uncertainty.as_ref().map_or([0.0; 3], |u| u.noise);
+        for c in (0..3).filter(|&c| !s.dropped[c]) {
+            residual2 += (s.rgb[c] - e[c]).powi(2);
+            noise2 += u[c] * u[c];
+        }
+    }
+    let ratio = if noise2 > 0.0 {
+        (residual2 / noise2).sqrt()
+    } else {
+        f64::INFINITY
+    };
+    let noise_share = if ratio > 1.0 { 1.0 / ratio } else { 1.0 };
+    let misfit_share = (1.0 - noise_share * noise_share).max(0.0).sqrt();
+
+    // Common sources: one fit pair each; the arm's angle: one pair per θL.
+    let theta_l = distinct_theta_l(samples);
+    let mut jobs: Vec<(usize, Option<f64>)> = (0..Source::COUNT)
+        .filter(|&j| Source::ALL[j] != Source::ArmAngle)
+        .map(|j| (j, None))
+        .collect();
+    let angle = Source::ALL
+        .iter()
+        .position(|&s| s == Source::ArmAngle)
+        .expect("the arm's angle is a source");
+    jobs.extend(theta_l.iter().map(|&t| (angle, Some(t))));
+    let changes: Vec<(usize, Vec<f64>)> = jobs
+        .par_iter()
+        .map(|&(j, at)| {
+            let change = move |u: &SampleUncertainty| u.sources[j];
+            let within =
+                move |s: &Sample| at.is_none_or(|t| (s.theta_l - t).abs() <= THETA_L_TOLERANCE);
+            Ok((j, refit.sensitivity(change, within)?))
+        })
+        .collect::<Result<_, FitError>>()?;
+    let mut lines = vec![vec![0.0; value.len()]; Source::COUNT];
+    for (j, change) in &changes {
+        for (line, d) in lines[*j].iter_mut().zip(change) {
+            *line = (*line * *line + d * d).sqrt();
+        }
+    }
+
+    let k = COVERAGE_FACTOR;
+    let logs = value.len() - m.len();
+    let parameter = |i: usize| {
+        let log = i >= logs;
+        // Lines of ln m are reported as lines of m.
+        let unit = if log { value[i].exp() } else { 1.0 };
+        let scatter = scatter[i];
+        let mut contributions = vec![
+            Contribution {
+                source: "noise".into(),
+                u: unit * scatter * noise_share,
+            },
+            Contribution {
+                source: "misfit".into(),
+                u: unit * scatter * misfit_share,
+            },
+        ];
+        contributions.extend(
+            Source::ALL
+                .iter()
+                .zip(&lines)
+                .map(|(s, line)| Contribution {
+                    source: s.name().into(),
+                    u: unit * line[i],
+                }),
+        );
+        let combined_raw =
+            (scatter * scatter + lines.iter().map(|l| l[i] * l[i]).sum::<f64>()).sqrt();
+        let (reported, interval) = if log {
+            let m = value[i].exp();
+            (
+                m,
+                [m * (-k * combined_raw).exp(), m * (k * combined_raw).exp()],
+            )
+        } else {
+            (
+                value[i],
+                [
+                    (value[i] - k * combined_raw).max(0.0),
+                    value[i] + k * combined_raw,
+                ],
+            )
+        };
+        ParameterBudget {
+            value: reported,
+            contributions,
+            combined: unit * combined_raw,
+            expanded: k * unit * combined_raw,
+            interval,
+        }
+    };
+    let fresnel = result.ks_90.is_some();
+    let n_colour = if fresnel { 9 } else { 6 };
+    let budget = Budget {
+        coverage_factor: k,
+        residual_to_noise: if ratio.is_finite() { ratio } else { 0.0 },
+        parameters: ParameterSet {
+            kd: std::array::from_fn(parameter),
+            ks: std::array::from_fn(|c| parameter(3 + c)),
+            ks_90: fresnel.then(|| std::array::from_fn(|c| parameter(6 + c))),
+            m: (n_colour..value.len()).map(parameter).collect(),
+        },
+        monte_carlo: None,
+    };
+    let finite = budget
+        .named()
+        .iter()
+        .all(|(_, b)| b.combined.is_finite() && b.interval.iter().all(|v| v.is_finite()));
+    if !finite {
+        return Err(FitError::Overflow("uncertainty budget"));
+    }
+    Ok(budget)
+}
+
+/// A parameter's distribution over Monte Carlo draws (JCGM 101).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Distribution {
+    pub mean: f64,
+    /// Standard deviation: the standard uncertainty.
+    pub std: f64,
+    /// The probabilistically symmetric 95 % coverage interval (2.5 and 97.5 percentiles).
+    pub interval: [f64; 2],
+}
+
+/// A normal deviate stream (splitmix64, Box–Muller), reproducible from its seed.
+struct Normal {
+    state: u64,
+    spare: Option<f64>,
+}
+
+impl Normal {
+    fn new(seed: u64) -> Self {
+        Normal {
+            state: seed,
+            spare: None,
+        }
+    }
+
+    fn uniform(&mut self) -> f64 {
+        self.state = self.state.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^= z >> 31;
+        ((z >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+    }
+
+    fn next(&mut self) -> f64 {
+        if let Some(v) = self.spare.take() {
+            return v;
+        }
+        let (u1, u2) = (self.uniform(), self.uniform());
+        let r = (-2.0 * u1.ln()).sqrt();
+        let (s, c) = (2.0 * std::f64::consts::PI * u2).sin_cos();
+        self.spare = Some(r * s);
+        r * c
+    }
+}
+
+/// What a Monte Carlo draw moves.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Draw {
+    /// The setup's sources only (the part the law of propagation computes by sensitivity).
+    Sources,
+    /// The sources and each value's noise (scaled by the residuals' scatter over the noise
+    /// when it is larger: misfit drawn as if independent).
+    All,
+}
+
+/// The distribution of every parameter of `result` (a fit of `samples`) over `draws`
+/// Monte Carlo draws of the measurement model, reproducible from `seed`: in each draw
+/// every common source, each θL's arm angle and (with [`Draw::All`]) each value's noise
+/// are drawn from their normal distributions and the fit is repeated.
+pub fn monte_carlo(
+    samples: &[Sample],
+    result: &FitResult,
+    draws: usize,
+    what: Draw,
+    seed: u64,
+) -> Result<ParameterSet<Distribution>, FitError> {
+    if draws < 2 {
+        return Err(FitError::InvalidOptions(format!(
+            "a Monte Carlo needs 2 draws or more, got {draws}"
+        )));
+    }
+    let refit = refitter(samples, result)?;
+    let theta_l = distinct_theta_l(samples);
+    let scale = match what {
+        Draw::Sources => 0.0,
+        Draw::All => {
+            let (mut r2, mut u2) = (0.0, 0.0);
+            for s in samples {
+                let e = result.predict_sample(s);
+                let u = s.uncertainty.as_ref().map_or([0.0; 3], |u| u.noise);
+                for c in (0..3).filter(|&c| !s.dropped[c]) {
+                    r2 += (s.rgb[c] - e[c]).powi(2);
+                    u2 += u[c] * u[c];
+                }
+            }
+            if u2 > 0.0 {
+                (r2 / u2).sqrt().max(1.0)
+            } else {
+                1.0
+            }
+        }
+    };
+    let angle = Source::ALL
+        .iter()
+        .position(|&s| s == Source::ArmAngle)
+        .expect("the arm's angle is a source");
+    let fits: Vec<Vec<f64>> = (0..draws)
+        .into_par_iter()
+        .map(|d| {
+            let mut normal = Normal::new(seed ^ (d as u64).wrapping_mul(0xd6e8_feb8_6659_fd93));
+            let z: Vec<f64> = (0..Source::COUNT).map(|_| normal.next()).collect();
+            let z_angle: Vec<f64> = theta_l.iter().map(|_| normal.next()).collect();
+            let moved: Vec<[f64; 3]> = samples
+                .iter()
+                .zip(&refit.data.y)
+                .map(|(s, y)| {
+                    let u = s.uncertainty.as_ref().expect("checked by the refitter");
+                    let k = theta_l
+                        .iter()
+                        .position(|t| (s.theta_l - t).abs() <= THETA_L_TOLERANCE)
+                        .unwrap_or(0);
+                    std::array::from_fn(|c| {
+                        let mut v = y[c];
+                        for (j, zj) in z.iter().enumerate() {
+                            let zj = if j == angle { z_angle[k] } else { *zj };
+                            v += zj * u.sources[j][c];
+                        }
+                        if scale > 0.0 && !s.dropped[c] {
+                            v += scale * u.noise[c] * normal.next();
+                        }
+                        v
+                    })
+                })
+                .collect();
+            refit.fit(&moved)
+        })
+        .collect::<Result<_, FitError>>()?;
+    let m_count = roughness_count(result.roughness);
+    let fresnel = result.ks_90.is_some();
+    let distribution = |i: usize| {
+        let log = i >= fits[0].len() - m_count;
+        let mut values: Vec<f64> = fits
+            .iter()
+            .map(|f| if log { f[i].exp() } else { f[i] })
+            .collect();
+        let n = values.len() as f64;
+        let mean = values.iter().sum::<f64>() / n;
+        let std = (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+        values.sort_by(f64::total_cmp);
+        let at = |q: f64| values[((q * (n - 1.0)).round() as usize).min(values.len() - 1)];
+        Distribution {
+            mean,
+            std,
+            interval: [at(0.025), at(0.975)],
+        }
+    };
+    let n_colour = if fresnel { 9 } else { 6 };
+    Ok(ParameterSet {
+        kd: std::array::from_fn(distribution),
+        ks: std::array::from_fn(|c| distribution(3 + c)),
+        ks_90: fresnel.then(|| std::array::from_fn(|c| distribution(6 + c))),
+        m: (n_colour..n_colour + m_count).map(distribution).collect(),
+    })
+}
