@@ -300,6 +300,79 @@ fn tradeoff_on_a_tiny_scene_costs_every_setting_and_recommends_one() {
     assert!(summary["recommended"]["total_s"].as_f64().unwrap() > 0.0);
 }
 
+#[test]
+fn tradeoff_ranks_by_the_expanded_uncertainty_of_the_parameters_asked_for() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("tiny.toml");
+    std::fs::write(&scene, tiny_scene()).unwrap();
+    let out = dir.path().join("tradeoff");
+    let run = |rank_by: &str| {
+        gonio(&[
+            "tradeoff",
+            "--scene",
+            scene.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--strides",
+            "1,4",
+            "--methods",
+            "robust",
+            "--rank-by",
+            rank_by,
+        ])
+    };
+    let result = run("ks_g,m");
+    assert!(result.status.success(), "{}", text(&result.stderr));
+    let table = std::fs::read_to_string(out.join("tradeoff.csv")).unwrap();
+    let header: Vec<&str> = table.lines().next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let rows: Vec<Vec<String>> = table
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(str::to_string).collect())
+        .collect();
+    let num = |row: &Vec<String>, name: &str| row[col(name)].parse::<f64>().unwrap();
+    // Every setting has its relative expanded uncertainty; fewer columns, fewer θL or
+    // fewer exposures never make it smaller than the full scan's by much.
+    let full = rows
+        .iter()
+        .find(|r| num(r, "n_theta_l") == 2.0 && num(r, "bracket") == 2.0 && num(r, "stride") == 1.0)
+        .unwrap();
+    for row in &rows {
+        let u = num(row, "rel_expanded");
+        assert!(u > 0.0 && u.is_finite(), "{row:?}");
+    }
+    let one_theta = rows
+        .iter()
+        .find(|r| num(r, "n_theta_l") == 1.0 && num(r, "bracket") == 2.0 && num(r, "stride") == 1.0)
+        .unwrap();
+    assert!(
+        num(one_theta, "rel_expanded") >= 0.9 * num(full, "rel_expanded"),
+        "{one_theta:?} {full:?}"
+    );
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("tradeoff.json")).unwrap()).unwrap();
+    assert_eq!(
+        summary["ranked_by"]["rel_expanded"],
+        serde_json::json!(["ks_g", "m"])
+    );
+    let best = summary["best_rel_expanded"].as_f64().unwrap();
+    let recommended = summary["recommended"]["rel_expanded"].as_f64().unwrap();
+    assert!(
+        best <= recommended && recommended <= best + (0.1 * best).max(0.002),
+        "{summary}"
+    );
+    assert!(summary["recommended"]["fit"]["budget"].is_object());
+    // A parameter the fit does not have is named, with the ones it has.
+    let result = run("ks_90_g");
+    assert!(!result.status.success());
+    let stderr = text(&result.stderr);
+    assert!(
+        stderr.contains("ks_90_g") && stderr.contains("kd_r"),
+        "{stderr}"
+    );
+}
+
 /// The study's results are written in a temporary directory and renamed into place:
 /// nothing temporary is left, a stale result is replaced whole, and a result whose name
 /// is taken by a directory fails the study naming it, removing nothing it did not create.

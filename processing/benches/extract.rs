@@ -3,6 +3,7 @@
 //! `GONIO_BENCH_SCAN=DIR cargo bench -p gonio-processing --bench extract` times the scan
 //! in DIR (e.g. made by `gonio simulate --scene gold --out DIR`); without it a synthetic
 //! Lambertian scan (6 θL × 4 exposures, 3872×2592) is written to a temporary directory.
+//! Timed with each sample's uncertainty (the default) and without.
 
 use std::path::{Path, PathBuf};
 
@@ -72,16 +73,27 @@ fn extract_six_theta_scan(c: &mut Criterion) {
             temporary.path().to_path_buf()
         }
     };
-    let options = ExtractOptions::default();
     let out = dir.join("bench-samples.csv");
     let mut group = c.benchmark_group("extract");
     group.sample_size(10);
-    group.bench_function("six_theta_l_scan_to_csv", |b| {
-        b.iter(|| {
-            let extraction = extract::extract_scan(&dir, &options).expect("extraction");
-            gonio_processing::samples::write_csv(&out, &extraction.samples).expect("write samples");
-        })
-    });
+    // With each sample's uncertainty (the default: its noise, and ten more extractions of
+    // the strips per θL for the setup's sources), and without.
+    for (name, uncertainty) in [
+        ("six_theta_l_scan_to_csv", true),
+        ("six_theta_l_scan_to_csv/no-uncertainty", false),
+    ] {
+        let options = ExtractOptions {
+            uncertainty,
+            ..ExtractOptions::default()
+        };
+        group.bench_function(name, |b| {
+            b.iter(|| {
+                let extraction = extract::extract_scan(&dir, &options).expect("extraction");
+                gonio_processing::samples::write_csv(&out, &extraction.samples)
+                    .expect("write samples");
+            })
+        });
+    }
     group.finish();
 }
 

@@ -5,9 +5,13 @@
 //!
 //!     cargo bench -p gonio-processing --bench fit
 //!     GONIO_BENCH_SAMPLES=samples.csv cargo bench -p gonio-processing --bench fit
+//!
+//! With a samples file that has uncertainty columns (`gonio extract` writes them), also
+//! the uncertainty budget of its robust fits and the convergence of its Monte Carlo.
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use gonio_processing::brdf::{Model, Params, Roughness};
+use gonio_processing::fit::budget::{budget, monte_carlo, Draw};
 use gonio_processing::fit::{fit, loss_reached, FitMethod, FitOptions};
 use gonio_processing::samples::{read_csv, Sample};
 
@@ -91,7 +95,49 @@ fn bench_samples_file(c: &mut Criterion) {
     group.bench_function("cook-torrance/nelder-mead/shared", |b| {
         b.iter(|| loss_reached(black_box(&data), &nelder_mead).expect("fit"))
     });
+    if data.iter().all(|s| s.uncertainty.is_some()) {
+        // The uncertainty budget of the robust fits (law of propagation: two refits per
+        // source and per θL for the arm's angle).
+        for model in [Model::CookTorrance, Model::CookTorranceFresnel] {
+            let result = fit(&data, &FitOptions::new(model)).expect("fit");
+            group.bench_function(format!("{model}/robust/shared/budget"), |b| {
+                b.iter(|| budget(black_box(&data), &result).expect("budget"))
+            });
+        }
+    }
     group.finish();
+    monte_carlo_convergence(&data);
+}
+
+/// The Monte Carlo (JCGM 101) of the Cook–Torrance fit's budget with 250, 500 and 1,000
+/// draws: its time, and how its standard deviation of Ks_G and m settles against the law of
+/// propagation's combined uncertainty; one JSON line for scripts/bench.sh.
+fn monte_carlo_convergence(data: &[Sample]) {
+    if data.iter().any(|s| s.uncertainty.is_none()) {
+        return;
+    }
+    let result = fit(data, &FitOptions::new(Model::CookTorrance)).expect("fit");
+    let lpu = budget(data, &result).expect("budget");
+    let mut runs = Vec::new();
+    for draws in [250, 500, 1000] {
+        let start = std::time::Instant::now();
+        let mc = monte_carlo(data, &result, draws, Draw::All, 7).expect("Monte Carlo");
+        runs.push(serde_json::json!({
+            "draws": draws,
+            "seconds": start.elapsed().as_secs_f64(),
+            "ks_g_std": mc.ks[1].std,
+            "m_std": mc.m[0].std,
+        }));
+    }
+    println!(
+        "{}",
+        serde_json::json!({
+            "bench": "budget_monte_carlo",
+            "ks_g_combined": lpu.parameters.ks[1].combined,
+            "m_combined": lpu.parameters.m[0].combined,
+            "runs": runs,
+        })
+    );
 }
 
 criterion_group!(benches, bench_fits, bench_samples_file);

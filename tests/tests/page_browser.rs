@@ -224,6 +224,11 @@ const PLOT_FACTS: &str = r#"(() => {
         legendInside: lr.x >= axisX && lr.x + lr.width <= box.width && lr.y >= 0 && lr.y + lr.height <= axisY,
         legend: [...svg.querySelectorAll('text.legend')].map((t) => t.textContent),
         params: [...document.querySelectorAll('#plot .fitparams')].map((p) => p.textContent).join(' | '),
+        budgets: [...document.querySelectorAll('#plot details.budget')].map((d) => ({
+            summary: d.querySelector('summary').textContent,
+            rows: d.querySelectorAll('tr').length,
+            columns: d.querySelector('tr').children.length,
+        })),
         markers: markers.length,
         hollow: markers.every((m) => m.getAttribute('fill') === 'none'),
         colours: [...new Set(markers.map((m) => m.getAttribute('stroke')))].length,
@@ -258,6 +263,21 @@ fn check_plot(plot: &Value, colours: u64) {
         params.contains("cook-torrance") && params.contains("ward") && params.contains("ρd"),
         "{params}"
     );
+    // Every fit shows its uncertainty budget: a header and one row per parameter (7 for
+    // Cook–Torrance and Ward, 10 for Cook–Torrance–Fresnel), a column per source.
+    let budgets = plot["budgets"].as_array().unwrap();
+    assert_eq!(budgets.len(), 3, "{plot}");
+    for budget in budgets {
+        let summary = budget["summary"].as_str().unwrap();
+        assert!(
+            summary.contains("uncertainty budget") && summary.contains("k = 2"),
+            "{summary}"
+        );
+        let rows = budget["rows"].as_u64().unwrap();
+        assert!(rows == 8 || rows == 11, "{budget}");
+        // label, value, noise, misfit, 7 sources, u_c, U, interval
+        assert_eq!(budget["columns"], json!(14), "{budget}");
+    }
     assert!(plot["markers"].as_u64().unwrap() > 20, "{plot}");
     assert_eq!(plot["hollow"], json!(true), "{plot}");
     assert_eq!(plot["colours"], json!(colours), "{plot}");

@@ -14,7 +14,8 @@
 //!   measurement) at the angles of the full scan, and relative Kd, Ks, m errors when the
 //!   fitted model is the truth's.
 //!
-//! Settings are ranked by the worst channel's ΔErr_p. Outputs in OUT: `tradeoff.csv`
+//! Settings are ranked by the worst channel's ΔErr_p, or with `--rank-by` by the largest
+//! relative expanded uncertainty (the fit's budget, k = 2) of the parameters named. Outputs in OUT: `tradeoff.csv`
 //! (one row per setting, with the 95 % intervals of m and Ks_G), `pareto.svg` (total time
 //! against worst-channel ΔErr_p, the Pareto front drawn), `tradeoff.json` (the recommended
 //! setting: the cheapest whose worst-channel ΔErr_p is within 10 % of the best reached, or
@@ -34,6 +35,7 @@ use gonio_mock_hw::scene::Scene;
 use gonio_processing::brdf::{Model, Roughness};
 use gonio_processing::color::CameraModel;
 use gonio_processing::extract::ExtractOptions;
+use gonio_processing::fit::budget::budget_if_possible;
 use gonio_processing::fit::{self, FitMethod, FitOptions, FitResult, CANDIDATES};
 use gonio_processing::metrics;
 use gonio_processing::samples::Sample;
@@ -84,6 +86,12 @@ pub struct Args {
     /// most this much (absolute) or 10 % of the best, whichever is larger.
     #[arg(long, default_value_t = 0.002)]
     pub tolerance: f64,
+    /// Rank the settings by the largest relative expanded uncertainty U/|value| (k = 2,
+    /// the fit's uncertainty budget) of these parameters (comma-separated, as the budget
+    /// names them: kd_r … ks_b, ks_90_r …, m or m_r …) instead of by ΔErr_p against the
+    /// truth; `--tolerance` is then in units of U/|value|.
+    #[arg(long, value_delimiter = ',')]
+    pub rank_by: Vec<String>,
 }
 
 /// One scan setting and what it cost and reached.
@@ -104,6 +112,8 @@ struct Accuracy {
     err_p: [f64; 3],
     /// Relative errors of Kd, Ks, m, when the fitted model is the truth's.
     parameters: Option<[f64; 3]>,
+    /// With `--rank-by`: the largest U/|value| of the parameters named.
+    expanded: Option<f64>,
 }
 
 impl Row {
@@ -115,12 +125,22 @@ impl Row {
         self.acquisition.total_s() + self.processing_s()
     }
 
-    /// The worst channel's ΔErr_p: the accuracy a setting is ranked by.
+    /// The worst channel's ΔErr_p.
     fn err_p_worst(&self) -> Option<f64> {
         self.outcome
             .as_ref()
             .ok()
             .map(|a| a.err_p.iter().copied().fold(0.0, f64::max))
+    }
+
+    /// What a setting is ranked by: the worst channel's ΔErr_p, or with `--rank-by` the
+    /// largest relative expanded uncertainty of the parameters named.
+    fn score(&self, by_uncertainty: bool) -> Option<f64> {
+        if by_uncertainty {
+            self.outcome.as_ref().ok().and_then(|a| a.expanded)
+        } else {
+            self.err_p_worst()
+        }
     }
 
     fn label(&self) -> String {
@@ -193,7 +213,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .map(|p| p.exposures.len())
         .min()
         .unwrap_or(1);
-    let extracted = extract_all(&scan_dir, &args.out, &positions, bracket_len)?;
+    let by_uncertainty = !args.rank_by.is_empty();
+    let extracted = extract_all(
+        &scan_dir,
+        &args.out,
+        &positions,
+        bracket_len,
+        by_uncertainty,
+    )?;
     let full: Vec<Sample> = extracted[bracket_len - 1]
         .iter()
         .flat_map(|e| e.samples.iter().copied())
@@ -267,16 +294,26 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     let start = Instant::now();
                     let fitted = fit::fit(&samples, &options);
                     // A Nelder–Mead fit's check against the robust fit is not its cost.
-                    let fit_s = fitted
+                    let mut fit_s = fitted
                         .as_ref()
                         .map_or_else(|_| start.elapsed().as_secs_f64(), |f| f.seconds);
-                    let outcome = fitted.map_err(|e| e.to_string()).and_then(|fit| {
+                    let outcome = fitted.map_err(|e| e.to_string()).and_then(|mut fit| {
                         let err_p = metrics::err_p(&points.beta, &points.predict(&fit))
                             .map_err(|e| e.to_string())?;
+                        let mut expanded = None;
+                        if by_uncertainty {
+                            // The budget is part of what the setting costs.
+                            let start = Instant::now();
+                            fit.budget = budget_if_possible(&samples, &fit)
+                                .map_err(|e| format!("uncertainty budget: {e}"))?;
+                            fit_s += start.elapsed().as_secs_f64();
+                            expanded = Some(largest_relative_expanded(&fit, &args.rank_by)?);
+                        }
                         Ok(Accuracy {
                             parameters: parameter_errors(&truth, &fit),
                             fit,
                             err_p,
+                            expanded,
                         })
                     });
                     rows.push(Row {
@@ -296,13 +333,43 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     bar.finish_and_clear();
+    if let (true, Some(Err(e))) = (by_uncertainty, rows.first().map(|r| &r.outcome)) {
+        if rows.iter().all(|r| r.outcome.is_err()) {
+            anyhow::bail!("--rank-by: {e}");
+        }
+    }
     let fitted = Fitted {
         truth: &truth,
         model,
         roughness,
         tolerance: args.tolerance,
+        rank_by: &args.rank_by,
     };
     write_outputs(&args.out, &fitted, &rows, &extracted, &positions)
+}
+
+/// The largest U/|value| of the parameters `names` in `fit`'s budget; an error naming the
+/// parameters there are when a name is not one of them.
+fn largest_relative_expanded(fit: &FitResult, names: &[String]) -> Result<f64, String> {
+    let budget = fit
+        .budget
+        .as_ref()
+        .ok_or("the fit has no uncertainty budget (no standard uncertainties)")?;
+    let named = budget.named();
+    names
+        .iter()
+        .map(|name| {
+            let (_, b) = named.iter().find(|(n, _)| n == name).ok_or_else(|| {
+                let known: Vec<&str> = named.iter().map(|(n, _)| n.as_str()).collect();
+                format!("no parameter `{name}` (the fit has {})", known.join(", "))
+            })?;
+            Ok(if b.value != 0.0 {
+                b.expanded / b.value.abs()
+            } else {
+                f64::INFINITY
+            })
+        })
+        .try_fold(0.0, |worst: f64, v: Result<f64, String>| Ok(worst.max(v?)))
 }
 
 /// m (G channel's) and Ks_G with their 95 % intervals, formatted; empty intervals when
@@ -329,20 +396,28 @@ struct Fitted<'a> {
     model: Model,
     roughness: Roughness,
     tolerance: f64,
+    /// The parameters whose expanded uncertainty ranks the settings (`--rank-by`); empty:
+    /// ranked by ΔErr_p.
+    rank_by: &'a [String],
 }
 
-/// Extractions of every θL with every bracket length: `[b − 1][position]`.
+/// Extractions of every θL with every bracket length: `[b − 1][position]`; the samples'
+/// uncertainty only when `uncertainty` (settings ranked by their budget).
 fn extract_all(
     scan_dir: &Path,
     out: &Path,
     positions: &[Position],
     bracket_len: usize,
+    uncertainty: bool,
 ) -> anyhow::Result<Vec<Vec<scan::Extracted>>> {
     let (work, _guard) =
         RemoveOnInterrupt::tempdir_in(tempfile::Builder::new().prefix(".extract-"), out)
             .context("creating a work directory")?;
-    // The scan's setup.json carries the white reflectance.
-    let options = ExtractOptions::default();
+    // The scan's setup.json carries the white reflectance and its uncertainties.
+    let options = ExtractOptions {
+        uncertainty,
+        ..ExtractOptions::default()
+    };
     let bar = progress::bar((bracket_len * positions.len()) as u64, "extractions");
     let mut all = Vec::new();
     for b in 1..=bracket_len {
@@ -374,28 +449,42 @@ fn write_outputs(
     extracted: &[Vec<scan::Extracted>],
     positions: &[Position],
 ) -> anyhow::Result<()> {
-    let costs: Vec<(f64, f64)> = rows
-        .iter()
-        .map(|r| (r.total_s(), r.err_p_worst().unwrap_or(f64::NAN)))
-        .collect();
-    let front = pareto_front(&costs);
-    let best = rows
-        .iter()
-        .filter_map(Row::err_p_worst)
-        .fold(f64::INFINITY, f64::min);
     let Fitted {
         truth,
         model,
         roughness,
         tolerance,
+        rank_by,
     } = *fitted;
+    let by_uncertainty = !rank_by.is_empty();
+    let score_key = |what: &str| {
+        if by_uncertainty {
+            format!("{what}_rel_expanded")
+        } else {
+            format!("{what}_err_p_worst")
+        }
+    };
+    let costs: Vec<(f64, f64)> = rows
+        .iter()
+        .map(|r| (r.total_s(), r.score(by_uncertainty).unwrap_or(f64::NAN)))
+        .collect();
+    let front = pareto_front(&costs);
+    let best = rows
+        .iter()
+        .filter_map(|r| r.score(by_uncertainty))
+        .fold(f64::INFINITY, f64::min);
+    let ranked_by = if by_uncertainty {
+        "largest U/|value| of the parameters ranked by (k = 2)"
+    } else {
+        "worst-channel ΔErr_p against the truth"
+    };
     let good_enough = best + (RELATIVE_SLACK * best).max(tolerance);
     let recommended = front.iter().copied().find(|&i| costs[i].1 <= good_enough);
 
     let mut csv = String::from(
         "n_theta_l,theta_l,bracket,shutters_s,stride,method,points,acquisition_s,travel_s,capture_s,\
          processing_s,extract_s,fit_s,total_s,err_p_r,err_p_g,err_p_b,kd_rel_err,ks_rel_err,m_rel_err,\
-         m,m_ci95_lo,m_ci95_hi,ks_g,ks_g_ci95_lo,ks_g_ci95_hi,pareto,recommended,status\n",
+         m,m_ci95_lo,m_ci95_hi,ks_g,ks_g_ci95_lo,ks_g_ci95_hi,rel_expanded,pareto,recommended,status\n",
     );
     for (i, r) in rows.iter().enumerate() {
         let head = format!(
@@ -421,17 +510,18 @@ fn write_outputs(
                     format!("{:.5},{:.5},{:.5}", p[0], p[1], p[2])
                 });
                 format!(
-                    "{:.5},{:.5},{:.5},{p},{},{},{},ok",
+                    "{:.5},{:.5},{:.5},{p},{},{},{},{},ok",
                     a.err_p[0],
                     a.err_p[1],
                     a.err_p[2],
                     intervals(&a.fit).join(","),
+                    a.expanded.map_or(String::new(), |v| format!("{v:.6}")),
                     front.contains(&i),
                     recommended == Some(i)
                 )
             }
             Err(e) => format!(
-                ",,,,,,,,,,,,false,false,\"failed: {}\"",
+                ",,,,,,,,,,,,,false,false,\"failed: {}\"",
                 e.replace('"', "'")
             ),
         };
@@ -472,7 +562,7 @@ fn write_outputs(
             truth.scene, model, roughness
         ),
         x_label: "acquisition + processing time (s, log scale)".into(),
-        y_label: "worst-channel ΔErr_p against the truth (log scale)".into(),
+        y_label: format!("{ranked_by} (log scale)"),
         log_x: true,
         log_y: true,
         series,
@@ -490,6 +580,7 @@ fn write_outputs(
             "processing_s": r.processing_s(),
             "total_s": r.total_s(),
             "err_p": r.outcome.as_ref().ok().map(|a| a.err_p),
+            "rel_expanded": r.outcome.as_ref().ok().and_then(|a| a.expanded),
             "parameter_rel_err": r.outcome.as_ref().ok().and_then(|a| a.parameters),
             "fit": r.outcome.as_ref().ok().map(|a| &a.fit),
         })
@@ -501,8 +592,9 @@ fn write_outputs(
         "roughness": roughness,
         "settings": rows.len(),
         "failed": rows.iter().filter(|r| r.outcome.is_err()).count(),
-        "best_err_p_worst": best.is_finite().then_some(best),
-        "good_enough_err_p_worst": good_enough.is_finite().then_some(good_enough),
+        "ranked_by": if by_uncertainty { serde_json::json!({"rel_expanded": rank_by}) } else { serde_json::json!("err_p_worst") },
+        score_key("best"): best.is_finite().then_some(best),
+        score_key("good_enough"): good_enough.is_finite().then_some(good_enough),
         "recommended": recommended.map(|i| row_json(&rows[i])),
         "pareto_front": front.iter().map(|&i| row_json(&rows[i])).collect::<Vec<_>>(),
         "extract_seconds_by_bracket_and_theta_l": extracted
