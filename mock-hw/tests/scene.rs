@@ -161,11 +161,43 @@ fn bad_values_are_named() {
             "light_distance_error_mm = -990.0",
             "effects.misalignment.light_distance_error_mm",
         ),
+        (
+            "white_reflectance_error = -1.0",
+            "effects.misalignment.white_reflectance_error",
+        ),
+        (
+            // 0.9 × 2.5 renders a white above 2.
+            "white_reflectance_error = 1.5",
+            "effects.misalignment.white_reflectance_error",
+        ),
+        (
+            "camera_distance_error_mm = -400.0",
+            "effects.misalignment.camera_distance_error_mm",
+        ),
+        (
+            "camera_distance_error_mm = inf",
+            "effects.misalignment.camera_distance_error_mm",
+        ),
+        (
+            // The scan has one light angle.
+            "arm_angle_errors_deg = [0.1, 0.2]",
+            "effects.misalignment.arm_angle_errors_deg",
+        ),
+        (
+            "arm_angle_errors_deg = [11.0]",
+            "effects.misalignment.arm_angle_errors_deg",
+        ),
         ("camera_roll_deg = 1.0", "camera_roll_deg"),
     ] {
         let err = error_text(&format!("{SMALL}\n{CT}\n[effects.misalignment]\n{line}\n"));
         assert!(err.contains(key), "{line}: {err}");
     }
+    let mut errors = small(&format!(
+        "{CT}\n[effects.misalignment]\narm_angle_errors_deg = [0.1]\n"
+    ))
+    .unwrap();
+    assert!(errors.set_theta_l_deg(vec![-20.0, -30.0]).is_err());
+    assert!(errors.set_theta_l_deg(vec![-20.0]).is_ok());
     let err = error_text(
         &format!("{SMALL}\n{CT}").replace("\"nikon-d5100\"", "\"/nonexistent/sens.csv\""),
     );
@@ -261,6 +293,19 @@ fn truth_and_setup_json() {
     assert_eq!(stated["camera_offset_mm"], 3.0);
     assert_eq!(stated["arm_zero_offset_deg"], 0.3);
     assert_eq!(stated["cylinder_tilt_deg"], 0.0);
+    assert_eq!(stated["white_reflectance_error"], 0.0);
+    assert_eq!(stated["camera_distance_error_mm"], 0.0);
+    assert_eq!(stated["arm_angle_errors_deg"], serde_json::json!([]));
+    let errors = small(&format!(
+        "{CT}\n[effects.misalignment]\nwhite_reflectance_error = 0.02\n\
+         camera_distance_error_mm = -1.5\narm_angle_errors_deg = [0.05]\n"
+    ))
+    .unwrap();
+    let stated = errors.truth_json()["misalignment"].clone();
+    assert_eq!(stated["white_reflectance_error"], 0.02);
+    assert_eq!(stated["camera_distance_error_mm"], -1.5);
+    assert_eq!(stated["arm_angle_errors_deg"], serde_json::json!([0.05]));
+    assert_eq!(errors.setup_json(), scene.setup_json());
     // setup.json states the nominal setup, whatever the misalignment.
     assert_eq!(misaligned.setup_json(), scene.setup_json());
 
