@@ -11,6 +11,7 @@ pub mod material;
 pub mod rgl;
 mod sample;
 pub mod spectral;
+mod uncertainty;
 
 use std::path::Path;
 
@@ -22,6 +23,7 @@ use spectral::{CameraDomain, Spectrum};
 
 pub use error::SceneError;
 pub use sample::{BraggFlakes, Sample, ThinFilm};
+pub use uncertainty::{SetupUncertainty, WhiteUncertainty};
 
 /// The physical setup. Lengths in mm, pixel pitch in µm, rows and columns in pixels.
 /// Field names match `processing::geometry::Setup` where they overlap (see
@@ -54,6 +56,10 @@ pub struct SceneSetup {
     pub sample_rows: [u32; 2],
     /// First and last row (inclusive) of the white-reference strip.
     pub white_rows: [u32; 2],
+    /// `[setup.uncertainty]`: the standard uncertainties setup.json states; `None`:
+    /// setup.json has no `uncertainty` block (its defaults apply).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uncertainty: Option<SetupUncertainty>,
 }
 
 impl SceneSetup {
@@ -140,6 +146,9 @@ impl SceneSetup {
         let [w0, w1] = self.white_rows;
         if s0 <= w1 && w0 <= s1 {
             return Err(invalid("setup.white_rows", "overlaps setup.sample_rows"));
+        }
+        if let Some(uncertainty) = &self.uncertainty {
+            uncertainty.validate()?;
         }
         Ok(())
     }
@@ -730,10 +739,11 @@ impl Scene {
     }
 
     /// The nominal setup as `processing::geometry::Setup`'s JSON (setup.json): the
-    /// geometry of `[setup]` and the white reference's reflectance.
+    /// geometry of `[setup]`, the white reference's reflectance and, when the scene
+    /// names `[setup.uncertainty]`, its `uncertainty` block.
     pub fn setup_json(&self) -> serde_json::Value {
         let s = &self.setup;
-        serde_json::json!({
+        let mut json = serde_json::json!({
             "cylinder_radius_mm": s.cylinder_radius_mm,
             "camera_distance_mm": s.camera_distance_mm,
             "light_distance_mm": s.light_distance_mm,
@@ -746,7 +756,11 @@ impl Scene {
             "sample_row": s.sample_row(),
             "white_row": s.white_row(),
             "white_reflectance": self.white_reflectance,
-        })
+        });
+        if let Some(uncertainty) = &s.uncertainty {
+            json["uncertainty"] = serde_json::json!(uncertainty);
+        }
+        json
     }
 
     /// The true model parameters (camera-RGB β domain) as `truth.json`.

@@ -338,6 +338,58 @@ fn truth_and_setup_json() {
     assert_eq!(setup["white_row"], 89);
 }
 
+/// The small scene with `table` as its `[setup.uncertainty]`.
+fn with_uncertainty(table: &str) -> String {
+    format!("{SMALL}\n{CT}").replace(
+        "\n[scan]",
+        &format!("\n[setup.uncertainty]\n{table}\n\n[scan]"),
+    )
+}
+
+#[test]
+fn setup_uncertainty_is_stated_in_setup_json() {
+    let scene = Scene::from_toml_str(&with_uncertainty(
+        "white_reflectance = [0.01, 0.004, 0.006]\ncamera_offset_mm = 0.2\n\
+         camera_distance_mm = 0.8\nlight_distance_mm = 3.0\ncylinder_tilt_deg = 0.05\n\
+         arm_zero_offset_deg = 0.02\narm_angle_deg = 0.001",
+    ))
+    .unwrap();
+    assert_eq!(
+        scene.setup_json()["uncertainty"],
+        serde_json::json!({
+            "white_reflectance": [0.01, 0.004, 0.006], "camera_offset_mm": 0.2,
+            "camera_distance_mm": 0.8, "light_distance_mm": 3.0, "cylinder_tilt_deg": 0.05,
+            "arm_zero_offset_deg": 0.02, "arm_angle_deg": 0.001,
+        })
+    );
+    // Only what the table names; binning keeps it.
+    let one = Scene::from_toml_str(&with_uncertainty("white_reflectance = 0.003")).unwrap();
+    let expected = serde_json::json!({ "white_reflectance": 0.003 });
+    assert_eq!(one.setup_json()["uncertainty"], expected);
+    assert_eq!(one.binned(2).unwrap().setup_json()["uncertainty"], expected);
+    // No table, no block.
+    assert!(small(CT).unwrap().setup_json().get("uncertainty").is_none());
+    for (line, key) in [
+        (
+            "camera_offset_mm = -0.1",
+            "setup.uncertainty.camera_offset_mm",
+        ),
+        ("arm_angle_deg = nan", "setup.uncertainty.arm_angle_deg"),
+        (
+            "light_distance_mm = 101.0",
+            "setup.uncertainty.light_distance_mm",
+        ),
+        (
+            "white_reflectance = [0.01, -0.01, 0.01]",
+            "setup.uncertainty.white_reflectance",
+        ),
+        ("camera_yaw_deg = 0.1", "camera_yaw_deg"),
+    ] {
+        let err = error_text(&with_uncertainty(line));
+        assert!(err.contains(key), "{line}: {err}");
+    }
+}
+
 #[test]
 fn binning_keeps_the_geometry() {
     let gold = Scene::builtin("gold").unwrap();
