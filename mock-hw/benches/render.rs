@@ -36,6 +36,9 @@ fn render(c: &mut Criterion) {
             cylinder_tilt_deg: 0.5,
             arm_zero_offset_deg: 0.3,
             light_distance_error_mm: 5.0,
+            white_reflectance_error: 0.01,
+            camera_distance_error_mm: 2.0,
+            arm_angle_errors_deg: vec![0.01; gold.theta_l_deg().len()],
         }),
         ..gold.effects().clone()
     };

@@ -20,10 +20,12 @@
 //! (exact, no approximation).
 //!
 //! A scene that names `[effects.misalignment]` breaks that symmetry: then every pixel's
-//! ray meets the (possibly tilted) cylinder in 3D, seen from the moved or turned camera,
-//! lit from where the misaligned arm puts the light, and the strips are bands on the
-//! cylinder between the heights the nominal strip rows see at its front
-//! ([`crate::scene::SceneSetup::front_height_mm`]).
+//! ray meets the (possibly tilted) cylinder in 3D, seen from the moved, turned or
+//! displaced camera, lit from where the misaligned arm puts the light (its zero offset
+//! plus the θL's own angle error), and the strips are bands on the cylinder between the
+//! heights the nominal strip rows see at its front
+//! ([`crate::scene::SceneSetup::front_height_mm`]); the white strip reflects as the
+//! misalignment's white reflectance error says.
 
 pub mod brdf;
 pub mod effects;
@@ -361,7 +363,10 @@ impl Misaligned {
         let s = scene.setup();
         let (sin_y, cos_y) = m.camera_yaw_deg.to_radians().sin_cos();
         let (sin_t, cos_t) = m.cylinder_tilt_deg.to_radians().sin_cos();
-        let (sin_l, cos_l) = (theta_l_deg + m.arm_zero_offset_deg).to_radians().sin_cos();
+        let arm_error = m.arm_angle_error_deg(scene.theta_l_deg(), theta_l_deg);
+        let (sin_l, cos_l) = (theta_l_deg + m.arm_zero_offset_deg + arm_error)
+            .to_radians()
+            .sin_cos();
         let light = s.light_distance_mm + m.light_distance_error_mm;
         let f = s.focal_length_mm;
         // Rows r0..=r1 cover sensor rows r0 − ½ to r1 + ½; lower rows are higher up.
@@ -372,7 +377,11 @@ impl Misaligned {
             )
         };
         Self {
-            camera: [s.camera_distance_mm, m.camera_offset_mm, 0.0],
+            camera: [
+                s.camera_distance_mm + m.camera_distance_error_mm,
+                m.camera_offset_mm,
+                0.0,
+            ],
             forward: [-f * cos_y, -f * sin_y, 0.0],
             right: [-sin_y, cos_y, 0.0],
             up: [0.0, 0.0, 1.0],
@@ -551,7 +560,7 @@ pub fn render(scene: &Scene, shot: &Shot) -> Frame16 {
         white_beta: scene
             .camera_domain()
             .white_rgb()
-            .map(|w| w * scene.white_reflectance()),
+            .map(|w| w * scene.rendered_white_reflectance()),
         retro: effects
             .retro_reflection
             .as_ref()

@@ -11,6 +11,7 @@ pub mod material;
 pub mod rgl;
 mod sample;
 pub mod spectral;
+mod uncertainty;
 
 use std::path::Path;
 
@@ -22,6 +23,7 @@ use spectral::{CameraDomain, Spectrum};
 
 pub use error::SceneError;
 pub use sample::{BraggFlakes, Sample, ThinFilm};
+pub use uncertainty::{SetupUncertainty, WhiteUncertainty};
 
 /// The physical setup. Lengths in mm, pixel pitch in µm, rows and columns in pixels.
 /// Field names match `processing::geometry::Setup` where they overlap (see
@@ -54,6 +56,10 @@ pub struct SceneSetup {
     pub sample_rows: [u32; 2],
     /// First and last row (inclusive) of the white-reference strip.
     pub white_rows: [u32; 2],
+    /// `[setup.uncertainty]`: the standard uncertainties setup.json states; `None`:
+    /// setup.json has no `uncertainty` block (its defaults apply).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uncertainty: Option<SetupUncertainty>,
 }
 
 impl SceneSetup {
@@ -140,6 +146,9 @@ impl SceneSetup {
         let [w0, w1] = self.white_rows;
         if s0 <= w1 && w0 <= s1 {
             return Err(invalid("setup.white_rows", "overlaps setup.sample_rows"));
+        }
+        if let Some(uncertainty) = &self.uncertainty {
+            uncertainty.validate()?;
         }
         Ok(())
     }
@@ -243,13 +252,48 @@ pub struct Misalignment {
     pub arm_zero_offset_deg: f64,
     /// The light is this much farther from the axis than `setup.light_distance_mm`, mm.
     pub light_distance_error_mm: f64,
+    /// The rendered white reference's reflectance is `white.reflectance` × (1 + this)
+    /// (setup.json keeps stating the nominal one); relative.
+    pub white_reflectance_error: f64,
+    /// The camera is this much farther from the axis than `setup.camera_distance_mm`, mm.
+    pub camera_distance_error_mm: f64,
+    /// The arm's repeatability: one error per θL of `[scan] theta_l_deg` (same length,
+    /// or empty for none), added to that θL's light angle on top of
+    /// `arm_zero_offset_deg`, degrees. An arm angle that is none of the scan's θL (to
+    /// within [`ARM_ANGLE_MATCH_DEG`]) gets none.
+    pub arm_angle_errors_deg: Vec<f64>,
 }
 
-/// Largest |yaw|, |tilt| and |arm zero offset| a scene may name, degrees.
+/// Largest |yaw|, |tilt|, |arm zero offset| and |arm angle error| a scene may name,
+/// degrees.
 const MAX_MISALIGNMENT_DEG: f64 = 10.0;
 
+/// Largest rendered white reflectance a white reflectance error may give.
+const MAX_RENDERED_WHITE: f64 = 2.0;
+
+/// How close an arm angle must be to one of the scan's θL to take its
+/// `arm_angle_errors_deg` entry: half the 0.001° the arm's G-code resolves, degrees.
+pub const ARM_ANGLE_MATCH_DEG: f64 = 5e-4;
+
 impl Misalignment {
-    fn validate(&self, setup: &SceneSetup) -> Result<(), SceneError> {
+    /// The arm angle error of the light at arm angle `theta_l_deg` in a scan of the
+    /// light angles `scan_theta_l_deg` (the scene's `[scan] theta_l_deg`), degrees.
+    pub fn arm_angle_error_deg(&self, scan_theta_l_deg: &[f64], theta_l_deg: f64) -> f64 {
+        scan_theta_l_deg
+            .iter()
+            .zip(&self.arm_angle_errors_deg)
+            .find(|(t, _)| (*t - theta_l_deg).abs() <= ARM_ANGLE_MATCH_DEG)
+            .map_or(0.0, |(_, e)| *e)
+    }
+
+    /// Checks the values against the nominal `setup`, the stated white reflectance and
+    /// the scan's light angles.
+    fn validate(
+        &self,
+        setup: &SceneSetup,
+        white_reflectance: f64,
+        theta_l_deg: &[f64],
+    ) -> Result<(), SceneError> {
         for (key, value) in [
             ("effects.misalignment.camera_yaw_deg", self.camera_yaw_deg),
             (
@@ -279,11 +323,56 @@ impl Misalignment {
                 ),
             ));
         }
+        if !(self.camera_distance_error_mm.is_finite()
+            && self.camera_distance_error_mm.abs() < 0.5 * gap)
+        {
+            return Err(invalid(
+                "effects.misalignment.camera_distance_error_mm",
+                format!(
+                    "{} must be smaller in size than half the camera's gap to the cylinder ({} mm)",
+                    self.camera_distance_error_mm,
+                    0.5 * gap
+                ),
+            ));
+        }
         let light = setup.light_distance_mm + self.light_distance_error_mm;
         if !(light.is_finite() && light > setup.cylinder_radius_mm) {
             return Err(invalid(
                 "effects.misalignment.light_distance_error_mm",
                 "puts the light inside the cylinder",
+            ));
+        }
+        let white = white_reflectance * (1.0 + self.white_reflectance_error);
+        if !(self.white_reflectance_error.is_finite()
+            && self.white_reflectance_error > -1.0
+            && white <= MAX_RENDERED_WHITE)
+        {
+            return Err(invalid(
+                "effects.misalignment.white_reflectance_error",
+                format!(
+                    "{} must exceed -1 and keep the rendered reflectance at most {MAX_RENDERED_WHITE}",
+                    self.white_reflectance_error
+                ),
+            ));
+        }
+        let errors = &self.arm_angle_errors_deg;
+        if !errors.is_empty() && errors.len() != theta_l_deg.len() {
+            return Err(invalid(
+                "effects.misalignment.arm_angle_errors_deg",
+                format!(
+                    "has {} values for the scan's {} light angles",
+                    errors.len(),
+                    theta_l_deg.len()
+                ),
+            ));
+        }
+        if let Some(e) = errors
+            .iter()
+            .find(|e| !(e.is_finite() && e.abs() <= MAX_MISALIGNMENT_DEG))
+        {
+            return Err(invalid(
+                "effects.misalignment.arm_angle_errors_deg",
+                format!("{e} must be in [-{MAX_MISALIGNMENT_DEG}, {MAX_MISALIGNMENT_DEG}]"),
             ));
         }
         Ok(())
@@ -306,9 +395,16 @@ pub struct Effects {
 }
 
 impl Effects {
-    fn validate(&self, setup: &SceneSetup) -> Result<(), SceneError> {
+    /// Checks the effects of a scene with this nominal `setup`, stated white reflectance
+    /// and scan light angles.
+    fn validate(
+        &self,
+        setup: &SceneSetup,
+        white_reflectance: f64,
+        theta_l_deg: &[f64],
+    ) -> Result<(), SceneError> {
         if let Some(m) = &self.misalignment {
-            m.validate(setup)?;
+            m.validate(setup, white_reflectance, theta_l_deg)?;
         }
         if let Some(noise) = &self.noise {
             check_positive("effects.noise.electrons_per_dn", noise.electrons_per_dn)?;
@@ -470,7 +566,8 @@ impl Scene {
         if !(25..=102_400).contains(&camera.iso) {
             return Err(invalid("camera.iso", "must be in 25..=102400"));
         }
-        file.effects.validate(&file.setup)?;
+        file.effects
+            .validate(&file.setup, white, &file.scan.theta_l_deg)?;
 
         let resolve = |p: &str| {
             let p = Path::new(p);
@@ -542,9 +639,18 @@ impl Scene {
         &self.sample
     }
 
-    /// Reflectance of the white reference (a Lambertian, spectrally flat).
+    /// Reflectance of the white reference (a Lambertian, spectrally flat), as stated.
     pub fn white_reflectance(&self) -> f64 {
         self.white_reflectance
+    }
+
+    /// Reflectance of the white reference as rendered: the stated one, times
+    /// (1 + the misalignment's `white_reflectance_error`) when the scene names one.
+    pub fn rendered_white_reflectance(&self) -> f64 {
+        match &self.effects.misalignment {
+            Some(m) => self.white_reflectance * (1.0 + m.white_reflectance_error),
+            None => self.white_reflectance,
+        }
     }
 
     /// Light intensity: raw G counts per second at ISO 100 of a perfect white facing
@@ -606,12 +712,13 @@ impl Scene {
 
     /// Replaces the optional effects.
     pub fn set_effects(&mut self, effects: Effects) -> Result<(), SceneError> {
-        effects.validate(&self.setup)?;
+        effects.validate(&self.setup, self.white_reflectance, &self.theta_l_deg)?;
         self.effects = effects;
         Ok(())
     }
 
-    /// Replaces the light angles of the scan.
+    /// Replaces the light angles of the scan (a misalignment's `arm_angle_errors_deg`,
+    /// if any, must have one value per new angle).
     pub fn set_theta_l_deg(&mut self, theta_l_deg: Vec<f64>) -> Result<(), SceneError> {
         if theta_l_deg.is_empty() {
             return Err(invalid("scan.theta_l_deg", "must not be empty"));
@@ -625,15 +732,18 @@ impl Scene {
                 format!("{t} must be in [-90, 90]"),
             ));
         }
+        self.effects
+            .validate(&self.setup, self.white_reflectance, &theta_l_deg)?;
         self.theta_l_deg = theta_l_deg;
         Ok(())
     }
 
     /// The nominal setup as `processing::geometry::Setup`'s JSON (setup.json): the
-    /// geometry of `[setup]` and the white reference's reflectance.
+    /// geometry of `[setup]`, the white reference's reflectance and, when the scene
+    /// names `[setup.uncertainty]`, its `uncertainty` block.
     pub fn setup_json(&self) -> serde_json::Value {
         let s = &self.setup;
-        serde_json::json!({
+        let mut json = serde_json::json!({
             "cylinder_radius_mm": s.cylinder_radius_mm,
             "camera_distance_mm": s.camera_distance_mm,
             "light_distance_mm": s.light_distance_mm,
@@ -646,7 +756,11 @@ impl Scene {
             "sample_row": s.sample_row(),
             "white_row": s.white_row(),
             "white_reflectance": self.white_reflectance,
-        })
+        });
+        if let Some(uncertainty) = &s.uncertainty {
+            json["uncertainty"] = serde_json::json!(uncertainty);
+        }
+        json
     }
 
     /// The true model parameters (camera-RGB β domain) as `truth.json`.

@@ -108,16 +108,25 @@ fn lit_span(frame: &Frame16, y: u32, floor: u16) -> (u32, u32) {
 }
 
 #[test]
-fn camera_offset_and_yaw_move_the_limbs_where_tangent_rays_fall() {
+fn camera_offset_yaw_and_distance_move_the_limbs_where_tangent_rays_fall() {
     // Light behind the camera (θL = 0) lights both limbs. A camera at (D, δ) turned by
     // ψ sees the cylinder's tangent rays at bearings β ± asin(r/|C|) from the line to
     // the axis; a bearing θ (counter-clockwise) falls at image x = f·tan(π + ψ − θ).
-    let (d, r, f, pitch, cx) = (700.0f64, 40.0f64, 85.0, 0.030, 199.5);
-    for (offset, yaw) in [(3.0f64, 0.0f64), (0.0, 0.5), (-2.0, -0.3)] {
+    // A camera distance error e puts the camera at D = 700 + e.
+    let (r, f, pitch, cx) = (40.0f64, 85.0, 0.030, 199.5);
+    for (offset, yaw, error) in [
+        (3.0f64, 0.0f64, 0.0f64),
+        (0.0, 0.5, 0.0),
+        (-2.0, -0.3, 0.0),
+        (0.0, 0.0, -50.0),
+        (0.0, 0.0, 40.0),
+        (2.0, 0.3, 25.0),
+    ] {
+        let d = 700.0 + error;
         let misaligned = scene(
             LAMBERTIAN,
             Some(&format!(
-                "camera_offset_mm = {offset}\ncamera_yaw_deg = {yaw}"
+                "camera_offset_mm = {offset}\ncamera_yaw_deg = {yaw}\ncamera_distance_error_mm = {error}"
             )),
         );
         let frame = render_frame(&misaligned, 0.0, 0.01);
@@ -133,11 +142,11 @@ fn camera_offset_and_yaw_move_the_limbs_where_tangent_rays_fall() {
             // The first lit pixel centre lies within one pixel inside the limb.
             assert!(
                 f64::from(first) >= left && f64::from(first) - left < 1.0,
-                "offset {offset}, yaw {yaw}: first lit {first}, limb {left}"
+                "offset {offset}, yaw {yaw}, distance error {error}: first lit {first}, limb {left}"
             );
             assert!(
                 f64::from(last) <= right && right - f64::from(last) < 1.0,
-                "offset {offset}, yaw {yaw}: last lit {last}, limb {right}"
+                "offset {offset}, yaw {yaw}, distance error {error}: last lit {last}, limb {right}"
             );
         }
     }
@@ -176,4 +185,75 @@ fn cylinder_tilt_rotates_its_picture_about_the_principal_point() {
             "row {y}: last lit {last}, limb {right}"
         );
     }
+}
+
+/// Rows of the white strip (79..=99) and of the sample strip (20..=40) well inside them.
+const WHITE_ROWS: [u32; 3] = [85, 89, 93];
+const SAMPLE_ROWS: [u32; 3] = [26, 30, 34];
+
+#[test]
+fn a_white_reflectance_error_scales_the_white_strip_only() {
+    let nominal = render_frame(&scene(CT, Some("")), -30.0, 0.01);
+    for error in [0.02, -0.05] {
+        let misaligned = scene(CT, Some(&format!("white_reflectance_error = {error}")));
+        // setup.json keeps stating the nominal white.
+        assert_eq!(misaligned.setup_json()["white_reflectance"], 0.9);
+        assert_eq!(misaligned.rendered_white_reflectance(), 0.9 * (1.0 + error));
+        let frame = render_frame(&misaligned, -30.0, 0.01);
+        let mut bright = 0;
+        for &y in &WHITE_ROWS {
+            for x in 0..frame.width() {
+                for (p, q) in frame.pixel(x, y).iter().zip(nominal.pixel(x, y)) {
+                    // Each count rounds its signal (to within ½): p = s(1 + e) ± ½ and
+                    // q = s ± ½.
+                    let expected = f64::from(q) * (1.0 + error);
+                    assert!(
+                        (f64::from(*p) - expected).abs() <= 0.5 * (2.0 + error.abs()),
+                        "error {error} at ({x}, {y}): {p}, expected {expected}"
+                    );
+                    bright += usize::from(q > 5000);
+                }
+            }
+        }
+        assert!(bright > 300, "{bright} bright white values");
+        assert_eq!(largest_difference(&frame, &nominal, &SAMPLE_ROWS), 0);
+    }
+}
+
+#[test]
+fn an_arm_angle_error_moves_the_light_of_its_own_theta_l_only() {
+    let two_angles = |misalignment: &str| {
+        Scene::from_toml_str(
+            &format!("{SMALL}\n{CT}\n[effects.misalignment]\n{misalignment}\n")
+                .replace("theta_l_deg = [-30.0]", "theta_l_deg = [-30.0, -45.0]"),
+        )
+        .unwrap()
+    };
+    let misaligned = two_angles("arm_zero_offset_deg = 0.1\narm_angle_errors_deg = [0.0, 0.4]");
+    let zero_only = two_angles("arm_zero_offset_deg = 0.1");
+    // θL −30° has no error of its own: the same frame as the zero offset alone.
+    assert_eq!(
+        render_frame(&misaligned, -30.0, 0.01),
+        render_frame(&zero_only, -30.0, 0.01)
+    );
+    // An arm angle outside the scan's list gets no error either.
+    assert_eq!(
+        render_frame(&misaligned, -37.0, 0.01),
+        render_frame(&zero_only, -37.0, 0.01)
+    );
+    // θL −45° has its light at −45 + 0.1 + 0.4 = −44.5°, which the separable renderer
+    // draws with no misalignment at all.
+    let general = render_frame(&misaligned, -45.0, 0.01);
+    let separable = render_frame(&scene(CT, None), -44.5, 0.01);
+    assert!(largest_difference(&general, &separable, &INNER_ROWS) <= 1);
+    let without = render_frame(&zero_only, -45.0, 0.01);
+    assert!(largest_difference(&general, &without, &INNER_ROWS) > 100);
+    // The same θL to within the arm's G-code resolution takes the error too.
+    assert!(
+        largest_difference(
+            &render_frame(&misaligned, -45.0002, 0.01),
+            &general,
+            &INNER_ROWS
+        ) <= 2
+    );
 }

@@ -161,11 +161,43 @@ fn bad_values_are_named() {
             "light_distance_error_mm = -990.0",
             "effects.misalignment.light_distance_error_mm",
         ),
+        (
+            "white_reflectance_error = -1.0",
+            "effects.misalignment.white_reflectance_error",
+        ),
+        (
+            // 0.9 × 2.5 renders a white above 2.
+            "white_reflectance_error = 1.5",
+            "effects.misalignment.white_reflectance_error",
+        ),
+        (
+            "camera_distance_error_mm = -400.0",
+            "effects.misalignment.camera_distance_error_mm",
+        ),
+        (
+            "camera_distance_error_mm = inf",
+            "effects.misalignment.camera_distance_error_mm",
+        ),
+        (
+            // The scan has one light angle.
+            "arm_angle_errors_deg = [0.1, 0.2]",
+            "effects.misalignment.arm_angle_errors_deg",
+        ),
+        (
+            "arm_angle_errors_deg = [11.0]",
+            "effects.misalignment.arm_angle_errors_deg",
+        ),
         ("camera_roll_deg = 1.0", "camera_roll_deg"),
     ] {
         let err = error_text(&format!("{SMALL}\n{CT}\n[effects.misalignment]\n{line}\n"));
         assert!(err.contains(key), "{line}: {err}");
     }
+    let mut errors = small(&format!(
+        "{CT}\n[effects.misalignment]\narm_angle_errors_deg = [0.1]\n"
+    ))
+    .unwrap();
+    assert!(errors.set_theta_l_deg(vec![-20.0, -30.0]).is_err());
+    assert!(errors.set_theta_l_deg(vec![-20.0]).is_ok());
     let err = error_text(
         &format!("{SMALL}\n{CT}").replace("\"nikon-d5100\"", "\"/nonexistent/sens.csv\""),
     );
@@ -261,6 +293,19 @@ fn truth_and_setup_json() {
     assert_eq!(stated["camera_offset_mm"], 3.0);
     assert_eq!(stated["arm_zero_offset_deg"], 0.3);
     assert_eq!(stated["cylinder_tilt_deg"], 0.0);
+    assert_eq!(stated["white_reflectance_error"], 0.0);
+    assert_eq!(stated["camera_distance_error_mm"], 0.0);
+    assert_eq!(stated["arm_angle_errors_deg"], serde_json::json!([]));
+    let errors = small(&format!(
+        "{CT}\n[effects.misalignment]\nwhite_reflectance_error = 0.02\n\
+         camera_distance_error_mm = -1.5\narm_angle_errors_deg = [0.05]\n"
+    ))
+    .unwrap();
+    let stated = errors.truth_json()["misalignment"].clone();
+    assert_eq!(stated["white_reflectance_error"], 0.02);
+    assert_eq!(stated["camera_distance_error_mm"], -1.5);
+    assert_eq!(stated["arm_angle_errors_deg"], serde_json::json!([0.05]));
+    assert_eq!(errors.setup_json(), scene.setup_json());
     // setup.json states the nominal setup, whatever the misalignment.
     assert_eq!(misaligned.setup_json(), scene.setup_json());
 
@@ -291,6 +336,58 @@ fn truth_and_setup_json() {
     assert_eq!(setup["white_reflectance"], 0.9);
     assert_eq!(setup["sample_row"], 30);
     assert_eq!(setup["white_row"], 89);
+}
+
+/// The small scene with `table` as its `[setup.uncertainty]`.
+fn with_uncertainty(table: &str) -> String {
+    format!("{SMALL}\n{CT}").replace(
+        "\n[scan]",
+        &format!("\n[setup.uncertainty]\n{table}\n\n[scan]"),
+    )
+}
+
+#[test]
+fn setup_uncertainty_is_stated_in_setup_json() {
+    let scene = Scene::from_toml_str(&with_uncertainty(
+        "white_reflectance = [0.01, 0.004, 0.006]\ncamera_offset_mm = 0.2\n\
+         camera_distance_mm = 0.8\nlight_distance_mm = 3.0\ncylinder_tilt_deg = 0.05\n\
+         arm_zero_offset_deg = 0.02\narm_angle_deg = 0.001",
+    ))
+    .unwrap();
+    assert_eq!(
+        scene.setup_json()["uncertainty"],
+        serde_json::json!({
+            "white_reflectance": [0.01, 0.004, 0.006], "camera_offset_mm": 0.2,
+            "camera_distance_mm": 0.8, "light_distance_mm": 3.0, "cylinder_tilt_deg": 0.05,
+            "arm_zero_offset_deg": 0.02, "arm_angle_deg": 0.001,
+        })
+    );
+    // Only what the table names; binning keeps it.
+    let one = Scene::from_toml_str(&with_uncertainty("white_reflectance = 0.003")).unwrap();
+    let expected = serde_json::json!({ "white_reflectance": 0.003 });
+    assert_eq!(one.setup_json()["uncertainty"], expected);
+    assert_eq!(one.binned(2).unwrap().setup_json()["uncertainty"], expected);
+    // No table, no block.
+    assert!(small(CT).unwrap().setup_json().get("uncertainty").is_none());
+    for (line, key) in [
+        (
+            "camera_offset_mm = -0.1",
+            "setup.uncertainty.camera_offset_mm",
+        ),
+        ("arm_angle_deg = nan", "setup.uncertainty.arm_angle_deg"),
+        (
+            "light_distance_mm = 101.0",
+            "setup.uncertainty.light_distance_mm",
+        ),
+        (
+            "white_reflectance = [0.01, -0.01, 0.01]",
+            "setup.uncertainty.white_reflectance",
+        ),
+        ("camera_yaw_deg = 0.1", "camera_yaw_deg"),
+    ] {
+        let err = error_text(&with_uncertainty(line));
+        assert!(err.contains(key), "{line}: {err}");
+    }
 }
 
 #[test]
