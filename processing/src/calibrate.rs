@@ -1,8 +1,9 @@
 //! Calibration of a scan's setup from its own captures (docs/ARCHITECTURE.md,
 //! "Calibration"): the strip rows, the cylinder's silhouette and axis in the image,
 //! the camera's sideways offset (and its distance when both limbs show), the cylinder's
-//! tilt and the arm's zero offset, each with a standard uncertainty, and residuals that
-//! say whether the model fits.
+//! tilt and the arm's zero offset, each with a standard uncertainty (which the calibrated
+//! setup.json's `uncertainty` block states), and residuals that say whether the model
+//! fits.
 //!
 //! The known quantities come from a prior [`Setup`] (the scan's setup.json): cylinder
 //! radius, focal length, pixel pitch, principal point, light distance, and the camera
@@ -26,6 +27,7 @@ use crate::capture::Frame;
 use crate::extract::{self, ExtractError};
 use crate::geometry::{GeometryError, Setup};
 use crate::hdr::{self, HdrError, MergeOptions};
+use crate::setup_uncertainty::{SetupUncertainty, MAX_UNCERTAINTY};
 use observe::{Band, Side};
 use solve::{Limb, Observations, Parameter, PeakRow, TerminatorRow};
 
@@ -108,7 +110,8 @@ pub struct Residuals {
 /// `notes`).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Calibration {
-    /// The prior with the estimated fields replaced.
+    /// The prior with the estimated fields replaced, and in its `uncertainty` block each
+    /// estimate's standard uncertainty (the prior's block for the rest).
     #[serde(skip)]
     pub setup: Setup,
     pub theta_l: Vec<f64>,
@@ -421,12 +424,35 @@ pub fn calibrate_scan(
     }
     let solution = solve::fit(&first.setup, &obs, &parameters)
         .ok_or_else(|| CalibrateError::Underdetermined("the least-squares fit failed".into()))?;
-    let setup = solution.setup.clone();
+    let mut setup = solution.setup.clone();
     let estimate = |p: Parameter, value: f64| {
         parameters.iter().position(|&q| q == p).map(|k| Estimate {
             value,
             stderr: solution.covariance[(k, k)].max(0.0).sqrt(),
         })
+    };
+    let camera_offset_mm = estimate(Parameter::CameraOffset, setup.camera_offset_mm);
+    let camera_distance_mm = estimate(Parameter::CameraDistance, setup.camera_distance_mm);
+    let cylinder_tilt_deg = estimate(Parameter::CylinderTilt, setup.cylinder_tilt_deg);
+    let arm_zero_offset_deg = estimate(Parameter::ArmZeroOffset, setup.arm_zero_offset_deg);
+    setup.uncertainty = SetupUncertainty {
+        camera_offset_mm: standard_uncertainty(
+            camera_offset_mm,
+            prior.uncertainty.camera_offset_mm,
+        ),
+        camera_distance_mm: standard_uncertainty(
+            camera_distance_mm,
+            prior.uncertainty.camera_distance_mm,
+        ),
+        cylinder_tilt_deg: standard_uncertainty(
+            cylinder_tilt_deg,
+            prior.uncertainty.cylinder_tilt_deg,
+        ),
+        arm_zero_offset_deg: standard_uncertainty(
+            arm_zero_offset_deg,
+            prior.uncertainty.arm_zero_offset_deg,
+        ),
+        ..prior.uncertainty
     };
 
     let n_limbs = obs.limbs.len();
@@ -474,14 +500,23 @@ pub fn calibrate_scan(
         theta_l: groups.iter().map(|g| g.0).collect(),
         sample_row,
         white_row,
-        camera_offset_mm: estimate(Parameter::CameraOffset, setup.camera_offset_mm),
-        camera_distance_mm: estimate(Parameter::CameraDistance, setup.camera_distance_mm),
-        cylinder_tilt_deg: estimate(Parameter::CylinderTilt, setup.cylinder_tilt_deg),
-        arm_zero_offset_deg: estimate(Parameter::ArmZeroOffset, setup.arm_zero_offset_deg),
+        camera_offset_mm,
+        camera_distance_mm,
+        cylinder_tilt_deg,
+        arm_zero_offset_deg,
         axis_in_image: axis_in_image(&setup),
         silhouette,
         residuals,
         notes,
         setup,
     })
+}
+
+/// The standard uncertainty the calibrated setup.json states for a field: its estimate's
+/// (when estimated, and a valid standard uncertainty), else the prior's, if any.
+fn standard_uncertainty(estimate: Option<Estimate>, prior: Option<f64>) -> Option<f64> {
+    estimate
+        .map(|e| e.stderr)
+        .filter(|u| u.is_finite() && (0.0..=MAX_UNCERTAINTY).contains(u))
+        .or(prior)
 }

@@ -5,7 +5,9 @@
 //! fits after calibration are as close to the truth as with the true setup (within
 //! 0.2 % of those fits), while the nominal setup's are off by the amount each test
 //! states; the misalignments a scan does not have come out as none. (At full size,
-//! with six θL, the uncertainties are several times smaller.)
+//! with six θL, the uncertainties are several times smaller.) The calibrated
+//! setup.json's `uncertainty` block states the estimates' standard uncertainties and
+//! keeps the prior's (the scene's `[setup.uncertainty]`) for the rest.
 
 use std::path::Path;
 
@@ -62,7 +64,7 @@ fn run(name: &str, m: Misalignment) -> Outcome {
     std::fs::write(
         &scene,
         format!(
-            "{GOLD}\n[effects.misalignment]\ncamera_offset_mm = {}\ncylinder_tilt_deg = {}\narm_zero_offset_deg = {}\n",
+            "{GOLD}\n[effects.misalignment]\ncamera_offset_mm = {}\ncylinder_tilt_deg = {}\narm_zero_offset_deg = {}\n{PRIOR_UNCERTAINTY}",
             m.camera_offset_mm, m.cylinder_tilt_deg, m.arm_zero_offset_deg
         ),
     )
@@ -95,6 +97,7 @@ fn run(name: &str, m: Misalignment) -> Outcome {
     std::fs::write(&true_path, serde_json::to_string(&true_setup).unwrap()).unwrap();
     let truth: Value =
         serde_json::from_str(&std::fs::read_to_string(scan.join("truth.json")).unwrap()).unwrap();
+    assert_uncertainty_block(&written);
     let outcome = Outcome {
         calibration: written["calibration"].clone(),
         nominal: fit_with(&scan, &scan.join("setup.json")),
@@ -105,6 +108,33 @@ fn run(name: &str, m: Misalignment) -> Outcome {
     };
     std::fs::remove_dir_all(dir).ok();
     outcome
+}
+
+/// The scene's `[setup.uncertainty]`, the prior's `uncertainty` block in setup.json.
+const PRIOR_UNCERTAINTY: &str = "[setup.uncertainty]\nwhite_reflectance = [0.004, 0.003, 0.005]\n\
+     camera_offset_mm = 0.7\ncamera_distance_mm = 0.9\nlight_distance_mm = 1.5\narm_angle_deg = 0.003\n";
+
+/// The calibrated setup.json states each estimate's standard uncertainty in its
+/// `uncertainty` block, and the prior's for the rest (here the camera distance, which
+/// one lit limb cannot give).
+fn assert_uncertainty_block(written: &Value) {
+    let calibration = &written["calibration"];
+    let stderr = |key: &str| calibration[key]["stderr"].clone();
+    assert!(calibration["camera_distance_mm"].is_null());
+    assert_eq!(
+        written["uncertainty"],
+        serde_json::json!({
+            "white_reflectance": [0.004, 0.003, 0.005],
+            "camera_offset_mm": stderr("camera_offset_mm"),
+            "camera_distance_mm": 0.9,
+            "light_distance_mm": 1.5,
+            "cylinder_tilt_deg": stderr("cylinder_tilt_deg"),
+            "arm_zero_offset_deg": stderr("arm_zero_offset_deg"),
+            "arm_angle_deg": 0.003,
+        })
+    );
+    // The estimates' own, not the prior's.
+    assert_ne!(written["uncertainty"]["camera_offset_mm"], 0.7);
 }
 
 /// Checks one estimate against the truth: within `tolerance` and within 4 of its

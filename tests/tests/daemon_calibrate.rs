@@ -38,7 +38,8 @@ fn a_calibration_becomes_the_setup_of_later_scans() {
     std::fs::write(
         &scene,
         format!(
-            "{SMALL_GOLD_SCENE}\n[effects.misalignment]\ncamera_offset_mm = 3.0\narm_zero_offset_deg = 0.3\n"
+            "{SMALL_GOLD_SCENE}\n[effects.misalignment]\ncamera_offset_mm = 3.0\narm_zero_offset_deg = 0.3\n\
+             [setup.uncertainty]\nwhite_reflectance = 0.004\ncamera_offset_mm = 0.7\n"
         ),
     )
     .unwrap();
@@ -58,8 +59,19 @@ fn a_calibration_becomes_the_setup_of_later_scans() {
     let first_setup = setup_of(first);
     let provenance = first_setup["provenance"].as_object().unwrap();
     assert!(provenance.contains_key("camera_offset_mm"), "{first_setup}");
+    // The scene's [setup.uncertainty] too, key by key.
+    assert_eq!(
+        first_setup["uncertainty"],
+        json!({ "white_reflectance": 0.004, "camera_offset_mm": 0.7 })
+    );
+    assert_eq!(
+        provenance["uncertainty"],
+        json!({ "white_reflectance": "emulated scene", "camera_offset_mm": "emulated scene" })
+    );
     assert!(
-        provenance.values().all(|v| v == "emulated scene"),
+        provenance
+            .iter()
+            .all(|(k, v)| v == "emulated scene" || k == "uncertainty"),
         "{first_setup}"
     );
     let missing = daemon.post("/api/scans/999/calibrate", &json!({}));
@@ -87,6 +99,19 @@ fn a_calibration_becomes_the_setup_of_later_scans() {
     for field in ["focal_length_mm", "pixel_pitch_um", "cylinder_radius_mm"] {
         assert_eq!(from[field], "emulated scene", "{field}: {from}");
     }
+    // The estimates' standard uncertainties from this calibration, the white's from the
+    // scene.
+    let u = &calibrated.json["uncertainty"];
+    assert_eq!(
+        u["camera_offset_mm"], c["camera_offset_mm"]["stderr"],
+        "{u}"
+    );
+    assert_eq!(u["white_reflectance"], 0.004, "{u}");
+    assert_eq!(
+        from["uncertainty"]["camera_offset_mm"],
+        by_calibration.as_str()
+    );
+    assert_eq!(from["uncertainty"]["white_reflectance"], "emulated scene");
     let stored = dir.join("data").join("setup.json");
     assert!(stored.is_file());
     // Twelve at once all succeed (they once shared a temporary name: "writing

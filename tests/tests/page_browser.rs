@@ -855,7 +855,10 @@ fn page_tells_the_truth_in_every_state() {
     assert!(
         table.contains(&format!("calibrated from scan {queued_id}"))
             && table.contains("emulated scene")
-            && table.contains("sample_row"),
+            && table.contains("sample_row")
+            // The estimates' standard uncertainties, one row per key.
+            && table.contains("uncertainty.camera_offset_mm")
+            && !table.contains("[object Object]"),
         "{table}"
     );
 

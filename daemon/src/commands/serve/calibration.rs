@@ -57,12 +57,23 @@ pub fn current_setup_json(
     let mut value = json!(configured?);
     let provenance: serde_json::Map<String, Value> = value
         .as_object()?
-        .keys()
-        .map(|field| (field.clone(), json!(source)))
+        .iter()
+        .map(|(field, v)| {
+            let source = match (field.as_str(), v.as_object()) {
+                (UNCERTAINTY, Some(block)) => {
+                    block.keys().map(|k| (k.clone(), json!(source))).collect()
+                }
+                _ => json!(source),
+            };
+            (field.clone(), source)
+        })
         .collect();
     value["provenance"] = Value::Object(provenance);
     Some(value)
 }
+
+/// setup.json's block of standard uncertainties, whose provenance is per key.
+const UNCERTAINTY: &str = "uncertainty";
 
 /// The fields a calibration estimates (a `null` estimate leaves the prior's value).
 const ESTIMATED: [&str; 6] = [
@@ -76,24 +87,42 @@ const ESTIMATED: [&str; 6] = [
 
 /// Where each field of a setup calibrated from scan `id` came from: the estimated ones
 /// from the calibration, the others as the prior's `provenance` says (else the prior,
-/// scan `id`'s setup.json).
+/// scan `id`'s setup.json). The `uncertainty` block's provenance is per key: the
+/// calibration for an estimate's standard uncertainty, else the prior's.
 fn provenance(stored: &Value, prior: &Value, id: i64) -> Value {
     let Some(fields) = stored.as_object() else {
         return json!({});
     };
     let calibration = &stored["calibration"];
+    let calibrated = json!(format!("calibrated from scan {id}"));
+    let from_prior = |source: Option<&Value>| {
+        source
+            .filter(|s| s.is_string())
+            .cloned()
+            .unwrap_or_else(|| json!(format!("scan {id}'s setup.json")))
+    };
     fields
-        .keys()
-        .filter(|field| !matches!(field.as_str(), "calibration" | "provenance"))
-        .map(|field| {
-            let estimated = ESTIMATED.contains(&field.as_str()) && !calibration[field].is_null();
-            let source = if estimated {
-                json!(format!("calibrated from scan {id}"))
-            } else {
-                prior["provenance"]
-                    .get(field)
-                    .cloned()
-                    .unwrap_or_else(|| json!(format!("scan {id}'s setup.json")))
+        .iter()
+        .filter(|(field, _)| !matches!(field.as_str(), "calibration" | "provenance"))
+        .map(|(field, value)| {
+            let prior_source = prior["provenance"].get(field);
+            let source = match (field.as_str(), value.as_object()) {
+                (UNCERTAINTY, Some(block)) => block
+                    .iter()
+                    .map(|(key, u)| {
+                        let source = if calibration[key]["stderr"] == *u {
+                            calibrated.clone()
+                        } else {
+                            // The prior's per key, or one source for its whole block.
+                            from_prior(prior_source.map(|p| p.get(key).unwrap_or(p)))
+                        };
+                        (key.clone(), source)
+                    })
+                    .collect(),
+                _ if ESTIMATED.contains(&field.as_str()) && !calibration[field].is_null() => {
+                    calibrated.clone()
+                }
+                _ => from_prior(prior_source),
             };
             (field.clone(), source)
         })
@@ -156,4 +185,63 @@ mod tests {
             })
         );
     }
+
+    #[test]
+    fn the_uncertainty_block_s_provenance_is_per_key() {
+        let stored = json!({
+            "camera_offset_mm": 0.1,
+            "uncertainty": { "camera_offset_mm": 0.02, "camera_distance_mm": 0.9,
+                             "white_reflectance": 0.004, "arm_angle_deg": 0.003 },
+            "calibration": { "camera_offset_mm": { "value": 0.1, "stderr": 0.02 },
+                             "camera_distance_mm": null },
+        });
+        let prior = json!({ "provenance": {
+            "uncertainty": { "camera_offset_mm": "emulated scene",
+                             "camera_distance_mm": "emulated scene",
+                             "white_reflectance": "emulated scene" } } });
+        assert_eq!(
+            provenance(&stored, &prior, 7)["uncertainty"],
+            json!({
+                "camera_offset_mm": "calibrated from scan 7",
+                "camera_distance_mm": "emulated scene",
+                "white_reflectance": "emulated scene",
+                "arm_angle_deg": "scan 7's setup.json",
+            })
+        );
+        // A prior that names one source for its whole block.
+        let prior = json!({ "provenance": { "uncertainty": "configuration [setup]" } });
+        assert_eq!(
+            provenance(&stored, &prior, 7)["uncertainty"]["white_reflectance"],
+            "configuration [setup]"
+        );
+    }
+
+    #[test]
+    fn a_configured_setup_names_its_source_for_every_uncertainty_key() {
+        let dir = std::env::temp_dir().join(format!("gonio-setup-json-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let config = super::super::config::Config::from_toml_str(CONFIGURED).unwrap();
+        let value =
+            current_setup_json(&dir, config.setup().as_ref(), "configuration [setup]").unwrap();
+        std::fs::remove_dir_all(&dir).ok();
+        assert_eq!(
+            value["uncertainty"],
+            json!({ "white_reflectance": [0.004, 0.003, 0.005], "arm_angle_deg": 0.002 })
+        );
+        assert_eq!(
+            value["provenance"]["uncertainty"],
+            json!({ "white_reflectance": "configuration [setup]",
+                    "arm_angle_deg": "configuration [setup]" })
+        );
+        assert_eq!(
+            value["provenance"]["focal_length_mm"],
+            "configuration [setup]"
+        );
+    }
+
+    /// A configured real setup with two of its standard uncertainties.
+    const CONFIGURED: &str = "[setup]\ncylinder_radius_mm = 40.0\ncamera_distance_mm = 700.0\n\
+        light_distance_mm = 1000.0\nfocal_length_mm = 85.0\npixel_pitch_um = 6.1\n\
+        image_width = 3872\nimage_height = 2592\nsample_row = 1100\nwhite_row = 1491\n\
+        [setup.uncertainty]\nwhite_reflectance = [0.004, 0.003, 0.005]\narm_angle_deg = 0.002\n";
 }

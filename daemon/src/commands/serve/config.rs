@@ -18,6 +18,7 @@
 //! white_reflectance = 1.0      # of the white strip where [setup] gives none
 //! # [setup] = processing's Setup fields, for real hardware (setup.json of each scan),
 //! # white_reflectance among them; emulated scans use the scene's setup
+//! # [setup.uncertainty] = setup.json's uncertainty block (standard uncertainties, k = 1)
 //!
 //! [arm]                        # or: kind = "grbl", path = "/dev/serial/by-id/..."
 //! kind = "emulator"
@@ -116,8 +117,9 @@ pub struct Config {
     /// Reflectance of the white reference strip of the real setup (1 = perfect
     /// reflecting diffuser) where `[setup]` gives none; emulated scans take the scene's.
     pub white_reflectance: f64,
-    /// Geometry and white reflectance of the real setup (written to each scan's
-    /// setup.json); emulated scans take the scene's.
+    /// Geometry, white reflectance and standard uncertainties (`[setup.uncertainty]`)
+    /// of the real setup (written to each scan's setup.json); emulated scans take the
+    /// scene's.
     pub setup: Option<Setup>,
 }
 
@@ -452,6 +454,11 @@ impl Config {
             self.max_body_bytes >= 1024,
             "max_body_bytes must be at least 1024"
         );
+        if let Some(setup) = self.setup() {
+            setup
+                .validate()
+                .map_err(|e| anyhow::anyhow!("[setup]: {e}"))?;
+        }
         self.arm.check()?;
         if let Some(carousel) = &self.carousel {
             carousel.check(&self.arm)?;
@@ -659,6 +666,39 @@ mod tests {
         ] {
             let err = Config::from_toml_str(text).unwrap_err();
             assert!(format!("{err:#}").contains(named), "{text}: {err:#}");
+        }
+    }
+
+    #[test]
+    fn setup_uncertainty_is_read_checked_and_named() {
+        let setup = "[setup]\ncylinder_radius_mm = 40.0\ncamera_distance_mm = 700.0\n\
+            light_distance_mm = 1000.0\nfocal_length_mm = 85.0\npixel_pitch_um = 6.1\n\
+            image_width = 3872\nimage_height = 2592\nsample_row = 1100\nwhite_row = 1491\n";
+        let config = Config::from_toml_str(&format!(
+            "{setup}[setup.uncertainty]\nwhite_reflectance = 0.004\ncamera_offset_mm = 0.3\n"
+        ))
+        .unwrap();
+        let uncertainty = config.setup().unwrap().uncertainty;
+        assert_eq!(uncertainty.camera_offset_mm, Some(0.3));
+        assert_eq!(
+            uncertainty.white_reflectance.map(|w| w.per_channel()),
+            Some([0.004; 3])
+        );
+        assert_eq!(uncertainty.arm_angle_deg, None);
+        assert!(Config::from_toml_str(setup)
+            .unwrap()
+            .setup()
+            .unwrap()
+            .uncertainty
+            .is_empty());
+        for (table, named) in [
+            ("cylinder_tilt_deg = -0.1", "uncertainty.cylinder_tilt_deg"),
+            ("arm_angle_deg = 1000.0", "uncertainty.arm_angle_deg"),
+            ("yaw_deg = 0.1", "yaw_deg"),
+        ] {
+            let err = Config::from_toml_str(&format!("{setup}[setup.uncertainty]\n{table}\n"))
+                .unwrap_err();
+            assert!(format!("{err:#}").contains(named), "{table}: {err:#}");
         }
     }
 
