@@ -364,7 +364,7 @@ pub fn extract_scan_with_progress(
             map.write_exr(&hdr_dir.join(format!("theta_l_{theta_l:.1}.exr")))
                 .map_err(|error| ExtractError::Hdr { theta_l, error })?;
         }
-        let (mut samples, dropped, centre_rows) =
+        let (mut samples, columns, dropped, centre_rows) =
             extract_theta(&setup, &map, &layout, theta_l, options, white_reflectance);
         if options.uncertainty {
             let strips = Strips {
@@ -372,7 +372,13 @@ pub fn extract_scan_with_progress(
                 layout: &layout,
                 theta_l,
             };
-            add_sensitivities(&setup, &strips, options, white_reflectance, &mut samples);
+            add_sensitivities(
+                &setup,
+                &strips,
+                options,
+                white_reflectance,
+                (&mut samples, &columns),
+            );
         }
         extraction.per_theta.push(ThetaSummary {
             theta_l,
@@ -819,7 +825,7 @@ fn extract_theta(
     theta_l: f64,
     options: &ExtractOptions,
     white_reflectance: f64,
-) -> (Vec<Sample>, DropCounts, usize) {
+) -> (Vec<Sample>, Vec<usize>, DropCounts, usize) {
     let columns: Vec<Column> = (0..map.width)
         .into_par_iter()
         .map(|x| {
@@ -887,9 +893,10 @@ fn extract_theta(
     let limit = options.grazing_limit_deg;
 
     let mut samples = Vec::new();
+    let mut sample_columns = Vec::new();
     let mut dropped = DropCounts::default();
     let mut centre_rows = 0;
-    for column in columns {
+    for (x, column) in columns.into_iter().enumerate() {
         let Some(((g, sample, white), sharp, relative_noise)) = column else {
             dropped.off_cylinder += 1;
             continue;
@@ -932,9 +939,10 @@ fn extract_theta(
                 });
             }
             samples.push(point);
+            sample_columns.push(x);
         }
     }
-    (samples, dropped, centre_rows)
+    (samples, sample_columns, dropped, centre_rows)
 }
 
 /// One θL's merged strips, as [`extract_theta`] reads them.
@@ -959,47 +967,63 @@ fn perturbed(setup: &Setup, source: Source, delta: f64) -> Setup {
     s
 }
 
-/// One channel of a θL's samples as a profile along signed θh (radians), sorted.
-fn profile(samples: &[Sample], c: usize) -> Vec<(f64, f64)> {
-    let mut points: Vec<(f64, f64)> = samples
-        .iter()
-        .filter_map(|s| Some((s.half_difference().0, s.channel(c)?)))
-        .collect();
-    points.sort_by(|a, b| a.0.total_cmp(&b.0));
-    points
-}
+/// Samples each side of a point in the local line whose slope is β's derivative along
+/// signed θh ([`slopes`]).
+const SLOPE_NEIGHBOURS: usize = 3;
 
-/// The profile's value at signed θh `h`: linear between the points around it, the end
-/// point's beyond; `None` for an empty profile.
-fn profile_at(points: &[(f64, f64)], h: f64) -> Option<f64> {
-    let k = points.partition_point(|p| p.0 <= h);
-    if k == 0 || k == points.len() {
-        return points.get(k.min(points.len().wrapping_sub(1))).map(|p| p.1);
-    }
-    let (a, b) = (points[k - 1], points[k]);
-    let w = if b.0 > a.0 {
-        (h - a.0) / (b.0 - a.0)
-    } else {
-        0.0
-    };
-    Some(a.1 + w * (b.1 - a.1))
+/// Per sample and channel, dβ/dθh (per radian of signed θh) along its θL: the slope of
+/// the least-squares line through it and its [`SLOPE_NEIGHBOURS`] neighbours each side
+/// (fewer at the ends), which averages the noise that a difference of two neighbours
+/// would carry into the sensitivities. 0 where a channel is dropped or the points do not
+/// spread in θh.
+fn slopes(samples: &[Sample], half_angles: &[f64]) -> Vec<[f64; 3]> {
+    (0..samples.len())
+        .map(|i| {
+            let near =
+                i.saturating_sub(SLOPE_NEIGHBOURS)..(i + SLOPE_NEIGHBOURS + 1).min(samples.len());
+            std::array::from_fn(|c| {
+                let points: Vec<(f64, f64)> = near
+                    .clone()
+                    .filter_map(|k| Some((half_angles[k], samples[k].channel(c)?)))
+                    .collect();
+                let n = points.len() as f64;
+                if samples[i].dropped[c] || n < 2.0 {
+                    return 0.0;
+                }
+                let mean_h = points.iter().map(|p| p.0).sum::<f64>() / n;
+                let mean_b = points.iter().map(|p| p.1).sum::<f64>() / n;
+                let sxx: f64 = points.iter().map(|p| (p.0 - mean_h).powi(2)).sum();
+                let sxy: f64 = points.iter().map(|p| (p.0 - mean_h) * (p.1 - mean_b)).sum();
+                if sxx > 0.0 {
+                    sxy / sxx
+                } else {
+                    0.0
+                }
+            })
+        })
+        .collect()
 }
 
 /// Fills each sample's [`SampleUncertainty::sources`]: how β at the sample's stated
 /// geometry changes when each uncertain input moves by one standard uncertainty.
 /// The white reflectance scales β. A geometric source changes where each pixel's value is
-/// placed: the strips are extracted again with the setup moved by ±u, each result read at
-/// the samples' stated signed θh (linear along the θL's columns), and half the
-/// difference taken (central difference). The change of θd at a fixed θh (a fraction of
-/// the source's own size) is left out.
+/// placed, and a little the value itself (the strips' irradiance ratio): the strips are
+/// extracted again with the setup moved by ±u, and a column whose value v goes to v′ and
+/// whose signed θh moves by Δ changes β at its stated θh by (v′ − v) − Δ·dβ/dθh ([`slopes`]
+/// of the stated samples); half the difference of the two signs is taken (central
+/// difference). The change of θd at a fixed θh (a fraction of the source's own size) is
+/// left out. A column the moved extraction drops gets no change.
 fn add_sensitivities(
     setup: &Setup,
     strips: &Strips,
     options: &ExtractOptions,
     white_reflectance: f64,
-    samples: &mut [Sample],
+    (samples, columns): (&mut [Sample], &[usize]),
 ) {
     let inputs = setup.uncertainty.inputs();
+    let half_angles: Vec<f64> = samples.iter().map(|s| s.half_difference().0).collect();
+    let slope = slopes(samples, &half_angles);
+    let stated: &[Sample] = samples;
     let changes: Vec<(usize, Vec<[f64; 3]>)> = inputs
         .par_iter()
         .enumerate()
@@ -1007,7 +1031,7 @@ fn add_sensitivities(
         .map(|(j, input)| {
             let [plus, minus] = [1.0, -1.0].map(|sign| {
                 let moved = perturbed(setup, input.source, sign * input.u[0]);
-                let (moved_samples, _, _) = extract_theta(
+                let (moved_samples, moved_columns, _, _) = extract_theta(
                     &moved,
                     strips.map,
                     strips.layout,
@@ -1015,13 +1039,20 @@ fn add_sensitivities(
                     options,
                     white_reflectance,
                 );
-                let profiles: [Vec<(f64, f64)>; 3] =
-                    std::array::from_fn(|c| profile(&moved_samples, c));
-                samples
+                stated
                     .iter()
-                    .map(|s| {
-                        let h = s.half_difference().0;
-                        std::array::from_fn(|c| profile_at(&profiles[c], h).unwrap_or(s.rgb[c]))
+                    .zip(columns)
+                    .enumerate()
+                    .map(|(i, (s, x))| {
+                        let Ok(k) = moved_columns.binary_search(x) else {
+                            return [0.0; 3];
+                        };
+                        let m = &moved_samples[k];
+                        let shift = m.half_difference().0 - half_angles[i];
+                        std::array::from_fn(|c| match (s.channel(c), m.channel(c)) {
+                            (Some(v), Some(moved)) => (moved - v) - shift * slope[i][c],
+                            _ => 0.0,
+                        })
                     })
                     .collect::<Vec<[f64; 3]>>()
             });
@@ -1033,6 +1064,7 @@ fn add_sensitivities(
             (j, change)
         })
         .collect();
+    // Source::ALL begins with the white reference.
     let white = inputs[0].u;
     for (i, sample) in samples.iter_mut().enumerate() {
         let rgb = sample.rgb;

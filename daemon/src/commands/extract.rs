@@ -36,6 +36,9 @@ pub struct Args {
     /// Setup JSON to use instead of DIR/setup.json (e.g. what `gonio calibrate` wrote).
     #[arg(long)]
     setup: Option<PathBuf>,
+    /// Leave out the samples' uncertainty columns (and the extractions they take).
+    #[arg(long)]
+    no_uncertainty: bool,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -45,6 +48,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         grazing_limit_deg: args.grazing_limit,
         hdr_dir: args.hdr_dir,
         setup: args.setup,
+        uncertainty: !args.no_uncertainty,
         ..ExtractOptions::default()
     };
     let bar = progress::bar(0, "θL");
