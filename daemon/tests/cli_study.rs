@@ -1,6 +1,6 @@
 //! `gonio study` and `gonio tradeoff` end to end: the built binary on small inputs.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Output;
 
 use gonio_processing::brdf::{Model, Params};
@@ -231,35 +231,56 @@ seed = 5
 "#
 }
 
-#[test]
-fn tradeoff_on_a_tiny_scene_costs_every_setting_and_recommends_one() {
-    let dir = tempfile::tempdir().unwrap();
-    let scene = dir.path().join("tiny.toml");
+/// `gonio tradeoff` of the tiny scene (written in `dir`) into `dir/tradeoff`, robust fits
+/// only, with the pixel-column `strides` and `extra` arguments.
+fn tiny_tradeoff(dir: &Path, strides: &str, extra: &[&str]) -> (Output, PathBuf) {
+    let scene = dir.join("tiny.toml");
     std::fs::write(&scene, tiny_scene()).unwrap();
-    let out = dir.path().join("tradeoff");
-    let result = gonio(&[
+    let out = dir.join("tradeoff");
+    let mut args = vec![
         "tradeoff",
         "--scene",
         scene.to_str().unwrap(),
         "--out",
         out.to_str().unwrap(),
         "--strides",
-        "1,2",
+        strides,
         "--methods",
         "robust",
-    ]);
-    assert!(result.status.success(), "{}", text(&result.stderr));
-    for name in ["tradeoff.csv", "pareto.svg", "tradeoff.json"] {
-        assert!(out.join(name).is_file(), "{name}");
-    }
+    ];
+    args.extend_from_slice(extra);
+    (gonio(&args), out)
+}
+
+/// `tradeoff.csv` in `out`: its rows and the index of each column by name.
+fn tradeoff_rows(out: &Path) -> (Vec<Vec<String>>, impl Fn(&str) -> usize) {
     let table = std::fs::read_to_string(out.join("tradeoff.csv")).unwrap();
-    let header: Vec<&str> = table.lines().next().unwrap().split(',').collect();
-    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
-    let rows: Vec<Vec<String>> = table
+    let header: Vec<String> = table
+        .lines()
+        .next()
+        .unwrap()
+        .split(',')
+        .map(str::to_string)
+        .collect();
+    let rows = table
         .lines()
         .skip(1)
         .map(|l| l.split(',').map(str::to_string).collect())
         .collect();
+    (rows, move |name: &str| {
+        header.iter().position(|h| h == name).unwrap()
+    })
+}
+
+#[test]
+fn tradeoff_on_a_tiny_scene_costs_every_setting_and_recommends_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let (result, out) = tiny_tradeoff(dir.path(), "1,2", &[]);
+    assert!(result.status.success(), "{}", text(&result.stderr));
+    for name in ["tradeoff.csv", "pareto.svg", "tradeoff.json"] {
+        assert!(out.join(name).is_file(), "{name}");
+    }
+    let (rows, col) = tradeoff_rows(&out);
     assert_eq!(
         rows.len(),
         2 * 2 * 2,
@@ -303,34 +324,10 @@ fn tradeoff_on_a_tiny_scene_costs_every_setting_and_recommends_one() {
 #[test]
 fn tradeoff_ranks_by_the_expanded_uncertainty_of_the_parameters_asked_for() {
     let dir = tempfile::tempdir().unwrap();
-    let scene = dir.path().join("tiny.toml");
-    std::fs::write(&scene, tiny_scene()).unwrap();
-    let out = dir.path().join("tradeoff");
-    let run = |rank_by: &str| {
-        gonio(&[
-            "tradeoff",
-            "--scene",
-            scene.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "--strides",
-            "1,4",
-            "--methods",
-            "robust",
-            "--rank-by",
-            rank_by,
-        ])
-    };
-    let result = run("ks_g,m");
+    let run = |rank_by: &str| tiny_tradeoff(dir.path(), "1,4", &["--rank-by", rank_by]);
+    let (result, out) = run("ks_g,m");
     assert!(result.status.success(), "{}", text(&result.stderr));
-    let table = std::fs::read_to_string(out.join("tradeoff.csv")).unwrap();
-    let header: Vec<&str> = table.lines().next().unwrap().split(',').collect();
-    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
-    let rows: Vec<Vec<String>> = table
-        .lines()
-        .skip(1)
-        .map(|l| l.split(',').map(str::to_string).collect())
-        .collect();
+    let (rows, col) = tradeoff_rows(&out);
     let num = |row: &Vec<String>, name: &str| row[col(name)].parse::<f64>().unwrap();
     // Every setting has its relative expanded uncertainty; fewer columns, fewer θL or
     // fewer exposures never make it smaller than the full scan's by much.
@@ -364,7 +361,7 @@ fn tradeoff_ranks_by_the_expanded_uncertainty_of_the_parameters_asked_for() {
     );
     assert!(summary["recommended"]["fit"]["budget"].is_object());
     // A parameter the fit does not have is named, with the ones it has.
-    let result = run("ks_90_g");
+    let (result, _) = run("ks_90_g");
     assert!(!result.status.success());
     let stderr = text(&result.stderr);
     assert!(
