@@ -26,12 +26,18 @@ use serde::{Deserialize, Serialize};
 
 use super::data::Data;
 use super::{parameter_count, robust, FitError, FitMethod, FitOptions, FitResult, ParameterSet};
-use crate::brdf::Roughness;
+use crate::brdf::{Roughness, M_MAX, M_MIN};
 use crate::samples::{distinct_theta_l, Sample, SampleUncertainty, THETA_L_TOLERANCE};
 use crate::setup_uncertainty::Source;
 
 /// The coverage factor of the expanded uncertainty (≈ 95 % for a normal distribution).
 pub const COVERAGE_FACTOR: f64 = 2.0;
+
+/// The refits search m within this factor of the fit's roughness (each way).
+const REFIT_M_RANGE: f64 = 1.5;
+
+/// Points of the refits' grid over log m (the fit's own search uses 24 over a wider range).
+const REFIT_GRID_POINTS: usize = 6;
 
 /// One line of a parameter's budget: a source and its contribution (a standard
 /// uncertainty in the parameter's unit).
@@ -221,6 +227,16 @@ fn refitter<'a>(samples: &'a [Sample], result: &FitResult) -> Result<Refit<'a>, 
     options.method = FitMethod::Robust;
     options.uncertainty = false;
     options.robust.polish = false;
+    // A perturbation of one standard uncertainty moves m little: the refits search
+    // within a factor [`REFIT_M_RANGE`] of the fit's roughness, on a coarser grid.
+    let m = result.m.per_channel();
+    let (lo, hi) = (
+        m.iter().copied().fold(f64::INFINITY, f64::min),
+        m.iter().copied().fold(0.0, f64::max),
+    );
+    options.robust.m_min = (lo / REFIT_M_RANGE).max(M_MIN);
+    options.robust.m_max = (hi * REFIT_M_RANGE).min(M_MAX);
+    options.robust.grid_points = REFIT_GRID_POINTS;
     Ok(Refit {
         data,
         options,
