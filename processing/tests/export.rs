@@ -36,6 +36,7 @@ fn fit_of(model: Model, kd: [f64; 3], ks: [f64; 3], m: f64) -> FitResult {
         colour_shift: None,
         global_minimum: None,
         selection: None,
+        table: None,
     }
 }
 
