@@ -39,7 +39,7 @@ pub const MAX_COLUMNS: usize = 256;
 /// Half-widths (degrees of θh) a table may average its columns' chromaticity over; the
 /// one kept is the one that predicts the chromaticity of unseen θL best
 /// (`held_out::table_held_out`).
-pub const CHROMATICITY_WINDOWS: [f64; 4] = [0.0, 1.0, 2.0, 4.0];
+pub const CHROMATICITY_WINDOWS: [f64; 5] = [0.0, 1.0, 2.0, 4.0, 8.0];
 
 /// Most points a column read from JSON may hold: what a table built from samples keeps.
 pub const MAX_POINTS_PER_COLUMN: usize = JUDGED_PER_THETA_L;
