@@ -6,8 +6,12 @@
 # Cook–Torrance–Fresnel for the goniochromatic scenes); then write the tables of
 # docs/results/README.md and the README's Results summary from those outputs
 # (scripts/results_docs.py), so that no number in them is written by hand.
+# With GONIO_RGL_DIR naming a directory of RGL-EPFL `*.bsdf` files, the real-materials
+# section renders each into a scan and judges every model and the table on it (without
+# it, the section is skipped and says so).
 # One function per section; a new section adds its function and its call in main.
 # Usage: bash scripts/results.sh [SCENE...]   (default: gold red blue-green opal)
+#        bash scripts/results.sh --real-materials-only   (that section and the tables)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -51,6 +55,53 @@ tradeoff_section() {
         | tee "$out/tradeoff.txt"
 }
 
+# A scene of the built-in gold geometry and θL whose sample is the RGL file $2, with a
+# bracket wide enough for a film's specular (β up to ~5e5 against a white's 100).
+rgl_scene() {
+    local name=$1 bsdf=$2
+    awk -v name="$name" -v bsdf="$bsdf" '
+        /^\[/ { skip = ($0 == "[sample]") }
+        skip { next }
+        /^name = / { print "name = \"" name "\""; next }
+        /^bracket_s = / {
+            print "bracket_s = [32.0, 8.0, 2.0, 0.5, 0.125, 0.03125, 0.0078125, 0.001953125, 0.00048828125, 0.0001220703125, 0.000030517578125]"
+            next
+        }
+        { print }
+        END { print "[sample]"; print "model = \"rgl\""; print "bsdf = \"" bsdf "\"" }
+    ' mock-hw/scenes/gold.toml
+}
+
+# Real materials: each RGL-EPFL file of $GONIO_RGL_DIR rendered into a 6-θL scan (sensor
+# binned 8×8), extracted, and judged by leave-one-θL-out: every model and roughness form,
+# the table in (θh, θd), and what `--model auto` chooses (`gonio study --held-out`).
+real_section() {
+    local out=docs/results/real-materials
+    rm -rf "$out"
+    mkdir -p "$out"
+    if [ -z "${GONIO_RGL_DIR:-}" ]; then
+        echo "skipped: GONIO_RGL_DIR was not set (GONIO_RGL_DIR=DIR bash scripts/results.sh renders the RGL-EPFL *.bsdf files of DIR)" \
+            | tee "$out/skipped.txt"
+        return
+    fi
+    local bsdf name scan
+    for bsdf in "$GONIO_RGL_DIR"/*.bsdf; do
+        [ -e "$bsdf" ] || continue
+        name=$(basename "$bsdf" .bsdf)
+        name=${name%_rgb}
+        scan="$scans/real-$name"
+        mkdir -p "$scan" "$out/$name"
+        rgl_scene "$name" "$(cd "$(dirname "$bsdf")" && pwd)/$(basename "$bsdf")" > "$scans/$name.toml"
+        echo "== real material $name: simulate, extract"
+        "$gonio" simulate --scene "$scans/$name.toml" --binning 8 --out "$scan" > /dev/null
+        "$gonio" extract "$scan" --out "$scan/samples.csv" \
+            | sed "s|$scans/|<scans>/|g" > "$out/$name/extract.txt"
+        echo "== real material $name: held out"
+        "$gonio" study "$scan/samples.csv" --held-out --roughness both --out "$out/$name" \
+            | sed "s|$scans/|<scans>/|g" | tee "$out/$name/held_out.txt"
+    done
+}
+
 # The tables of docs/results/README.md and the README's summary, from the outputs.
 docs_section() {
     echo "== tables of docs/results/README.md and README.md"
@@ -62,7 +113,9 @@ main() {
     scans=$(mktemp -d)
     trap 'rm -rf "$scans"' EXIT
     local scenes=("$@")
-    if [ ${#scenes[@]} -eq 0 ]; then
+    if [ "${1:-}" = --real-materials-only ]; then
+        scenes=()
+    elif [ ${#scenes[@]} -eq 0 ]; then
         scenes=(gold red blue-green opal)
     fi
     for scene in "${scenes[@]}"; do
@@ -70,6 +123,7 @@ main() {
         study_section "$scene"
         tradeoff_section "$scene"
     done
+    real_section
     docs_section
     echo "results written under docs/results/"
 }

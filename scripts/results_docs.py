@@ -268,11 +268,137 @@ def summary_table():
     )
 
 
+REAL = "real-materials"
+
+
+def form_label(entry):
+    """A held-out entry's or candidate's label: the variant's, or `table`."""
+    if entry["model"] == "table":
+        return "table (θh, θd)"
+    return variant_label(entry["model"], entry["roughness"])
+
+
+def real_materials():
+    """Material directories of the real-materials section, by name."""
+    root = RESULTS / REAL
+    if not root.is_dir():
+        return []
+    return sorted(d.name for d in root.iterdir() if (d / "held_out.json").is_file())
+
+
+def real_judged(name):
+    """(CT, best parametric, table, auto's choice) held-out entries of a material, and
+    whether auto reported a colour shift."""
+    held = read_json(RESULTS / REAL / name / "held_out.json")
+    entries = held["variants"]
+    parametric = [e for e in entries if e["model"] != "table" and e["relative_loss"] is not None]
+    ct = next(e for e in entries if e["model"] == "cook-torrance" and e["roughness"] == "shared")
+    best = min(parametric, key=lambda e: e["relative_loss"])
+    table_entry = next((e for e in entries if e["model"] == "table"), None)
+    selection = held["chosen"]["selection"]
+    won = selection["candidates"][selection["chosen"]]
+    auto = next(
+        e
+        for e in entries
+        if e["model"] == won["model"] and e.get("roughness") == won.get("roughness")
+    )
+    return ct, best, table_entry, auto, selection["colour_shift"]
+
+
+def uv(entry, key="median_delta_e_uv"):
+    value = entry[key] if entry else None
+    return "–" if value is None else f"{value:.4f}"
+
+
+def real_materials_table():
+    """Per real material: Cook–Torrance, the best parametric model, the table and auto's
+    choice by median held-out ΔE_u′v′ (all points), and whether the target holds: ≥ 2×
+    better than Cook–Torrance where a colour change is reported, never > 2 % worse
+    elsewhere. Then per material and candidate the full held-out errors."""
+    names = real_materials()
+    if not names:
+        return (
+            "*Skipped*: `GONIO_RGL_DIR` was not set when `scripts/results.sh` last ran. To "
+            "produce this section, point it at a directory of RGL-EPFL `*_rgb.bsdf` files: "
+            "`GONIO_RGL_DIR=DIR bash scripts/results.sh --real-materials-only`."
+        )
+    summary, detail = [], []
+    for name in names:
+        ct, best, table_entry, auto, shift = real_judged(name)
+        ratio = auto["median_delta_e_uv"] / ct["median_delta_e_uv"]
+        if shift:
+            target = "yes" if ratio <= 0.5 else "no"
+            goal = "≥ 2× better"
+        else:
+            target = "yes" if ratio <= 1.02 else "no"
+            goal = "≤ 2 % worse"
+        summary.append(
+            [
+                name,
+                "yes" if shift else "no",
+                uv(ct),
+                f"{form_label(best)}: {uv(best)}",
+                uv(table_entry),
+                form_label(auto),
+                f"{ratio:.3f}",
+                f"{goal}: {target}",
+            ]
+        )
+        shown = []
+        for role, e in [("Cook–Torrance", ct), ("best parametric", best), ("table", table_entry), ("auto's choice", auto)]:
+            if e is None:
+                continue
+            same = next((row for row in shown if row[0] is e), None)
+            if same:
+                same[1].append(role)
+                continue
+            shown.append((e, [role]))
+        for e, roles in shown:
+            loss = "–" if e["relative_loss"] is None else f"{e['relative_loss']:.4f}"
+            err = " / ".join(f"{v:.4f}" for v in e["median_err_p"]) if e["median_err_p"] else "–"
+            err_lobe = (
+                " / ".join(f"{v:.4f}" for v in e["median_err_p_lobe"]) if e["median_err_p_lobe"] else "–"
+            )
+            detail.append(
+                [name, form_label(e), ", ".join(roles), loss, uv(e), uv(e, "median_delta_e_uv_lobe"), err, err_lobe]
+            )
+    return (
+        table(
+            [
+                "material",
+                "colour change reported",
+                "Cook–Torrance: ΔE_u′v′",
+                "best parametric: ΔE_u′v′",
+                "table: ΔE_u′v′",
+                "auto's choice",
+                "its ΔE_u′v′ / Cook–Torrance's",
+                "target",
+            ],
+            summary,
+        )
+        + "\n\n"
+        + table(
+            [
+                "material",
+                "model",
+                "role",
+                "held-out loss",
+                "ΔE_u′v′ all",
+                "ΔE_u′v′ lobe",
+                "ΔErr_p R / G / B all",
+                "ΔErr_p R / G / B lobe",
+            ],
+            detail,
+        )
+    )
+
+
 # Block name → (document, function).
 SECTIONS = {
     "study": ("results", study_table),
     "study-time": ("results", study_time_table),
     "tradeoff": ("results", tradeoff_table),
+    "real-materials": ("results", real_materials_table),
     "summary": ("readme", summary_table),
 }
 

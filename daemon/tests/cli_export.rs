@@ -102,6 +102,49 @@ fn export_refuses_what_it_cannot_write_with_one_line() {
     one_line(&export(dir.path(), "table", "t.csv"), "fit.json");
 }
 
+#[test]
+fn a_fit_that_predicts_with_a_table_is_exported_only_as_a_table() {
+    let dir = tempfile::tempdir().unwrap();
+    let fit = fitted(dir.path(), "table");
+    let table = fit.table.as_ref().expect("--model table writes the table");
+    assert_eq!(table.columns().len(), 2);
+    let out = export(dir.path(), "mitsuba", "fit.xml");
+    assert!(!out.status.success());
+    let stderr = text(&out.stderr);
+    assert!(
+        stderr.contains("measured table") && stderr.contains("--format table"),
+        "{stderr}"
+    );
+    assert_eq!(stderr.trim().lines().count(), 1, "{stderr}");
+    assert!(!dir.path().join("fit.xml").exists());
+    // The grid holds the table's predictions: its measured values at a measured point,
+    // the nearest θL's beyond the measured θd.
+    let out = export(dir.path(), "table", "t.json");
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let rows: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("t.json")).unwrap()).unwrap();
+    let at = |ti: f64, tr: f64| -> f64 {
+        rows["rows"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["theta_i"] == ti && r["theta_r"] == tr)
+            .unwrap()["beta"][1]
+            .as_f64()
+            .unwrap()
+    };
+    let truth = Params::shared([9.0, 6.5, 2.0], [25.0, 20.0, 7.0], 0.07);
+    let measured = Model::CookTorrance.evaluate(&truth, -10.0, -10.0)[1];
+    assert!(
+        (at(-10.0, -10.0) - measured).abs() < 1e-9 * measured,
+        "{measured}"
+    );
+    let peak = Model::CookTorrance.evaluate(&truth, -20.0, -20.0)[1];
+    for far in [-30.0, -40.0] {
+        assert!((at(far, far) - peak).abs() < 1e-9 * peak, "{far}: {peak}");
+    }
+}
+
 /// Mitsuba 3 (Python package `mitsuba`, importable by `GONIO_PYTHON`, else `python3`;
 /// scripts/test.sh installs it in .venv-test) loads the exported
 /// scene file, and its BSDF evaluated at in-plane directions equals gonio's fit

@@ -22,6 +22,10 @@
 //! - Per-channel roughness: `alpha` is G's m (Mitsuba's roughness is one value).
 //! - Cook–Torrance–Fresnel's colour changes with the angle between light and camera,
 //!   which no Mitsuba 3 conductor parameter expresses: tabulate it instead.
+//! - A fit that predicts with a measured table (`FitResult::table`) is refused too: its
+//!   parametric fields are only its best parametric fit. Tabulated, the grid holds the
+//!   table's predictions: measured between the θL of the scan, and beyond them constant
+//!   (the nearest θL's column in θd, a column's end point in θh; see `fit::table`).
 
 use std::f64::consts::PI;
 use std::fmt::Write as _;
@@ -34,6 +38,8 @@ use crate::fit::FitResult;
 pub enum ExportError {
     #[error("{model} cannot be written as a Mitsuba 3 BSDF (its specular colour changes with angle); export it as a table")]
     NoMitsubaForm { model: Model },
+    #[error("this fit predicts with a measured table in (θh, θd), which no Mitsuba 3 BSDF reproduces (its {model} fields are only the best parametric fit); export it as a table (--format table)")]
+    TablePredictions { model: Model },
     #[error("the white's camera RGB {0:?} must be positive and finite")]
     BadWhite([f64; 3]),
     #[error("table grid: {0}")]
@@ -65,6 +71,9 @@ fn check_white(white: [f64; 3]) -> Result<(), ExportError> {
 /// of camera RGB `white`.
 pub fn mitsuba_bsdf(fit: &FitResult, white: [f64; 3]) -> Result<MitsubaBsdf, ExportError> {
     check_white(white)?;
+    if fit.table.is_some() {
+        return Err(ExportError::TablePredictions { model: fit.model });
+    }
     let specular_scale = match fit.model {
         Model::CookTorrance => 4.0 / PI,
         Model::Ward => 1.0 / PI,

@@ -19,6 +19,10 @@
 //!   the paper's two models.
 //!
 //! β are in the camera-RGB domain (a white gives G = 100), so Kd is typically 0–100.
+//!
+//! A fit may also carry a measured table in (θh, θd) (`table`; [`fit_table`], or chosen
+//! by `--model auto`): it then predicts with the table, and its parametric fields are a
+//! parametric fit of the same samples, kept for renderers.
 
 pub mod budget;
 mod choice;
@@ -30,6 +34,8 @@ mod nelder_mead;
 mod options;
 mod robust;
 mod simplex;
+mod stride;
+pub mod table;
 mod uncertainty;
 
 use std::time::Instant;
@@ -37,9 +43,12 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 
 use crate::brdf::{Cosines, Model, Params, Roughness};
+use crate::color::CameraModel;
 use crate::metrics;
+use crate::samples::distinct_theta_l;
 use crate::samples::Sample;
 use data::{Data, Found};
+use table::Table;
 
 pub use choice::{
     choose_held_out, fit_auto, specular_uv_change, Candidate, Criterion, Selection,
@@ -47,8 +56,9 @@ pub use choice::{
 };
 pub use data::fits_colour_shift;
 pub use error::FitError;
-pub use held_out::{leave_one_theta_l_out, Variant, CANDIDATES};
+pub use held_out::{leave_one_theta_l_out, Form, Variant, AUTO_CANDIDATES, CANDIDATES};
 pub use options::{FitMethod, FitOptions, NelderMeadOptions, RobustOptions};
+pub use stride::JUDGED_PER_THETA_L;
 pub use uncertainty::{chi2_3_survival, ColourShift, Correlation, ParameterSet, Z95};
 
 /// Fitted roughness as written in the fit JSON: `[m]` or `[mr, mg, mb]`.
@@ -120,6 +130,12 @@ pub struct FitResult {
     /// uncertainty and it was asked for.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub budget: Option<budget::Budget>,
+    /// The measured table in (θh, θd) the fit predicts with (`--model table`, or the
+    /// table chosen by `--model auto`); the fields above are then a parametric fit of
+    /// the same samples (loss and ΔErr_p its own), for renderers and readers that know
+    /// no table.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub table: Option<Table>,
 }
 
 /// Where a local method (Nelder–Mead) ended, against the global minimum of the eq. 10
@@ -162,19 +178,27 @@ impl FitResult {
 
     /// β the fit predicts at in-plane (θi, θr) in degrees.
     pub fn predict(&self, theta_i_deg: f64, theta_r_deg: f64) -> [f64; 3] {
-        self.predict_at(&Cosines::in_plane(theta_i_deg, theta_r_deg))
+        self.predict_at(
+            &Cosines::in_plane(theta_i_deg, theta_r_deg),
+            theta_i_deg >= theta_r_deg,
+        )
     }
 
     /// β the fit predicts at a sample's point (its 3D cosines when it has them).
     pub fn predict_sample(&self, sample: &Sample) -> [f64; 3] {
-        self.predict_at(&sample.cosines())
+        self.predict_at(&sample.cosines(), sample.theta_i >= sample.theta_r)
     }
 
-    /// β the fit predicts at a point given by its 3D cosines.
-    pub fn predict_at(&self, cosines: &Cosines) -> [f64; 3] {
-        self.model
-            .basis_at(cosines)
-            .evaluate_fresnel(&self.params(), &self.specular_90())
+    /// β the fit predicts at a point given by its 3D cosines, on the side `side`
+    /// (θi ≥ θr) of the specular peak: the table's when it has one, else the model's.
+    fn predict_at(&self, cosines: &Cosines, side: bool) -> [f64; 3] {
+        match &self.table {
+            Some(table) => table.predict_at(cosines, side),
+            None => self
+                .model
+                .basis_at(cosines)
+                .evaluate_fresnel(&self.params(), &self.specular_90()),
+        }
     }
 }
 
@@ -328,6 +352,26 @@ pub fn fit(samples: &[Sample], options: &FitOptions) -> Result<FitResult, FitErr
     fit_given(samples, options, None)
 }
 
+/// The table of `samples` ([`table`]) with `options`' parametric fit of the same
+/// samples for its parametric fields. With three θL or more its chromaticity window is
+/// the one that predicts unseen θL best ([`held_out::table_held_out`], ΔE_u′v′ through
+/// `camera`); with fewer, none.
+pub fn fit_table(
+    samples: &[Sample],
+    options: &FitOptions,
+    camera: &CameraModel,
+) -> Result<FitResult, FitError> {
+    let mut result = fit(samples, options)?;
+    let judged = (distinct_theta_l(samples).len() >= 3)
+        .then(|| held_out::table_held_out(samples, camera).table)
+        .flatten();
+    result.table = Some(match judged {
+        Some(table) => table,
+        None => Table::new(samples, 0.0)?,
+    });
+    Ok(result)
+}
+
 /// [`fit`] of Cook–Torrance–Fresnel given `tied`, the robust Cook–Torrance fit of the
 /// same samples with the same options but the model: the fit its colour-shift test falls
 /// back to when the shift is not significant, taken as it is instead of fitted again (its
@@ -424,6 +468,7 @@ fn fit_given(
         global_minimum,
         selection: None,
         budget: None,
+        table: None,
     })
 }
 

@@ -37,6 +37,7 @@ fn fit_of(model: Model, kd: [f64; 3], ks: [f64; 3], m: f64) -> FitResult {
         global_minimum: None,
         selection: None,
         budget: None,
+        table: None,
     }
 }
 

@@ -51,6 +51,19 @@ fn copy_inputs(from: &Path, to: &Path) {
             all.extend(per_scene.iter().map(|f| name.join(f)));
         }
     }
+    let real = from.join("docs/results/real-materials");
+    if let Ok(entries) = std::fs::read_dir(&real) {
+        for entry in entries {
+            let path = entry.expect("entry").path();
+            let name =
+                Path::new("docs/results/real-materials").join(path.file_name().expect("name"));
+            if path.join("held_out.json").is_file() {
+                all.push(name.join("held_out.json"));
+            } else if path.is_file() {
+                all.push(name);
+            }
+        }
+    }
     for file in all {
         let target = to.join(&file);
         std::fs::create_dir_all(target.parent().expect("parent")).expect("create dir");

@@ -6,7 +6,7 @@ use anyhow::{bail, Context};
 use clap::ValueEnum;
 use gonio_processing::brdf::{Model, Roughness};
 use gonio_processing::color::CameraModel;
-use gonio_processing::fit::{self, Criterion, FitMethod, FitOptions, Selection, CANDIDATES};
+use gonio_processing::fit::{self, Criterion, FitMethod, FitOptions, Selection, AUTO_CANDIDATES};
 use gonio_processing::samples::{self, Sample};
 
 use super::output::write_output;
@@ -22,8 +22,12 @@ enum ModelArg {
     Ward,
     /// Cook–Torrance with a specular colour that varies with the facet incidence θd.
     CookTorranceFresnel,
-    /// The model (and roughness form) that best predicts each θL from the others (three
-    /// θL or more), else the lowest BIC; the choice is recorded in the fit JSON.
+    /// The measured table in (θh, θd), interpolated between the scan's θL; the fit JSON
+    /// also holds a Cook–Torrance fit (with --roughness) for renderers.
+    Table,
+    /// The model (and roughness form), or the table, that best predicts each θL from the
+    /// others (three θL or more), else the lowest BIC; the choice is recorded in the fit
+    /// JSON.
     Auto,
 }
 
@@ -110,6 +114,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ModelArg::CookTorrance => Some(Model::CookTorrance),
         ModelArg::Ward => Some(Model::Ward),
         ModelArg::CookTorranceFresnel => Some(Model::CookTorranceFresnel),
+        ModelArg::Table => Some(Model::CookTorrance),
         ModelArg::Auto => None,
     };
     let mut options = FitOptions::new(model.unwrap_or(Model::CookTorrance));
@@ -126,9 +131,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         bail!("--model auto compares robust fits: --method nelder-mead and --polish do not apply");
     }
     let spinner = progress::spinner(format!("fitting {} samples", selected.len()));
-    let result = match model {
-        Some(_) => fit::fit(&selected, &options),
-        None => fit::fit_auto(&selected, &CANDIDATES, &CameraModel::builtin()),
+    let result = match (args.model, model) {
+        (ModelArg::Table, _) => fit::fit_table(&selected, &options, &CameraModel::builtin()),
+        (_, Some(_)) => fit::fit(&selected, &options),
+        (_, None) => fit::fit_auto(&selected, &AUTO_CANDIDATES, &CameraModel::builtin()),
     }
     .with_context(|| format!("fitting {}", args.samples.display()));
     spinner.finish_and_clear();
@@ -165,6 +171,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let json = serde_json::to_string_pretty(&result).context("serialising the fit")?;
     write_output(&args.out, |path| std::fs::write(path, json + "\n"))?;
+    if let Some(table) = &result.table {
+        let columns = table.columns();
+        println!(
+            "predicts with the table of {} θL ({} β values, θd {:.1}°…{:.1}°); beyond them the \
+             nearest θL, beyond a θL's θh its end point; the parametric fields below are {}'s",
+            columns.len(),
+            table.values(),
+            columns.first().map_or(0.0, |c| c.theta_d),
+            columns.last().map_or(0.0, |c| c.theta_d),
+            result.model,
+        );
+    }
     let m = result.params().m;
     println!(
         "{} ({}, {}) on {} samples: loss {:.6}, {} evaluations in {:.3} s -> {}",
@@ -330,7 +348,7 @@ fn print_selection(selection: &Selection) {
         println!(
             "{} {:<35} {:>6}  {:>13}  {:>8} {:>8}  {err_p}{}",
             if i == selection.chosen { "*" } else { " " },
-            c.variant.label(),
+            c.form.label(),
             c.parameters,
             c.score.map_or("failed".to_string(), |s| format!("{s:.6}")),
             value(c.held_out_delta_e_uv),

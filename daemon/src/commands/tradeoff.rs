@@ -231,7 +231,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let chosen = match (args.model, truth.model) {
         (None, None) => {
             let spinner = progress::spinner("choosing the model by the θL it did not see");
-            let fit = fit::fit_auto(&full, &CANDIDATES, &CameraModel::builtin());
+            // Its parametric candidates: the tradeoff is of a model's fit.
+            let forms = CANDIDATES.map(fit::Form::Parametric);
+            let fit = fit::fit_auto(&full, &forms, &CameraModel::builtin());
             spinner.finish_and_clear();
             let fit = fit.context("choosing the model")?;
             if let Some(selection) = &fit.selection {

@@ -200,6 +200,15 @@ pub fn budget_if_possible(
     budget(samples, result).map(Some)
 }
 
+/// β the fit's parametric model predicts at a sample (a fit that predicts with a table
+/// keeps its parametric fit beside it: that is the fit the budget is of).
+fn parametric(result: &FitResult, sample: &Sample) -> [f64; 3] {
+    result
+        .model
+        .basis_at(&sample.cosines())
+        .evaluate_fresnel(&result.params(), &result.specular_90())
+}
+
 /// Why a budget could not be made.
 fn missing(what: &str) -> FitError {
     FitError::InvalidOptions(format!("no uncertainty budget: {what}"))
@@ -274,7 +283,7 @@ pub fn budget(samples: &[Sample], result: &FitResult) -> Result<Budget, FitError
         .collect();
 
     // The residuals' scatter against the noise the samples state.
-    let estimates: Vec<[f64; 3]> = samples.iter().map(|s| result.predict_sample(s)).collect();
+    let estimates: Vec<[f64; 3]> = samples.iter().map(|s| parametric(result, s)).collect();
     let (mut residual2, mut noise2) = (0.0, 0.0);
     for (s, e) in samples.iter().zip(&estimates) {
         let u = s.uncertainty.as_ref().map_or([0.0; 3], |u| u.noise);
@@ -470,7 +479,7 @@ pub fn monte_carlo(
         Draw::All => {
             let (mut r2, mut u2) = (0.0, 0.0);
             for s in samples {
-                let e = result.predict_sample(s);
+                let e = parametric(result, s);
                 let u = s.uncertainty.as_ref().map_or([0.0; 3], |u| u.noise);
                 for c in (0..3).filter(|&c| !s.dropped[c]) {
                     r2 += (s.rgb[c] - e[c]).powi(2);

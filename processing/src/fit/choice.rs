@@ -24,14 +24,26 @@
 //! a colour shift. With fewer than three θL no chromaticity is predicted unseen and no
 //! colour shift is reported. The fit's u′v′ change of its specular colour between the
 //! smallest and the largest |θL| is recorded beside ([`specular_uv_change`]).
+//!
+//! The table in (θh, θd) ([`super::table`]) is the last candidate (the most complex:
+//! every measured value is a parameter), judged by the same held-out loss with three θL
+//! or more; with fewer it is not a candidate (one θL left out would leave at most one
+//! column, which predicts nothing across θd). When it wins, the fit predicts with it and
+//! keeps the best parametric candidate's fields (fitted to every sample) for renderers.
+//! A table reproduces whatever colour change the material has, so a table choice reports
+//! a colour shift by the same rule: when it predicts the unseen highlight's chromaticity
+//! at least [`COLOUR_SHIFT_GAIN`] times better than every candidate without a colour
+//! shift.
 
 use serde::{Deserialize, Serialize};
 
-use super::held_out::{leave_one_theta_l_out, HeldOut, Variant};
+use super::held_out::{leave_one_theta_l_out, table_held_out, Form, HeldOut};
+use super::stride::judged;
+use super::table::Table;
 use super::{fit, parameter_count, FitError, FitResult};
 use crate::brdf::Roughness;
 use crate::color::CameraModel;
-use crate::samples::{distinct_theta_l, Sample, THETA_L_TOLERANCE};
+use crate::samples::{distinct_theta_l, Sample};
 
 /// A later candidate replaces the best so far only with a score lower by more than this
 /// fraction of it (BIC: of the best's |BIC|).
@@ -55,8 +67,9 @@ pub enum Criterion {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Candidate {
     #[serde(flatten)]
-    pub variant: Variant,
-    /// Fitted parameters (a tied colour shift counts as Cook–Torrance's).
+    pub form: Form,
+    /// Fitted parameters (a tied colour shift counts as Cook–Torrance's; the table's
+    /// stored β values).
     pub parameters: usize,
     /// The criterion's value (lower is better); `None` when a fit failed.
     pub score: Option<f64>,
@@ -93,46 +106,12 @@ pub struct Selection {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub specular_uv_change: Option<f64>,
     /// Leave-one-θL-out on a large scan: the candidates were judged on every
-    /// `judged_stride`-th sample of each θL ([`JUDGED_PER_THETA_L`]); `None`: on all.
+    /// `judged_stride`-th sample of each θL
+    /// ([`super::stride::JUDGED_PER_THETA_L`]); `None`: on all.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub judged_stride: Option<usize>,
     /// Why the chosen one won, in words.
     pub reason: String,
-}
-
-/// Most samples of one θL the candidates are judged on by leave-one-θL-out: a larger
-/// scan is judged on every k-th sample of each θL, k the smallest stride that keeps each
-/// θL within it (neighbouring columns differ little in geometry), and the chosen
-/// candidate is then fitted to every sample.
-pub const JUDGED_PER_THETA_L: usize = 500;
-
-/// Every `stride`-th sample of each θL of `samples` (in their order), and the stride:
-/// the smallest that keeps each θL within [`JUDGED_PER_THETA_L`].
-fn judged(samples: &[Sample]) -> (Vec<Sample>, usize) {
-    let theta_l = distinct_theta_l(samples);
-    let at = |s: &Sample| {
-        theta_l
-            .iter()
-            .position(|t| (t - s.theta_l).abs() <= THETA_L_TOLERANCE)
-    };
-    let mut counts = vec![0usize; theta_l.len()];
-    for i in samples.iter().filter_map(at) {
-        counts[i] += 1;
-    }
-    let most = counts.iter().copied().max().unwrap_or(0);
-    let stride = most.div_ceil(JUDGED_PER_THETA_L).max(1);
-    let mut seen = vec![0usize; theta_l.len()];
-    let kept = samples
-        .iter()
-        .filter(|s| {
-            at(s).is_some_and(|i| {
-                seen[i] += 1;
-                (seen[i] - 1).is_multiple_of(stride)
-            })
-        })
-        .copied()
-        .collect();
-    (kept, stride)
 }
 
 /// u′v′ distance between the specular colours of `result` at the smallest and largest
@@ -192,16 +171,23 @@ fn best(scores: &[Option<f64>]) -> Option<usize> {
     chosen
 }
 
-fn held_out_candidate(h: &HeldOut) -> Candidate {
+/// The scores of `h`; `table_values`: the stored values of the table of every θL.
+fn held_out_candidate(h: &HeldOut, table_values: usize) -> Candidate {
     let shift_tied = h.colour_shift_count() == (0, h.folds.len()) && !h.folds.is_empty();
-    let full = parameter_count(h.variant.model, h.variant.roughness);
+    let parameters = match h.form {
+        Form::Parametric(v) => {
+            let full = parameter_count(v.model, v.roughness);
+            if v.model.has_fresnel_colour() && shift_tied {
+                full - 3
+            } else {
+                full
+            }
+        }
+        Form::Table(_) => table_values,
+    };
     Candidate {
-        variant: h.variant,
-        parameters: if h.variant.model.has_fresnel_colour() && shift_tied {
-            full - 3
-        } else {
-            full
-        },
+        form: h.form,
+        parameters,
         score: h.relative_loss(),
         held_out_delta_e_uv: h.median_delta_e_uv(false),
         held_out_delta_e_uv_lobe: h.median_delta_e_uv(true),
@@ -214,48 +200,75 @@ fn held_out_candidate(h: &HeldOut) -> Candidate {
     }
 }
 
-/// Fits the candidate among `variants` that `samples` favour (see the module), with its
+/// Fits the candidate among `forms` that `samples` favour (see the module), with its
 /// uncertainty, and records the choice in the result's `selection`.
 pub fn fit_auto(
     samples: &[Sample],
-    variants: &[Variant],
+    forms: &[Form],
     camera: &CameraModel,
 ) -> Result<FitResult, FitError> {
+    let variants: Vec<_> = forms.iter().filter_map(Form::variant).collect();
     if variants.is_empty() {
-        return Err(FitError::InvalidOptions("no candidate model".into()));
+        return Err(FitError::InvalidOptions(
+            "no parametric candidate model".into(),
+        ));
     }
     let theta_l = distinct_theta_l(samples);
     if theta_l.len() >= 3 {
         let (judged, stride) = judged(samples);
-        let held = leave_one_theta_l_out(&judged, variants, camera)?;
+        let parametric = leave_one_theta_l_out(&judged, &variants, camera)?;
+        let mut parametric = parametric.into_iter();
+        let held: Vec<HeldOut> = forms
+            .iter()
+            .filter_map(|form| match form {
+                Form::Parametric(_) => parametric.next(),
+                Form::Table(_) => Some(table_held_out(&judged, camera)),
+            })
+            .collect();
         let mut result = choose_held_out(samples, &held, camera)?;
         if let Some(selection) = result.selection.as_mut() {
             selection.judged_stride = (stride > 1).then_some(stride);
         }
         return Ok(result);
     }
-    let fits: Vec<Result<FitResult, FitError>> = variants
+    let fits: Vec<Option<Result<FitResult, FitError>>> = forms
         .iter()
-        .map(|v| fit(samples, &v.options()))
+        .map(|form| form.variant().map(|v| fit(samples, &v.options())))
         .collect();
-    let candidates = variants
+    let candidates = forms
         .iter()
         .zip(&fits)
-        .map(|(&variant, f)| Candidate {
-            variant,
-            parameters: f.as_ref().map_or_else(
-                |_| parameter_count(variant.model, variant.roughness),
-                fitted_parameters,
-            ),
-            score: f.as_ref().ok().map(|r| bic(r, samples.len())),
-            held_out_delta_e_uv: None,
-            held_out_delta_e_uv_lobe: None,
-            held_out_err_p: None,
-            held_out_err_p_lobe: None,
-            error: f.as_ref().err().map(|e| e.to_string()),
+        .map(|(&form, f)| {
+            let (parameters, score, error) = match (form, f) {
+                (Form::Parametric(v), Some(f)) => (
+                    f.as_ref()
+                        .map_or_else(|_| parameter_count(v.model, v.roughness), fitted_parameters),
+                    f.as_ref().ok().map(|r| bic(r, samples.len())),
+                    f.as_ref().err().map(|e| e.to_string()),
+                ),
+                _ => (
+                    0,
+                    None,
+                    Some(format!(
+                        "not a candidate with {} θL: it is judged only on θL it did not see \
+                         (three θL or more)",
+                        theta_l.len()
+                    )),
+                ),
+            };
+            Candidate {
+                form,
+                parameters,
+                score,
+                held_out_delta_e_uv: None,
+                held_out_delta_e_uv_lobe: None,
+                held_out_err_p: None,
+                held_out_err_p_lobe: None,
+                error,
+            }
         })
         .collect();
-    choose(samples, Criterion::Bic, candidates, fits, camera)
+    choose(samples, Criterion::Bic, candidates, fits, None, camera)
 }
 
 /// The choice among variants already judged by leave-one-θL-out (`held`, from
@@ -266,47 +279,79 @@ pub fn choose_held_out(
     held: &[HeldOut],
     camera: &CameraModel,
 ) -> Result<FitResult, FitError> {
-    let candidates = held.iter().map(held_out_candidate).collect();
+    let table = held.iter().find_map(|h| h.table.clone());
+    let values = table.as_ref().map_or(0, Table::values);
+    let candidates = held.iter().map(|h| held_out_candidate(h, values)).collect();
     choose(
         samples,
         Criterion::LeaveOneThetaLOut,
         candidates,
         Vec::new(),
+        table,
         camera,
     )
 }
 
 /// The best of `candidates` (fitted to every sample in `fits` when already done) with
-/// the choice recorded in its `selection`.
+/// the choice recorded in its `selection`. When the table (`table`, of every sample)
+/// wins, the result is the best parametric candidate's fit predicting with it.
 fn choose(
     samples: &[Sample],
     criterion: Criterion,
     candidates: Vec<Candidate>,
-    fits: Vec<Result<FitResult, FitError>>,
+    fits: Vec<Option<Result<FitResult, FitError>>>,
+    table: Option<Table>,
     camera: &CameraModel,
 ) -> Result<FitResult, FitError> {
     let theta_l = distinct_theta_l(samples);
     let scores: Vec<Option<f64>> = candidates.iter().map(|c| c.score).collect();
-    let Some(chosen) = best(&scores) else {
+    let parametric_scores: Vec<Option<f64>> = candidates
+        .iter()
+        .map(|c| c.score.filter(|_| c.form.variant().is_some()))
+        .collect();
+    let (Some(chosen), Some(parametric)) = (best(&scores), best(&parametric_scores)) else {
         let why = candidates
             .iter()
-            .filter_map(|c| Some(format!("{}: {}", c.variant.label(), c.error.as_ref()?)))
+            .filter_map(|c| Some(format!("{}: {}", c.form.label(), c.error.as_ref()?)))
             .collect::<Vec<_>>()
             .join("; ");
         return Err(FitError::Optimizer(format!(
-            "no candidate model could be scored ({why})"
+            "no parametric candidate model could be scored ({why})"
         )));
     };
-    let mut result = match fits.into_iter().nth(chosen) {
-        Some(Ok(f)) => f,
-        _ => fit(samples, &candidates[chosen].variant.options())?,
+    let mut result = match (
+        fits.into_iter().nth(parametric).flatten(),
+        candidates[parametric].form,
+    ) {
+        (Some(Ok(f)), _) => f,
+        (_, form) => {
+            let variant = form.variant().ok_or_else(|| {
+                FitError::Optimizer(format!("{} is not a parametric model", form.label()))
+            })?;
+            fit(samples, &variant.options())?
+        }
     };
-    let change = specular_uv_change(&result, &theta_l, camera);
+    let tabulated = chosen != parametric;
+    if tabulated {
+        result.table = Some(match table {
+            Some(table) => table,
+            None => Table::new(samples, 0.0)?,
+        });
+    }
+    let change = specular_uv_change(&result, &theta_l, camera).filter(|_| !tabulated);
     let gain = chromatic_gain(&candidates, chosen);
     let colour_shift = criterion == Criterion::LeaveOneThetaLOut
-        && result.colour_shift.is_some_and(|c| c.fitted)
+        && (tabulated || result.colour_shift.is_some_and(|c| c.fitted))
         && gain.is_some_and(|g| g >= COLOUR_SHIFT_GAIN);
-    let reason = reason(criterion, &candidates, chosen, &result, gain, change);
+    let reason = reason(
+        criterion,
+        &candidates,
+        chosen,
+        parametric,
+        &result,
+        gain,
+        change,
+    );
     result.selection = Some(Selection {
         criterion,
         candidates,
@@ -326,7 +371,11 @@ fn chromatic_gain(candidates: &[Candidate], chosen: usize) -> Option<f64> {
     let own = candidates[chosen].held_out_delta_e_uv_lobe?;
     let others = candidates
         .iter()
-        .filter(|c| !c.variant.model.has_fresnel_colour())
+        .filter(|c| {
+            c.form
+                .variant()
+                .is_some_and(|v| !v.model.has_fresnel_colour())
+        })
         .filter_map(|c| c.held_out_delta_e_uv_lobe)
         .fold(f64::INFINITY, f64::min);
     (others.is_finite() && own > 0.0).then(|| others / own)
@@ -338,6 +387,7 @@ fn reason(
     criterion: Criterion,
     candidates: &[Candidate],
     chosen: usize,
+    parametric: usize,
     result: &FitResult,
     gain: Option<f64>,
     change: Option<f64>,
@@ -359,21 +409,40 @@ fn reason(
         Some((_, r)) if r.score.unwrap() <= score => format!(
             "{} has the lowest {what} among the simplest: {score:.6}, equal within {TIE:e} to {} \
              ({:.6}) with fewer or as many parameters",
-            winner.variant.label(),
-            r.variant.label(),
+            winner.form.label(),
+            r.form.label(),
             r.score.unwrap()
         ),
         Some((_, r)) => format!(
             "{} has the lowest {what}: {score:.6}, against {:.6} for {} (next best)",
-            winner.variant.label(),
+            winner.form.label(),
             r.score.unwrap(),
-            r.variant.label()
+            r.form.label()
         ),
         None => format!(
             "{} is the only candidate scored: {what} {score:.6}",
-            winner.variant.label()
+            winner.form.label()
         ),
     };
+    if chosen != parametric {
+        text.push_str(&format!(
+            "; predictions use the table of the measured θL in (θh, θd), and its parametric \
+             fields are those of {}, the best parametric candidate",
+            candidates[parametric].form.label()
+        ));
+        text.push_str(&match gain {
+            Some(g) if g >= COLOUR_SHIFT_GAIN => format!(
+                "; it predicts the unseen highlight's chromaticity {g:.2}× better than any \
+                 model without a shift (≥ {COLOUR_SHIFT_GAIN}×): a colour shift"
+            ),
+            Some(g) => format!(
+                "; it predicts the unseen highlight's chromaticity only {g:.2}× better than a \
+                 model without a shift (< {COLOUR_SHIFT_GAIN}×): no colour shift"
+            ),
+            None => "; no chromaticity of the highlight judged: no colour shift reported".into(),
+        });
+        return text;
+    }
     if result.model.has_fresnel_colour() {
         let uv = change.map_or(String::new(), |d| {
             format!(" (its specular colour moves by Δu′v′ = {d:.4} over the scanned angles)")
@@ -400,40 +469,4 @@ fn reason(
         text.push_str("; one roughness per channel");
     }
     text
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_large_scan_is_judged_on_every_kth_sample_of_each_theta_l() {
-        let scan = |counts: &[usize]| -> Vec<Sample> {
-            counts
-                .iter()
-                .enumerate()
-                .flat_map(|(i, &n)| {
-                    (0..n).map(move |k| {
-                        Sample::in_plane(-20.0 - 5.0 * i as f64, k as f64 * 0.01, 0.0, [1.0; 3])
-                    })
-                })
-                .collect()
-        };
-        let count = |samples: &[Sample], theta_l: f64| {
-            samples.iter().filter(|s| s.theta_l == theta_l).count()
-        };
-        let (kept, stride) = judged(&scan(&[1200, 300, 1001]));
-        assert_eq!(stride, 3);
-        assert_eq!(
-            [
-                count(&kept, -20.0),
-                count(&kept, -25.0),
-                count(&kept, -30.0)
-            ],
-            [400, 100, 334]
-        );
-        assert_eq!(kept[1].theta_i, 0.03);
-        let small = scan(&[500, 20, 499]);
-        assert_eq!(judged(&small), (small.clone(), 1));
-    }
 }

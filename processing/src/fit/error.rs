@@ -27,4 +27,6 @@ pub enum FitError {
     Overflow(&'static str),
     #[error(transparent)]
     Metric(#[from] metrics::MetricsError),
+    #[error("table: {0}")]
+    Table(#[from] super::table::TableError),
 }

@@ -8,10 +8,14 @@
 //!
 //! Only points whose three channels are known are scored (a dropped value has no
 //! chromaticity).
+//!
+//! The table in (θh, θd) ([`super::table`]) is judged the same way: each θL predicted
+//! from the columns of the others ([`table_held_out`]).
 
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use super::table::{Table, CHROMATICITY_WINDOWS};
 use super::{fit, FitError, FitOptions};
 use crate::brdf::{Model, Roughness};
 use crate::color::CameraModel;
@@ -47,6 +51,50 @@ impl Variant {
     }
 }
 
+/// The table's form as written in a candidate: `{"model": "table"}`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub struct TableForm {
+    model: TableName,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+enum TableName {
+    Table,
+}
+
+/// What is judged: a parametric variant, or the table in (θh, θd) ([`super::table`]).
+/// Written as the variant's `model` and `roughness`, or as `"model": "table"`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum Form {
+    Parametric(Variant),
+    Table(TableForm),
+}
+
+impl Form {
+    /// The table.
+    pub const TABLE: Form = Form::Table(TableForm {
+        model: TableName::Table,
+    });
+
+    /// The variant's label, or `table`.
+    pub fn label(&self) -> String {
+        match self {
+            Form::Parametric(v) => v.label(),
+            Form::Table(_) => "table".into(),
+        }
+    }
+
+    /// The parametric variant, `None` for the table.
+    pub fn variant(&self) -> Option<Variant> {
+        match *self {
+            Form::Parametric(v) => Some(v),
+            Form::Table(_) => None,
+        }
+    }
+}
+
 /// Every model with both roughness forms, in order of their number of parameters (7, 7,
 /// 9, 9, 10, 12): the candidates of `gonio fit --model auto`.
 pub const CANDIDATES: [Variant; 6] = [
@@ -56,6 +104,18 @@ pub const CANDIDATES: [Variant; 6] = [
     Variant::new(Model::Ward, Roughness::PerChannel),
     Variant::new(Model::CookTorranceFresnel, Roughness::Shared),
     Variant::new(Model::CookTorranceFresnel, Roughness::PerChannel),
+];
+
+/// The candidates of `gonio fit --model auto`: the parametric ones ([`CANDIDATES`]), then
+/// the table, the most complex (judged with three θL or more only).
+pub const AUTO_CANDIDATES: [Form; 7] = [
+    Form::Parametric(CANDIDATES[0]),
+    Form::Parametric(CANDIDATES[1]),
+    Form::Parametric(CANDIDATES[2]),
+    Form::Parametric(CANDIDATES[3]),
+    Form::Parametric(CANDIDATES[4]),
+    Form::Parametric(CANDIDATES[5]),
+    Form::TABLE,
 ];
 
 /// A point of a θL is in its specular lobe when its excess over the θL's darkest point,
@@ -117,14 +177,17 @@ pub struct Fold {
     pub colour_shift: Option<bool>,
 }
 
-/// A variant judged at every θL in turn.
+/// A variant (or the table) judged at every θL in turn.
 #[derive(Debug, Clone, PartialEq)]
 pub struct HeldOut {
-    pub variant: Variant,
+    pub form: Form,
     /// The folds that were fitted and scored, in the samples' θL order.
     pub folds: Vec<Fold>,
     /// The θL whose fold failed, and why.
     pub failed: Vec<(f64, String)>,
+    /// The table's form only: the table of every θL judged (its chromaticity window the
+    /// one that predicted unseen θL best).
+    pub table: Option<Table>,
 }
 
 /// The median of `values` (mean of the middle two for an even count); `None` if empty.
@@ -267,88 +330,64 @@ fn score(
     })
 }
 
-/// One θL as a table: its mean θd (radians) and its points' (signed θh, β), sorted by θh.
-type ThetaTable = (f64, Vec<(f64, [f64; 3])>);
-
-/// A sample's half-vector and difference angles (radians): θh signed by the side of the
-/// specular peak it lies on (the sign of θi − θr), θd = acos(v·h).
-fn half_difference(s: &Sample) -> (f64, f64) {
-    let c = s.cosines();
-    let theta_h = c.n_dot_h.clamp(-1.0, 1.0).acos();
-    let side = if s.theta_i >= s.theta_r { 1.0 } else { -1.0 };
-    (side * theta_h, c.v_dot_h.clamp(-1.0, 1.0).acos())
+/// The table judged like a model: each θL predicted from the table of the others'
+/// columns ([`Table::without`]), for each chromaticity window of
+/// [`CHROMATICITY_WINDOWS`]; the window kept is the one with the lowest median held-out
+/// ΔE_u′v′ over all points (the narrowest on a tie). The model-free bound of a model's
+/// held-out error: no model reaches below what its own data interpolate to, except by
+/// extrapolating better beyond the measured θd.
+pub fn table_held_out(samples: &[Sample], camera: &CameraModel) -> HeldOut {
+    let mut best: Option<(f64, HeldOut)> = None;
+    for window in CHROMATICITY_WINDOWS {
+        let held = table_folds(samples, window, camera);
+        let uv = held.median_delta_e_uv(false).unwrap_or(f64::INFINITY);
+        if best.as_ref().is_none_or(|(b, _)| uv < *b) {
+            best = Some((uv, held));
+        }
+    }
+    match best {
+        Some((_, held)) => held,
+        None => table_folds(samples, 0.0, camera),
+    }
 }
 
-/// β of one θL's points (sorted by signed θh) at signed θh `h`: linear between the two
-/// points around it, the end point's beyond.
-fn along(points: &[(f64, [f64; 3])], h: f64) -> [f64; 3] {
-    let k = points.partition_point(|p| p.0 <= h);
-    if k == 0 {
-        return points[0].1;
-    }
-    if k == points.len() {
-        return points[k - 1].1;
-    }
-    let (a, b) = (points[k - 1], points[k]);
-    let w = if b.0 > a.0 {
-        (h - a.0) / (b.0 - a.0)
-    } else {
-        0.0
+/// The table of `samples` with chromaticity window `window`, each θL predicted from the
+/// others' columns.
+fn table_folds(samples: &[Sample], window: f64, camera: &CameraModel) -> HeldOut {
+    let mut held = HeldOut {
+        form: Form::TABLE,
+        folds: Vec::new(),
+        failed: Vec::new(),
+        table: None,
     };
-    std::array::from_fn(|c| a.1[c] + w * (b.1[c] - a.1[c]))
+    let table = Table::new(samples, window).map_err(|e| e.to_string());
+    for t in distinct_theta_l(samples) {
+        let outcome = match &table {
+            Ok(table) => table_fold(samples, table, t, camera),
+            Err(e) => Err(e.clone()),
+        };
+        match outcome {
+            Ok(f) => held.folds.push(f),
+            Err(e) => held.failed.push((t, e)),
+        }
+    }
+    held.table = table.ok();
+    held
 }
 
-/// The model-free bound of a model's held-out error: each θL predicted from the other
-/// θL's own samples, as a table in (θh, θd) (an isotropic BRDF is nearly bivariate in
-/// them; Romeiro et al. 2008): along each other θL linear in signed θh, then linear in θd
-/// between the two θL whose mean θd bracket the point's (the nearest θL beyond the ends).
-/// No model reaches below what its own data interpolate to, except by extrapolating
-/// better beyond the measured θd.
-pub fn interpolation_folds(samples: &[Sample], camera: &CameraModel) -> Vec<Result<Fold, String>> {
-    let theta_l = distinct_theta_l(samples);
-    let tables: Vec<ThetaTable> = theta_l
-        .iter()
-        .filter_map(|&t| {
-            let held = known(samples, t).ok()?;
-            let mut points: Vec<(f64, [f64; 3])> =
-                held.iter().map(|s| (half_difference(s).0, s.rgb)).collect();
-            points.sort_by(|a, b| a.0.total_cmp(&b.0));
-            let mean_d = held.iter().map(|s| half_difference(s).1).sum::<f64>() / held.len() as f64;
-            Some((mean_d, points))
-        })
-        .collect();
-    theta_l
-        .iter()
-        .enumerate()
-        .map(|(i, &t)| {
-            let held = known(samples, t)?;
-            let mut others: Vec<&ThetaTable> = tables
-                .iter()
-                .enumerate()
-                .filter(|(j, _)| *j != i)
-                .map(|(_, table)| table)
-                .collect();
-            others.sort_by(|a, b| a.0.total_cmp(&b.0));
-            if others.is_empty() {
-                return Err("no other θL to interpolate".into());
-            }
-            let estimated: Vec<[f64; 3]> = held
-                .iter()
-                .map(|s| {
-                    let (h, d) = half_difference(s);
-                    let k = others.partition_point(|o| o.0 <= d);
-                    if k == 0 || k == others.len() {
-                        return along(&others[k.min(others.len() - 1)].1, h);
-                    }
-                    let (lo, hi) = (others[k - 1], others[k]);
-                    let (a, b) = (along(&lo.1, h), along(&hi.1, h));
-                    let w = (d - lo.0) / (hi.0 - lo.0);
-                    std::array::from_fn(|c| a[c] + w * (b[c] - a[c]))
-                })
-                .collect();
-            score(t, &held, &estimated, camera)
-        })
-        .collect()
+/// The table of every other θL than `theta_l` scored at its samples.
+fn table_fold(
+    samples: &[Sample],
+    table: &Table,
+    theta_l: f64,
+    camera: &CameraModel,
+) -> Result<Fold, String> {
+    let held = known(samples, theta_l)?;
+    let others = table
+        .without(theta_l)
+        .ok_or_else(|| "no other θL to interpolate".to_string())?;
+    let estimated: Vec<[f64; 3]> = held.iter().map(|s| others.predict_sample(s)).collect();
+    score(theta_l, &held, &estimated, camera)
 }
 
 /// Every variant judged at every θL of `samples` in turn, fits in parallel. Needs two
@@ -377,9 +416,10 @@ pub fn leave_one_theta_l_out(
         .enumerate()
         .map(|(v, &variant)| {
             let mut held = HeldOut {
-                variant,
+                form: Form::Parametric(variant),
                 folds: Vec::new(),
                 failed: Vec::new(),
+                table: None,
             };
             for (_, t, outcome) in outcomes.iter().filter(|(w, _, _)| *w == v) {
                 match outcome {
@@ -411,7 +451,7 @@ mod tests {
     }
 
     #[test]
-    fn interpolation_predicts_a_brdf_of_the_half_angle_alone() {
+    fn the_table_predicts_a_brdf_of_the_half_angle_alone() {
         // β depends on signed θh only: every θL, interior or at an end of the θd range,
         // is predicted from the others to the accuracy of linear interpolation along θh.
         let beta = |h: f64| {
@@ -428,10 +468,9 @@ mod tests {
                 samples.push(Sample::in_plane(theta_l, theta_i, theta_r, beta(h)));
             }
         }
-        let folds = interpolation_folds(&samples, &CameraModel::builtin());
-        assert_eq!(folds.len(), 6);
-        for fold in folds {
-            let fold = fold.unwrap();
+        let held = table_held_out(&samples, &CameraModel::builtin());
+        assert_eq!((held.folds.len(), held.failed.len()), (6, 0));
+        for fold in held.folds {
             assert!(fold.all.err_p.iter().all(|&e| e < 1e-3), "{fold:?}");
             assert!(fold.lobe.is_some(), "{fold:?}");
         }

@@ -14,7 +14,7 @@ use gonio_processing::capture::{is_capture_path, sidecar_path, CaptureError, Fra
 use gonio_processing::color::CameraModel;
 use gonio_processing::extract::{extract_scan, ExtractOptions};
 use gonio_processing::fit::budget::budget_if_possible;
-use gonio_processing::fit::{fit, fit_auto, FitOptions, FitResult, CANDIDATES};
+use gonio_processing::fit::{fit, fit_auto, FitOptions, FitResult, AUTO_CANDIDATES};
 use gonio_processing::hdr::{merge, MergeOptions};
 use gonio_processing::metrics::err_p;
 use gonio_processing::samples::{read_csv, write_csv, Sample};
@@ -393,7 +393,7 @@ fn fit_model(dir: &Path, plan: &ScanPlan, model: &str) -> anyhow::Result<Value> 
         .with_context(|| format!("unknown model {model:?}"))?;
     let samples = read_csv(&dir.join("samples.csv"))?;
     let result = if model == AUTO_FIT.0 {
-        fit_auto(&samples, &CANDIDATES, &CameraModel::builtin())?
+        fit_auto(&samples, &AUTO_CANDIDATES, &CameraModel::builtin())?
     } else {
         let live = plan
             .theta_l
@@ -417,6 +417,7 @@ fn fit_model(dir: &Path, plan: &ScanPlan, model: &str) -> anyhow::Result<Value> 
         record["roughness"] = json!(result.roughness);
         record["colour_shift"] = json!(selection.colour_shift);
         record["reason"] = json!(selection.reason);
+        record["table"] = json!(result.table.is_some());
     }
     Ok(record)
 }
@@ -606,11 +607,12 @@ mod tests {
         let auto: FitResult =
             serde_json::from_slice(&std::fs::read(dir.join(AUTO_FIT.1)).unwrap()).unwrap();
         let selection = auto.selection.expect("an auto fit records its choice");
-        assert_eq!(selection.candidates.len(), CANDIDATES.len());
-        assert_eq!(
-            selection.candidates[selection.chosen].variant.model,
-            auto.model
-        );
+        assert_eq!(selection.candidates.len(), AUTO_CANDIDATES.len());
+        let chosen = selection.candidates[selection.chosen].form;
+        match chosen.variant() {
+            Some(v) => assert_eq!((v.model, auto.table.is_none()), (auto.model, true)),
+            None => assert!(auto.table.is_some(), "{chosen:?}"),
+        }
         assert_eq!(record["reason"], json!(selection.reason));
     }
 }

@@ -1,12 +1,13 @@
 //! `gonio study --held-out`: every variant judged by leave-one-θL-out on the samples'
-//! own θL (`gonio_processing::fit::held_out`), the model `--model auto` chooses, and the
-//! model-free bound: each θL interpolated from the others in (θh, θd).
+//! own θL (`gonio_processing::fit::held_out`), then the table in (θh, θd) (each θL
+//! interpolated from the others: the model-free bound), and what `--model auto` chooses
+//! among them.
 
 use std::fmt::Write as _;
 
 use anyhow::Context;
 use gonio_processing::color::CameraModel;
-use gonio_processing::fit::held_out::{interpolation_folds, median, Errors, Fold, HeldOut};
+use gonio_processing::fit::held_out::{table_held_out, Errors, Form, HeldOut};
 use gonio_processing::fit::{choose_held_out, leave_one_theta_l_out, parameter_count, Variant};
 use gonio_processing::samples::Sample;
 
@@ -29,7 +30,16 @@ fn error_cells(errors: Option<&Errors>) -> String {
     }
 }
 
-/// `held_out.csv`: per variant one row per θL left out, then its medians over them.
+/// The `model,roughness` cells of a form (the table's roughness empty).
+fn form_cells(form: Form) -> String {
+    match form {
+        Form::Parametric(v) => format!("{},{}", v.model, v.roughness),
+        Form::Table(_) => "table,".into(),
+    }
+}
+
+/// `held_out.csv`: per variant (and the table) one row per θL left out, then its
+/// medians over them.
 fn csv(held: &[HeldOut]) -> String {
     let mut out = String::from(
         "model,roughness,theta_l_left_out,loss,scale,points,err_p_r,err_p_g,err_p_b,\
@@ -37,7 +47,7 @@ fn csv(held: &[HeldOut]) -> String {
          colour_shift,status\n",
     );
     for h in held {
-        let head = format!("{},{}", h.variant.model, h.variant.roughness);
+        let head = form_cells(h.form);
         for f in &h.folds {
             let _ = writeln!(
                 out,
@@ -83,32 +93,44 @@ pub fn run(args: &Args, samples: &[Sample], variants: &[Variant]) -> anyhow::Res
         "{} variants, each θL left out in turn",
         variants.len()
     ));
-    let judged = leave_one_theta_l_out(samples, &variants, &camera).and_then(|held| {
+    let judged = leave_one_theta_l_out(samples, &variants, &camera).and_then(|mut held| {
+        held.push(table_held_out(samples, &camera));
         let chosen = choose_held_out(samples, &held, &camera)?;
         Ok((held, chosen))
     });
     spinner.finish_and_clear();
     let (held, chosen) = judged.with_context(|| format!("judging {}", args.samples.display()))?;
-    let bound = interpolation_folds(samples, &camera);
+    let entries = held
+        .iter()
+        .map(|h| {
+            // The form's `model` (and `roughness`) first, then the scores.
+            let mut entry = serde_json::to_value(h.form)?;
+            let scores = serde_json::json!({
+                "relative_loss": h.relative_loss(),
+                "median_delta_e_uv": h.median_delta_e_uv(false),
+                "median_delta_e_uv_lobe": h.median_delta_e_uv(true),
+                "median_err_p": h.median_err_p(false),
+                "median_err_p_lobe": h.median_err_p(true),
+                "folds": h.folds,
+                "failed": h.failed.iter()
+                    .map(|(t, e)| serde_json::json!({"theta_l": t, "error": e}))
+                    .collect::<Vec<_>>(),
+            });
+            if let (Some(entry), serde_json::Value::Object(scores)) =
+                (entry.as_object_mut(), scores)
+            {
+                entry.extend(scores);
+            }
+            Ok(entry)
+        })
+        .collect::<serde_json::Result<Vec<_>>>()?;
+    // The chosen fit without its table (the selection says when the table won).
+    let mut chosen_fit = chosen.clone();
+    chosen_fit.table = None;
     let summary = serde_json::json!({
         "samples": samples.len(),
-        "interpolation": bound.iter().map(|f| match f {
-            Ok(fold) => serde_json::json!(fold),
-            Err(e) => serde_json::json!({"error": e}),
-        }).collect::<Vec<_>>(),
-        "variants": held.iter().map(|h| serde_json::json!({
-            "model": h.variant.model,
-            "roughness": h.variant.roughness,
-            "relative_loss": h.relative_loss(),
-            "median_delta_e_uv": h.median_delta_e_uv(false),
-            "median_delta_e_uv_lobe": h.median_delta_e_uv(true),
-            "median_err_p": h.median_err_p(false),
-            "median_err_p_lobe": h.median_err_p(true),
-            "folds": h.folds,
-            "failed": h.failed.iter().map(|(t, e)| serde_json::json!({"theta_l": t, "error": e}))
-                .collect::<Vec<_>>(),
-        })).collect::<Vec<_>>(),
-        "chosen": chosen,
+        "variants": entries,
+        "chosen": chosen_fit,
     });
     let table = csv(&held);
     let json = serde_json::to_string_pretty(&summary)? + "\n";
@@ -135,7 +157,7 @@ pub fn run(args: &Args, samples: &[Sample], variants: &[Variant]) -> anyhow::Res
         let (kept, tested) = h.colour_shift_count();
         println!(
             "{:<35} {:>12}  {:>11} {:>6}  {:<22} {:<22} {}",
-            h.variant.label(),
+            h.form.label(),
             value(h.relative_loss()),
             value(h.median_delta_e_uv(false)),
             value(h.median_delta_e_uv(true)),
@@ -148,39 +170,6 @@ pub fn run(args: &Args, samples: &[Sample], variants: &[Variant]) -> anyhow::Res
             },
         );
     }
-    let folds: Vec<&Fold> = bound.iter().filter_map(|f| f.as_ref().ok()).collect();
-    let median_of = |f: &dyn Fn(&Fold) -> Option<f64>| {
-        median(&folds.iter().filter_map(|x| f(x)).collect::<Vec<_>>())
-    };
-    let rgb_of = |lobe: bool| -> Option<[f64; 3]> {
-        let channel = |c: usize| {
-            median_of(&|f: &Fold| {
-                if lobe {
-                    f.lobe.as_ref().map(|e| e.err_p[c])
-                } else {
-                    Some(f.all.err_p[c])
-                }
-            })
-        };
-        Some([channel(0)?, channel(1)?, channel(2)?])
-    };
-    let (loss, scale) = folds
-        .iter()
-        .fold((0.0, 0.0), |(l, s), f| (l + f.loss, s + f.scale));
-    println!(
-        "{:<35} {:>12}  {:>11} {:>6}  {:<22} {:<22} ({} of {} θL)",
-        "interpolation of the other θL",
-        value((scale > 0.0).then(|| loss / scale)),
-        value(median_of(&|f: &Fold| f.all.delta_e_uv)),
-        value(median_of(&|f: &Fold| f
-            .lobe
-            .as_ref()
-            .and_then(|e| e.delta_e_uv))),
-        rgb(rgb_of(false)),
-        rgb(rgb_of(true)),
-        folds.len(),
-        bound.len(),
-    );
     if let Some(selection) = &chosen.selection {
         println!("--model auto: {}", selection.reason);
     }

@@ -1,0 +1,450 @@
+//! A measured BRDF as a table in (signed θh, θd): the data-driven model of `gonio fit
+//! --model table` and the last candidate of `--model auto`.
+//!
+//! An isotropic BRDF is close to a function of the half angle θh (between normal and
+//! half vector) and the difference angle θd (between the half vector and the light or
+//! camera) alone (Romeiro et al. 2008, *Passive reflectometry*): the specular lobe and
+//! any colour change of a film or a pigment flake with the facet incidence are
+//! functions of them. Every θL of a scan is one column of the table: in the plane of the
+//! light θd = |θi + θr|/2 = |θL|/2 is constant along it, and its points spread along θh,
+//! signed by the side of the specular peak they lie on (the sign of θi − θr; in-plane
+//! θh = (θi − θr)/2), since a real sample need not be symmetric about its peak.
+//!
+//! β at (θh, θd) is linear in θh along each column between its two points around θh (its
+//! end point's beyond its ends), then linear in θd between the two columns whose mean θd
+//! bracket θd (the nearest column beyond the measured θd). Nothing is fitted: the table
+//! reproduces its samples and predicts between them; it extrapolates only as constants.
+//!
+//! A column keeps the points of its θL whose three channels are known, every k-th of
+//! them with k the smallest stride that keeps each θL within
+//! [`super::stride::JUDGED_PER_THETA_L`] points (neighbouring pixel columns differ little);
+//! points at the same θh are averaged. The chromaticity of a column's points may be
+//! averaged over a window of θh (its brightness kept point by point): noise in R, G, B
+//! makes a single point's colour scatter where a material's colour changes slowly; the
+//! window ([`CHROMATICITY_WINDOWS`]) is the one that predicts unseen θL best. Read from JSON, a table is checked before it is
+//! used: at most [`MAX_COLUMNS`] columns of at most [`MAX_POINTS_PER_COLUMN`] points each
+//! (counted while reading, before anything larger is allocated), every value finite, θh
+//! strictly increasing along each column.
+
+use serde::de::{self, SeqAccess, Visitor};
+use serde::{Deserialize, Deserializer, Serialize};
+
+use super::stride::{judged, JUDGED_PER_THETA_L};
+use crate::brdf::Cosines;
+use crate::samples::{distinct_theta_l, Sample, THETA_L_TOLERANCE};
+
+/// Most columns (θL) a table read from JSON may hold.
+pub const MAX_COLUMNS: usize = 256;
+
+/// Half-widths (degrees of θh) a table may average its columns' chromaticity over; the
+/// one kept is the one that predicts the chromaticity of unseen θL best
+/// (`held_out::table_held_out`).
+pub const CHROMATICITY_WINDOWS: [f64; 5] = [0.0, 1.0, 2.0, 4.0, 8.0];
+
+/// Most points a column read from JSON may hold: what a table built from samples keeps.
+pub const MAX_POINTS_PER_COLUMN: usize = JUDGED_PER_THETA_L;
+
+/// Why a table could not be built or read.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum TableError {
+    #[error("no point with every channel known: the table would be empty")]
+    Empty,
+    #[error("column {column}: {what}")]
+    Invalid { column: usize, what: String },
+}
+
+/// One θL of the table.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Column {
+    /// The θL it was measured at (degrees).
+    pub theta_l: f64,
+    /// Mean θd of its points (degrees).
+    pub theta_d: f64,
+    /// Its points, `[θh (degrees, signed), β_R, β_G, β_B]`, θh strictly increasing.
+    #[serde(deserialize_with = "capped_points")]
+    pub points: Vec<[f64; 4]>,
+}
+
+/// The table: the half-width its columns' chromaticity was averaged over, and its
+/// columns in order of increasing θd.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "TableFile")]
+pub struct Table {
+    /// Degrees of θh (0: every point's own).
+    chromaticity_window: f64,
+    columns: Vec<Column>,
+}
+
+/// A table as read, before it is checked.
+#[derive(Deserialize)]
+struct TableFile {
+    #[serde(default)]
+    chromaticity_window: f64,
+    #[serde(deserialize_with = "capped_columns")]
+    columns: Vec<Column>,
+}
+
+impl TryFrom<TableFile> for Table {
+    type Error = TableError;
+
+    fn try_from(file: TableFile) -> Result<Self, TableError> {
+        if file.columns.is_empty() {
+            return Err(TableError::Empty);
+        }
+        if !(file.chromaticity_window.is_finite() && file.chromaticity_window >= 0.0) {
+            return Err(TableError::Invalid {
+                column: 0,
+                what: "the chromaticity window is not a finite angle ≥ 0".into(),
+            });
+        }
+        for (i, c) in file.columns.iter().enumerate() {
+            let invalid = |what: &str| TableError::Invalid {
+                column: i,
+                what: what.to_owned(),
+            };
+            if !(c.theta_l.is_finite() && c.theta_d.is_finite()) {
+                return Err(invalid("θL or θd is not finite"));
+            }
+            if c.points.is_empty() {
+                return Err(invalid("no point"));
+            }
+            if c.points.iter().flatten().any(|v| !v.is_finite()) {
+                return Err(invalid("a value is not finite"));
+            }
+            if c.points.windows(2).any(|w| w[1][0] <= w[0][0]) {
+                return Err(invalid("θh is not strictly increasing"));
+            }
+            if i > 0 && c.theta_d < file.columns[i - 1].theta_d {
+                return Err(invalid("θd is below the previous column's"));
+            }
+        }
+        Ok(Table {
+            chromaticity_window: file.chromaticity_window,
+            columns: file.columns,
+        })
+    }
+}
+
+/// A sequence of at most `max` elements, refused as soon as it holds more.
+struct Capped<T> {
+    max: usize,
+    what: &'static str,
+    element: std::marker::PhantomData<T>,
+}
+
+impl<'de, T: Deserialize<'de>> Visitor<'de> for Capped<T> {
+    type Value = Vec<T>;
+
+    fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        write!(f, "a list of at most {} {}", self.max, self.what)
+    }
+
+    fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Vec<T>, A::Error> {
+        let mut out = Vec::with_capacity(seq.size_hint().unwrap_or(0).min(self.max));
+        while let Some(v) = seq.next_element()? {
+            if out.len() == self.max {
+                return Err(de::Error::custom(format!(
+                    "more than {} {}",
+                    self.max, self.what
+                )));
+            }
+            out.push(v);
+        }
+        Ok(out)
+    }
+}
+
+fn capped_points<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<[f64; 4]>, D::Error> {
+    d.deserialize_seq(Capped {
+        max: MAX_POINTS_PER_COLUMN,
+        what: "points in a table column",
+        element: std::marker::PhantomData,
+    })
+}
+
+fn capped_columns<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<Column>, D::Error> {
+    d.deserialize_seq(Capped {
+        max: MAX_COLUMNS,
+        what: "table columns",
+        element: std::marker::PhantomData,
+    })
+}
+
+/// A point's half and difference angles (degrees): θh signed by the side of the
+/// specular peak (`side`: θi ≥ θr), θd = acos(v·h).
+pub fn half_difference(cosines: &Cosines, side: bool) -> (f64, f64) {
+    let theta_h = cosines.n_dot_h.clamp(-1.0, 1.0).acos().to_degrees();
+    let theta_d = cosines.v_dot_h.clamp(-1.0, 1.0).acos().to_degrees();
+    (if side { theta_h } else { -theta_h }, theta_d)
+}
+
+/// [`half_difference`] of a sample.
+fn sample_angles(s: &Sample) -> (f64, f64) {
+    half_difference(&s.cosines(), s.theta_i >= s.theta_r)
+}
+
+/// β of a column's points at signed θh `h`: linear between the two points around it, the
+/// end point's beyond.
+fn along(points: &[[f64; 4]], h: f64) -> [f64; 3] {
+    let rgb = |p: &[f64; 4]| [p[1], p[2], p[3]];
+    let k = points.partition_point(|p| p[0] <= h);
+    if k == 0 {
+        return rgb(&points[0]);
+    }
+    if k == points.len() {
+        return rgb(&points[k - 1]);
+    }
+    let (a, b) = (&points[k - 1], &points[k]);
+    let w = if b[0] > a[0] {
+        (h - a[0]) / (b[0] - a[0])
+    } else {
+        0.0
+    };
+    std::array::from_fn(|c| a[c + 1] + w * (b[c + 1] - a[c + 1]))
+}
+
+impl Table {
+    /// The table of `samples` (see the module): one column per θL with a point whose
+    /// channels are all known, each point's chromaticity averaged over `window` degrees
+    /// of θh around it.
+    pub fn new(samples: &[Sample], window: f64) -> Result<Table, TableError> {
+        let (kept, _) = judged(samples);
+        let mut columns: Vec<Column> = distinct_theta_l(&kept)
+            .into_iter()
+            .filter_map(|theta_l| {
+                let angles: Vec<((f64, f64), [f64; 3])> = kept
+                    .iter()
+                    .filter(|s| (s.theta_l - theta_l).abs() <= THETA_L_TOLERANCE)
+                    .filter(|s| !s.dropped.contains(&true))
+                    .map(|s| (sample_angles(s), s.rgb))
+                    .collect();
+                if angles.is_empty() {
+                    return None;
+                }
+                let theta_d = angles.iter().map(|((_, d), _)| d).sum::<f64>() / angles.len() as f64;
+                let mut sorted: Vec<(f64, [f64; 3])> =
+                    angles.into_iter().map(|((h, _), rgb)| (h, rgb)).collect();
+                sorted.sort_by(|a, b| a.0.total_cmp(&b.0));
+                Some(Column {
+                    theta_l,
+                    theta_d,
+                    points: smooth_chromaticity(merge_equal(&sorted), window),
+                })
+            })
+            .collect();
+        if columns.is_empty() {
+            return Err(TableError::Empty);
+        }
+        columns.sort_by(|a, b| a.theta_d.total_cmp(&b.theta_d));
+        Ok(Table {
+            chromaticity_window: window.max(0.0),
+            columns,
+        })
+    }
+
+    /// The half-width (degrees of θh) its chromaticity was averaged over.
+    pub fn chromaticity_window(&self) -> f64 {
+        self.chromaticity_window
+    }
+
+    /// Its columns, in order of increasing θd.
+    pub fn columns(&self) -> &[Column] {
+        &self.columns
+    }
+
+    /// Its stored β values (three per point).
+    pub fn values(&self) -> usize {
+        3 * self.columns.iter().map(|c| c.points.len()).sum::<usize>()
+    }
+
+    /// The table without the column of θL `theta_l`; `None` if nothing would be left.
+    pub fn without(&self, theta_l: f64) -> Option<Table> {
+        let columns: Vec<Column> = self
+            .columns
+            .iter()
+            .filter(|c| (c.theta_l - theta_l).abs() > THETA_L_TOLERANCE)
+            .cloned()
+            .collect();
+        (!columns.is_empty()).then_some(Table {
+            chromaticity_window: self.chromaticity_window,
+            columns,
+        })
+    }
+
+    /// β at signed θh `h` and θd `d` (degrees; see the module).
+    pub fn predict(&self, h: f64, d: f64) -> [f64; 3] {
+        let columns = &self.columns;
+        let k = columns.partition_point(|c| c.theta_d <= d);
+        if k == 0 || k == columns.len() {
+            return along(&columns[k.min(columns.len() - 1)].points, h);
+        }
+        let (lo, hi) = (&columns[k - 1], &columns[k]);
+        let (a, b) = (along(&lo.points, h), along(&hi.points, h));
+        let span = hi.theta_d - lo.theta_d;
+        let w = if span > 0.0 {
+            (d - lo.theta_d) / span
+        } else {
+            0.0
+        };
+        std::array::from_fn(|c| a[c] + w * (b[c] - a[c]))
+    }
+
+    /// β at a point given by its cosines, on the side `side` (θi ≥ θr) of the peak.
+    pub fn predict_at(&self, cosines: &Cosines, side: bool) -> [f64; 3] {
+        let (h, d) = half_difference(cosines, side);
+        self.predict(h, d)
+    }
+
+    /// β at a sample's point.
+    pub fn predict_sample(&self, s: &Sample) -> [f64; 3] {
+        let (h, d) = sample_angles(s);
+        self.predict(h, d)
+    }
+}
+
+/// A column's points with each point's chromaticity replaced by that of the sum of its
+/// points within `window` degrees of θh (its own R + G + B kept): the brightness keeps
+/// every point's detail, the colour is averaged over the window. Where that sum or the
+/// point's own is not positive the point is kept as it is.
+fn smooth_chromaticity(points: Vec<[f64; 4]>, window: f64) -> Vec<[f64; 4]> {
+    if window <= 0.0 {
+        return points;
+    }
+    points
+        .iter()
+        .map(|p| {
+            let lo = points.partition_point(|q| q[0] < p[0] - window);
+            let hi = points.partition_point(|q| q[0] <= p[0] + window);
+            let mut sum = [0.0; 3];
+            for q in &points[lo..hi] {
+                for (c, s) in sum.iter_mut().enumerate() {
+                    *s += q[c + 1];
+                }
+            }
+            let total: f64 = sum.iter().sum();
+            let own = p[1] + p[2] + p[3];
+            if total > 0.0 && own > 0.0 {
+                [
+                    p[0],
+                    own * sum[0] / total,
+                    own * sum[1] / total,
+                    own * sum[2] / total,
+                ]
+            } else {
+                *p
+            }
+        })
+        .collect()
+}
+
+/// Points sorted by θh with those at equal θh averaged.
+fn merge_equal(sorted: &[(f64, [f64; 3])]) -> Vec<[f64; 4]> {
+    let mut out: Vec<[f64; 4]> = Vec::with_capacity(sorted.len());
+    let mut i = 0;
+    while i < sorted.len() {
+        let h = sorted[i].0;
+        let same = sorted[i..].iter().take_while(|p| p.0 == h).count();
+        let n = same as f64;
+        let mean = |c: usize| sorted[i..i + same].iter().map(|p| p.1[c]).sum::<f64>() / n;
+        out.push([h, mean(0), mean(1), mean(2)]);
+        i += same;
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn two_columns() -> Vec<Sample> {
+        let mut samples = Vec::new();
+        for (theta_l, level) in [(-20.0, 10.0), (-40.0, 30.0)] {
+            for theta_i in [-10.0, -5.0, 0.0, 5.0] {
+                let rgb = [level + theta_i, level, 1.0];
+                samples.push(Sample::in_plane(theta_l, theta_i, theta_l - theta_i, rgb));
+            }
+        }
+        samples
+    }
+
+    #[test]
+    fn it_interpolates_in_theta_h_then_in_theta_d_and_holds_its_ends() {
+        let table = Table::new(&two_columns(), 0.0).unwrap();
+        let c = table.columns();
+        assert_eq!(c.len(), 2);
+        // θd = |θL|/2 in the plane; columns in order of θd.
+        assert!((c[0].theta_d - 10.0).abs() < 1e-9 && (c[1].theta_d - 20.0).abs() < 1e-9);
+        // θL −20, θi 0: θr −20, θh = +10°.
+        let at = table.predict(10.0, 10.0);
+        assert!((at[0] - 10.0).abs() < 1e-9, "{at:?}");
+        // Halfway in θd, between two points in θh.
+        let mid = table.predict(12.5, 15.0);
+        let expected = 0.5 * ((10.0 + 2.5) + (30.0 + 2.5 - 10.0));
+        assert!(
+            (mid[0] - expected).abs() < 1e-9 && (mid[1] - 20.0).abs() < 1e-9,
+            "{mid:?}"
+        );
+        // Beyond the measured θd and θh: the nearest column, its end point.
+        assert_eq!(table.predict(1e3, 80.0), table.predict(1e3, 20.0));
+        assert_eq!(table.predict(-1e3, 0.0)[1], 10.0);
+        assert_eq!(table.without(-20.0).unwrap().columns().len(), 1);
+        assert!(table.without(-20.0).unwrap().without(-40.0).is_none());
+    }
+
+    #[test]
+    fn dropped_channels_are_left_out_and_equal_theta_h_averaged() {
+        let mut samples = two_columns();
+        samples[0].dropped = [false, true, false];
+        samples.push(Sample::in_plane(-20.0, 5.0, -25.0, [17.0, 12.0, 3.0]));
+        let table = Table::new(&samples, 0.0).unwrap();
+        let column = &table.columns()[0];
+        assert_eq!(column.points.len(), 3);
+        assert_eq!(column.points[2][1..], [16.0, 11.0, 2.0]);
+    }
+
+    #[test]
+    fn the_chromaticity_is_averaged_over_the_window_and_the_brightness_kept() {
+        let points = vec![
+            [0.0, 1.0, 2.0, 3.0],
+            [1.0, 3.0, 2.0, 1.0],
+            [5.0, 10.0, 10.0, 10.0],
+        ];
+        let smooth = smooth_chromaticity(points.clone(), 1.0);
+        // The first two share their colour (sum 4, 4, 4), each keeps its own sum 6.
+        assert_eq!(smooth[0], [0.0, 2.0, 2.0, 2.0]);
+        assert_eq!(smooth[1], [1.0, 2.0, 2.0, 2.0]);
+        assert_eq!(smooth[2], points[2]);
+        assert_eq!(smooth_chromaticity(points.clone(), 0.0), points);
+    }
+
+    #[test]
+    fn a_hostile_table_is_refused_before_it_is_used() {
+        let table = Table::new(&two_columns(), 1.0).unwrap();
+        let json = serde_json::to_value(&table).unwrap();
+        let back: Table = serde_json::from_value(json.clone()).unwrap();
+        assert_eq!(back, table);
+        let refused = |edit: &dyn Fn(&mut serde_json::Value)| {
+            let mut v = json.clone();
+            edit(&mut v);
+            serde_json::from_value::<Table>(v).unwrap_err().to_string()
+        };
+        let unsorted = refused(&|v| v["columns"][0]["points"][1][0] = (-1e9).into());
+        assert!(unsorted.contains("strictly increasing"), "{unsorted}");
+        let empty = refused(&|v| v["columns"] = serde_json::json!([]));
+        assert!(empty.contains("empty"), "{empty}");
+        let long = refused(&|v| {
+            v["columns"][0]["points"] =
+                serde_json::json!(vec![[0.0, 1.0, 1.0, 1.0]; MAX_POINTS_PER_COLUMN + 1])
+        });
+        assert!(long.contains("more than"), "{long}");
+        let no_d = refused(&|v| v["columns"][1]["theta_d"] = 0.0.into());
+        let window = refused(&|v| v["chromaticity_window"] = (-1.0).into());
+        assert!(window.contains("window"), "{window}");
+        assert!(no_d.contains("θd"), "{no_d}");
+        // JSON has no infinity: an overflowing number is refused by the parser itself.
+        let text = serde_json::to_string(&json)
+            .unwrap()
+            .replacen("10.0", "1e999", 1);
+        assert!(serde_json::from_str::<Table>(&text).is_err());
+    }
+}
