@@ -26,7 +26,7 @@ use serde::{Deserialize, Serialize};
 
 use super::data::Data;
 use super::{parameter_count, robust, FitError, FitMethod, FitOptions, FitResult, ParameterSet};
-use crate::brdf::{Roughness, M_MAX, M_MIN};
+use crate::brdf::{M_MAX, M_MIN};
 use crate::samples::{distinct_theta_l, Sample, SampleUncertainty, THETA_L_TOLERANCE};
 use crate::setup_uncertainty::Source;
 
@@ -125,14 +125,6 @@ fn vector(kd: [f64; 3], ks: [f64; 3], ks_90: Option<[f64; 3]>, m: &[f64]) -> Vec
         .collect()
 }
 
-/// How many roughness values a fit with `roughness` has.
-fn roughness_count(roughness: Roughness) -> usize {
-    match roughness {
-        Roughness::Shared => 1,
-        Roughness::PerChannel => 3,
-    }
-}
-
 /// The fitter of the perturbed samples: the fit's model, roughness and colour-shift
 /// decision, by the robust method, on the same points with other β.
 struct Refit<'a> {
@@ -147,7 +139,7 @@ impl Refit<'_> {
     fn fit(&self, moved: &[[f64; 3]]) -> Result<Vec<f64>, FitError> {
         let data = self.data.with_measured(moved.to_vec());
         let (found, ks_90) = robust::fit(&data, &self.options)?;
-        let m = &found.params.m[..roughness_count(self.options.roughness)];
+        let m = &found.params.m[..self.options.roughness.count()];
         let ks_90 = self.fresnel.then_some(ks_90);
         Ok(vector(found.params.kd, found.params.ks, ks_90, m))
     }
@@ -264,7 +256,7 @@ pub fn budget(samples: &[Sample], result: &FitResult) -> Result<Budget, FitError
         .ok_or_else(|| missing("the fit has no standard uncertainties"))?;
     let refit = refitter(samples, result)?;
     let m = result.m.per_channel();
-    let m = &m[..roughness_count(result.roughness)];
+    let m = &m[..result.roughness.count()];
     let value = vector(result.kd, result.ks, result.ks_90, m);
     // The HC1 standard uncertainties in the same layout (stderr.m is m·σ(ln m)).
     let scatter: Vec<f64> = stderr
@@ -528,7 +520,7 @@ pub fn monte_carlo(
             refit.fit(&moved)
         })
         .collect::<Result<_, FitError>>()?;
-    let m_count = roughness_count(result.roughness);
+    let m_count = result.roughness.count();
     let fresnel = result.ks_90.is_some();
     let distribution = |i: usize| {
         let log = i >= fits[0].len() - m_count;
