@@ -9,9 +9,12 @@
 # With GONIO_RGL_DIR naming a directory of RGL-EPFL `*.bsdf` files, the real-materials
 # section renders each into a scan and judges every model and the table on it (without
 # it, the section is skipped and says so).
+# The coverage of the uncertainty budget's expanded intervals comes from 600 emulated
+# scans whose setup departs from the stated one (tests/tests/budget_coverage.rs).
 # One function per section; a new section adds its function and its call in main.
 # Usage: bash scripts/results.sh [SCENE...]   (default: gold red blue-green opal)
 #        bash scripts/results.sh --real-materials-only   (that section and the tables)
+#        bash scripts/results.sh --coverage-only         (that section and the tables)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -102,6 +105,16 @@ real_section() {
     done
 }
 
+# The uncertainty budget's coverage over 600 emulated scans whose setup is off by what
+# their setup.json states (every parameter of Cook–Torrance and Ward; about 7 min).
+coverage_section() {
+    local out=docs/results/uncertainty
+    mkdir -p "$out"
+    echo "== uncertainty budget: coverage over 600 scans"
+    GONIO_COVERAGE_SCANS=600 GONIO_COVERAGE_OUT="$PWD/$out/coverage.json" \
+        cargo test --locked --workspace --test budget_coverage -- --nocapture
+}
+
 # The tables of docs/results/README.md and the README's summary, from the outputs.
 docs_section() {
     echo "== tables of docs/results/README.md and README.md"
@@ -109,6 +122,11 @@ docs_section() {
 }
 
 main() {
+    if [ "${1:-}" = --coverage-only ]; then
+        coverage_section
+        docs_section
+        return
+    fi
     cargo build --release --locked -p gonio-daemon
     scans=$(mktemp -d)
     trap 'rm -rf "$scans"' EXIT
@@ -123,6 +141,9 @@ main() {
         study_section "$scene"
         tradeoff_section "$scene"
     done
+    if [ "${1:-}" != --real-materials-only ]; then
+        coverage_section
+    fi
     real_section
     docs_section
     echo "results written under docs/results/"

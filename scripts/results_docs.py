@@ -393,12 +393,41 @@ def real_materials_table():
     )
 
 
+def coverage_table():
+    """Per parameter of each model: how often the budget's expanded interval (k = 2) and
+    the fit's noise-only 95 % interval held the truth over the coverage scans."""
+    path = RESULTS / "uncertainty" / "coverage.json"
+    if not path.is_file():
+        return "*Not run*: `bash scripts/results.sh --coverage-only` writes this table."
+    report = read_json(path)
+    rows = []
+    for p in report["parameters"]:
+        n = p["scans"]
+        rows.append(
+            [
+                p["parameter"],
+                f"{100 * p['expanded_hits'] / n:.0f} % ({p['expanded_hits']}/{n})",
+                f"{100 * p['noise_only_hits'] / n:.0f} % ({p['noise_only_hits']}/{n})",
+            ]
+        )
+    hits = sum(p["expanded_hits"] for p in report["parameters"])
+    total = sum(p["scans"] for p in report["parameters"])
+    stated = ", ".join(f"{k} {v}" for k, v in report["stated"].items())
+    return (
+        f"{report['scans']} scans (θL {', '.join(f'{t:g}' for t in report['theta_l_deg'])}°); "
+        f"stated standard uncertainties: {stated}.\n\n"
+        + table(["parameter", "expanded (k = 2)", "noise-only 95 %"], rows)
+        + f"\n\nAll parameters: {100 * hits / total:.1f} %."
+    )
+
+
 # Block name → (document, function).
 SECTIONS = {
     "study": ("results", study_table),
     "study-time": ("results", study_time_table),
     "tradeoff": ("results", tradeoff_table),
     "real-materials": ("results", real_materials_table),
+    "coverage": ("results", coverage_table),
     "summary": ("readme", summary_table),
 }
 

@@ -27,6 +27,7 @@
 pub mod budget;
 mod choice;
 mod data;
+mod departure;
 mod error;
 pub mod held_out;
 mod linear;

@@ -11,9 +11,9 @@
 //! often the expanded interval (k = 2) holds the true value, and how often the fit's
 //! noise-only 95 % interval does.
 //!
-//! CI runs [`FAST_SCANS`] scans; `GONIO_COVERAGE_SCANS=N` runs N (the closing figure:
-//! `GONIO_COVERAGE_SCANS=200 cargo test --workspace --test budget_coverage --
-//! --nocapture`).
+//! CI runs [`FAST_SCANS`] scans; `GONIO_COVERAGE_SCANS=N` runs N, and
+//! `GONIO_COVERAGE_OUT=FILE` writes the figures as JSON (`bash scripts/results.sh
+//! --coverage-only` runs 200 and writes docs/results' table from them).
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -214,15 +214,34 @@ fn expanded_intervals_hold_the_truth_of_scans_whose_setup_is_off() {
     }
     let pooled = total.0 as f64 / total.1 as f64;
     println!("all parameters       {:>8.1} %", 100.0 * pooled);
+    if let Ok(out) = std::env::var("GONIO_COVERAGE_OUT") {
+        let parameters: Vec<Value> = expanded
+            .0
+            .iter()
+            .zip(&noise_only.0)
+            .map(|((name, (hit, n)), (_, (noise_hit, _)))| {
+                json!({"parameter": name, "scans": n, "expanded_hits": hit,
+                       "noise_only_hits": noise_hit})
+            })
+            .collect();
+        let report = json!({
+            "scans": scans,
+            "stated": stated(),
+            "theta_l_deg": THETA_L,
+            "parameters": parameters,
+        });
+        std::fs::write(&out, serde_json::to_string_pretty(&report).unwrap() + "\n")
+            .unwrap_or_else(|e| panic!("{out}: {e}"));
+    }
     // The seeds are fixed: the same scans every run. Few scans estimate a coverage
     // coarsely (16 scans, 8 per model: one miss is 12.5 %), so the fast run checks the
-    // pooled figure and that no parameter falls far below; the full run holds each at 92 %
-    // or more (intervals of Ks and m come out conservative: a setup error's residuals
-    // also count as misfit, see docs/ARCHITECTURE.md).
+    // pooled figure and that no parameter falls far below; a full run (200 scans or more)
+    // holds each in 92–99 %: the target is 92–98 %, and with 100 scans per model one
+    // scan is 1 % (a coverage of 97 % comes out at 99 % or more one time in five).
     if scans >= 200 {
         for (name, (hit, n)) in &expanded.0 {
             let coverage = *hit as f64 / *n as f64;
-            assert!(coverage >= 0.92, "{name}: {coverage}");
+            assert!((0.92..=0.99).contains(&coverage), "{name}: {coverage}");
         }
     } else {
         assert!((0.90..=0.995).contains(&pooled), "pooled coverage {pooled}");

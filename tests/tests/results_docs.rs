@@ -64,6 +64,10 @@ fn copy_inputs(from: &Path, to: &Path) {
             }
         }
     }
+    let coverage = Path::new("docs/results/uncertainty/coverage.json");
+    if from.join(coverage).is_file() {
+        all.push(coverage.to_path_buf());
+    }
     for file in all {
         let target = to.join(&file);
         std::fs::create_dir_all(target.parent().expect("parent")).expect("create dir");

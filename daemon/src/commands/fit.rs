@@ -302,6 +302,21 @@ fn print_budget(budget: &fit::budget::Budget) {
         );
         println!("{row}");
     }
+    if !budget.departure.is_empty() {
+        let departure: Vec<String> = budget
+            .departure
+            .iter()
+            .map(|d| match d.theta_l {
+                Some(t) => format!("{} (θL {t}) {:+.2}", short(&d.source), d.z),
+                None => format!("{} {:+.2}", short(&d.source), d.z),
+            })
+            .collect();
+        println!(
+            "  the lines are taken with the setup departing as the residuals suggest (in u; \
+             not applied to the values): {}",
+            departure.join(", ")
+        );
+    }
     if let Some(mc) = &budget.monte_carlo {
         println!(
             "  Monte Carlo ({} draws): standard deviation, 95 % coverage interval",

@@ -6,14 +6,16 @@
 //! inputs of the setup (white reflectance, geometry, arm) each off by z_j standard
 //! uncertainties, with c_pj the change of β_p for z_j = 1 ([`SampleUncertainty::sources`],
 //! common to every point, or to one θL's points for the arm's angle), and e_p the
-//! independent noise. Each source's contribution to a parameter is its sensitivity times
-//! its standard uncertainty, found by fitting again with the samples moved by ±c_·j
-//! (central difference: the law of propagation with numerical sensitivity coefficients,
-//! JCGM 100 §5.1.3). The arm's angle is one source per θL, its contributions added in
-//! quadrature. The noise and the model misfit come from the fit's own residuals (the HC1
-//! sandwich, see [`super::uncertainty`]): its variance is split between them in the ratio
-//! of the residuals' Σ r² to the noise's Σ u² the samples state (what the residuals show
-//! beyond the noise is misfit). The combined standard uncertainty is the root sum of
+//! independent noise. The lines are taken at the values with the setup's departure that
+//! best explains the residuals removed ([`super::departure`]). Each source's contribution
+//! to a parameter comes from fitting again with the samples moved by ±k·c_·j and unmoved:
+//! the secant's slope and the second difference per standard uncertainty (the law of
+//! propagation with numerical sensitivity coefficients and its second-order term, JCGM 100
+//! §5.1.2–5.1.3). The arm's angle is one source per θL, its contributions added in
+//! quadrature. The noise and the model misfit come from the unmoved fit's residuals (the
+//! HC1 sandwich, see [`super::uncertainty`]): its variance is split between them in the
+//! ratio of the residuals' Σ r² to the noise's Σ u² the samples state (what the residuals
+//! show beyond the noise is misfit). The combined standard uncertainty is the root sum of
 //! squares of the lines (the sources are independent); U = k·u_c with k = 2.
 //! Kd, Ks and Ks_90 are reported as they are; the roughness on the log scale (its lines are
 //! m times those of ln m; its interval m·exp(±k·u_c(ln m))).
@@ -25,8 +27,11 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::data::Data;
-use super::{parameter_count, robust, FitError, FitMethod, FitOptions, FitResult, ParameterSet};
-use crate::brdf::{M_MAX, M_MIN};
+use super::{
+    departure, parameter_count, robust, uncertainty, FitError, FitMethod, FitOptions, FitResult,
+    ParameterSet,
+};
+use crate::brdf::{Roughness, M_MAX, M_MIN};
 use crate::samples::{distinct_theta_l, Sample, SampleUncertainty, THETA_L_TOLERANCE};
 use crate::setup_uncertainty::Source;
 
@@ -35,6 +40,12 @@ pub const COVERAGE_FACTOR: f64 = 2.0;
 
 /// The refits search m within this factor of the fit's roughness (each way).
 const REFIT_M_RANGE: f64 = 1.5;
+
+/// Sensitivities are secants over ±this many standard uncertainties, the range the
+/// expanded interval covers: a robust fit does not follow the setup linearly (on a broad
+/// Ward lobe its m moves with about the cube of the camera's offset: a central difference
+/// over ±1 u gives a fifth of the change at 2 u).
+const SECANT_SPAN: f64 = COVERAGE_FACTOR;
 
 /// Points of the refits' grid over log m (the fit's own search uses 24 over a wider range).
 const REFIT_GRID_POINTS: usize = 6;
@@ -69,13 +80,32 @@ pub struct ParameterBudget {
 pub struct Budget {
     /// k of U = k·u_c.
     pub coverage_factor: f64,
-    /// √(Σ r² / Σ u_noise²) over the measured values: the residuals' scatter over the
-    /// noise the samples state (1: the model fits to the noise).
+    /// √(Σ r² / Σ u_noise²) over the measured values with the setup's departure removed:
+    /// the residuals' scatter over the noise the samples state (1: the model fits to the
+    /// noise).
     pub residual_to_noise: f64,
+    /// The departure of the setup that best explains the fit's residuals, per source (the
+    /// arm's angle per θL), in standard uncertainties: the lines are taken at the values
+    /// with it removed. Not a calibration: the fitted values keep the stated setup.
+    #[serde(default)]
+    pub departure: Vec<SourceDeparture>,
     pub parameters: ParameterSet<ParameterBudget>,
     /// The same propagation by Monte Carlo, when asked for.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub monte_carlo: Option<MonteCarlo>,
+}
+
+/// One source's departure from the stated setup, as the residuals suggest it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SourceDeparture {
+    /// A [`Source::name`].
+    pub source: String,
+    /// The arm angle θL (degrees) whose angle this is, for `arm_angle`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub theta_l: Option<f64>,
+    /// The world's setup as the residuals suggest it: the stated one plus `z` standard
+    /// uncertainties of the source.
+    pub z: f64,
 }
 
 /// A Monte Carlo propagation (JCGM 101) of the budget's model.
@@ -164,18 +194,28 @@ impl Refit<'_> {
             .collect()
     }
 
-    /// Half the difference of the fits with the samples moved by ±`change` where `at`.
-    fn sensitivity(
+    /// A source's line per parameter, from the fits with the samples moved by
+    /// ±[`SECANT_SPAN`]·`change` where `at` and `base`, the fit of the unmoved values:
+    /// √(c₁² + ½·c₂²) with c₁ the secant's slope and c₂ the second difference, both per
+    /// standard uncertainty (JCGM 100 §5.1.2, its note: the second-order term).
+    fn line(
         &self,
+        base: &[f64],
         change: impl Fn(&SampleUncertainty) -> [f64; 3] + Copy,
         at: impl Fn(&Sample) -> bool + Copy,
     ) -> Result<Vec<f64>, FitError> {
-        let plus = self.fit(&self.moved(1.0, change, at))?;
-        let minus = self.fit(&self.moved(-1.0, change, at))?;
+        let h = SECANT_SPAN;
+        let plus = self.fit(&self.moved(h, change, at))?;
+        let minus = self.fit(&self.moved(-h, change, at))?;
         Ok(plus
             .iter()
             .zip(&minus)
-            .map(|(p, m)| (p - m) / 2.0)
+            .zip(base)
+            .map(|((p, m), b)| {
+                let slope = (p - m) / (2.0 * h);
+                let curvature = (p - 2.0 * b + m) / (h * h);
+                (slope * slope + 0.5 * curvature * curvature).sqrt()
+            })
             .collect())
     }
 }
@@ -254,11 +294,46 @@ pub fn budget(samples: &[Sample], result: &FitResult) -> Result<Budget, FitError
         .stderr
         .as_ref()
         .ok_or_else(|| missing("the fit has no standard uncertainties"))?;
-    let refit = refitter(samples, result)?;
+    let mut refit = refitter(samples, result)?;
     let m = result.m.per_channel();
     let m = &m[..result.roughness.count()];
     let value = vector(result.kd, result.ks, result.ks_90, m);
-    // The HC1 standard uncertainties in the same layout (stderr.m is m·σ(ln m)).
+    let fresnel = result.ks_90.is_some();
+    let theta_l = distinct_theta_l(samples);
+
+    // The lines are taken at the values with the setup's departure removed.
+    let departure = departure::estimate(
+        &refit.data,
+        samples,
+        &result.params(),
+        &result.specular_90(),
+        &theta_l,
+        fresnel,
+        result.roughness == Roughness::Shared,
+    )?;
+    let departures = departure
+        .z
+        .iter()
+        .map(|&(source, theta_l, z)| SourceDeparture {
+            source: source.name().into(),
+            theta_l,
+            // The residuals are the measured values less the truth's, −c·d for a world at
+            // the stated setup + d·u.
+            z: -z,
+        })
+        .collect();
+    refit.data = refit.data.with_measured(departure.corrected);
+    let (found, ks_90) = robust::fit(&refit.data, &refit.options)?;
+    let base = vector(
+        found.params.kd,
+        found.params.ks,
+        refit.fresnel.then_some(ks_90),
+        &found.params.m[..m.len()],
+    );
+    let spread = uncertainty::estimate(&refit.data, &refit.options, &found.params, &ks_90);
+    // The HC1 standard uncertainties in the same layout (stderr.m is m·σ(ln m)); the
+    // fit's own where the corrected values' are not defined.
+    let stderr = spread.as_ref().map_or(stderr, |s| &s.stderr);
     let scatter: Vec<f64> = stderr
         .kd
         .iter()
@@ -274,13 +349,13 @@ pub fn budget(samples: &[Sample], result: &FitResult) -> Result<Budget, FitError
         .chain(stderr.m.iter().zip(m).map(|(s, m)| s / m))
         .collect();
 
-    // The residuals' scatter against the noise the samples state.
-    let estimates: Vec<[f64; 3]> = samples.iter().map(|s| parametric(result, s)).collect();
+    // What is left of the residuals against the noise the samples state.
+    let estimates = refit.data.estimates(&found.params, &ks_90);
     let (mut residual2, mut noise2) = (0.0, 0.0);
-    for (s, e) in samples.iter().zip(&estimates) {
+    for ((s, e), y) in samples.iter().zip(&estimates).zip(&refit.data.y) {
         let u = s.uncertainty.as_ref().map_or([0.0; 3], |u| u.noise);
         for c in (0..3).filter(|&c| !s.dropped[c]) {
-            residual2 += (s.rgb[c] - e[c]).powi(2);
+            residual2 += (y[c] - e[c]).powi(2);
             noise2 += u[c] * u[c];
         }
     }
@@ -293,7 +368,6 @@ pub fn budget(samples: &[Sample], result: &FitResult) -> Result<Budget, FitError
     let misfit_share = (1.0 - noise_share * noise_share).max(0.0).sqrt();
 
     // Common sources: one fit pair each; the arm's angle: one pair per θL.
-    let theta_l = distinct_theta_l(samples);
     let mut jobs: Vec<(usize, Option<f64>)> = (0..Source::COUNT)
         .filter(|&j| Source::ALL[j] != Source::ArmAngle)
         .map(|j| (j, None))
@@ -309,7 +383,7 @@ pub fn budget(samples: &[Sample], result: &FitResult) -> Result<Budget, FitError
             let change = move |u: &SampleUncertainty| u.sources[j];
             let within =
                 move |s: &Sample| at.is_none_or(|t| (s.theta_l - t).abs() <= THETA_L_TOLERANCE);
-            Ok((j, refit.sensitivity(change, within)?))
+            Ok((j, refit.line(&base, change, within)?))
         })
         .collect::<Result<_, FitError>>()?;
     let mut lines = vec![vec![0.0; value.len()]; Source::COUNT];
@@ -370,11 +444,11 @@ pub fn budget(samples: &[Sample], result: &FitResult) -> Result<Budget, FitError
             interval,
         }
     };
-    let fresnel = result.ks_90.is_some();
     let n_colour = if fresnel { 9 } else { 6 };
     let budget = Budget {
         coverage_factor: k,
         residual_to_noise: if ratio.is_finite() { ratio } else { 0.0 },
+        departure: departures,
         parameters: ParameterSet {
             kd: std::array::from_fn(parameter),
             ks: std::array::from_fn(|c| parameter(3 + c)),

@@ -1,0 +1,259 @@
+//! The departure of the setup that best explains a fit's residuals, for the uncertainty
+//! budget (docs/ARCHITECTURE.md, "Uncertainty budget").
+//!
+//! A setup that is not the one setup.json states leaves residuals of its own: the θL no
+//! longer agree with each other, and no parameter of the model absorbs that. Counted as
+//! misfit they would count the setup's error twice (once in its source's line, once in
+//! the misfit line), and sensitivities taken at values the model cannot fit are not the
+//! model's (a robust fit to values that disagree moves in jumps). So the budget first
+//! finds the departure z of each source (in standard uncertainties; the arm's angle one
+//! per θL) most probable given the residuals r and the stated uncertainties,
+//!
+//!   min over z, δ of  Σ_pc (r_pc − Σ_j c_pcj·z_j − Σ_k g_pck·δ_k)² / (s²·u_pc²)  +  Σ_j z_j²,
+//!
+//! with c_pcj the samples' change of β per +1 u of source j, g_pck the model's Jacobian
+//! (the parameters take up what they can: a departure they absorb is not identifiable
+//! from the residuals and the prior keeps it at 0, as the white's is), u_pc the noise the
+//! samples state and s² ≥ 1 the scatter of what is left over the noise (re-estimated until
+//! it settles, so that misfit the sources cannot explain pulls z towards 0). The budget's
+//! noise, misfit and source lines are then taken at the values with that departure
+//! removed, y − Σ_j c_j·z_j. The fitted values themselves are not corrected: that is
+//! calibration, `gonio calibrate`'s job.
+
+use nalgebra::{DMatrix, DVector};
+
+use super::data::Data;
+use super::FitError;
+use crate::brdf::Params;
+use crate::samples::{Sample, THETA_L_TOLERANCE};
+use crate::setup_uncertainty::Source;
+
+/// Rounds of the scatter s² (it settles in 2–3).
+const SCATTER_ROUNDS: usize = 5;
+
+/// Step in ln m of the Jacobian's central difference.
+const LN_M_STEP: f64 = 1e-3;
+
+/// Singular values below this fraction of the largest are dropped in the solve.
+const SOLVE_TOLERANCE: f64 = 1e-12;
+
+/// The departure found: per source (the arm's angle per θL) its z, and the values with
+/// it removed.
+pub(crate) struct Departure {
+    /// (source name, θL for the arm's angle, z in standard uncertainties).
+    pub z: Vec<(Source, Option<f64>, f64)>,
+    /// y − Σ_j c_j·z_j per point (0 where a value was dropped).
+    pub corrected: Vec<[f64; 3]>,
+}
+
+/// The departure of the setup that best explains the residuals of the fit (`params`,
+/// `ks_90`) to `data`, made from `samples` (which carry their uncertainty); `theta_l` the
+/// scan's distinct arm angles. `fresnel`: the fit has a specular colour at 90° of its own;
+/// `shared`: one roughness for all channels.
+pub(crate) fn estimate(
+    data: &Data,
+    samples: &[Sample],
+    params: &Params,
+    ks_90: &[f64; 3],
+    theta_l: &[f64],
+    fresnel: bool,
+    shared: bool,
+) -> Result<Departure, FitError> {
+    // The columns: every source but the white's and the arm's angle, then the arm's angle
+    // per θL. The white's error scales every value: Kd and Ks take it up entirely, and its
+    // column, the measured values scaled, would only find their noise.
+    let mut columns: Vec<(Source, Option<f64>)> = Source::ALL
+        .iter()
+        .filter(|&&s| s != Source::ArmAngle && s != Source::WhiteReflectance)
+        .map(|&s| (s, None))
+        .collect();
+    columns.extend(theta_l.iter().map(|&t| (Source::ArmAngle, Some(t))));
+    let index = |s: Source| Source::ALL.iter().position(|&a| a == s).unwrap_or(0);
+    let change = |sample: &Sample, &(source, at): &(Source, Option<f64>)| -> [f64; 3] {
+        let Some(u) = &sample.uncertainty else {
+            return [0.0; 3];
+        };
+        match at {
+            Some(t) if (sample.theta_l - t).abs() > THETA_L_TOLERANCE => [0.0; 3],
+            _ => u.sources[index(source)],
+        }
+    };
+    let jacobian = jacobian(data, params, ks_90, fresnel, shared);
+    let (n_z, n_g) = (columns.len(), jacobian.len());
+    let size = n_z + n_g;
+
+    let estimates = data.estimates(params, ks_90);
+    let keep = |p: usize, c: usize| data.keep.as_ref().is_none_or(|k| k[p][c] > 0.0);
+    let mean = data.zero_loss / data.y.len().max(1) as f64;
+    let floor = 1e-6 * mean + f64::MIN_POSITIVE;
+    // Per value: the row [c_·j | g_·k], its residual and 1/u².
+    let mut rows: Vec<(Vec<f64>, f64, f64)> = Vec::with_capacity(3 * data.y.len());
+    for (p, sample) in samples.iter().enumerate() {
+        let noise = sample.uncertainty.as_ref().map_or([0.0; 3], |u| u.noise);
+        let changes: Vec<[f64; 3]> = columns.iter().map(|col| change(sample, col)).collect();
+        for c in (0..3).filter(|&c| keep(p, c)) {
+            let row: Vec<f64> = changes
+                .iter()
+                .map(|d| d[c])
+                .chain(jacobian.iter().map(|g| g[p][c]))
+                .collect();
+            let u = noise[c].max(floor);
+            rows.push((row, data.y[p][c] - estimates[p][c], 1.0 / (u * u)));
+        }
+    }
+    if rows.len() <= size {
+        return Err(FitError::TooFewPoints {
+            points: rows.len(),
+            parameters: size,
+        });
+    }
+
+    let mut scatter2: f64 = 1.0;
+    let mut z = vec![0.0; n_z];
+    for _ in 0..SCATTER_ROUNDS {
+        let mut normal = DMatrix::<f64>::zeros(size, size);
+        let mut rhs = DVector::<f64>::zeros(size);
+        for (row, r, w) in &rows {
+            let w = w / scatter2;
+            for i in 0..size {
+                let wi = w * row[i];
+                rhs[i] += wi * r;
+                for j in i..size {
+                    normal[(i, j)] += wi * row[j];
+                }
+            }
+        }
+        for i in 0..size {
+            if i < n_z {
+                normal[(i, i)] += 1.0;
+            }
+            for j in 0..i {
+                normal[(i, j)] = normal[(j, i)];
+            }
+        }
+        let solution = solve(normal, rhs)?;
+        z.copy_from_slice(&solution.as_slice()[..n_z]);
+        // What is left, over the noise, per value (at least 1).
+        let left: f64 = rows
+            .iter()
+            .map(|(row, r, w)| {
+                let explained: f64 = row.iter().zip(solution.iter()).map(|(a, x)| a * x).sum();
+                (r - explained).powi(2) * w
+            })
+            .sum::<f64>()
+            / (rows.len() - size) as f64;
+        let next = left.max(1.0);
+        let settled = (next - scatter2).abs() <= 1e-3 * scatter2;
+        scatter2 = next;
+        if settled {
+            break;
+        }
+    }
+    let corrected = samples
+        .iter()
+        .enumerate()
+        .map(|(p, sample)| {
+            let mut y = data.y[p];
+            for (col, zj) in columns.iter().zip(&z) {
+                let d = change(sample, col);
+                for c in (0..3).filter(|&c| keep(p, c)) {
+                    y[c] -= zj * d[c];
+                }
+            }
+            y
+        })
+        .collect();
+    Ok(Departure {
+        z: columns
+            .iter()
+            .zip(&z)
+            .map(|(&(s, at), &z)| (s, at, z))
+            .collect(),
+        corrected,
+    })
+}
+
+/// The model's Jacobian at (`params`, `ks_90`): per parameter (Kd, Ks, Ks_90 when
+/// `fresnel`, ln m shared or per channel), the change of every point's β.
+fn jacobian(
+    data: &Data,
+    params: &Params,
+    ks_90: &[f64; 3],
+    fresnel: bool,
+    shared: bool,
+) -> Vec<Vec<[f64; 3]>> {
+    let at = |p: &Params, k: &[f64; 3]| data.estimates(p, k);
+    let base = at(params, ks_90);
+    let difference = |a: &[[f64; 3]], b: &[[f64; 3]], scale: f64| -> Vec<[f64; 3]> {
+        a.iter()
+            .zip(b)
+            .map(|(a, b)| std::array::from_fn(|c| (a[c] - b[c]) / scale))
+            .collect()
+    };
+    let mut columns = Vec::new();
+    for c in 0..3 {
+        // Kd and Ks enter linearly: a unit step is exact.
+        let mut p = *params;
+        p.kd[c] += 1.0;
+        columns.push(difference(&at(&p, ks_90), &base, 1.0));
+        let mut p = *params;
+        p.ks[c] += 1.0;
+        let mut k = *ks_90;
+        if !fresnel {
+            k[c] += 1.0;
+        }
+        columns.push(difference(&at(&p, &k), &base, 1.0));
+        if fresnel {
+            let mut k = *ks_90;
+            k[c] += 1.0;
+            columns.push(difference(&at(params, &k), &base, 1.0));
+        }
+    }
+    let channels: Vec<Vec<usize>> = if shared {
+        vec![vec![0, 1, 2]]
+    } else {
+        (0..3).map(|c| vec![c]).collect()
+    };
+    for set in channels {
+        let (mut up, mut down) = (*params, *params);
+        for &c in &set {
+            up.m[c] *= LN_M_STEP.exp();
+            down.m[c] *= (-LN_M_STEP).exp();
+        }
+        columns.push(difference(
+            &at(&up, ks_90),
+            &at(&down, ks_90),
+            2.0 * LN_M_STEP,
+        ));
+    }
+    columns
+}
+
+/// x of `normal`·x = `rhs`, scaled to a unit diagonal and solved by SVD (directions the
+/// data do not determine are left at 0).
+fn solve(normal: DMatrix<f64>, rhs: DVector<f64>) -> Result<DVector<f64>, FitError> {
+    let n = normal.nrows();
+    let scale: Vec<f64> = (0..n)
+        .map(|i| {
+            let d = normal[(i, i)];
+            if d > 0.0 && d.is_finite() {
+                1.0 / d.sqrt()
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let scaled = DMatrix::from_fn(n, n, |i, j| normal[(i, j)] * scale[i] * scale[j]);
+    let b = DVector::from_fn(n, |i, _| rhs[i] * scale[i]);
+    let svd = scaled.svd(true, true);
+    let largest = svd.singular_values.max();
+    let y = svd
+        .solve(&b, SOLVE_TOLERANCE * largest)
+        .map_err(|e| FitError::Optimizer(format!("setup departure: {e}")))?;
+    let x = DVector::from_fn(n, |i, _| y[i] * scale[i]);
+    if x.iter().all(|v| v.is_finite()) {
+        Ok(x)
+    } else {
+        Err(FitError::Overflow("setup departure"))
+    }
+}
