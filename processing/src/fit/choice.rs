@@ -33,8 +33,7 @@
 //! A table reproduces whatever colour change the material has, so a table choice reports
 //! a colour shift by the same rule: when it predicts the unseen highlight's chromaticity
 //! at least [`COLOUR_SHIFT_GAIN`] times better than every candidate without a colour
-//! shift, the same table with its specular colour held constant
-//! ([`super::held_out::constant_colour_lobe_uv`]) counting among them.
+//! shift.
 
 use serde::{Deserialize, Serialize};
 
@@ -80,10 +79,6 @@ pub struct Candidate {
     pub held_out_delta_e_uv: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub held_out_delta_e_uv_lobe: Option<f64>,
-    /// The table only: the held-out ΔE_u′v′ over the lobe of the same table with its
-    /// specular colour held constant (the colour shift's verdict for a table).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub held_out_delta_e_uv_lobe_constant_colour: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub held_out_err_p: Option<[f64; 3]>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -196,7 +191,6 @@ fn held_out_candidate(h: &HeldOut, table_values: usize) -> Candidate {
         score: h.relative_loss(),
         held_out_delta_e_uv: h.median_delta_e_uv(false),
         held_out_delta_e_uv_lobe: h.median_delta_e_uv(true),
-        held_out_delta_e_uv_lobe_constant_colour: h.constant_colour_lobe_uv,
         held_out_err_p: h.median_err_p(false),
         held_out_err_p_lobe: h.median_err_p(true),
         error: h
@@ -268,7 +262,6 @@ pub fn fit_auto(
                 score,
                 held_out_delta_e_uv: None,
                 held_out_delta_e_uv_lobe: None,
-                held_out_delta_e_uv_lobe_constant_colour: None,
                 held_out_err_p: None,
                 held_out_err_p_lobe: None,
                 error,
@@ -373,8 +366,7 @@ fn choose(
 }
 
 /// The best held-out lobe ΔE_u′v′ among the candidates without a colour shift over the
-/// chosen candidate's; for the table, its own form with the specular colour held
-/// constant counts among them.
+/// chosen candidate's.
 fn chromatic_gain(candidates: &[Candidate], chosen: usize) -> Option<f64> {
     let own = candidates[chosen].held_out_delta_e_uv_lobe?;
     let others = candidates
@@ -385,7 +377,6 @@ fn chromatic_gain(candidates: &[Candidate], chosen: usize) -> Option<f64> {
                 .is_some_and(|v| !v.model.has_fresnel_colour())
         })
         .filter_map(|c| c.held_out_delta_e_uv_lobe)
-        .chain(candidates[chosen].held_out_delta_e_uv_lobe_constant_colour)
         .fold(f64::INFINITY, f64::min);
     (others.is_finite() && own > 0.0).then(|| others / own)
 }

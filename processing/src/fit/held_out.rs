@@ -188,9 +188,6 @@ pub struct HeldOut {
     /// The table's form only: the table of every θL judged (its chromaticity window the
     /// one that predicted unseen θL best).
     pub table: Option<Table>,
-    /// The table's form only: the median held-out ΔE_u′v′ over the specular lobe of the
-    /// same table with its specular colour held constant ([`constant_colour_lobe_uv`]).
-    pub constant_colour_lobe_uv: Option<f64>,
 }
 
 /// The median of `values` (mean of the middle two for an even count); `None` if empty.
@@ -348,80 +345,10 @@ pub fn table_held_out(samples: &[Sample], camera: &CameraModel) -> HeldOut {
             best = Some((uv, held));
         }
     }
-    let (window, mut held) = match best {
-        Some((_, held)) => (
-            held.table.as_ref().map_or(0.0, Table::chromaticity_window),
-            held,
-        ),
-        None => (0.0, table_folds(samples, 0.0, camera)),
-    };
-    held.constant_colour_lobe_uv = constant_colour_lobe_uv(samples, window, camera);
-    held
-}
-
-/// The median held-out ΔE_u′v′ over the specular lobe of the table (chromaticity window
-/// `window`) whose specular colour is held constant: per θL left out, every value of the
-/// others is projected onto the plane through black of two colours that fits their
-/// directions best (the least-squares plane of the values scaled to unit length), and
-/// the table of those predicts the θL left out. Without a colour shift every value is a
-/// mix a·D + b·S of a diffuse colour D and a specular colour S, all in one plane: the
-/// projection keeps each point's brightness and mix but no specular colour of its own.
-/// Where the highlight changes colour with angle the full table predicts its
-/// chromaticity better; where it does not (a dielectric's colourless specular over a
-/// coloured diffuse) both predict alike. `None` when no fold could be scored.
-pub fn constant_colour_lobe_uv(
-    samples: &[Sample],
-    window: f64,
-    camera: &CameraModel,
-) -> Option<f64> {
-    let folds: Vec<f64> = distinct_theta_l(samples)
-        .par_iter()
-        .filter_map(|&t| {
-            let held = known(samples, t).ok()?;
-            let others: Vec<Sample> = samples
-                .iter()
-                .filter(|s| (s.theta_l - t).abs() > THETA_L_TOLERANCE)
-                .cloned()
-                .collect();
-            let normal = two_colour_normal(&others)?;
-            let projected: Vec<Sample> = others
-                .into_iter()
-                .map(|mut s| {
-                    let along: f64 = (0..3).map(|c| normal[c] * s.rgb[c]).sum();
-                    s.rgb = std::array::from_fn(|c| (s.rgb[c] - along * normal[c]).max(0.0));
-                    s
-                })
-                .collect();
-            let table = Table::new(&projected, window).ok()?;
-            let estimated: Vec<[f64; 3]> = held.iter().map(|s| table.predict_sample(s)).collect();
-            score(t, &held, &estimated, camera).ok()?.lobe?.delta_e_uv
-        })
-        .collect();
-    median(&folds)
-}
-
-/// The unit normal of the plane through black that the directions of `samples`' values
-/// (all three channels known and positive) fit best: the eigenvector of the smallest
-/// eigenvalue of Σ ŷŷᵀ, ŷ = y/‖y‖. `None` without such values.
-fn two_colour_normal(samples: &[Sample]) -> Option<[f64; 3]> {
-    let mut m = nalgebra::Matrix3::<f64>::zeros();
-    let mut count = 0usize;
-    for s in samples.iter().filter(|s| !s.dropped.contains(&true)) {
-        let norm = s.rgb.iter().map(|v| v * v).sum::<f64>().sqrt();
-        if !(norm > 0.0 && norm.is_finite()) {
-            continue;
-        }
-        let y = nalgebra::Vector3::from(s.rgb) / norm;
-        m += y * y.transpose();
-        count += 1;
+    match best {
+        Some((_, held)) => held,
+        None => table_folds(samples, 0.0, camera),
     }
-    if count < 3 {
-        return None;
-    }
-    let eigen = m.symmetric_eigen();
-    let smallest = eigen.eigenvalues.imin();
-    let n = eigen.eigenvectors.column(smallest);
-    Some([n[0], n[1], n[2]])
 }
 
 /// The table of `samples` with chromaticity window `window`, each θL predicted from the
@@ -432,7 +359,6 @@ fn table_folds(samples: &[Sample], window: f64, camera: &CameraModel) -> HeldOut
         folds: Vec::new(),
         failed: Vec::new(),
         table: None,
-        constant_colour_lobe_uv: None,
     };
     let table = Table::new(samples, window).map_err(|e| e.to_string());
     for t in distinct_theta_l(samples) {
@@ -494,7 +420,6 @@ pub fn leave_one_theta_l_out(
                 folds: Vec::new(),
                 failed: Vec::new(),
                 table: None,
-                constant_colour_lobe_uv: None,
             };
             for (_, t, outcome) in outcomes.iter().filter(|(w, _, _)| *w == v) {
                 match outcome {
