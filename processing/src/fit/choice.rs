@@ -33,7 +33,9 @@
 //! A table reproduces whatever colour change the material has, so a table choice reports
 //! a colour shift by the same rule: when it predicts the unseen highlight's chromaticity
 //! at least [`COLOUR_SHIFT_GAIN`] times better than every candidate without a colour
-//! shift.
+//! shift, the same table with a specular of one colour among them
+//! ([`super::held_out::constant_colour_lobe_uv`]): a table also follows a lobe's shape,
+//! which no model may, and that alone can predict the highlight's chromaticity better.
 
 use serde::{Deserialize, Serialize};
 
@@ -83,6 +85,11 @@ pub struct Candidate {
     pub held_out_err_p: Option<[f64; 3]>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub held_out_err_p_lobe: Option<[f64; 3]>,
+    /// The table only: the median held-out ΔE_u′v′ over the lobe of the same table with
+    /// one specular colour ([`super::held_out::constant_colour_lobe_uv`]), a candidate
+    /// without a colour shift.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub held_out_delta_e_uv_lobe_one_specular_colour: Option<f64>,
     /// Why it could not be scored.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
@@ -193,6 +200,7 @@ fn held_out_candidate(h: &HeldOut, table_values: usize) -> Candidate {
         held_out_delta_e_uv_lobe: h.median_delta_e_uv(true),
         held_out_err_p: h.median_err_p(false),
         held_out_err_p_lobe: h.median_err_p(true),
+        held_out_delta_e_uv_lobe_one_specular_colour: h.constant_colour_lobe_uv,
         error: h
             .failed
             .first()
@@ -264,6 +272,7 @@ pub fn fit_auto(
                 held_out_delta_e_uv_lobe: None,
                 held_out_err_p: None,
                 held_out_err_p_lobe: None,
+                held_out_delta_e_uv_lobe_one_specular_colour: None,
                 error,
             }
         })
@@ -366,7 +375,7 @@ fn choose(
 }
 
 /// The best held-out lobe ΔE_u′v′ among the candidates without a colour shift over the
-/// chosen candidate's.
+/// chosen candidate's. A table is also judged against itself with one specular colour.
 fn chromatic_gain(candidates: &[Candidate], chosen: usize) -> Option<f64> {
     let own = candidates[chosen].held_out_delta_e_uv_lobe?;
     let others = candidates
@@ -377,6 +386,7 @@ fn chromatic_gain(candidates: &[Candidate], chosen: usize) -> Option<f64> {
                 .is_some_and(|v| !v.model.has_fresnel_colour())
         })
         .filter_map(|c| c.held_out_delta_e_uv_lobe)
+        .chain(candidates[chosen].held_out_delta_e_uv_lobe_one_specular_colour)
         .fold(f64::INFINITY, f64::min);
     (others.is_finite() && own > 0.0).then(|| others / own)
 }
@@ -433,11 +443,13 @@ fn reason(
         text.push_str(&match gain {
             Some(g) if g >= COLOUR_SHIFT_GAIN => format!(
                 "; it predicts the unseen highlight's chromaticity {g:.2}× better than any \
-                 model without a shift (≥ {COLOUR_SHIFT_GAIN}×): a colour shift"
+                 model without a shift and than itself with one specular colour \
+                 (≥ {COLOUR_SHIFT_GAIN}×): a colour shift"
             ),
             Some(g) => format!(
                 "; it predicts the unseen highlight's chromaticity only {g:.2}× better than a \
-                 model without a shift (< {COLOUR_SHIFT_GAIN}×): no colour shift"
+                 model without a shift or itself with one specular colour \
+                 (< {COLOUR_SHIFT_GAIN}×): no colour shift"
             ),
             None => "; no chromaticity of the highlight judged: no colour shift reported".into(),
         });

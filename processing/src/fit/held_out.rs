@@ -188,6 +188,9 @@ pub struct HeldOut {
     /// The table's form only: the table of every θL judged (its chromaticity window the
     /// one that predicted unseen θL best).
     pub table: Option<Table>,
+    /// The table's form only: the median held-out ΔE_u′v′ over the specular lobe of the
+    /// same table with its specular colour held constant ([`constant_colour_lobe_uv`]).
+    pub constant_colour_lobe_uv: Option<f64>,
 }
 
 /// The median of `values` (mean of the middle two for an even count); `None` if empty.
@@ -345,9 +348,119 @@ pub fn table_held_out(samples: &[Sample], camera: &CameraModel) -> HeldOut {
             best = Some((uv, held));
         }
     }
-    match best {
+    let mut held = match best {
         Some((_, held)) => held,
         None => table_folds(samples, 0.0, camera),
+    };
+    held.constant_colour_lobe_uv = held
+        .table
+        .as_ref()
+        .and_then(|table| constant_colour_lobe_uv(samples, table, camera));
+    held
+}
+
+/// The median held-out ΔE_u′v′ over the specular lobe of `table` (of every θL of
+/// `samples`) with a specular of one colour ([`one_specular_colour`]): each θL predicted
+/// from the others' columns with their specular's colour replaced by the one colour they
+/// share. It keeps each point's brightness, the diffuse under the lobe with whatever
+/// colour it has at each θd, but not a specular colour that changes: where the highlight
+/// changes colour with angle the full table predicts its chromaticity better; where it
+/// does not (a dielectric's colourless specular over a coloured diffuse) both predict
+/// alike. `None` when no fold could be scored.
+pub fn constant_colour_lobe_uv(
+    samples: &[Sample],
+    table: &Table,
+    camera: &CameraModel,
+) -> Option<f64> {
+    let folds: Vec<f64> = distinct_theta_l(samples)
+        .iter()
+        .filter_map(|&t| {
+            let held = known(samples, t).ok()?;
+            let others = one_specular_colour(&table.without(t)?);
+            let estimated: Vec<[f64; 3]> = held.iter().map(|s| others.predict_sample(s)).collect();
+            score(t, &held, &estimated, camera).ok()?.lobe?.delta_e_uv
+        })
+        .collect();
+    median(&folds)
+}
+
+/// `table` with a specular of one colour: every value becomes its nearest mix
+/// a·D + b·S (a, b ≥ 0, least squares) of its column's diffuse colour D (the median of
+/// the column's points off its lobe, [`lobe`]; of all its points where every one is on
+/// it) and one specular colour S shared by every column (the sum over their lobes of what
+/// rises above D, each channel clipped at 0).
+fn one_specular_colour(table: &Table) -> Table {
+    let rgb = |p: &[f64; 4]| [p[1], p[2], p[3]];
+    let parts: Vec<([f64; 3], Vec<bool>)> = table
+        .columns()
+        .iter()
+        .map(|column| {
+            let values: Vec<[f64; 3]> = column.points.iter().map(rgb).collect();
+            let in_lobe = lobe(&values);
+            let off: Vec<&[f64; 3]> = values
+                .iter()
+                .zip(&in_lobe)
+                .filter(|(_, &l)| !l)
+                .map(|(v, _)| v)
+                .collect();
+            let pool = if off.is_empty() {
+                values.iter().collect()
+            } else {
+                off
+            };
+            let diffuse = std::array::from_fn(|c| {
+                median(&pool.iter().map(|v| v[c]).collect::<Vec<_>>()).unwrap_or(0.0)
+            });
+            (diffuse, in_lobe)
+        })
+        .collect();
+    let mut specular = [0.0; 3];
+    for (column, (diffuse, in_lobe)) in table.columns().iter().zip(&parts) {
+        for (p, _) in column.points.iter().zip(in_lobe).filter(|(_, &l)| l) {
+            for c in 0..3 {
+                specular[c] += (p[c + 1] - diffuse[c]).max(0.0);
+            }
+        }
+    }
+    let mut parts = parts.into_iter();
+    table.with_values(|column| {
+        let (diffuse, _) = parts.next().unwrap_or_default();
+        column
+            .points
+            .iter()
+            .map(|p| two_colours(&rgb(p), &diffuse, &specular))
+            .collect()
+    })
+}
+
+/// The mix a·`d` + b·`s` (a, b ≥ 0) nearest `y` in least squares.
+fn two_colours(y: &[f64; 3], d: &[f64; 3], s: &[f64; 3]) -> [f64; 3] {
+    let dot = |a: &[f64; 3], b: &[f64; 3]| (0..3).map(|c| a[c] * b[c]).sum::<f64>();
+    let along = |v: &[f64; 3]| {
+        let n = dot(v, v);
+        let k = if n > 0.0 {
+            (dot(v, y) / n).max(0.0)
+        } else {
+            0.0
+        };
+        v.map(|x| k * x)
+    };
+    let (dd, ss, ds) = (dot(d, d), dot(s, s), dot(d, s));
+    let det = dd * ss - ds * ds;
+    // Nearly parallel colours (a white diffuse under a white specular) span one direction.
+    if det > 1e-9 * dd * ss {
+        let a = (ss * dot(d, y) - ds * dot(s, y)) / det;
+        let b = (dd * dot(s, y) - ds * dot(d, y)) / det;
+        if a >= 0.0 && b >= 0.0 {
+            return std::array::from_fn(|c| a * d[c] + b * s[c]);
+        }
+    }
+    let residual = |v: &[f64; 3]| (0..3).map(|c| (y[c] - v[c]).powi(2)).sum::<f64>();
+    let (on_d, on_s) = (along(d), along(s));
+    if residual(&on_d) <= residual(&on_s) {
+        on_d
+    } else {
+        on_s
     }
 }
 
@@ -359,6 +472,7 @@ fn table_folds(samples: &[Sample], window: f64, camera: &CameraModel) -> HeldOut
         folds: Vec::new(),
         failed: Vec::new(),
         table: None,
+        constant_colour_lobe_uv: None,
     };
     let table = Table::new(samples, window).map_err(|e| e.to_string());
     for t in distinct_theta_l(samples) {
@@ -420,6 +534,7 @@ pub fn leave_one_theta_l_out(
                 folds: Vec::new(),
                 failed: Vec::new(),
                 table: None,
+                constant_colour_lobe_uv: None,
             };
             for (_, t, outcome) in outcomes.iter().filter(|(w, _, _)| *w == v) {
                 match outcome {
@@ -473,6 +588,75 @@ mod tests {
         for fold in held.folds {
             assert!(fold.all.err_p.iter().all(|&e| e < 1e-3), "{fold:?}");
             assert!(fold.lobe.is_some(), "{fold:?}");
+        }
+    }
+
+    /// Samples of β(θh) per θL (θh in degrees), in-plane, no noise.
+    fn scan(beta: impl Fn(f64, f64) -> [f64; 3]) -> Vec<Sample> {
+        let mut samples = Vec::new();
+        for theta_l in [-20.0, -30.0, -40.0] {
+            for k in 0..=160 {
+                let theta_i = -40.0 + 0.5 * f64::from(k);
+                let theta_r = theta_l - theta_i;
+                samples.push(Sample::in_plane(
+                    theta_l,
+                    theta_i,
+                    theta_r,
+                    beta((theta_i - theta_r) / 2.0, theta_l),
+                ));
+            }
+        }
+        samples
+    }
+
+    #[test]
+    fn one_specular_colour_keeps_a_colourless_specular_and_changes_a_changing_one() {
+        let peak_at = |h: f64| 40.0 / (1.0 + (h / 3.0).powi(2));
+        // A white lobe whose brightness changes with θL over an orange diffuse: its lobe
+        // is kept.
+        let white = Table::new(
+            &scan(|h, t| [8.0, 4.0, 1.5].map(|d| d + peak_at(h) * (1.0 - 0.01 * t))),
+            0.0,
+        )
+        .unwrap();
+        let kept = one_specular_colour(&white);
+        for (a, b) in white.columns().iter().zip(kept.columns()) {
+            let values: Vec<[f64; 3]> = a.points.iter().map(|p| [p[1], p[2], p[3]]).collect();
+            let on = lobe(&values);
+            assert!(on.iter().filter(|&&l| l).count() > 10);
+            for ((p, q), _) in a.points.iter().zip(&b.points).zip(&on).filter(|(_, &l)| l) {
+                assert!(
+                    (0..4).all(|c| (p[c] - q[c]).abs() < 1e-9 * p[c].abs().max(1.0)),
+                    "{p:?} {q:?}"
+                );
+            }
+        }
+        // A lobe red at one θL, green at another and blue at the third: each becomes the
+        // one colour they share, far from its own.
+        let changing = Table::new(
+            &scan(|h, t| {
+                let k = ((-t - 20.0) / 10.0).round() as usize;
+                std::array::from_fn(|c| 2.0 + if c == k { peak_at(h) } else { 0.0 })
+            }),
+            0.0,
+        )
+        .unwrap();
+        let one = one_specular_colour(&changing);
+        let peak = |t: &Table, c: usize| {
+            t.columns()[c]
+                .points
+                .iter()
+                .max_by(|a, b| (a[1] + a[2] + a[3]).total_cmp(&(b[1] + b[2] + b[3])))
+                .copied()
+                .unwrap()
+        };
+        for c in 0..3 {
+            let (own, shared) = (peak(&changing, c), peak(&one, c));
+            let share = |p: [f64; 4]| p[1 + c] / (p[1] + p[2] + p[3]);
+            assert!(
+                share(own) > 0.9 && share(shared) < 0.5,
+                "{own:?} {shared:?}"
+            );
         }
     }
 

@@ -271,6 +271,27 @@ impl Table {
         })
     }
 
+    /// The same table with each column's values replaced by `values(column)`: one
+    /// `[R, G, B]` per point in order (θh kept; a column given fewer keeps the rest).
+    pub fn with_values(&self, mut values: impl FnMut(&Column) -> Vec<[f64; 3]>) -> Table {
+        let columns = self
+            .columns
+            .iter()
+            .map(|column| {
+                let new = values(column);
+                let mut column = column.clone();
+                for (p, v) in column.points.iter_mut().zip(new) {
+                    p[1..].copy_from_slice(&v);
+                }
+                column
+            })
+            .collect();
+        Table {
+            chromaticity_window: self.chromaticity_window,
+            columns,
+        }
+    }
+
     /// β at signed θh `h` and θd `d` (degrees; see the module).
     pub fn predict(&self, h: f64, d: f64) -> [f64; 3] {
         let columns = &self.columns;
