@@ -12,7 +12,11 @@
 //!   Cook–Torrance's).
 //!
 //! Candidates are listed simplest first; a later one wins only with a score lower by
-//! more than [`TIE`] (relative), so equal scores keep the simpler model.
+//! more than [`TIE`] (relative), so equal scores keep the simpler model, and, judged on
+//! held-out θL, only with a median held-out ΔE_u′v′ (all points) no higher than the
+//! best's so far: a larger model that predicts the unseen values better but their
+//! colours worse (one roughness per channel bending the lobe's colour) does not replace
+//! a simpler one.
 //!
 //! A colour shift is reported only when the choice was made on held-out θL, the chosen
 //! fit keeps one (Cook–Torrance–Fresnel, Wald test) **and** it predicts the chromaticity
@@ -160,15 +164,25 @@ fn bic(result: &FitResult, points: usize) -> f64 {
         + fitted_parameters(result) as f64 * n.ln()
 }
 
-/// The index of the lowest score, a later candidate winning only by more than [`TIE`].
-fn best(scores: &[Option<f64>]) -> Option<usize> {
+/// The index of the lowest score, a later candidate winning only by more than [`TIE`]
+/// and, where `colours` gives both its and the best's held-out ΔE_u′v′, only with one no
+/// higher: a larger model that predicts the unseen θL's values better but their colours
+/// worse does not replace a simpler one.
+fn best(scores: &[Option<f64>], colours: &[Option<f64>]) -> Option<usize> {
     let mut chosen: Option<usize> = None;
     for (i, s) in scores.iter().enumerate() {
         let Some(s) = *s else { continue };
         match chosen {
             Some(c) => {
                 let b = scores[c].unwrap_or(f64::INFINITY);
-                if s < b - TIE * b.abs() {
+                let colour_kept = match (
+                    colours.get(i).copied().flatten(),
+                    colours.get(c).copied().flatten(),
+                ) {
+                    (Some(own), Some(best)) => own <= best,
+                    _ => true,
+                };
+                if s < b - TIE * b.abs() && colour_kept {
                     chosen = Some(i);
                 }
             }
@@ -318,7 +332,10 @@ fn choose(
         .iter()
         .map(|c| c.score.filter(|_| c.form.variant().is_some()))
         .collect();
-    let (Some(chosen), Some(parametric)) = (best(&scores), best(&parametric_scores)) else {
+    let colours: Vec<Option<f64>> = candidates.iter().map(|c| c.held_out_delta_e_uv).collect();
+    let (Some(chosen), Some(parametric)) =
+        (best(&scores, &colours), best(&parametric_scores, &colours))
+    else {
         let why = candidates
             .iter()
             .filter_map(|c| Some(format!("{}: {}", c.form.label(), c.error.as_ref()?)))
@@ -415,7 +432,22 @@ fn reason(
         .enumerate()
         .filter(|(i, c)| *i != chosen && c.score.is_some())
         .min_by(|a, b| a.1.score.unwrap().total_cmp(&b.1.score.unwrap()));
+    let colour = |c: &Candidate| c.held_out_delta_e_uv.unwrap_or(f64::NAN);
     let mut text = match runner_up {
+        Some((_, r))
+            if r.score.unwrap() < score - TIE * score.abs() && colour(r) > colour(winner) =>
+        {
+            format!(
+                "{} is kept with a {what} of {score:.6}: {} has a lower one ({:.6}) but \
+                 predicts the unseen θL's colours worse (median ΔE_u′v′ {:.4} against {:.4}), \
+                 and a larger model replaces a simpler one only where it predicts both better",
+                winner.form.label(),
+                r.form.label(),
+                r.score.unwrap(),
+                colour(r),
+                colour(winner)
+            )
+        }
         Some((_, r)) if r.score.unwrap() <= score => format!(
             "{} has the lowest {what} among the simplest: {score:.6}, equal within {TIE:e} to {} \
              ({:.6}) with fewer or as many parameters",
