@@ -439,7 +439,7 @@ fn reason(
         {
             format!(
                 "{} is kept with a {what} of {score:.6}: {} has a lower one ({:.6}) but \
-                 predicts the unseen θL's colours worse (median ΔE_u′v′ {:.4} against {:.4}), \
+                 predicts the unseen θL's colours worse (median ΔE_u′v′ {:.5} against {:.5}), \
                  and a larger model replaces a simpler one only where it predicts both better",
                 winner.form.label(),
                 r.form.label(),
