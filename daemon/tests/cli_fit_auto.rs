@@ -18,6 +18,8 @@
 
 use std::path::{Path, PathBuf};
 
+use gonio_processing::fit::held_out::median;
+
 mod common;
 
 use common::gonio_ok as gonio;
@@ -175,13 +177,6 @@ fn variant(v: &serde_json::Value) -> String {
     )
 }
 
-/// The median of `values`.
-fn median(mut values: Vec<f64>) -> f64 {
-    values.sort_by(f64::total_cmp);
-    let n = values.len();
-    (values[(n - 1) / 2] + values[n / 2]) / 2.0
-}
-
 #[test]
 fn real_materials_meet_the_target_and_white_ones_report_no_colour_shift() {
     let Some(rgl_dir) = std::env::var_os("GONIO_RGL_DIR") else {
@@ -252,7 +247,7 @@ fn real_materials_meet_the_target_and_white_ones_report_no_colour_shift() {
             cook_torrance.push(at("cook-torrance/shared", left_out));
             shifts += usize::from(selection["colour_shift"].as_bool().unwrap());
         }
-        let ratio = median(chosen) / median(cook_torrance);
+        let ratio = median(&chosen).unwrap() / median(&cook_torrance).unwrap();
         eprintln!(
             "{name}: colour shift {shift} (from five θL: {shifts} of 6); the choice made on \
              five θL predicts the sixth with {ratio:.3}× Cook–Torrance's median ΔE_u′v′"

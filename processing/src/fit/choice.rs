@@ -38,7 +38,7 @@
 //! a colour shift by the same rule: when it predicts the unseen highlight's chromaticity
 //! at least [`COLOUR_SHIFT_GAIN`] times better than every candidate without a colour
 //! shift, the same table with a specular of one colour among them
-//! ([`super::held_out::constant_colour_lobe_uv`]): a table also follows a lobe's shape,
+//! ([`super::held_out::one_specular_colour_lobe_uv`]): a table also follows a lobe's shape,
 //! which no model may, and that alone can predict the highlight's chromaticity better.
 
 use serde::{Deserialize, Serialize};
@@ -90,7 +90,7 @@ pub struct Candidate {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub held_out_err_p_lobe: Option<[f64; 3]>,
     /// The table only: the median held-out ΔE_u′v′ over the lobe of the same table with
-    /// one specular colour ([`super::held_out::constant_colour_lobe_uv`]), a candidate
+    /// one specular colour ([`super::held_out::one_specular_colour_lobe_uv`]), a candidate
     /// without a colour shift.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub held_out_delta_e_uv_lobe_one_specular_colour: Option<f64>,
@@ -214,7 +214,7 @@ fn held_out_candidate(h: &HeldOut, table_values: usize) -> Candidate {
         held_out_delta_e_uv_lobe: h.median_delta_e_uv(true),
         held_out_err_p: h.median_err_p(false),
         held_out_err_p_lobe: h.median_err_p(true),
-        held_out_delta_e_uv_lobe_one_specular_colour: h.constant_colour_lobe_uv,
+        held_out_delta_e_uv_lobe_one_specular_colour: h.one_specular_colour_lobe_uv,
         error: h
             .failed
             .first()

@@ -15,6 +15,7 @@
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use super::linear::nnls2;
 use super::table::{Table, CHROMATICITY_WINDOWS};
 use super::{fit, FitError, FitOptions};
 use crate::brdf::{Model, Roughness};
@@ -189,8 +190,8 @@ pub struct HeldOut {
     /// one that predicted unseen θL best).
     pub table: Option<Table>,
     /// The table's form only: the median held-out ΔE_u′v′ over the specular lobe of the
-    /// same table with its specular colour held constant ([`constant_colour_lobe_uv`]).
-    pub constant_colour_lobe_uv: Option<f64>,
+    /// same table with a specular of one colour ([`one_specular_colour_lobe_uv`]).
+    pub one_specular_colour_lobe_uv: Option<f64>,
 }
 
 /// The median of `values` (mean of the middle two for an even count); `None` if empty.
@@ -352,10 +353,10 @@ pub fn table_held_out(samples: &[Sample], camera: &CameraModel) -> HeldOut {
         Some((_, held)) => held,
         None => table_folds(samples, 0.0, camera),
     };
-    held.constant_colour_lobe_uv = held
+    held.one_specular_colour_lobe_uv = held
         .table
         .as_ref()
-        .and_then(|table| constant_colour_lobe_uv(samples, table, camera));
+        .and_then(|table| one_specular_colour_lobe_uv(samples, table, camera));
     held
 }
 
@@ -367,7 +368,7 @@ pub fn table_held_out(samples: &[Sample], camera: &CameraModel) -> HeldOut {
 /// changes colour with angle the full table predicts its chromaticity better; where it
 /// does not (a dielectric's colourless specular over a coloured diffuse) both predict
 /// alike. `None` when no fold could be scored.
-pub fn constant_colour_lobe_uv(
+pub fn one_specular_colour_lobe_uv(
     samples: &[Sample],
     table: &Table,
     camera: &CameraModel,
@@ -436,32 +437,8 @@ fn one_specular_colour(table: &Table) -> Table {
 /// The mix a·`d` + b·`s` (a, b ≥ 0) nearest `y` in least squares.
 fn two_colours(y: &[f64; 3], d: &[f64; 3], s: &[f64; 3]) -> [f64; 3] {
     let dot = |a: &[f64; 3], b: &[f64; 3]| (0..3).map(|c| a[c] * b[c]).sum::<f64>();
-    let along = |v: &[f64; 3]| {
-        let n = dot(v, v);
-        let k = if n > 0.0 {
-            (dot(v, y) / n).max(0.0)
-        } else {
-            0.0
-        };
-        v.map(|x| k * x)
-    };
-    let (dd, ss, ds) = (dot(d, d), dot(s, s), dot(d, s));
-    let det = dd * ss - ds * ds;
-    // Nearly parallel colours (a white diffuse under a white specular) span one direction.
-    if det > 1e-9 * dd * ss {
-        let a = (ss * dot(d, y) - ds * dot(s, y)) / det;
-        let b = (dd * dot(s, y) - ds * dot(d, y)) / det;
-        if a >= 0.0 && b >= 0.0 {
-            return std::array::from_fn(|c| a * d[c] + b * s[c]);
-        }
-    }
-    let residual = |v: &[f64; 3]| (0..3).map(|c| (y[c] - v[c]).powi(2)).sum::<f64>();
-    let (on_d, on_s) = (along(d), along(s));
-    if residual(&on_d) <= residual(&on_s) {
-        on_d
-    } else {
-        on_s
-    }
+    let (a, b) = nnls2(dot(d, d), dot(d, s), dot(s, s), dot(d, y), dot(s, y));
+    std::array::from_fn(|c| a * d[c] + b * s[c])
 }
 
 /// The table of `samples` with chromaticity window `window`, each θL predicted from the
@@ -472,7 +449,7 @@ fn table_folds(samples: &[Sample], window: f64, camera: &CameraModel) -> HeldOut
         folds: Vec::new(),
         failed: Vec::new(),
         table: None,
-        constant_colour_lobe_uv: None,
+        one_specular_colour_lobe_uv: None,
     };
     let table = Table::new(samples, window).map_err(|e| e.to_string());
     for t in distinct_theta_l(samples) {
@@ -534,7 +511,7 @@ pub fn leave_one_theta_l_out(
                 folds: Vec::new(),
                 failed: Vec::new(),
                 table: None,
-                constant_colour_lobe_uv: None,
+                one_specular_colour_lobe_uv: None,
             };
             for (_, t, outcome) in outcomes.iter().filter(|(w, _, _)| *w == v) {
                 match outcome {

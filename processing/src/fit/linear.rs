@@ -40,7 +40,7 @@ pub(crate) struct LinearFit {
 
 /// Minimises Σ w (y − kd·a − ks·s)² over kd, ks ≥ 0 from the weighted sums
 /// saa = Σwa², sas = Σwas, sss = Σws², say = Σway, ssy = Σwsy.
-fn nnls2(saa: f64, sas: f64, sss: f64, say: f64, ssy: f64) -> (f64, f64) {
+pub(crate) fn nnls2(saa: f64, sas: f64, sss: f64, say: f64, ssy: f64) -> (f64, f64) {
     let det = saa * sss - sas * sas;
     if det > 1e-12 * saa * sss {
         let kd = (sss * say - sas * ssy) / det;
