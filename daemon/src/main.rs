@@ -28,7 +28,14 @@ enum Command {
     Extract(commands::extract::Args),
     /// Estimate a scan's setup (strip rows, camera offset, cylinder tilt, arm zero) from its captures.
     Calibrate(commands::calibrate::Args),
-    /// Fit a reflection model to a samples CSV.
+    /// Fit a reflection model to a samples CSV, with its uncertainty budget.
+    ///
+    /// Samples with uncertainty columns (what `gonio extract` writes unless
+    /// `--no-uncertainty`) get the fit's uncertainty budget (GUM law of propagation):
+    /// each parameter's standard uncertainty by source (noise, misfit, the setup's
+    /// standard uncertainties), combined and expanded (k = 2), printed as a table and
+    /// kept in the fit JSON under `budget`; `--monte-carlo N` adds the JCGM 101
+    /// propagation.
     Fit(commands::fit::Args),
     /// Fit every combination of the θL present and compare against a reference.
     Study(commands::study::Args),

@@ -396,6 +396,13 @@ impl Frame {
         path: &Path,
         select: impl FnOnce(usize, usize) -> Result<Vec<Range<usize>>, E>,
     ) -> Result<Frame, E> {
+        // A file of another kind is named as such, not as one whose sidecar is missing.
+        if !is_capture_path(path) {
+            return Err(CaptureError::UnsupportedFormat {
+                path: path.to_path_buf(),
+            }
+            .into());
+        }
         let file_len = checked_len(path)?;
         let sidecar = read_sidecar(path)?;
         let decoded = match DECODER.get() {

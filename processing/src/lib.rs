@@ -22,6 +22,7 @@ pub mod extract;
 pub mod guard;
 pub mod hdr;
 pub mod reference;
+pub mod scan_plan;
 
 pub mod export;
 pub mod study;

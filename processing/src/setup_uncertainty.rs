@@ -166,9 +166,24 @@ impl Input {
 
     fn format(&self, u: f64) -> String {
         match self.source.unit() {
-            "relative" => format!("{} %", u * 100.0),
-            unit => format!("{u} {unit}"),
+            "relative" => format!("{} %", three_significant(u * 100.0)),
+            unit => format!("{} {unit}", three_significant(u)),
         }
+    }
+}
+
+/// `x` to three significant digits, without trailing zeros (0.0312 for
+/// 0.031234567, 2 for 2.0): an uncertainty is stated to two or three digits (GUM 7.2.6).
+fn three_significant(x: f64) -> String {
+    if x == 0.0 || !x.is_finite() {
+        return x.to_string();
+    }
+    let decimals = (2 - x.abs().log10().floor() as i32).clamp(0, 15) as usize;
+    let text = format!("{x:.decimals$}");
+    if text.contains('.') {
+        text.trim_end_matches('0').trim_end_matches('.').to_owned()
+    } else {
+        text
     }
 }
 
@@ -237,6 +252,10 @@ mod tests {
         assert_eq!(inputs[6].u, [0.002; 3]);
         assert_eq!(inputs[1].describe(), "camera offset 0.5 mm (default)");
         assert_eq!(inputs[6].describe(), "arm angle 0.002 °");
+        assert_eq!(three_significant(0.031234567890123), "0.0312");
+        assert_eq!(three_significant(2.0), "2");
+        assert_eq!(three_significant(123.456), "123");
+        assert_eq!(three_significant(0.5), "0.5");
         assert_eq!(block.invalid(), None);
     }
 

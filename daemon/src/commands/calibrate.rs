@@ -20,6 +20,10 @@ pub struct Args {
     /// instead of DIR/setup.json.
     #[arg(long)]
     pub setup: Option<PathBuf>,
+    /// Go on when the directory lacks a θL or frame its plan.json names, or holds an
+    /// image without its sidecar (or a sidecar without its image); says what is missing.
+    #[arg(long)]
+    pub allow_missing: bool,
 }
 
 fn show(name: &str, estimate: Option<Estimate>, prior: f64, unit: &str) -> String {
@@ -30,6 +34,7 @@ fn show(name: &str, estimate: Option<Estimate>, prior: f64, unit: &str) -> Strin
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    super::plan_check::require_whole(&args.dir, args.allow_missing)?;
     let prior_path = args.setup.unwrap_or_else(|| args.dir.join("setup.json"));
     let prior = read_setup(&prior_path)?;
     let calibration = calibrate::calibrate_scan(&args.dir, &prior, &CalibrateOptions::default())

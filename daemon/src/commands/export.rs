@@ -62,11 +62,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     write_atomically(&args.out, written.as_bytes())
         .with_context(|| format!("writing {}", args.out.display()))?;
-    println!(
-        "{} fit ({}) -> {}",
-        fit.model,
-        fit.roughness,
-        args.out.display()
-    );
+    // What was written: the measured table when the fit predicts with one.
+    let source = if fit.table.is_some() {
+        "measured (θh, θd) table".to_owned()
+    } else {
+        format!("{} fit ({})", fit.model, fit.roughness)
+    };
+    let form = match args.format {
+        Format::Mitsuba => "Mitsuba 3 BSDF",
+        Format::Table => "BRDF on a (θi, θr) grid",
+    };
+    println!("{source} as a {form} -> {}", args.out.display());
     Ok(())
 }

@@ -39,15 +39,24 @@ pub struct Args {
     /// Leave out the samples' uncertainty columns (and the extractions they take).
     #[arg(long)]
     no_uncertainty: bool,
+    /// Go on when the directory lacks a θL or frame its plan.json names, or holds an
+    /// image without its sidecar (or a sidecar without its image); says what is missing.
+    #[arg(long)]
+    allow_missing: bool,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     gonio_processing::capture::set_max_pixels(args.max_frame_pixels);
+    super::plan_check::require_whole(&args.dir, args.allow_missing)?;
+    let setup_name = args.setup.as_ref().map_or_else(
+        || "setup.json".to_owned(),
+        |path| path.display().to_string(),
+    );
     let options = ExtractOptions {
         white_reflectance: args.white_reflectance,
         grazing_limit_deg: args.grazing_limit,
         hdr_dir: args.hdr_dir,
-        setup: args.setup,
+        setup: args.setup.clone(),
         uncertainty: !args.no_uncertainty,
         ..ExtractOptions::default()
     };
@@ -90,9 +99,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
     }
     let source = match extraction.white_source {
-        WhiteSource::Option => "--white-reflectance",
-        WhiteSource::Setup => "setup.json",
-        WhiteSource::Assumed => "assumed: setup.json gives none",
+        WhiteSource::Option => "--white-reflectance".to_owned(),
+        WhiteSource::Setup => setup_name.clone(),
+        WhiteSource::Assumed => format!("assumed: {setup_name} gives none"),
     };
     println!(
         "white reference reflectance {} ({source})",
@@ -101,15 +110,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(inputs) = &extraction.inputs {
         let listed: Vec<String> = inputs.iter().map(|i| i.describe()).collect();
         println!(
-            "standard uncertainties of the setup (setup.json's `uncertainty`): {}",
+            "standard uncertainties of the setup ({setup_name}'s `uncertainty`): {}",
             listed.join(", ")
-        );
-    }
-    if !extraction.skipped_without_sidecar.is_empty() {
-        eprintln!(
-            "warning: skipped {} image files without a .json sidecar (first: {})",
-            extraction.skipped_without_sidecar.len(),
-            extraction.skipped_without_sidecar[0].display()
         );
     }
     Ok(())

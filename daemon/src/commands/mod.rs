@@ -7,6 +7,7 @@ pub mod extract;
 pub mod fit;
 pub mod hdr;
 mod output;
+mod plan_check;
 pub mod serve;
 pub mod simulate;
 pub mod study;

@@ -10,14 +10,14 @@ use gonio_files::output::write_atomically;
 use gonio_mock_hw::render::{self, reference};
 use gonio_mock_hw::scene::Scene;
 use gonio_processing::geometry::Setup;
+use gonio_processing::scan_plan::{self, ScanPlan};
 
 use crate::progress;
 
 /// Arguments of `gonio simulate`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// Scene file (TOML), or a built-in scene: gold, red, blue-green.
-    #[arg(long)]
+    #[arg(long, help = SCENE_HELP)]
     pub scene: String,
     /// Output scan directory (created if missing).
     #[arg(long)]
@@ -32,6 +32,9 @@ pub struct Args {
     #[arg(long, default_value_t = 1)]
     pub binning: u32,
 }
+
+/// Help of a `--scene` option: every name of [`Scene::BUILTIN`] (a test checks it).
+pub const SCENE_HELP: &str = "Scene file (TOML), or a built-in scene: gold, red, blue-green, opal";
 
 /// A built-in scene by name, otherwise a scene file.
 pub fn load_scene(spec: &str) -> anyhow::Result<Scene> {
@@ -81,6 +84,13 @@ pub fn render_scan(args: Args) -> anyhow::Result<(usize, String)> {
         .context("scene setup does not convert to the processing setup")?;
     write_json(&out.join("setup.json"), &serde_json::to_value(&setup)?)?;
     write_json(&out.join("truth.json"), &scene.truth_json())?;
+    let plan = ScanPlan {
+        theta_l: scene.theta_l_deg().to_vec(),
+        bracket_s: Some(scene.bracket_s().to_vec()),
+    };
+    let plan_path = out.join(scan_plan::PLAN_FILE);
+    write_atomically(&plan_path, plan.to_json_text().as_bytes())
+        .with_context(|| format!("writing {}", plan_path.display()))?;
     let reference_path = out.join("reference.csv");
     write_atomically(&reference_path, reference::reference_csv(&scene).as_bytes())
         .with_context(|| format!("writing {}", reference_path.display()))?;
@@ -120,4 +130,19 @@ pub fn render_scan(args: Args) -> anyhow::Result<(usize, String)> {
     }
     bar.finish_and_clear();
     Ok((total, scene.name().to_owned()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_scene_help_names_every_built_in_scene() {
+        for name in Scene::BUILTIN {
+            assert!(
+                SCENE_HELP.contains(name),
+                "{name} missing from {SCENE_HELP}"
+            );
+        }
+    }
 }

@@ -79,6 +79,10 @@ pub struct Args {
     /// Fit on every N-th sample of each θL (pixel-column stride); scores use all samples.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
     pub stride: u32,
+    /// Go on when the samples lack a θL that the plan.json beside them names (a scan
+    /// directory's samples.csv).
+    #[arg(long)]
+    pub allow_missing: bool,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -90,6 +94,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     // Both readers name the file in their errors.
     let samples = samples::read_csv(&args.samples)?;
+    super::plan_check::require_planned_theta_l(
+        &args.samples,
+        &samples::distinct_theta_l(&samples),
+        args.allow_missing,
+    )?;
     let mut variants = Vec::new();
     for &model in &args.models {
         for &roughness in args.roughness.forms() {

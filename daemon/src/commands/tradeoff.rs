@@ -56,8 +56,7 @@ const RELATIVE_SLACK: f64 = 0.10;
 /// Arguments of `gonio tradeoff`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// Scene file (TOML), or a built-in scene: gold, red, blue-green.
-    #[arg(long)]
+    #[arg(long, help = super::simulate::SCENE_HELP)]
     pub scene: String,
     /// Output directory for the table and the figure (created if missing).
     #[arg(long)]

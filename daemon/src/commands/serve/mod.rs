@@ -232,7 +232,8 @@ fn listen(addr: std::net::SocketAddr) -> std::io::Result<tokio::net::TcpListener
 }
 
 /// The bearer token: from the config, else `GONIO_TOKEN`, else the one in DATA/token,
-/// else a new random one written there (mode 600) and printed.
+/// else a new random one written there (mode 600). One in DATA/token is printed at every
+/// start (the operator reads it there or in this line).
 fn token(config: &Config) -> anyhow::Result<String> {
     if let Some(token) = config.token.clone().filter(|t| !t.is_empty()) {
         return Ok(token);
@@ -244,7 +245,7 @@ fn token(config: &Config) -> anyhow::Result<String> {
     if let Ok(existing) = read_input_to_string(&path, MAX_SMALL_FILE_BYTES) {
         let existing = existing.trim().to_owned();
         if !existing.is_empty() {
-            println!("gonio: token in {}", path.display());
+            println!("gonio: token {existing} (from {})", path.display());
             return Ok(existing);
         }
     }

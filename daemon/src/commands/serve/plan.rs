@@ -18,6 +18,16 @@ pub struct ScanPlan {
     pub auto_bracket: bool,
 }
 
+impl ScanPlan {
+    /// What the scan directory's `plan.json` records: its θL and fixed bracket.
+    pub fn folder_plan(&self) -> gonio_processing::scan_plan::ScanPlan {
+        gonio_processing::scan_plan::ScanPlan {
+            theta_l: self.theta_l.clone(),
+            bracket_s: (!self.auto_bracket).then(|| self.shutter_s.clone()),
+        }
+    }
+}
+
 /// The reflection models fitted at the end of every scan, with their result file names.
 pub const FIT_MODELS: [(&str, &str); 3] = [
     ("cook-torrance", "fit-cook-torrance.json"),

@@ -584,7 +584,7 @@ impl HardwareLane {
             return Ok(());
         }
         let dir = self.shared.scan_dir(id);
-        if let Err(err) = self.prepare_dir(&dir) {
+        if let Err(err) = self.prepare_dir(&dir, &scan.plan) {
             if storage::is_disk_full(&err) {
                 let reason = self.shared.storage.full_reason(0);
                 let now = self.store.scan(id)?;
@@ -721,9 +721,9 @@ impl HardwareLane {
         calibration::current_setup(&self.shared.config.data_dir, self.setup.as_ref())
     }
 
-    /// Creates the scan directory with setup.json (and truth.json for emulated scans,
-    /// of the scene mounted now, whose levels its capture sidecars then carry).
-    fn prepare_dir(&mut self, dir: &Path) -> std::io::Result<()> {
+    /// Creates the scan directory with setup.json, plan.json (and truth.json for emulated
+    /// scans, of the scene mounted now, whose levels its capture sidecars then carry).
+    fn prepare_dir(&mut self, dir: &Path, plan: &ScanPlan) -> std::io::Result<()> {
         if let Some(scene) = self.shared.mount.emulated_scene() {
             let facts = SceneFacts::of(&scene).map_err(std::io::Error::other)?;
             self.setup = Some(facts.setup);
@@ -741,6 +741,10 @@ impl HardwareLane {
                 ),
             ),
             ("truth.json", self.truth.clone()),
+            (
+                gonio_processing::scan_plan::PLAN_FILE,
+                serde_json::to_value(plan.folder_plan()).ok(),
+            ),
         ];
         for (name, value) in files {
             let path = dir.join(name);
