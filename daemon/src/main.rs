@@ -45,6 +45,8 @@ enum Command {
     EmulateArm(commands::emulate_arm::Args),
     /// Write a fit for a renderer (Mitsuba 3 BSDF) or as a BRDF table.
     Export(commands::export::Args),
+    /// Write a scan's report: one self-contained, printable HTML file.
+    Report(commands::report::Args),
     /// Decode captures asked for on stdin (a child of the other commands).
     #[command(hide = true)]
     DecodeWorker(decode_workers::Args),
@@ -78,6 +80,7 @@ fn main() {
         Command::Tradeoff(args) => commands::tradeoff::run(args),
         Command::EmulateArm(args) => commands::emulate_arm::run(args),
         Command::Export(args) => commands::export::run(args),
+        Command::Report(args) => commands::report::run(args),
         Command::DecodeWorker(args) => decode_workers::serve(args),
     });
     let result = match outcome {

@@ -10,6 +10,8 @@ use std::time::{Duration, Instant};
 
 use serde_json::Value;
 
+pub mod browser;
+
 /// The `gonio` binary of the profile the tests were built with, brought up to date on
 /// first use, so `cargo test --workspace` works on a clean checkout. The update runs
 /// `cargo test --workspace --no-run`: the same feature resolution as the workspace test

@@ -8,6 +8,7 @@ pub mod fit;
 pub mod hdr;
 mod output;
 mod plan_check;
+pub mod report;
 pub mod serve;
 pub mod simulate;
 pub mod study;

@@ -198,9 +198,32 @@ pub fn box_plot_svg(
     root.present().map_err(|e| err(&e))
 }
 
-/// An x–y chart of points and polylines with a legend.
+/// An x–y chart of points and polylines with a legend, written to `path`.
 pub fn xy_svg(path: &Path, plot: &XyPlot) -> Result<(), FigureError> {
-    let err = |e: &dyn std::fmt::Display| draw_error(path, e);
+    let svg = xy_svg_text(plot).map_err(|e| FigureError {
+        path: path.to_path_buf(),
+        ..e
+    })?;
+    std::fs::write(path, svg).map_err(|e| draw_error(path, e))
+}
+
+/// [`xy_svg`]'s chart as SVG text (900 × 600 user units), for embedding in a page.
+pub fn xy_svg_text(plot: &XyPlot) -> Result<String, FigureError> {
+    let mut svg = String::new();
+    draw_xy(
+        SVGBackend::with_string(&mut svg, SIZE).into_drawing_area(),
+        plot,
+    )
+    .map_err(|e| draw_error(Path::new(""), e))?;
+    Ok(svg)
+}
+
+/// Draws `plot` on `root`; errors as text.
+fn draw_xy(
+    root: DrawingArea<SVGBackend<'_>, plotters::coord::Shift>,
+    plot: &XyPlot,
+) -> Result<(), String> {
+    let err = |e: &dyn std::fmt::Display| e.to_string();
     let axis = |log: bool, v: f64| {
         if log {
             (v > 0.0).then(|| v.log10())
@@ -227,7 +250,6 @@ pub fn xy_svg(path: &Path, plot: &XyPlot) -> Result<(), FigureError> {
     let (x_lo, x_hi) = padded_range(all().map(|p| p.0));
     let (y_lo, y_hi) = padded_range(all().map(|p| p.1));
 
-    let root = SVGBackend::new(path, SIZE).into_drawing_area();
     root.fill(&WHITE).map_err(|e| err(&e))?;
     let mut chart = ChartBuilder::on(&root)
         .caption(&plot.title, ("sans-serif", 22))

@@ -163,6 +163,7 @@ pub fn router(shared: Arc<Shared>) -> Router {
         .route("/api/scans/{id}/events", get(scan_events))
         .route("/api/scans/{id}/thumbnail.png", get(thumbnail))
         .route("/api/scans/{id}/plot", get(plot))
+        .route("/api/scans/{id}/report", get(report))
         .route("/api/scans/{id}/files", get(list_files))
         .route("/api/scans/{id}/files/{*path}", get(get_file))
         .route("/api/scans/{id}/archive", get(scan_archive))
@@ -1128,6 +1129,54 @@ async fn plot(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Va
         .map_err(internal)?
         .map_err(|e| ApiError::not_found(format!("plot data: {e}")))?;
     Ok(Json(plot))
+}
+
+/// The scan's report: one self-contained, printable HTML file (`gonio report`'s, with
+/// what the daemon knows of the scan). 409 while the scan has no samples or fit yet.
+async fn report(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Response> {
+    let scan = load_scan(&shared, id).await?;
+    let dir = shared.scan_dir(id);
+    let facts = gonio_report::ScanFacts {
+        id: Some(id),
+        sample: Some(scan.plan.sample.clone()),
+        state: Some(scan.state.as_str().to_owned()),
+        created: Some(scan.created.clone()),
+        started: scan.started.clone(),
+        finished: scan.finished.clone(),
+        notes: None,
+    };
+    let render_dir = dir.clone();
+    let html = tokio::task::spawn_blocking(move || {
+        gonio_report::render(
+            &render_dir,
+            &facts,
+            env!("CARGO_PKG_VERSION"),
+            &crate::commands::report::now(),
+        )
+    })
+    .await
+    .map_err(internal)?
+    .map_err(|e| {
+        let message = without_server_paths(&e.to_string(), &[&dir]);
+        match e {
+            gonio_report::ReportError::Empty { .. } => ApiError::new(
+                StatusCode::CONFLICT,
+                format!("scan {id} has no samples or fit to report yet"),
+            ),
+            _ => internal(message),
+        }
+    })?;
+    Ok((
+        [
+            (header::CONTENT_TYPE, "text/html; charset=utf-8".to_owned()),
+            (
+                header::CONTENT_DISPOSITION,
+                format!("inline; filename=\"gonio-scan-{id}-report.html\""),
+            ),
+        ],
+        html,
+    )
+        .into_response())
 }
 
 /// Test hook (only with `emulator.fault_injection = true`): injects a fault into the

@@ -1,0 +1,116 @@
+//! A scan's report: the daemon serves it for a finished scan and `gonio report` writes
+//! it from the scan directory; one self-contained HTML file that a headless Chromium
+//! opens with no network request and no error, that fits a 390 px screen (tables scroll
+//! in their boxes, plots scale) and holds the budget in the GUM's layout.
+
+use std::time::Duration;
+
+use gonio_tests::browser::Browser;
+use gonio_tests::{emulator_config, gonio, temp_dir, Daemon};
+use serde_json::json;
+
+/// What a report shows, read in the browser.
+const REPORT_FACTS: &str = r#"(() => ({
+    title: document.title,
+    sections: [...document.querySelectorAll('h2')].map((h) => h.textContent),
+    plots: document.querySelectorAll('svg').length,
+    budgetRows: document.querySelectorAll('table.budget tbody tr').length,
+    budgetHeader: [...document.querySelectorAll('table.budget th')].map((t) => t.textContent),
+    pageWidth: document.documentElement.scrollWidth,
+    resources: performance.getEntriesByType('resource').map((r) => r.name),
+}))()"#;
+
+#[test]
+fn a_finished_scans_report_is_whole_self_contained_and_opens_in_a_browser() {
+    let dir = temp_dir("report");
+    let daemon = Daemon::start(&dir, &emulator_config(0.01));
+    let id = daemon.post_gold_scan(&[-20.0, -30.0, -40.0], &[0.1, 0.01]);
+    daemon.wait_state(id, &["done"], Duration::from_secs(300));
+
+    let answer = daemon.get(&format!("/api/scans/{id}/report"));
+    assert_eq!(answer.status, 200);
+    assert!(
+        answer.content_type.starts_with("text/html"),
+        "{}",
+        answer.content_type
+    );
+    let html = String::from_utf8(answer.bytes).unwrap();
+    assert!(html.contains("BRDF measurement report: gold"));
+    assert!(
+        html.contains(&format!("<td>scan</td><td>{id}</td>")),
+        "scan id shown"
+    );
+    // Nothing is loaded from elsewhere: no link, script or image source, no CSS url().
+    for needle in ["src=", "href=", "url(", "<script", "<link"] {
+        assert!(!html.contains(needle), "the report refers out: {needle}");
+    }
+    assert_eq!(daemon.get("/api/scans/999/report").status, 404);
+
+    // The same report from the scan directory, offline.
+    let scan_dir = daemon.data.join(format!("scans/{id}"));
+    let file = dir.join("report.html");
+    let out = gonio(&[
+        "report",
+        scan_dir.to_str().unwrap(),
+        "--notes",
+        "batch 7 <ACME>",
+        "--out",
+        file.to_str().unwrap(),
+    ]);
+    assert!(out.contains("report of"), "{out}");
+    let offline = std::fs::read_to_string(&file).unwrap();
+    assert!(
+        offline.contains("batch 7 &lt;ACME&gt;"),
+        "notes shown, escaped"
+    );
+
+    // Opened in a real browser at a phone's width.
+    let browser = Browser::launch(&dir.join("profile"));
+    let mut page = browser.page();
+    page.call(
+        "Emulation.setDeviceMetricsOverride",
+        json!({"width": 390, "height": 800, "deviceScaleFactor": 1, "mobile": true}),
+    );
+    page.call(
+        "Page.navigate",
+        json!({"url": format!("file://{}", file.display())}),
+    );
+    page.wait_for(
+        "the report",
+        "document.readyState === 'complete' && document.querySelectorAll('svg').length",
+        Duration::from_secs(30),
+    );
+    let facts = page.eval(REPORT_FACTS);
+    assert_eq!(facts["title"], "gonio report: gold", "{facts}");
+    let sections: Vec<&str> = facts["sections"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|s| s.as_str())
+        .collect();
+    for wanted in [
+        "Scan",
+        "Plan and captures",
+        "Setup",
+        "Model",
+        "Uncertainty budget",
+        "Measured and fitted",
+        "Held-out errors of the candidates",
+    ] {
+        assert!(sections.contains(&wanted), "no {wanted} in {sections:?}");
+    }
+    assert_eq!(facts["plots"], 2, "{facts}");
+    // Kd, Ks per channel and m: seven quantities at least, each with u_c and U.
+    assert!(facts["budgetRows"].as_u64().unwrap() >= 7, "{facts}");
+    let header = facts["budgetHeader"].to_string();
+    for column in ["u(noise)", "u(camera offset)", "interval"] {
+        assert!(header.contains(column), "{column} missing from {header}");
+    }
+    assert!(
+        facts["pageWidth"].as_u64().unwrap() <= 390,
+        "the report is wider than a 390 px screen: {facts}"
+    );
+    assert_eq!(facts["resources"], json!([]), "the report loaded resources");
+    assert_eq!(page.errors(), Vec::<String>::new());
+    std::fs::remove_dir_all(dir).ok();
+}
