@@ -52,6 +52,8 @@ fn a_finished_scans_report_is_whole_self_contained_and_opens_in_a_browser() {
     let out = gonio(&[
         "report",
         scan_dir.to_str().unwrap(),
+        "--sample",
+        "gold",
         "--notes",
         "batch 7 <ACME>",
         "--out",
