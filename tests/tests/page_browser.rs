@@ -14,7 +14,7 @@
 
 use std::time::{Duration, Instant};
 
-use gonio_tests::browser::{wait_until, Browser, Cdp};
+use gonio_tests::browser::{Browser, Cdp};
 use gonio_tests::{
     emulator_config, emulator_config_scaled, temp_dir, with_small_red_sample, Daemon, TOKEN,
 };
