@@ -104,6 +104,11 @@ pub enum ExtractError {
         path: PathBuf,
         error: std::io::Error,
     },
+    #[error(
+        "{path}: a symbolic link: θL folders and captures must be plain directories and \
+         files (a link is not followed)"
+    )]
+    Link { path: PathBuf },
     #[error("{dir}: no captures (image files with a .json sidecar) found")]
     NoCaptures { dir: PathBuf },
     #[error(transparent)]
@@ -452,9 +457,17 @@ fn find_captures(dir: &Path, out: &mut Vec<PathBuf>) -> Result<(), ExtractError>
         let entry = entry.map_err(walk_error)?;
         let path = entry.path();
         let kind = entry.file_type().map_err(walk_error)?;
+        let named_like_capture = capture::is_capture_path(&path)
+            || entry
+                .file_name()
+                .as_encoded_bytes()
+                .starts_with(b"theta_l_");
+        if kind.is_symlink() && named_like_capture {
+            return Err(ExtractError::Link { path });
+        }
         if kind.is_dir() {
             find_captures(&path, out)?;
-        } else if capture::is_capture_path(&path) {
+        } else if kind.is_file() && capture::is_capture_path(&path) {
             out.push(path);
         }
     }
