@@ -541,3 +541,50 @@ fn extract_with_no_samples_exits_non_zero_naming_the_dominant_reason() {
     assert_clean_failure(&output, "no samples");
     assert!(!out.exists());
 }
+
+/// A θL folder of a scan that is a symbolic link (to `/etc`, to another scan) is
+/// refused by extract and calibrate with one line naming it, as the daemon's files
+/// route refuses links; neither follows it.
+#[test]
+fn extract_and_calibrate_refuse_a_symlinked_theta_l_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = dir.path().join("scan");
+    let scene = dir.path().join("scene.toml");
+    let fixture = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/tiny_scene.toml");
+    let text = std::fs::read_to_string(fixture).unwrap()
+        + "\n[sample]\nmodel = \"cook-torrance\"\nkd = [9.0, 6.5, 2.0]\nks = [25.0, 20.0, 7.0]\nm = [0.07]\n";
+    std::fs::write(&scene, text).unwrap();
+    let output = gonio(&[
+        "simulate".as_ref(),
+        "--scene".as_ref(),
+        scene.as_os_str(),
+        "--out".as_ref(),
+        scan.as_os_str(),
+    ]);
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let folder = std::fs::read_dir(&scan)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .find(|name| name.starts_with("theta_l_"))
+        .expect("a θL folder");
+    // The captures stay where the link points: following it would find them.
+    let elsewhere = dir.path().join("elsewhere");
+    std::fs::rename(scan.join(&folder), &elsewhere).unwrap();
+    std::os::unix::fs::symlink(&elsewhere, scan.join(&folder)).unwrap();
+    let out = dir.path().join("out");
+    for command in ["extract", "calibrate"] {
+        let output = gonio(&[
+            command.as_ref(),
+            scan.as_os_str(),
+            "--out".as_ref(),
+            out.as_os_str(),
+        ]);
+        let stderr = assert_clean_failure(&output, "symbolic link");
+        assert!(stderr.contains(&folder), "{command}: {stderr}");
+        assert!(!out.exists(), "{command}");
+    }
+}

@@ -19,7 +19,7 @@ use std::path::{Component, Path};
 use crate::input::check_kind;
 
 /// Flags of the final open: read only, never following a link, never blocking.
-const READ_FLAGS: libc::c_int =
+pub(crate) const READ_FLAGS: libc::c_int =
     libc::O_RDONLY | libc::O_NOFOLLOW | libc::O_NONBLOCK | libc::O_NOCTTY | libc::O_CLOEXEC;
 
 /// Opens the regular file `relative` (plain names only) below directory `dir` (see the

@@ -5,10 +5,12 @@
 //! - [`output`]: atomic writes of outputs under unique temporary names, never replacing
 //!   what is not a regular file.
 //! - [`beneath`]: opening a file below a directory by handle, following no link.
+//! - [`walk`]: every regular file below a directory, visited by handle.
 
 pub mod beneath;
 pub mod input;
 pub mod output;
+pub mod walk;
 
 /// Makes a FIFO at `path`, for tests.
 #[cfg(test)]

@@ -46,6 +46,9 @@ use crate::hdr::{self, HdrError, HdrImage, MergeOptions, SATURATED, UNDEREXPOSED
 use crate::samples::{Sample, SampleUncertainty};
 use crate::setup_uncertainty::{Input, Source};
 
+mod captures;
+use captures::{find_captures, FindError};
+
 /// Rows averaged around each strip's centre row (paper §2.2).
 pub const STRIP_ROWS: usize = 5;
 
@@ -104,6 +107,11 @@ pub enum ExtractError {
         path: PathBuf,
         error: std::io::Error,
     },
+    #[error(
+        "{path}: a symbolic link: θL folders and captures must be plain directories and \
+         files (a link is not followed)"
+    )]
+    Link { path: PathBuf },
     #[error("{dir}: no captures (image files with a .json sidecar) found")]
     NoCaptures { dir: PathBuf },
     #[error(transparent)]
@@ -126,6 +134,15 @@ pub enum ExtractError {
     },
     #[error("invalid extraction option: {0}")]
     Options(String),
+}
+
+impl From<FindError> for ExtractError {
+    fn from(err: FindError) -> Self {
+        match err {
+            FindError::Walk { path, error } => ExtractError::Walk { path, error },
+            FindError::Link { path } => ExtractError::Link { path },
+        }
+    }
 }
 
 /// What was dropped. Columns count once, in the first reason that applies; values (one
@@ -441,24 +458,6 @@ pub fn read_setup(path: &Path) -> Result<Setup, ExtractError> {
         error,
     })?;
     Ok(setup)
-}
-
-fn find_captures(dir: &Path, out: &mut Vec<PathBuf>) -> Result<(), ExtractError> {
-    let walk_error = |error| ExtractError::Walk {
-        path: dir.to_path_buf(),
-        error,
-    };
-    for entry in fs::read_dir(dir).map_err(walk_error)? {
-        let entry = entry.map_err(walk_error)?;
-        let path = entry.path();
-        let kind = entry.file_type().map_err(walk_error)?;
-        if kind.is_dir() {
-            find_captures(&path, out)?;
-        } else if capture::is_capture_path(&path) {
-            out.push(path);
-        }
-    }
-    Ok(())
 }
 
 /// One strip's rows at one column: each row's radiance and flags.

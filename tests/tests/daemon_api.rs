@@ -21,8 +21,11 @@ fn mutating_routes_need_the_token_and_change_nothing_without_it() {
     std::fs::create_dir_all(&data).unwrap();
     std::fs::set_permissions(&data, Permissions::from_mode(0o755)).unwrap();
     let daemon = Daemon::start(&dir, &emulator_config(0.01));
-    let health = daemon.get("/api/health").json;
-    assert_eq!(health["status"], "ok");
+    // Health says "degraded" (arm_disconnected) until the hardware lane has opened the
+    // arm.
+    let health = daemon.wait_for("/api/health", Duration::from_secs(30), |h| {
+        h["status"] == "ok"
+    });
     assert!(
         health["disk_free_bytes"].as_u64().is_some_and(|b| b > 0),
         "{health}"

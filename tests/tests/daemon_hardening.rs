@@ -7,29 +7,10 @@ use std::net::TcpStream;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use gonio_tests::{emulator_config, emulator_config_scaled, raw_http, temp_dir, Daemon, TOKEN};
+use gonio_tests::{
+    allow_open_files, emulator_config, emulator_config_scaled, raw_http, temp_dir, Daemon, TOKEN,
+};
 use serde_json::{json, Value};
-
-/// Raises this test process's own descriptor limit so it can hold `n` sockets.
-fn allow_open_files(n: u64) {
-    let mut limit = libc::rlimit {
-        rlim_cur: 0,
-        rlim_max: 0,
-    };
-    // SAFETY: plain struct in, plain struct out.
-    unsafe {
-        assert_eq!(libc::getrlimit(libc::RLIMIT_NOFILE, &mut limit), 0);
-        if limit.rlim_cur < n {
-            limit.rlim_cur = n.min(limit.rlim_max).max(n);
-            limit.rlim_max = limit.rlim_max.max(n);
-            assert_eq!(
-                libc::setrlimit(libc::RLIMIT_NOFILE, &limit),
-                0,
-                "raising the test's own file limit to {n}"
-            );
-        }
-    }
-}
 
 /// Sockets the process `pid` has open (its descriptors that are sockets).
 fn open_sockets(pid: u32) -> usize {

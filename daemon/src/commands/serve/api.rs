@@ -2,8 +2,7 @@
 //! Mutating routes need the bearer token; reads are open.
 
 use std::convert::Infallible;
-use std::path::Path as FsPath;
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::Ordering;
 use std::sync::Arc;
 
 use axum::body::Bytes;
@@ -18,117 +17,24 @@ use futures_util::{Stream, StreamExt};
 use gonio_drivers::ArmState;
 use serde::Deserialize;
 use serde_json::{json, Value};
-use tokio_stream::wrappers::{BroadcastStream, ReceiverStream};
+use tokio_stream::wrappers::BroadcastStream;
 
-use super::archive::{file_name_part, TarWriter};
+use super::answers::{
+    db, internal, load_scan, without_absolute_paths, without_server_paths, ApiError, ApiResult,
+    AppState,
+};
 use super::calibration;
 use super::config::Config;
 use super::devices::InjectedFault;
-use super::files::{is_partial, open_under};
-use super::plan::Step;
 use super::preview;
+use super::scan_files;
+use super::scan_report;
 use super::shared::{PositionRequest, Shared, EMERGENCY_STOP};
-use super::store::{NewScan, ScanRecord, ScanState, StepState, Store, StoreError};
-use super::sync::lock;
-use super::validate::{self, Bounds, FieldError};
+use super::store::{NewScan, ScanState, Store, StoreError};
+use super::sync::{lock, Slots};
+use super::thumbnails;
+use super::validate::{self, Bounds};
 use super::view::{applies_to, rfc3339, scan_view};
-
-/// An error answer: status and `{"error": "...", "field": ...}`.
-pub struct ApiError {
-    status: StatusCode,
-    message: String,
-    field: Option<String>,
-}
-
-impl ApiError {
-    fn new(status: StatusCode, message: impl Into<String>) -> Self {
-        Self {
-            status,
-            message: message.into(),
-            field: None,
-        }
-    }
-
-    fn not_found(what: impl std::fmt::Display) -> Self {
-        Self::new(StatusCode::NOT_FOUND, format!("{what} not found"))
-    }
-}
-
-impl IntoResponse for ApiError {
-    fn into_response(self) -> Response {
-        // One line, whatever a cause's message holds.
-        let message = gonio_processing::guard::one_line(&self.message);
-        let body = match self.field {
-            Some(field) => json!({ "error": message, "field": field }),
-            None => json!({ "error": message }),
-        };
-        (self.status, Json(body)).into_response()
-    }
-}
-
-impl From<StoreError> for ApiError {
-    /// A journal that finds the disk full is a state, not a fault: 503 saying so (the
-    /// lanes log it, once).
-    fn from(err: StoreError) -> Self {
-        if err.is_disk_full() {
-            return Self::new(
-                StatusCode::SERVICE_UNAVAILABLE,
-                "the disk is full: the journal cannot be written; \
-                 try again once space is freed on the data directory's disk",
-            );
-        }
-        tracing::error!("store: {err}");
-        Self::new(StatusCode::INTERNAL_SERVER_ERROR, err.to_string())
-    }
-}
-
-impl From<FieldError> for ApiError {
-    fn from(err: FieldError) -> Self {
-        Self {
-            status: StatusCode::UNPROCESSABLE_ENTITY,
-            message: err.to_string(),
-            field: Some(err.field),
-        }
-    }
-}
-
-/// `message` with every path under `dirs` (most specific first) made relative to it,
-/// so that an answer shows no path of the server (`theta_l_-20.0/exp_00.json`, not
-/// `/srv/gonio-data/scans/3/theta_l_-20.0/exp_00.json`).
-fn without_server_paths(message: &str, dirs: &[&FsPath]) -> String {
-    dirs.iter().fold(message.to_owned(), |message, dir| {
-        let dir = dir.display().to_string();
-        message.replace(&format!("{dir}/"), "").replace(&dir, ".")
-    })
-}
-
-fn internal(err: impl std::fmt::Display) -> ApiError {
-    ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, err.to_string())
-}
-
-type ApiResult<T> = Result<T, ApiError>;
-type AppState = State<Arc<Shared>>;
-
-/// Liveness, and the data directory's free space (`null` when it cannot be measured).
-async fn health(State(shared): AppState) -> Json<Value> {
-    let free = shared.storage.free_bytes().ok();
-    Json(json!({ "status": "ok", "disk_free_bytes": free }))
-}
-
-/// Runs `f` with the handlers' database connection off the async workers.
-async fn db<T: Send + 'static>(
-    shared: &Arc<Shared>,
-    f: impl FnOnce(&Shared, &mut Store) -> Result<T, StoreError> + Send + 'static,
-) -> ApiResult<T> {
-    let shared = shared.clone();
-    tokio::task::spawn_blocking(move || {
-        let mut store = lock(&shared.store);
-        f(&shared, &mut store)
-    })
-    .await
-    .map_err(internal)?
-    .map_err(ApiError::from)
-}
 
 /// The routes of the daemon. Every request first passes the Host check; mutating
 /// routes need the token (reads too when bound beyond loopback without
@@ -161,12 +67,12 @@ pub fn router(shared: Arc<Shared>) -> Router {
         .route("/api/scans/{id}", get(get_scan))
         .route("/api/scans/{id}/steps", get(scan_steps))
         .route("/api/scans/{id}/events", get(scan_events))
-        .route("/api/scans/{id}/thumbnail.png", get(thumbnail))
+        .route("/api/scans/{id}/thumbnail.png", get(thumbnails::thumbnail))
         .route("/api/scans/{id}/plot", get(plot))
-        .route("/api/scans/{id}/report", get(report))
-        .route("/api/scans/{id}/files", get(list_files))
-        .route("/api/scans/{id}/files/{*path}", get(get_file))
-        .route("/api/scans/{id}/archive", get(scan_archive))
+        .route("/api/scans/{id}/report", get(scan_report::report))
+        .route("/api/scans/{id}/files", get(scan_files::list_files))
+        .route("/api/scans/{id}/files/{*path}", get(scan_files::get_file))
+        .route("/api/scans/{id}/archive", get(scan_files::scan_archive))
         .route("/api/sweeps", get(list_sweeps))
         .route("/api/sweeps/{id}", get(get_sweep));
     let reads = if reads_need_token(&shared.config) {
@@ -177,7 +83,7 @@ pub fn router(shared: Arc<Shared>) -> Router {
     Router::new()
         .route("/", get(super::web::index))
         .route("/api/openapi.json", get(super::web::openapi))
-        .route("/api/health", get(health))
+        .route("/api/health", get(super::health::health))
         .merge(reads)
         .merge(mutating)
         .fallback(|| async { ApiError::not_found("no such route:") })
@@ -421,12 +327,6 @@ async fn list_scans(State(shared): AppState) -> ApiResult<Json<Value>> {
     Ok(Json(Value::Array(views)))
 }
 
-async fn load_scan(shared: &Arc<Shared>, id: i64) -> ApiResult<ScanRecord> {
-    db(shared, move |_, store| store.scan(id))
-        .await?
-        .ok_or_else(|| ApiError::not_found(format!("scan {id}")))
-}
-
 /// The detailed view of scan `id`.
 async fn load_view(shared: &Arc<Shared>, id: i64) -> ApiResult<Value> {
     db(shared, move |shared, store| {
@@ -526,10 +426,17 @@ async fn confirm_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult
     let sample = scan.plan.sample.clone();
     let mounting = shared.clone();
     let mounted = sample.clone();
+    // A sample the configuration cannot show (its scene file missing or bad) is the
+    // operator's to fix: 409 naming the file, not where it is on the server.
     tokio::task::spawn_blocking(move || mounting.mount.mount(&mounted))
         .await
         .map_err(internal)?
-        .map_err(|e| internal(format!("mounting sample {sample}: {e:#}")))?;
+        .map_err(|e| {
+            ApiError::new(
+                StatusCode::CONFLICT,
+                without_absolute_paths(&format!("cannot mount sample {sample}: {e:#}")),
+            )
+        })?;
     let refused_in = db(&shared, move |shared, store| {
         let Some(scan) = store.scan(id)? else {
             return Ok(Some(ScanState::Cancelled));
@@ -860,16 +767,18 @@ async fn scan_events(
     Path(id): Path<i64>,
 ) -> ApiResult<Sse<impl Stream<Item = Result<Event, Infallible>>>> {
     load_scan(&shared, id).await?;
-    let open = EventStreamSlot::take(shared.config.max_event_streams).ok_or_else(|| {
-        ApiError::new(
-            StatusCode::SERVICE_UNAVAILABLE,
-            format!(
-                "{} event streams are open, the most allowed (max_event_streams): close \
+    let open = EVENT_STREAMS
+        .take(shared.config.max_event_streams)
+        .ok_or_else(|| {
+            ApiError::new(
+                StatusCode::SERVICE_UNAVAILABLE,
+                format!(
+                    "{} event streams are open, the most allowed (max_event_streams): close \
                  one or poll GET /api/scans/{id}",
-                shared.config.max_event_streams
-            ),
-        )
-    })?;
+                    shared.config.max_event_streams
+                ),
+            )
+        })?;
     let updates = BroadcastStream::new(shared.events.subscribe());
     // The publisher sends the view now: every event of the stream comes from it, in
     // order.
@@ -902,223 +811,7 @@ async fn scan_events(
 }
 
 /// Open server-sent event streams of this process.
-static EVENT_STREAMS: AtomicUsize = AtomicUsize::new(0);
-
-/// One open event stream, counted until dropped.
-struct EventStreamSlot;
-
-impl EventStreamSlot {
-    /// A slot, unless `max` streams are open.
-    fn take(max: usize) -> Option<Self> {
-        EVENT_STREAMS
-            .fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| {
-                (n < max).then_some(n + 1)
-            })
-            .ok()
-            .map(|_| EventStreamSlot)
-    }
-}
-
-impl Drop for EventStreamSlot {
-    fn drop(&mut self) {
-        EVENT_STREAMS.fetch_sub(1, Ordering::AcqRel);
-    }
-}
-
-async fn list_files(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
-    load_scan(&shared, id).await?;
-    let dir = shared.scan_dir(id);
-    let files = tokio::task::spawn_blocking(move || {
-        let mut files = Vec::new();
-        collect_files(&dir, &dir, &mut files);
-        files.sort();
-        files
-    })
-    .await
-    .map_err(internal)?;
-    Ok(Json(json!(files)))
-}
-
-/// The regular files under `dir`, relative to `base`; symbolic links are neither
-/// listed nor followed.
-fn collect_files(base: &FsPath, dir: &FsPath, out: &mut Vec<String>) {
-    let Ok(entries) = std::fs::read_dir(dir) else {
-        return;
-    };
-    for entry in entries.flatten() {
-        let path = entry.path();
-        let Ok(kind) = entry.file_type() else {
-            continue;
-        };
-        if kind.is_dir() {
-            collect_files(base, &path, out);
-        } else if kind.is_file() && !is_partial(&entry.file_name().to_string_lossy()) {
-            if let Ok(rel) = path.strip_prefix(base) {
-                out.push(rel.to_string_lossy().into_owned());
-            }
-        }
-    }
-}
-
-fn content_type(path: &FsPath) -> &'static str {
-    match path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase)
-        .as_deref()
-    {
-        Some("json") => "application/json",
-        Some("csv") => "text/csv; charset=utf-8",
-        Some("tif" | "tiff") => "image/tiff",
-        Some("exr") => "image/x-exr",
-        Some("png") => "image/png",
-        Some("svg") => "image/svg+xml",
-        _ => "application/octet-stream",
-    }
-}
-
-async fn get_file(
-    State(shared): AppState,
-    Path((id, rel)): Path<(i64, String)>,
-) -> ApiResult<Response> {
-    let dir = shared.scan_dir(id);
-    let not_found = || ApiError::not_found(format!("file {rel:?} of scan {id}"));
-    let wanted = rel.clone();
-    let bytes = tokio::task::spawn_blocking(move || {
-        let mut file = open_under(&dir, &wanted)?;
-        let mut bytes = Vec::new();
-        std::io::Read::read_to_end(&mut file, &mut bytes).ok()?;
-        Some(bytes)
-    })
-    .await
-    .map_err(internal)?
-    .ok_or_else(not_found)?;
-    let kind = content_type(FsPath::new(&rel));
-    let sample = load_scan(&shared, id).await?.plan.sample;
-    let name = format!(
-        "{id}-{}-{}",
-        file_name_part(&sample),
-        file_name_part(&rel.replace('/', "-"))
-    );
-    Ok((
-        [
-            (header::CONTENT_TYPE, kind.to_owned()),
-            (header::CONTENT_DISPOSITION, attachment(&name)),
-        ],
-        bytes,
-    )
-        .into_response())
-}
-
-/// `Content-Disposition` of a download named `name` (made of safe characters).
-fn attachment(name: &str) -> String {
-    format!("attachment; filename=\"{name}\"")
-}
-
-/// Chunks of an archive in flight between its writer and the connection.
-const ARCHIVE_CHUNKS: usize = 8;
-
-/// Writes into a channel of byte chunks, for a streamed answer; fails once the
-/// receiver (the connection) is gone.
-struct ChannelWriter(tokio::sync::mpsc::Sender<Result<Bytes, std::io::Error>>);
-
-impl std::io::Write for ChannelWriter {
-    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
-        self.0
-            .blocking_send(Ok(Bytes::copy_from_slice(buf)))
-            .map_err(|_| std::io::Error::new(std::io::ErrorKind::BrokenPipe, "client gone"))?;
-        Ok(buf.len())
-    }
-
-    fn flush(&mut self) -> std::io::Result<()> {
-        Ok(())
-    }
-}
-
-/// The whole scan as one tar archive, streamed: every file of its directory
-/// (captures, maps, samples, fits, setup) and `log.json` (its journal and its entries
-/// of the hardware log), under `<id>-<sample>/`.
-async fn scan_archive(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Response> {
-    let scan = load_scan(&shared, id).await?;
-    let (steps, log) = db(&shared, move |_, store| {
-        let log: Vec<_> = store
-            .hardware_log(0)?
-            .into_iter()
-            .filter(|e| e.scan_id == Some(id))
-            .collect();
-        Ok((store.steps(id)?, log))
-    })
-    .await?;
-    let log = serde_json::to_vec_pretty(&json!({ "steps": steps, "hardware_log": log }))
-        .map_err(internal)?;
-    let top = format!("{id}-{}", file_name_part(&scan.plan.sample));
-    let dir = shared.scan_dir(id);
-    let (sender, receiver) = tokio::sync::mpsc::channel(ARCHIVE_CHUNKS);
-    let root = top.clone();
-    tokio::task::spawn_blocking(move || {
-        let mut files = Vec::new();
-        collect_files(&dir, &dir, &mut files);
-        files.sort();
-        let out = std::io::BufWriter::with_capacity(1 << 16, ChannelWriter(sender.clone()));
-        let mut tar = TarWriter::new(out);
-        let written = files
-            .iter()
-            .try_for_each(|rel| tar.append_file(&format!("{root}/{rel}"), &dir.join(rel)))
-            .and_then(|()| {
-                let mtime = std::time::SystemTime::now()
-                    .duration_since(std::time::UNIX_EPOCH)
-                    .map_or(0, |d| d.as_secs());
-                tar.append(
-                    &format!("{root}/log.json"),
-                    log.len() as u64,
-                    mtime,
-                    &mut log.as_slice(),
-                )
-            })
-            .and_then(|()| tar.finish().map(drop));
-        if let Err(err) = written {
-            // The client sees a cut archive, never a silently short one.
-            tracing::warn!("archive of scan {id}: {err}");
-            let _ = sender.blocking_send(Err(err));
-        }
-    });
-    let body = axum::body::Body::from_stream(ReceiverStream::new(receiver));
-    Ok((
-        [
-            (header::CONTENT_TYPE, "application/x-tar".to_owned()),
-            (
-                header::CONTENT_DISPOSITION,
-                attachment(&format!("{top}.tar")),
-            ),
-        ],
-        body,
-    )
-        .into_response())
-}
-
-/// The latest captured frame of a scan as a small PNG.
-async fn thumbnail(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Response> {
-    let steps = db(&shared, move |_, store| store.steps(id)).await?;
-    let latest = steps
-        .iter()
-        .rev()
-        .filter(|s| s.state == StepState::Done && matches!(s.step, Step::Capture { .. }))
-        .find_map(|s| s.result.as_ref()?.get("path")?.as_str().map(str::to_owned))
-        .ok_or_else(|| ApiError::not_found(format!("a frame of scan {id}")))?;
-    let path = shared.scan_dir(id).join(latest);
-    let png = tokio::task::spawn_blocking(move || preview::thumbnail_png(&path))
-        .await
-        .map_err(internal)?
-        .map_err(internal)?;
-    Ok((
-        [
-            (header::CONTENT_TYPE, "image/png"),
-            (header::CACHE_CONTROL, "no-store"),
-        ],
-        png,
-    )
-        .into_response())
-}
+static EVENT_STREAMS: Slots = Slots::new();
 
 /// Measured samples and the fitted models' predictions, for the page's plots.
 async fn plot(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
@@ -1129,54 +822,6 @@ async fn plot(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Va
         .map_err(internal)?
         .map_err(|e| ApiError::not_found(format!("plot data: {e}")))?;
     Ok(Json(plot))
-}
-
-/// The scan's report: one self-contained, printable HTML file (`gonio report`'s, with
-/// what the daemon knows of the scan). 409 while the scan has no samples or fit yet.
-async fn report(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Response> {
-    let scan = load_scan(&shared, id).await?;
-    let dir = shared.scan_dir(id);
-    let facts = gonio_report::ScanFacts {
-        id: Some(id),
-        sample: Some(scan.plan.sample.clone()),
-        state: Some(scan.state.as_str().to_owned()),
-        created: Some(scan.created.clone()),
-        started: scan.started.clone(),
-        finished: scan.finished.clone(),
-        notes: None,
-    };
-    let render_dir = dir.clone();
-    let html = tokio::task::spawn_blocking(move || {
-        gonio_report::render(
-            &render_dir,
-            &facts,
-            env!("CARGO_PKG_VERSION"),
-            &crate::commands::report::now(),
-        )
-    })
-    .await
-    .map_err(internal)?
-    .map_err(|e| {
-        let message = without_server_paths(&e.to_string(), &[&dir]);
-        match e {
-            gonio_report::ReportError::Empty { .. } => ApiError::new(
-                StatusCode::CONFLICT,
-                format!("scan {id} has no samples or fit to report yet"),
-            ),
-            _ => internal(message),
-        }
-    })?;
-    Ok((
-        [
-            (header::CONTENT_TYPE, "text/html; charset=utf-8".to_owned()),
-            (
-                header::CONTENT_DISPOSITION,
-                format!("inline; filename=\"gonio-scan-{id}-report.html\""),
-            ),
-        ],
-        html,
-    )
-        .into_response())
 }
 
 /// Test hook (only with `emulator.fault_injection = true`): injects a fault into the
@@ -1205,17 +850,6 @@ async fn inject_fault(State(shared): AppState, body: Bytes) -> ApiResult<Json<Va
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn answers_show_paths_relative_to_the_scan_or_data_directory() {
-        let (scan, data) = (FsPath::new("/srv/data/scans/3"), FsPath::new("/srv/data"));
-        let message = "/srv/data/scans/3/theta_l_-20.0/exp_00.json: sidecar field 'iso'; \
-                       writing /srv/data/setup.json; reading /srv/data/scans/3";
-        assert_eq!(
-            without_server_paths(message, &[scan, data]),
-            "theta_l_-20.0/exp_00.json: sidecar field 'iso'; writing setup.json; reading ."
-        );
-    }
 
     #[test]
     fn host_check_answers_the_bind_address_localhost_and_allowed_names() {

@@ -1,14 +1,17 @@
-//! A whole scan as one POSIX tar archive (ustar), written entry by entry so that
-//! `GET /api/scans/{id}/archive` streams it without holding it in memory.
+//! A whole scan as one POSIX tar archive (pax), written entry by entry so that
+//! `GET /api/scans/{id}/archive` streams it without holding it in memory. Any name a
+//! directory may hold is kept byte for byte: one of at most 100 bytes in the ustar
+//! header, a longer one in a pax extended header (`path`, with `hdrcharset=BINARY`
+//! when it is not UTF-8); a file of 8 GiB or more has its size there too.
 
 use std::io::{self, Read, Write};
-use std::path::Path;
 
 /// Bytes of a tar block; headers and file data are padded to it.
 const BLOCK: usize = 512;
-/// Longest name a ustar header holds in `name` (100 bytes) and `prefix` (155 bytes).
+/// Longest name the ustar header's `name` field holds.
 const NAME_LEN: usize = 100;
-const PREFIX_LEN: usize = 155;
+/// Sizes from this on do not fit the header's 11 octal digits.
+const OCTAL_SIZE_LIMIT: u64 = 1 << 33;
 
 /// A file name safe in a download's name and an archive's directory: letters, digits,
 /// `.`, `-` and `_` kept, anything else `_`.
@@ -36,37 +39,57 @@ impl<W: Write> TarWriter<W> {
         Self { out }
     }
 
-    /// Adds a regular file `name` (relative, `/`-separated) with the bytes of `data`,
-    /// `size` of them, last modified at `mtime` (Unix seconds).
+    /// Adds a regular file `name` (relative, `/`-separated, any bytes but NUL) with the
+    /// bytes of `data`, `size` of them, last modified at `mtime` (Unix seconds).
     pub fn append(
         &mut self,
-        name: &str,
+        name: &[u8],
         size: u64,
         mtime: u64,
         data: &mut impl Read,
     ) -> io::Result<()> {
-        self.out.write_all(&header(name, size, mtime)?)?;
+        let mut records = Vec::new();
+        if name.len() > NAME_LEN {
+            if std::str::from_utf8(name).is_err() {
+                records.extend(pax_record(b"hdrcharset", b"BINARY"));
+            }
+            records.extend(pax_record(b"path", name));
+        }
+        if size >= OCTAL_SIZE_LIMIT {
+            records.extend(pax_record(b"size", size.to_string().as_bytes()));
+        }
+        let short = &name[..name.len().min(NAME_LEN)];
+        if !records.is_empty() {
+            self.out
+                .write_all(&header(short, records.len() as u64, mtime, b'x'))?;
+            self.write_padded(&records)?;
+        }
+        let octal_size = if size < OCTAL_SIZE_LIMIT { size } else { 0 };
+        self.out
+            .write_all(&header(short, octal_size, mtime, b'0'))?;
         let copied = io::copy(&mut data.take(size), &mut self.out)?;
         if copied != size {
             return Err(io::Error::new(
                 io::ErrorKind::UnexpectedEof,
-                format!("{name}: {copied} of {size} bytes read (the file shrank)"),
+                format!(
+                    "{}: {copied} of {size} bytes read (the file shrank)",
+                    String::from_utf8_lossy(name)
+                ),
             ));
         }
-        let pad = (BLOCK - (size as usize % BLOCK)) % BLOCK;
-        self.out.write_all(&[0; BLOCK][..pad])
+        self.pad(size)
     }
 
-    /// Adds the file at `path` as `name`.
-    pub fn append_file(&mut self, name: &str, path: &Path) -> io::Result<()> {
-        let mut file = std::fs::File::open(path)?;
-        let meta = file.metadata()?;
-        let mtime = meta
-            .modified()
-            .ok()
-            .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
-            .map_or(0, |d| d.as_secs());
-        self.append(name, meta.len(), mtime, &mut file)
+    /// Writes `bytes` and pads them to a whole block.
+    fn write_padded(&mut self, bytes: &[u8]) -> io::Result<()> {
+        self.out.write_all(bytes)?;
+        self.pad(bytes.len() as u64)
+    }
+
+    /// Pads `written` bytes of data to a whole block.
+    fn pad(&mut self, written: u64) -> io::Result<()> {
+        let pad = (BLOCK - (written % BLOCK as u64) as usize) % BLOCK;
+        self.out.write_all(&[0; BLOCK][..pad])
     }
 
     /// Writes the two zero blocks that end an archive and returns the writer.
@@ -77,41 +100,40 @@ impl<W: Write> TarWriter<W> {
     }
 }
 
-/// A ustar header block for a regular file.
-fn header(name: &str, size: u64, mtime: u64) -> io::Result<[u8; BLOCK]> {
-    let too_long = || {
-        io::Error::new(
-            io::ErrorKind::InvalidInput,
-            format!("{name}: too long for a tar header"),
-        )
-    };
-    let (prefix, rest) = if name.len() <= NAME_LEN {
-        ("", name)
-    } else {
-        // Split at a `/` so that the prefix and the name each fit.
-        let cut = name
-            .char_indices()
-            .find(|&(i, c)| c == '/' && i <= PREFIX_LEN && name.len() - i - 1 <= NAME_LEN)
-            .map(|(i, _)| i)
-            .ok_or_else(too_long)?;
-        (&name[..cut], &name[cut + 1..])
-    };
+/// One pax record, `"<length> <key>=<value>\n"`, its length counting its own digits.
+fn pax_record(key: &[u8], value: &[u8]) -> Vec<u8> {
+    let rest = key.len() + value.len() + 3;
+    let mut length = rest + 1;
+    while length != rest + length.to_string().len() {
+        length = rest + length.to_string().len();
+    }
+    let mut record = length.to_string().into_bytes();
+    record.push(b' ');
+    record.extend_from_slice(key);
+    record.push(b'=');
+    record.extend_from_slice(value);
+    record.push(b'\n');
+    record
+}
+
+/// A ustar header block of type `kind` (`0` a regular file, `x` a pax extended header)
+/// for `name` (at most [`NAME_LEN`] bytes).
+fn header(name: &[u8], size: u64, mtime: u64, kind: u8) -> [u8; BLOCK] {
     let mut block = [0u8; BLOCK];
-    block[..rest.len()].copy_from_slice(rest.as_bytes());
+    block[..name.len()].copy_from_slice(name);
     octal(&mut block[100..108], 0o644);
     octal(&mut block[108..116], 0);
     octal(&mut block[116..124], 0);
     octal(&mut block[124..136], size);
     octal(&mut block[136..148], mtime);
-    block[156] = b'0';
+    block[156] = kind;
     block[257..263].copy_from_slice(b"ustar\0");
     block[263..265].copy_from_slice(b"00");
-    block[345..345 + prefix.len()].copy_from_slice(prefix.as_bytes());
     // The checksum is computed with its own field as spaces.
     block[148..156].fill(b' ');
     let sum: u64 = block.iter().map(|&b| u64::from(b)).sum();
     octal(&mut block[148..155], sum);
-    Ok(block)
+    block
 }
 
 /// `value` as zero-padded octal digits filling `field` but its last byte (a NUL).
@@ -126,47 +148,68 @@ fn octal(field: &mut [u8], value: u64) {
 mod tests {
     use super::*;
 
-    /// The entries of a ustar archive: (name, data), read back by the format's rules.
-    fn entries(archive: &[u8]) -> Vec<(String, Vec<u8>)> {
-        let text = |field: &[u8]| {
+    /// The entries of a pax archive: (name, data), read back by the format's rules.
+    fn entries(archive: &[u8]) -> Vec<(Vec<u8>, Vec<u8>)> {
+        let field = |field: &[u8]| {
             let end = field.iter().position(|&b| b == 0).unwrap_or(field.len());
-            String::from_utf8(field[..end].to_vec()).unwrap()
+            field[..end].to_vec()
+        };
+        let number = |bytes: &[u8]| {
+            u64::from_str_radix(String::from_utf8(field(bytes)).unwrap().trim(), 8).unwrap()
         };
         let mut out = Vec::new();
         let mut at = 0;
+        let mut long_name = None;
         while archive[at..at + BLOCK].iter().any(|&b| b != 0) {
             let block = &archive[at..at + BLOCK];
             let mut stored = block.to_vec();
             stored[148..156].fill(b' ');
             let sum: u64 = stored.iter().map(|&b| u64::from(b)).sum();
-            assert_eq!(
-                u64::from_str_radix(text(&block[148..155]).trim(), 8),
-                Ok(sum)
-            );
-            let size = u64::from_str_radix(&text(&block[124..135]), 8).unwrap() as usize;
-            let (prefix, name) = (text(&block[345..500]), text(&block[..100]));
-            let name = if prefix.is_empty() {
-                name
-            } else {
-                format!("{prefix}/{name}")
-            };
-            out.push((name, archive[at + BLOCK..at + BLOCK + size].to_vec()));
+            assert_eq!(number(&block[148..155]), sum);
+            let size = number(&block[124..135]) as usize;
+            let data = archive[at + BLOCK..at + BLOCK + size].to_vec();
             at += BLOCK + size.div_ceil(BLOCK) * BLOCK;
+            if block[156] == b'x' {
+                let mut rest = data.as_slice();
+                while !rest.is_empty() {
+                    let space = rest.iter().position(|&b| b == b' ').unwrap();
+                    let length: usize = std::str::from_utf8(&rest[..space])
+                        .unwrap()
+                        .parse()
+                        .unwrap();
+                    let record = &rest[space + 1..length - 1];
+                    let equals = record.iter().position(|&b| b == b'=').unwrap();
+                    if &record[..equals] == b"path" {
+                        long_name = Some(record[equals + 1..].to_vec());
+                    }
+                    rest = &rest[length..];
+                }
+                continue;
+            }
+            assert_eq!(block[156], b'0');
+            let name = long_name.take().unwrap_or_else(|| field(&block[..100]));
+            out.push((name, data));
         }
         assert!(archive[at..].iter().all(|&b| b == 0) && archive.len() - at >= 2 * BLOCK);
         out
     }
 
     #[test]
-    fn entries_read_back_with_long_names_and_sizes_off_the_block() {
-        let long = format!("{}/{}", "d".repeat(120), "f".repeat(90));
-        let files: Vec<(String, Vec<u8>)> = vec![
+    fn entries_read_back_with_any_name_and_sizes_off_the_block() {
+        let files: Vec<(Vec<u8>, Vec<u8>)> = vec![
             (
-                "3-gold/samples.csv".into(),
+                b"3-gold/samples.csv".to_vec(),
                 b"theta_i,theta_r\n1,2\n".to_vec(),
             ),
-            ("3-gold/empty".into(), Vec::new()),
-            (long, vec![7u8; 1500]),
+            (b"3-gold/empty".to_vec(), Vec::new()),
+            (
+                format!("{}/{}", "d".repeat(120), "f".repeat(255)).into_bytes(),
+                vec![7u8; 1500],
+            ),
+            (b"3-gold/quote\"new\nline\xff".to_vec(), b"odd".to_vec()),
+            ([&b"3-gold/"[..], &[0xfe; 200]].concat(), b"binary".to_vec()),
+            // A record whose length gains a digit with its own length (99 → 100).
+            ("x".repeat(92).into_bytes(), b"edge".to_vec()),
         ];
         let mut tar = TarWriter::new(Vec::new());
         for (name, data) in &files {
@@ -179,13 +222,41 @@ mod tests {
     }
 
     #[test]
-    fn names_that_fit_no_header_and_files_that_shrink_are_errors() {
+    fn pax_records_count_their_own_length() {
+        for value in [0, 1, 80, 85, 86, 95, 96, 990, 995] {
+            let record = pax_record(b"path", &vec![b'a'; value]);
+            let space = record.iter().position(|&b| b == b' ').unwrap();
+            let length: usize = std::str::from_utf8(&record[..space])
+                .unwrap()
+                .parse()
+                .unwrap();
+            assert_eq!(length, record.len(), "value of {value} bytes");
+        }
+    }
+
+    #[test]
+    fn sizes_beyond_the_octal_field_go_to_a_pax_record() {
+        // The headers are written before the data, which runs short at once.
+        let size = OCTAL_SIZE_LIMIT + 3;
+        let mut head = Vec::new();
+        let mut tar = TarWriter::new(&mut head);
+        let err = tar.append(b"big", size, 0, &mut io::empty()).unwrap_err();
+        assert!(
+            err.to_string().contains(&format!("0 of {size} bytes")),
+            "{err}"
+        );
+        assert_eq!(head.len(), 3 * BLOCK);
+        assert_eq!(head[156], b'x');
+        let record = pax_record(b"size", size.to_string().as_bytes());
+        assert_eq!(&head[BLOCK..BLOCK + record.len()], record.as_slice());
+        assert_eq!(head[2 * BLOCK + 156], b'0');
+        assert_eq!(&head[2 * BLOCK..2 * BLOCK + 3], b"big");
+    }
+
+    #[test]
+    fn files_that_shrink_are_errors() {
         let mut tar = TarWriter::new(Vec::new());
-        let err = tar
-            .append(&"x".repeat(300), 0, 0, &mut io::empty())
-            .unwrap_err();
-        assert!(err.to_string().contains("too long"), "{err}");
-        let err = tar.append("a", 10, 0, &mut &b"abc"[..]).unwrap_err();
+        let err = tar.append(b"a", 10, 0, &mut &b"abc"[..]).unwrap_err();
         assert!(err.to_string().contains("3 of 10 bytes"), "{err}");
     }
 

@@ -59,6 +59,12 @@
 //! reserve_bytes = 67108864     # free space kept for the journal: no step runs below it
 //! journal_reserve_bytes = 16777216  # held in DATA/journal.reserve, freed when the disk is full
 //!
+//! [downloads]
+//! max_archives = 4             # archives written at once (another: 503, Retry-After)
+//! stall_timeout_s = 30         # a download whose client reads nothing this long is cut
+//! max_thumbnail_decodes = 2    # thumbnails decoded at once
+//! thumbnail_wait_s = 5         # a thumbnail waits this long for a decode, then 503
+//!
 //! [emulator]
 //! fault_injection = false      # test hook: POST /api/emulator/fault
 //! # free_space_file = "free"   # test hook: the data directory's free bytes, read from it
@@ -73,6 +79,8 @@ use gonio_drivers::grbl::{ArmAxis, GrblArmConfig};
 use gonio_files::input::{read_input_to_string, MAX_SMALL_FILE_BYTES};
 use gonio_processing::geometry::Setup;
 use serde::Deserialize;
+
+use super::downloads_config::DownloadsConfig;
 
 /// The whole configuration file.
 #[derive(Debug, Clone, Deserialize)]
@@ -113,6 +121,7 @@ pub struct Config {
     pub retry: RetryConfig,
     pub processing: ProcessingConfig,
     pub storage: StorageConfig,
+    pub downloads: DownloadsConfig,
     pub emulator: EmulatorConfig,
     /// Reflectance of the white reference strip of the real setup (1 = perfect
     /// reflecting diffuser) where `[setup]` gives none; emulated scans take the scene's.
@@ -146,6 +155,7 @@ impl Default for Config {
             retry: RetryConfig::default(),
             processing: ProcessingConfig::default(),
             storage: StorageConfig::default(),
+            downloads: DownloadsConfig::default(),
             emulator: EmulatorConfig::default(),
             white_reflectance: 1.0,
             setup: None,
@@ -460,6 +470,7 @@ impl Config {
                 .map_err(|e| anyhow::anyhow!("[setup]: {e}"))?;
         }
         self.arm.check()?;
+        self.downloads.check()?;
         if let Some(carousel) = &self.carousel {
             carousel.check(&self.arm)?;
         }

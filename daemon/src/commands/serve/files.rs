@@ -1,6 +1,10 @@
 //! Durable file writes and safe paths inside the data directory.
 
+use std::ffi::OsStr;
 use std::fs;
+use std::io;
+use std::os::unix::ffi::OsStrExt;
+use std::os::unix::fs::MetadataExt;
 use std::path::{Component, Path, PathBuf};
 
 use gonio_files::output::partial_writer;
@@ -91,14 +95,14 @@ fn process_exists(pid: u32) -> bool {
 }
 
 /// Joins a relative, user-supplied path under `base`, refusing anything that could
-/// leave it (`..`, absolute paths, hidden components).
+/// leave it (`..`, absolute paths) and hidden components.
 pub fn safe_join(base: &Path, relative: &str) -> Option<PathBuf> {
     let rel = Path::new(relative);
     let mut out = base.to_path_buf();
     let mut any = false;
     for component in rel.components() {
         match component {
-            Component::Normal(part) if !part.to_string_lossy().starts_with('.') => {
+            Component::Normal(part) if is_visible(part) => {
                 out.push(part);
                 any = true;
             }
@@ -108,13 +112,42 @@ pub fn safe_join(base: &Path, relative: &str) -> Option<PathBuf> {
     any.then_some(out)
 }
 
+/// Whether a client may see a directory entry of this name: not hidden (dot files,
+/// the temporaries of atomic writes).
+fn is_visible(name: &OsStr) -> bool {
+    !name.as_bytes().starts_with(b".")
+}
+
+/// Whether a client may read this open file: a regular file with one link. A file
+/// with more is also elsewhere, maybe outside the scan (a hard link to DATA/token).
+fn is_own_file(meta: &fs::Metadata) -> bool {
+    meta.file_type().is_file() && meta.nlink() == 1
+}
+
 /// Opens a file under `base` for reading by a client: `relative` must be a path
 /// [`safe_join`] accepts, and is opened by handle relative to `base`
-/// (`gonio_files::beneath`): no link followed at any component, regular files only,
-/// never blocking on a FIFO.
+/// (`gonio_files::beneath`): no link followed at any component, regular files with
+/// one link only, never blocking on a FIFO.
 pub fn open_under(base: &Path, relative: &str) -> Option<fs::File> {
     safe_join(base, relative)?;
-    gonio_files::beneath::open_beneath(base, Path::new(relative)).ok()
+    let file = gonio_files::beneath::open_beneath(base, Path::new(relative)).ok()?;
+    is_own_file(&file.metadata().ok()?).then_some(file)
+}
+
+/// Visits, by handle, every file below `base` that [`open_under`] would open (and some
+/// whose names are not UTF-8, which no client can name): `visit` gets its path
+/// relative to `base`, the open file and its metadata (`gonio_files::walk`).
+pub fn servable_files(
+    base: &Path,
+    visit: &mut dyn FnMut(&Path, fs::File, fs::Metadata) -> io::Result<()>,
+) -> io::Result<()> {
+    gonio_files::walk::walk_beneath(base, &is_visible, &mut |relative, file, meta| {
+        if is_own_file(&meta) {
+            visit(relative, file, meta)
+        } else {
+            Ok(())
+        }
+    })
 }
 
 /// Whether `name` is a safe single path component for a sample: 1–64 characters of
@@ -159,8 +192,12 @@ mod tests {
         fs::write(base.join("sub/ok.csv"), b"ok").unwrap();
         fs::write(base.join("sub/.x.1.partial"), b"half").unwrap();
         std::os::unix::fs::symlink(base.join("sub/ok.csv"), base.join("link.csv")).unwrap();
+        fs::write(base.join("token"), b"secret").unwrap();
+        fs::hard_link(base.join("token"), base.join("sub/hard.csv")).unwrap();
         assert!(open_under(base, "sub/ok.csv").is_some());
         for bad in [
+            "sub/hard.csv",
+            "token",
             "link.csv",
             "sub",
             "sub/.x.1.partial",
@@ -168,6 +205,40 @@ mod tests {
             "missing",
         ] {
             assert!(open_under(base, bad).is_none(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn the_files_visited_are_those_open_under_opens() {
+        let dir = tempfile::tempdir().unwrap();
+        let base = dir.path();
+        fs::create_dir_all(base.join("sub")).unwrap();
+        fs::create_dir_all(base.join(".hidden")).unwrap();
+        fs::write(base.join("sub/ok.csv"), b"ok").unwrap();
+        fs::write(base.join(".hidden/x.csv"), b"x").unwrap();
+        fs::write(base.join("sub/.x.1.partial"), b"half").unwrap();
+        fs::write(base.join("token"), b"secret").unwrap();
+        fs::hard_link(base.join("token"), base.join("sub/hard.csv")).unwrap();
+        std::os::unix::fs::symlink(base.join("sub"), base.join("linked")).unwrap();
+        let mut visited = Vec::new();
+        servable_files(base, &mut |relative, _, _| {
+            visited.push(relative.to_str().unwrap().to_owned());
+            Ok(())
+        })
+        .unwrap();
+        assert_eq!(visited, ["sub/ok.csv"]);
+        for name in [
+            "sub/ok.csv",
+            "sub/hard.csv",
+            "token",
+            ".hidden/x.csv",
+            "linked/ok.csv",
+        ] {
+            assert_eq!(
+                open_under(base, name).is_some(),
+                visited.iter().any(|v| v == name),
+                "{name}"
+            );
         }
     }
 

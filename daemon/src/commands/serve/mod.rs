@@ -2,24 +2,30 @@
 //! a durable SQLite store; a hardware lane and a processing lane run their steps
 //! (docs/ARCHITECTURE.md, "Daemon").
 
+mod answers;
 mod api;
 mod archive;
 mod calibration;
 mod config;
 mod connections;
 mod devices;
+mod downloads_config;
 mod files;
+mod health;
 mod lanes;
 mod mount;
 mod plan;
 mod preview;
 mod process;
 mod progress;
+mod scan_files;
+mod scan_report;
 mod shared;
 mod step_guard;
 mod storage;
 mod store;
 mod sync;
+mod thumbnails;
 mod timing;
 mod validate;
 mod view;
@@ -94,18 +100,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     private_data_dir(&config.data_dir)?;
     gonio_processing::capture::set_max_pixels(config.max_frame_pixels);
-    // One daemon per data directory: the OS drops the lock when the process ends,
-    // however it ends.
-    let lock_path = config.data_dir.join("daemon.lock");
-    let lock_file = std::fs::File::create(&lock_path)
-        .with_context(|| format!("creating {}", lock_path.display()))?;
-    lock_file.try_lock().map_err(|_| {
-        anyhow::anyhow!(
-            "another gonio serve is using {} (lock {} is held)",
-            config.data_dir.display(),
-            lock_path.display()
-        )
-    })?;
+    // One daemon per data directory: an OS lock (flock) on the directory itself, which
+    // no file's removal can undo; the OS drops it when the process ends, however it
+    // ends.
+    let lock_dir = std::fs::File::open(&config.data_dir)
+        .with_context(|| format!("opening {}", config.data_dir.display()))?;
+    match lock_dir.try_lock() {
+        Ok(()) => {}
+        Err(std::fs::TryLockError::WouldBlock) => anyhow::bail!(
+            "another gonio serve is using {} (it holds the directory's lock)",
+            config.data_dir.display()
+        ),
+        Err(std::fs::TryLockError::Error(err)) => {
+            return Err(err).with_context(|| format!("locking {}", config.data_dir.display()))
+        }
+    }
     let token = token(&config)?;
     let fault = step_guard::record_faults(&config.data_dir)?;
 
@@ -170,7 +179,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     // Stopped on a signal: the steps running are redone at the next start.
     let served = runtime.block_on(serve(shared.clone(), listener));
-    drop(lock_file);
+    drop(lock_dir);
     served
 }
 

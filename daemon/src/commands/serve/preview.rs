@@ -5,7 +5,7 @@ use std::io::Cursor;
 use std::path::Path;
 
 use gonio_files::input::{read_input_to_string, MAX_SMALL_FILE_BYTES};
-use gonio_processing::capture::Frame;
+use gonio_processing::capture::{CaptureError, Frame};
 use gonio_processing::fit::FitResult;
 use image::{ImageBuffer, Rgb};
 use serde_json::{json, Value};
@@ -29,30 +29,35 @@ pub enum PreviewError {
 
 /// A PNG thumbnail of a capture (TIFF or camera raw, with its sidecar): downscaled,
 /// black level removed, normalised to its 99.5th percentile and gamma-encoded so dark
-/// frames stay visible.
+/// frames stay visible. Only about twice as many rows as the thumbnail has are read
+/// (evenly spaced; a striped TIFF decodes only their strips), so the memory it takes is
+/// a few rows' worth, not the frame's.
 pub fn thumbnail_png(path: &Path) -> Result<Vec<u8>, PreviewError> {
     let image_err = |error| PreviewError::Image {
         path: path.display().to_string(),
         error,
     };
-    let capture = Frame::read(path).map_err(|e| PreviewError::Processing(e.to_string()))?;
+    let mut full = (1usize, 1usize);
+    let capture = Frame::read_rows(path, |width, height| {
+        full = (width, height);
+        let step = (height / (2 * THUMBNAIL_SIZE as usize)).max(1);
+        Ok::<_, CaptureError>((0..height).step_by(step).map(|y| y..y + 1).collect())
+    })
+    .map_err(|e| PreviewError::Processing(e.to_string()))?;
     let black = capture.black_level.clamp(0.0, f64::from(u16::MAX)) as u16;
-    let counts: Vec<u16> = capture
-        .data
-        .iter()
-        .map(|v| v.saturating_sub(black))
-        .collect();
+    let mut counts = capture.data;
+    for value in &mut counts {
+        *value = value.saturating_sub(black);
+    }
     let frame: ImageBuffer<Rgb<u16>, Vec<u16>> =
         ImageBuffer::from_raw(capture.width as u32, capture.height as u32, counts).ok_or_else(
             || PreviewError::Processing(format!("{}: inconsistent frame size", path.display())),
         )?;
-    let small = image::imageops::thumbnail(
-        &frame,
-        THUMBNAIL_SIZE.min(frame.width()),
-        ((u64::from(THUMBNAIL_SIZE.min(frame.width())) * u64::from(frame.height()))
-            / u64::from(frame.width().max(1)))
-        .max(1) as u32,
-    );
+    // The frame's own proportions, whichever rows were read.
+    let (full_width, full_height) = (full.0.max(1) as u64, full.1 as u64);
+    let width = THUMBNAIL_SIZE.min(frame.width()).max(1);
+    let height = ((u64::from(width) * full_height) / full_width).clamp(1, u64::from(u32::MAX));
+    let small = image::imageops::thumbnail(&frame, width, height as u32);
     let mut values: Vec<u16> = small.as_raw().clone();
     let top = if values.is_empty() {
         1.0

@@ -1,6 +1,8 @@
-//! Synchronisation between the daemon's threads: poison-tolerant locking, and a
-//! mailbox that wakes a waiting thread with work.
+//! Synchronisation between the daemon's threads: poison-tolerant locking, a mailbox
+//! that wakes a waiting thread with work, and counted slots that cap how many of a
+//! kind of request run at once.
 
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Condvar, Mutex, MutexGuard};
 use std::time::Duration;
 
@@ -39,6 +41,37 @@ impl<T: Default + PartialEq> Mailbox<T> {
     }
 }
 
+/// A count of things of one kind in progress (open event streams, archives being
+/// written), each counted by the [`Slot`] it holds.
+#[derive(Debug, Default)]
+pub struct Slots(AtomicUsize);
+
+/// One of [`Slots`], counted until dropped.
+#[derive(Debug)]
+pub struct Slot(&'static Slots);
+
+impl Slots {
+    pub const fn new() -> Self {
+        Self(AtomicUsize::new(0))
+    }
+
+    /// A slot, unless `max` are taken.
+    pub fn take(&'static self, max: usize) -> Option<Slot> {
+        self.0
+            .fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| {
+                (n < max).then_some(n + 1)
+            })
+            .ok()
+            .map(|_| Slot(self))
+    }
+}
+
+impl Drop for Slot {
+    fn drop(&mut self) {
+        self.0 .0.fetch_sub(1, Ordering::AcqRel);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -72,5 +105,18 @@ mod tests {
         assert_eq!(mailbox.take(Duration::from_secs(10)), BTreeSet::from([7]));
         assert!(started.elapsed() < Duration::from_secs(5));
         thread.join().unwrap();
+    }
+
+    #[test]
+    fn slots_are_counted_until_dropped() {
+        static SLOTS: Slots = Slots::new();
+        let first = SLOTS.take(2).unwrap();
+        let second = SLOTS.take(2).unwrap();
+        assert!(SLOTS.take(2).is_none());
+        drop(first);
+        let third = SLOTS.take(2).unwrap();
+        assert!(SLOTS.take(2).is_none());
+        drop((second, third));
+        assert!(SLOTS.take(1).is_some());
     }
 }
