@@ -710,6 +710,19 @@ impl Scene {
         })
     }
 
+    /// The same instrument with no sample before the camera (an empty carousel slot,
+    /// or a carousel between slots): the sample strip reflects nothing.
+    pub fn without_sample(&self) -> Result<Scene, SceneError> {
+        let sample = Sample::Lambertian { kd: [0.0; 3] };
+        let material = Material::new(&sample, &self.domain)?;
+        Ok(Scene {
+            name: format!("{} (no sample)", self.name),
+            sample,
+            material,
+            ..self.clone()
+        })
+    }
+
     /// Replaces the optional effects.
     pub fn set_effects(&mut self, effects: Effects) -> Result<(), SceneError> {
         effects.validate(&self.setup, self.white_reflectance, &self.theta_l_deg)?;

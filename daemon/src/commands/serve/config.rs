@@ -74,6 +74,8 @@ use gonio_files::input::{read_input_to_string, MAX_SMALL_FILE_BYTES};
 use gonio_processing::geometry::Setup;
 use serde::Deserialize;
 
+use super::files::is_safe_name;
+
 /// The whole configuration file.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -308,11 +310,43 @@ impl CarouselConfig {
         anyhow::ensure!(!self.slots.is_empty(), "carousel.slots is empty");
         for (sample, slot) in &self.slots {
             anyhow::ensure!(
+                is_safe_name(sample),
+                "carousel.slots: {sample:?} is not a sample name \
+                 (1-64 letters, digits, '-', '_' or '.', not starting with '.')"
+            );
+            anyhow::ensure!(
                 slot.is_finite() && *slot <= 0.0,
                 "carousel.slots.{sample} must be a machine position at or below 0, got {slot}"
             );
         }
         Ok(())
+    }
+
+    /// Each slot beyond an axis travel of `travel` (positions on [−travel, 0]): its
+    /// sample, and why it cannot be reached.
+    pub fn beyond_travel(&self, travel: f64) -> Vec<(String, String)> {
+        let axis = self.axis();
+        self.slots
+            .iter()
+            .filter(|(_, slot)| **slot < -travel)
+            .map(|(sample, slot)| {
+                let why = format!(
+                    "carousel.slots.{sample} = {slot} is beyond the board's travel of the \
+                     {} axis (${}: positions on [-{travel}, 0])",
+                    axis.letter(),
+                    130 + axis.index()
+                );
+                (sample.clone(), why)
+            })
+            .collect()
+    }
+
+    /// Refuses a slot beyond an axis travel of `travel`.
+    pub fn check_travel(&self, travel: f64) -> anyhow::Result<()> {
+        match self.beyond_travel(travel).into_iter().next() {
+            Some((_, why)) => anyhow::bail!("{why}"),
+            None => Ok(()),
+        }
     }
 }
 

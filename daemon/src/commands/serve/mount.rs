@@ -34,13 +34,19 @@ impl EmulatedSamples {
 
     /// The scene that shows `sample`, as configured or builtin.
     fn scene_of(&self, sample: &str) -> Option<&str> {
-        self.scenes.get(sample).map(String::as_str).or_else(|| {
-            Scene::BUILTIN
-                .iter()
-                .copied()
-                .find(|builtin| *builtin == sample)
-        })
+        scene_of(&self.scenes, sample)
     }
+}
+
+/// The scene (builtin name or path) that shows `sample`: its entry in `scenes`, else
+/// the builtin scene of that name.
+pub fn scene_of<'a>(scenes: &'a BTreeMap<String, String>, sample: &str) -> Option<&'a str> {
+    scenes.get(sample).map(String::as_str).or_else(|| {
+        Scene::BUILTIN
+            .iter()
+            .copied()
+            .find(|builtin| *builtin == sample)
+    })
 }
 
 /// What the daemon knows of the sample on the cylinder.
@@ -60,10 +66,12 @@ impl Mount {
         }
     }
 
-    /// The emulated instrument, with `sample` mounted.
+    /// The emulated instrument, with `sample` mounted; with a carousel, none is known
+    /// to be before the camera until the carousel is turned to a slot.
     pub fn emulated(sample: &str, samples: EmulatedSamples) -> Self {
+        let known = (!samples.mount.has_carousel()).then(|| sample.to_owned());
         Self {
-            known: Mutex::new(Some(sample.to_owned())),
+            known: Mutex::new(known),
             emulated: Some(samples),
         }
     }
@@ -84,11 +92,13 @@ impl Mount {
         })
     }
 
-    /// Records that `sample` is mounted now. On the emulator this mounts its scene (read
-    /// from its file or the builtin ones), so the camera renders it from the next
-    /// capture on.
+    /// Records that `sample` is mounted now. On the emulator without a carousel this
+    /// mounts its scene (read from its file or the builtin ones), so the camera renders
+    /// it from the next capture on.
     pub fn mount(&self, sample: &str) -> anyhow::Result<()> {
-        if let Some(emulated) = &self.emulated {
+        // With a carousel the emulated instrument shows the sample of the slot it is at.
+        let swaps = self.emulated.as_ref().filter(|e| !e.mount.has_carousel());
+        if let Some(emulated) = swaps {
             let spec = emulated
                 .scene_of(sample)
                 .with_context(|| format!("the emulated instrument holds no sample {sample:?}"))?;

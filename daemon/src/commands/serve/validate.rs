@@ -35,6 +35,8 @@ pub struct Bounds {
     /// The samples the instrument can hold, where it knows them (the emulator's
     /// scenes); `None`: any name.
     pub samples: Option<Vec<String>>,
+    /// Samples whose carousel slot lies beyond the board's travel, each with why.
+    pub unreachable: Vec<(String, String)>,
 }
 
 /// Most θL of one scan.
@@ -79,7 +81,10 @@ fn holdable(field: &str, sample: &str, bounds: &Bounds) -> Result<(), FieldError
                 names.join(", ")
             ),
         )),
-        _ => Ok(()),
+        _ => match bounds.unreachable.iter().find(|(name, _)| name == sample) {
+            Some((_, why)) => Err(invalid(field, why.clone())),
+            None => Ok(()),
+        },
     }
 }
 
@@ -366,6 +371,7 @@ mod tests {
             shutter_max_s: 30.0,
             max_steps: 10_000,
             samples: None,
+            unreachable: Vec::new(),
         }
     }
 
