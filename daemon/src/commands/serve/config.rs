@@ -679,6 +679,9 @@ mod tests {
         assert_eq!(carousel.axis(), ArmAxis::Y);
         assert_eq!(carousel.slot("red"), Some(-100.0));
         assert_eq!(carousel.slot("teal"), None);
+        assert!(carousel.check_travel(100.0).is_ok());
+        let err = carousel.check_travel(90.0).unwrap_err().to_string();
+        assert!(err.contains("carousel.slots.red = -100"), "{err}");
         for (text, named) in [
             (
                 "[carousel]\naxis = \"X\"\nslots = { a = -1.0 }\n",
@@ -696,6 +699,14 @@ mod tests {
             (
                 "[arm]\nhoming = \"off\"\n[carousel]\naxis = \"Y\"\nslots = { a = -1.0 }\n",
                 "homing",
+            ),
+            (
+                "[carousel]\naxis = \"Y\"\nslots = { \"../a\" = -1.0 }\n",
+                "\"../a\" is not a sample name",
+            ),
+            (
+                "[carousel]\naxis = \"Y\"\nslots = { \"a b\" = -1.0 }\n",
+                "\"a b\" is not a sample name",
             ),
         ] {
             let err = Config::from_toml_str(text).unwrap_err();

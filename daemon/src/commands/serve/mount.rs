@@ -32,9 +32,12 @@ impl EmulatedSamples {
         Ok(Self { mount, scenes })
     }
 
-    /// The scene that shows `sample`, as configured or builtin.
-    fn scene_of(&self, sample: &str) -> Option<&str> {
-        scene_of(&self.scenes, sample)
+    /// The scene that shows `sample`, as configured or builtin, read.
+    fn load(&self, sample: &str) -> anyhow::Result<Scene> {
+        let spec = scene_of(&self.scenes, sample)
+            .with_context(|| format!("the emulated instrument holds no sample {sample:?}"))?;
+        crate::commands::simulate::load_scene(spec)
+            .with_context(|| format!("scene of sample {sample}"))
     }
 }
 
@@ -99,12 +102,7 @@ impl Mount {
         // With a carousel the emulated instrument shows the sample of the slot it is at.
         let swaps = self.emulated.as_ref().filter(|e| !e.mount.has_carousel());
         if let Some(emulated) = swaps {
-            let spec = emulated
-                .scene_of(sample)
-                .with_context(|| format!("the emulated instrument holds no sample {sample:?}"))?;
-            let scene = crate::commands::simulate::load_scene(spec)
-                .with_context(|| format!("scene of sample {sample}"))?;
-            emulated.mount.mount(scene);
+            emulated.mount.mount(emulated.load(sample)?);
         }
         *lock(&self.known) = Some(sample.to_owned());
         Ok(())
@@ -115,8 +113,16 @@ impl Mount {
         *lock(&self.known) = None;
     }
 
-    /// The scene the emulated camera renders now (`None` on real hardware).
-    pub fn emulated_scene(&self) -> Option<Arc<Scene>> {
-        self.emulated.as_ref().map(|e| e.mount.scene())
+    /// The scene of `sample` on the emulated instrument (`None` on real hardware): with
+    /// a carousel, the scene of its slot (the carousel may not be there yet); else the
+    /// scene the camera renders now (the sample confirmed mounted).
+    pub fn emulated_scene(&self, sample: &str) -> anyhow::Result<Option<Arc<Scene>>> {
+        let Some(emulated) = &self.emulated else {
+            return Ok(None);
+        };
+        if !emulated.mount.has_carousel() {
+            return Ok(Some(emulated.mount.scene()));
+        }
+        Ok(Some(Arc::new(emulated.load(sample)?)))
     }
 }

@@ -492,6 +492,25 @@ mod tests {
     }
 
     #[test]
+    fn a_sample_whose_carousel_slot_is_beyond_the_travel_is_named() {
+        let why = "carousel.slots.red = -250 is beyond the board's travel";
+        let bounds = Bounds {
+            samples: Some(vec!["gold".into(), "red".into()]),
+            unreachable: vec![("red".into(), why.into())],
+            ..bounds()
+        };
+        assert!(scan_request(&json!({"sample": "gold", "theta_l": [-20]}), &bounds).is_ok());
+        let err = scan_request(&json!({"sample": "red", "theta_l": [-20]}), &bounds).unwrap_err();
+        assert_eq!((err.field.as_str(), err.message.as_str()), ("sample", why));
+        let err = sweep_request(
+            &json!({"samples": ["gold", "red"], "theta_l_sets": [[-20]]}),
+            &bounds,
+        )
+        .unwrap_err();
+        assert_eq!(err.field, "samples[1]", "{err}");
+    }
+
+    #[test]
     fn sweep_expands_repeat_major_with_start_time() {
         let sweep = sweep_request(
             &json!({"samples": ["a", "b"], "theta_l_sets": [[-20], [-30, -40]],

@@ -551,7 +551,7 @@ impl HardwareLane {
             return Ok(());
         }
         let dir = self.shared.scan_dir(id);
-        if let Err(err) = self.prepare_dir(&dir) {
+        if let Err(err) = self.prepare_dir(&dir, &scan.plan.sample) {
             if storage::is_disk_full(&err) {
                 let reason = self.shared.storage.full_reason(0);
                 let now = self.store.scan(id)?;
@@ -641,9 +641,10 @@ impl HardwareLane {
     }
 
     /// Creates the scan directory with setup.json (and truth.json for emulated scans,
-    /// of the scene mounted now, whose levels its capture sidecars then carry).
-    fn prepare_dir(&mut self, dir: &Path) -> std::io::Result<()> {
-        if let Some(scene) = self.shared.mount.emulated_scene() {
+    /// of the scene of `sample`, whose levels its capture sidecars then carry).
+    fn prepare_dir(&mut self, dir: &Path, sample: &str) -> std::io::Result<()> {
+        let scene = self.shared.mount.emulated_scene(sample);
+        if let Some(scene) = scene.map_err(std::io::Error::other)? {
             let facts = SceneFacts::of(&scene).map_err(std::io::Error::other)?;
             self.setup = Some(facts.setup);
             self.truth = Some(facts.truth);
