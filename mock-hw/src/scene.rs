@@ -6,6 +6,7 @@
 //! perfect white gives β_G = 100), the domain of fit results and `truth.json`.
 //! Relative paths inside a scene file resolve against the file's directory.
 
+mod empty_slot;
 mod error;
 pub mod material;
 pub mod rgl;
@@ -706,19 +707,6 @@ impl Scene {
         setup.validate()?;
         Ok(Scene {
             setup,
-            ..self.clone()
-        })
-    }
-
-    /// The same instrument with no sample before the camera (an empty carousel slot,
-    /// or a carousel between slots): the sample strip reflects nothing.
-    pub fn without_sample(&self) -> Result<Scene, SceneError> {
-        let sample = Sample::Lambertian { kd: [0.0; 3] };
-        let material = Material::new(&sample, &self.domain)?;
-        Ok(Scene {
-            name: format!("{} (no sample)", self.name),
-            sample,
-            material,
             ..self.clone()
         })
     }
