@@ -336,3 +336,43 @@ fn concurrent_confirms_mount_the_sample_once() {
     let done = daemon.wait_state(id, &["done", "failed"], Duration::from_secs(60));
     assert_eq!(done["state"], "done", "{done}");
 }
+
+#[test]
+fn home_after_a_failed_homing_resets_the_alarm_and_tries_again() {
+    let dir = temp_dir("arm-state-home-after-failure");
+    // Homing cannot pull off its switch ($27=0): every cycle ends in ALARM:8.
+    let board = "steps_per_deg = 80.0\nmax_travel_deg = 180.0\nmax_rate_deg_per_min = 1200.0\n\
+                 accel_deg_per_s2 = 40.0\nhoming_enabled = true\nsoft_limits = true\n\
+                 homing_seek_deg_per_min = 600.0\nhoming_cycles = [\"X\"]\n\
+                 homing_pulloff_deg = 0.0\n";
+    let daemon = Daemon::start(&dir, &board_config(&dir, board, "", 0.01));
+    let id = daemon.post_gold_scan(&[-20.0], &[0.05]);
+    let waiting = daemon.wait_state(id, &["waiting", "failed"], Duration::from_secs(30));
+    assert_eq!(waiting["state"], "waiting", "{waiting}");
+    daemon.wait_for("/api/hardware", Duration::from_secs(10), |h| {
+        h["arm"]["state"] == "alarm"
+    });
+    let home = daemon.post("/api/arm/home", &json!({}));
+    assert_eq!(home.status, 202, "{:?}", home.json);
+    assert_eq!(home.json["clears_alarm"], true, "{:?}", home.json);
+    let failed = daemon.wait_for("/api/hardware/log", Duration::from_secs(60), |log| {
+        log.as_array()
+            .unwrap()
+            .iter()
+            .any(|e| e["action"] == "home failed")
+    });
+    let entry = failed
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|e| e["action"] == "home failed")
+        .unwrap()
+        .clone();
+    // The alarm was reset and the cycle run again (it fails again on this board).
+    let detail = entry["detail"].as_str().unwrap();
+    assert!(
+        detail.starts_with("asked by the operator: alarm cleared (soft reset), then $H: "),
+        "{detail}"
+    );
+    assert!(detail.contains("alarm 8"), "{detail}");
+}
