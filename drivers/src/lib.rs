@@ -105,6 +105,16 @@ pub trait Arm: Send {
     /// `position` (the axis' units) and return once it is idle there. The arm must be
     /// referenced: the homing cycle references the axes it homes.
     fn move_axis(&mut self, axis: grbl::ArmAxis, position: f64) -> Result<(), DeviceError>;
+    /// The travel of `axis` as the controller was last read (its units: positions on
+    /// [−travel, 0] once homed), if known.
+    fn axis_travel(&self, _axis: grbl::ArmAxis) -> Option<f64> {
+        None
+    }
+    /// Whether the controller references the arm with its homing cycle (else by a
+    /// declared position).
+    fn homes(&self) -> bool {
+        true
+    }
     /// Query state and position.
     fn status(&mut self) -> Result<ArmStatus, DeviceError>;
     /// Clear an alarm or reset condition; the caller re-homes afterwards.

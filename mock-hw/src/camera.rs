@@ -190,28 +190,78 @@ impl FaultInjector {
 }
 
 /// The sample on the emulated cylinder, as the scene the camera renders: state of the
-/// emulated instrument, changed from any thread (an operator swapping the cylinder, a
-/// carousel turning). A capture renders the scene mounted when it starts. Cheap to
-/// clone.
+/// emulated instrument, changed from any thread (an operator swapping the cylinder).
+/// With a [`Carousel`], the sample before the camera is the one whose slot the
+/// carousel's axis is at, none between slots. A capture renders the scene before the
+/// camera when it starts. Cheap to clone.
 #[derive(Debug, Clone)]
 pub struct SampleMount {
     scene: Arc<Mutex<Arc<Scene>>>,
+    carousel: Option<Arc<Carousel>>,
+}
+
+/// A sample carousel on an axis of the emulated board: each slot is a physical position
+/// of the axis (its units, 0 at its homing switch: the machine position once homed)
+/// that brings a sample before the camera.
+#[derive(Debug)]
+pub struct Carousel {
+    axis: usize,
+    slots: Vec<(f64, Arc<Scene>)>,
+    /// What the camera sees between slots.
+    empty: Arc<Scene>,
+    world: World,
+}
+
+/// How far (the axis' units) the carousel may sit from a slot and still hold its
+/// sample before the camera.
+pub const SLOT_TOLERANCE: f64 = 0.05;
+
+impl Carousel {
+    /// A carousel on axis `axis` (0 = X) of the board that moves `world`, holding each
+    /// scene of `slots` at its position; `empty` is seen between slots.
+    pub fn new(axis: usize, slots: Vec<(f64, Scene)>, empty: Scene, world: World) -> Self {
+        Self {
+            axis,
+            slots: slots.into_iter().map(|(p, s)| (p, Arc::new(s))).collect(),
+            empty: Arc::new(empty),
+            world,
+        }
+    }
+
+    /// The scene before the camera now.
+    fn scene(&self) -> Arc<Scene> {
+        let at = self.world.axis(self.axis);
+        self.slots
+            .iter()
+            .find(|(slot, _)| (slot - at).abs() <= SLOT_TOLERANCE)
+            .map_or_else(|| self.empty.clone(), |(_, scene)| scene.clone())
+    }
 }
 
 impl SampleMount {
     fn new(scene: Scene) -> Self {
         Self {
             scene: Arc::new(Mutex::new(Arc::new(scene))),
+            carousel: None,
         }
     }
 
-    /// Mounts the sample `scene` shows, in place of the one mounted.
+    /// Mounts the sample `scene` shows, in place of the one mounted (with a carousel,
+    /// the carousel's position decides instead).
     pub fn mount(&self, scene: Scene) {
         *self.scene.lock().unwrap_or_else(PoisonError::into_inner) = Arc::new(scene);
     }
 
-    /// The scene of the sample mounted now.
+    /// Whether a carousel decides which sample is before the camera.
+    pub fn has_carousel(&self) -> bool {
+        self.carousel.is_some()
+    }
+
+    /// The scene of the sample before the camera now.
     pub fn scene(&self) -> Arc<Scene> {
+        if let Some(carousel) = &self.carousel {
+            return carousel.scene();
+        }
         self.scene
             .lock()
             .unwrap_or_else(PoisonError::into_inner)
@@ -250,6 +300,12 @@ impl EmulatedCamera {
     /// The scene of the sample mounted now.
     pub fn scene(&self) -> Arc<Scene> {
         self.mount.scene()
+    }
+
+    /// The camera before `carousel`: it sees the sample of the slot the carousel is at.
+    pub fn with_carousel(mut self, carousel: Carousel) -> Self {
+        self.mount.carousel = Some(Arc::new(carousel));
+        self
     }
 
     /// A handle that changes the mounted sample while the camera is owned elsewhere.

@@ -70,6 +70,12 @@ pub fn move_duration_s(distance_deg: f64, max_rate_deg_per_min: f64, accel_deg_p
     .duration()
 }
 
+/// The factory max travel (`$13N`, the axis' units) of `axis` on a board set up as
+/// `config` says: soft limits and the homed positions lie on [−travel, 0].
+pub fn axis_travel(config: &GrblConfig, axis: Axis) -> f64 {
+    settings::Settings::from_config(config).axes[axis.index()].max_travel
+}
+
 /// A running emulated controller. Dropping it stops its thread and removes the device.
 #[derive(Debug)]
 pub struct GrblEmulator {

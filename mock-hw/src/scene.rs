@@ -6,6 +6,7 @@
 //! perfect white gives β_G = 100), the domain of fit results and `truth.json`.
 //! Relative paths inside a scene file resolve against the file's directory.
 
+mod empty_slot;
 mod error;
 pub mod material;
 pub mod rgl;

@@ -706,6 +706,16 @@ impl Arm for GrblArm {
         Ok(())
     }
 
+    fn homes(&self) -> bool {
+        GrblArm::homes(self)
+    }
+
+    /// `$13N` of `axis` as last read.
+    fn axis_travel(&self, axis: ArmAxis) -> Option<f64> {
+        self.settings
+            .get(Settings::MAX_TRAVEL + axis.index() as u32)
+    }
+
     fn status(&mut self) -> Result<ArmStatus, DeviceError> {
         self.prepare()?;
         let report = self.query_status()?;

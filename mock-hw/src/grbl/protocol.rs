@@ -112,7 +112,15 @@ impl Controller {
         let settings = Settings::from_config(config);
         let arm_axis = config.arm_axis.index();
         let idle = config.idle_axis_switch;
-        let mut offset = [-idle.unwrap_or(0.0); N_AXIS];
+        // Where each axis physically is (kept across the board's power cycles).
+        let mut offset: [f64; N_AXIS] = std::array::from_fn(|i| {
+            let placed = world.axis(i);
+            if placed.is_finite() {
+                placed
+            } else {
+                -idle.unwrap_or(0.0)
+            }
+        });
         offset[arm_axis] = world.arm_deg();
         let mut wired = [idle.is_some(); N_AXIS];
         wired[arm_axis] = true;
@@ -143,6 +151,7 @@ impl Controller {
             transcript,
             out: VecDeque::new(),
         };
+        controller.sync_world(now);
         controller.power_on(now);
         controller
     }
@@ -319,6 +328,9 @@ impl Controller {
         let (position, _) = self.motion.state(now);
         let arm = self.arm_axis;
         self.world.set_arm_deg(position[arm] + self.offset[arm]);
+        for (i, (p, o)) in position.iter().zip(self.offset).enumerate() {
+            self.world.set_axis(i, p + o);
+        }
     }
 
     fn emit(&mut self, now: f64, bytes: Vec<u8>) {

@@ -2,11 +2,10 @@
 //! Mutating routes need the bearer token; reads are open.
 
 use std::convert::Infallible;
-use std::sync::atomic::Ordering;
 use std::sync::Arc;
 
 use axum::body::Bytes;
-use axum::extract::{DefaultBodyLimit, Path, Query, Request, State};
+use axum::extract::{DefaultBodyLimit, Path, Request, State};
 use axum::http::{header, HeaderValue, StatusCode};
 use axum::middleware::{self, Next};
 use axum::response::sse::{Event, KeepAlive, Sse};
@@ -14,8 +13,6 @@ use axum::response::{IntoResponse, Response};
 use axum::routing::{delete, get, post};
 use axum::{Json, Router};
 use futures_util::{Stream, StreamExt};
-use gonio_drivers::ArmState;
-use serde::Deserialize;
 use serde_json::{json, Value};
 use tokio_stream::wrappers::BroadcastStream;
 
@@ -29,12 +26,16 @@ use super::devices::InjectedFault;
 use super::preview;
 use super::scan_files;
 use super::scan_report;
-use super::shared::{PositionRequest, Shared, EMERGENCY_STOP};
+use super::shared::Shared;
 use super::store::{NewScan, ScanState, Store, StoreError};
 use super::sync::{lock, Slots};
 use super::thumbnails;
 use super::validate::{self, Bounds};
 use super::view::{applies_to, rfc3339, scan_view};
+
+mod arm;
+
+use arm::{declare_arm_position, hardware, hardware_log, home_arm, reconnect_arm, stop_arm};
 
 /// The routes of the daemon. Every request first passes the Host check; mutating
 /// routes need the token (reads too when bound beyond loopback without
@@ -265,13 +266,22 @@ fn parse_json(body: &Bytes) -> ApiResult<Value> {
 }
 
 fn bounds(shared: &Shared) -> Bounds {
-    let camera = lock(&shared.hardware).camera.clone();
+    let (camera, travel) = {
+        let status = lock(&shared.hardware);
+        (status.camera.clone(), status.arm.carousel_travel)
+    };
+    let carousel = shared.config.carousel.as_ref();
+    let unreachable = carousel
+        .zip(travel)
+        .map(|(carousel, travel)| carousel.beyond_travel(travel))
+        .unwrap_or_default();
     Bounds {
         limits: shared.config.limits,
         shutter_min_s: camera.shutter_min_s,
         shutter_max_s: camera.shutter_max_s,
         max_steps: shared.config.max_steps_per_request,
         samples: holdable(shared),
+        unreachable,
     }
 }
 
@@ -410,6 +420,7 @@ async fn cancel_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<
 /// it is recorded as mounted (on the emulator, its scene is mounted) and the scan is
 /// queued again. 409 unless the scan waits for its sample.
 async fn confirm_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
+    let _one_at_a_time = shared.confirming.lock().await;
     let scan = load_scan(&shared, id).await?;
     let not_waiting = |state: ScanState| {
         ApiError::new(
@@ -510,147 +521,6 @@ async fn forget_calibration(State(shared): AppState) -> ApiResult<Json<Value>> {
     Ok(Json(json!({ "removed": removed })))
 }
 
-/// Stops the arm at once (feed hold, then reset) and pauses the running scan.
-async fn stop_arm(State(shared): AppState) -> ApiResult<Json<Value>> {
-    shared.stops.fetch_add(1, Ordering::AcqRel);
-    let estop = lock(&shared.estop).clone();
-    let stopped = match estop {
-        Some(estop) => tokio::task::spawn_blocking(move || estop.stop())
-            .await
-            .map_err(internal)?
-            .map_err(|e| ApiError::new(StatusCode::SERVICE_UNAVAILABLE, format!("arm stop: {e}"))),
-        None => Err(ApiError::new(
-            StatusCode::SERVICE_UNAVAILABLE,
-            "arm stop: the arm is not connected",
-        )),
-    };
-    let paused = db(&shared, |shared, store| {
-        let ids =
-            store.transition_all(ScanState::Running, ScanState::Paused, Some(EMERGENCY_STOP))?;
-        store.log(shared.boot, None, "stop", "emergency stop")?;
-        for id in &ids {
-            shared.changed(*id);
-        }
-        Ok(ids)
-    })
-    .await?;
-    stopped?;
-    tracing::warn!("emergency stop; paused scans {paused:?}");
-    Ok(Json(json!({ "stopped": true, "paused": paused })))
-}
-
-/// Homes the arm (after a stop or a reset): 202 at once, the hardware lane homes it
-/// before it runs anything else; 409 while a scan runs or when the controller does not
-/// home, 503 without an arm.
-async fn home_arm(State(shared): AppState) -> ApiResult<impl IntoResponse> {
-    let running = db(&shared, |_, store| {
-        Ok(store
-            .scans()?
-            .iter()
-            .find(|s| s.state == ScanState::Running)
-            .map(|s| s.id))
-    })
-    .await?;
-    if let Some(id) = running {
-        return Err(ApiError::new(
-            StatusCode::CONFLICT,
-            format!("scan {id} is running: pause or cancel it before homing the arm"),
-        ));
-    }
-    match lock(&shared.hardware).arm.state {
-        ArmState::Disconnected => {
-            return Err(ApiError::new(
-                StatusCode::SERVICE_UNAVAILABLE,
-                "arm not connected: nothing to home",
-            ))
-        }
-        ArmState::NeedsPosition => {
-            return Err(ApiError::new(
-                StatusCode::CONFLICT,
-                "this controller does not home: declare the arm's position \
-                 (POST /api/arm/position)",
-            ))
-        }
-        _ => {}
-    }
-    shared.home_requested.store(true, Ordering::Release);
-    shared.hardware_wake.post(|wake| *wake = true);
-    tracing::info!("homing asked by the operator");
-    Ok((StatusCode::ACCEPTED, Json(json!({ "homing": true }))))
-}
-
-/// Opens the arm again now: one that is disconnected (instead of waiting for its next
-/// try) or refused for its settings (after they were changed on the board). 409 while
-/// the arm is connected: reopening would reset it.
-async fn reconnect_arm(State(shared): AppState) -> ApiResult<Json<Value>> {
-    let state = lock(&shared.hardware).arm.state;
-    if !matches!(state, ArmState::Disconnected | ArmState::Refused) {
-        return Err(ApiError::new(
-            StatusCode::CONFLICT,
-            "the arm is connected: nothing to reconnect (opening it again would reset it)",
-        ));
-    }
-    shared.arm_reconnect.store(true, Ordering::Release);
-    shared.wake();
-    tracing::info!("arm reconnect asked for");
-    Ok(Json(json!({ "reconnecting": true })))
-}
-
-/// How long a declared position may wait for the hardware lane (busy with a step).
-const DECLARE_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(30);
-
-/// Declares where the arm is, for controllers without homing (`{"angle": degrees}`);
-/// the hardware lane applies it (`G92`), records it in the hardware log and queues the
-/// waiting scans again.
-async fn declare_arm_position(State(shared): AppState, body: Bytes) -> ApiResult<Json<Value>> {
-    let angle = validate::arm_position(&parse_json(&body)?, shared.config.arm.max_travel_deg)?;
-    let (reply, answer) = std::sync::mpsc::sync_channel(1);
-    {
-        let mut pending = lock(&shared.arm_position);
-        if pending.is_some() {
-            return Err(ApiError::new(
-                StatusCode::CONFLICT,
-                "another arm position is being declared",
-            ));
-        }
-        *pending = Some(PositionRequest {
-            angle_deg: angle,
-            reply,
-        });
-    }
-    shared.wake();
-    let answered = tokio::task::spawn_blocking(move || answer.recv_timeout(DECLARE_TIMEOUT))
-        .await
-        .map_err(internal)?;
-    let refused = |status, err: gonio_drivers::DeviceError| {
-        ApiError::new(status, format!("arm position not declared: {err}"))
-    };
-    match answered {
-        Ok(Ok(())) => {
-            tracing::info!("arm position declared: {angle}°");
-            Ok(Json(json!({ "angle": angle, "declared": true })))
-        }
-        Ok(Err(err @ gonio_drivers::DeviceError::OutOfRange { .. })) => Err(ApiError {
-            field: Some("angle".into()),
-            ..refused(StatusCode::UNPROCESSABLE_ENTITY, err)
-        }),
-        Ok(Err(err))
-            if err.is_transient() || matches!(err, gonio_drivers::DeviceError::NotFound(_)) =>
-        {
-            Err(refused(StatusCode::SERVICE_UNAVAILABLE, err))
-        }
-        Ok(Err(err)) => Err(refused(StatusCode::CONFLICT, err)),
-        Err(_) => {
-            // Still pending: withdraw it, so it is not applied behind the caller's back.
-            lock(&shared.arm_position).take();
-            Err(ApiError::new(
-                StatusCode::SERVICE_UNAVAILABLE,
-                "arm position not declared: the hardware is busy, try again",
-            ))
-        }
-    }
-}
-
 async fn create_sweep(State(shared): AppState, body: Bytes) -> ApiResult<impl IntoResponse> {
     let value = parse_json(&body)?;
     let sweep = validate::sweep_request(&value, &bounds(&shared))?;
@@ -731,33 +601,6 @@ async fn list_sweeps(State(shared): AppState) -> ApiResult<Json<Value>> {
     })
     .await?;
     Ok(Json(Value::Array(sweeps)))
-}
-
-async fn hardware(State(shared): AppState) -> Json<Value> {
-    let mut status = lock(&shared.hardware).clone();
-    let live = lock(&shared.arm_angle).as_ref().and_then(|a| a.get());
-    // As the arm reported it, also while a move is under way.
-    status.arm.angle_deg = status.arm.shown_angle(live.or(status.arm.angle_deg));
-    Json(json!({
-        "arm": status.arm,
-        "camera": status.camera,
-        "emulated": shared.emulators.is_some(),
-        "boot": shared.boot,
-    }))
-}
-
-#[derive(Deserialize)]
-struct LogQuery {
-    #[serde(default)]
-    after: i64,
-}
-
-async fn hardware_log(
-    State(shared): AppState,
-    Query(query): Query<LogQuery>,
-) -> ApiResult<Json<Value>> {
-    let entries = db(&shared, move |_, store| store.hardware_log(query.after)).await?;
-    Ok(Json(json!(entries)))
 }
 
 /// Server-sent events of one scan: its view now, then at every change; the stream

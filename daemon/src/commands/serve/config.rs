@@ -81,6 +81,7 @@ use gonio_processing::geometry::Setup;
 use serde::Deserialize;
 
 use super::downloads_config::DownloadsConfig;
+use super::files::is_safe_name;
 
 /// The whole configuration file.
 #[derive(Debug, Clone, Deserialize)]
@@ -318,11 +319,43 @@ impl CarouselConfig {
         anyhow::ensure!(!self.slots.is_empty(), "carousel.slots is empty");
         for (sample, slot) in &self.slots {
             anyhow::ensure!(
+                is_safe_name(sample),
+                "carousel.slots: {sample:?} is not a sample name \
+                 (1-64 letters, digits, '-', '_' or '.', not starting with '.')"
+            );
+            anyhow::ensure!(
                 slot.is_finite() && *slot <= 0.0,
                 "carousel.slots.{sample} must be a machine position at or below 0, got {slot}"
             );
         }
         Ok(())
+    }
+
+    /// Each slot beyond an axis travel of `travel` (positions on [−travel, 0]): its
+    /// sample, and why it cannot be reached.
+    pub fn beyond_travel(&self, travel: f64) -> Vec<(String, String)> {
+        let axis = self.axis();
+        self.slots
+            .iter()
+            .filter(|(_, slot)| **slot < -travel)
+            .map(|(sample, slot)| {
+                let why = format!(
+                    "carousel.slots.{sample} = {slot} is beyond the board's travel of the \
+                     {} axis (${}: positions on [-{travel}, 0])",
+                    axis.letter(),
+                    130 + axis.index()
+                );
+                (sample.clone(), why)
+            })
+            .collect()
+    }
+
+    /// Refuses a slot beyond an axis travel of `travel`.
+    pub fn check_travel(&self, travel: f64) -> anyhow::Result<()> {
+        match self.beyond_travel(travel).into_iter().next() {
+            Some((_, why)) => anyhow::bail!("{why}"),
+            None => Ok(()),
+        }
     }
 }
 
@@ -656,6 +689,9 @@ mod tests {
         assert_eq!(carousel.axis(), ArmAxis::Y);
         assert_eq!(carousel.slot("red"), Some(-100.0));
         assert_eq!(carousel.slot("teal"), None);
+        assert!(carousel.check_travel(100.0).is_ok());
+        let err = carousel.check_travel(90.0).unwrap_err().to_string();
+        assert!(err.contains("carousel.slots.red = -100"), "{err}");
         for (text, named) in [
             (
                 "[carousel]\naxis = \"X\"\nslots = { a = -1.0 }\n",
@@ -673,6 +709,14 @@ mod tests {
             (
                 "[arm]\nhoming = \"off\"\n[carousel]\naxis = \"Y\"\nslots = { a = -1.0 }\n",
                 "homing",
+            ),
+            (
+                "[carousel]\naxis = \"Y\"\nslots = { \"../a\" = -1.0 }\n",
+                "\"../a\" is not a sample name",
+            ),
+            (
+                "[carousel]\naxis = \"Y\"\nslots = { \"a b\" = -1.0 }\n",
+                "\"a b\" is not a sample name",
             ),
         ] {
             let err = Config::from_toml_str(text).unwrap_err();

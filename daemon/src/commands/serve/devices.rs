@@ -2,6 +2,7 @@
 //! or the emulators (a GRBL emulator on a pseudo-terminal, driven through the real
 //! GRBL driver, and a camera rendering a scene).
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -10,7 +11,7 @@ use gonio_drivers::grbl::{ArmAxis, GrblArm, GrblArmConfig, Homing};
 use gonio_drivers::supervised_camera::{SupervisedCamera, SupervisorConfig, WorkerSpec};
 use gonio_drivers::{Arm, Camera, DeviceError};
 use gonio_files::input::{read_input_to_string, MAX_SMALL_FILE_BYTES};
-use gonio_mock_hw::camera::{CameraFault, CaptureTiming, EmulatedCamera, FaultInjector};
+use gonio_mock_hw::camera::{CameraFault, CaptureTiming, Carousel, EmulatedCamera, FaultInjector};
 use gonio_mock_hw::grbl::{Axis, AxisSet, Fault, GrblConfig, GrblEmulator};
 use gonio_mock_hw::scene::Scene;
 use gonio_mock_hw::world::World;
@@ -19,7 +20,7 @@ use gonio_processing::geometry::Setup;
 use serde_json::Value;
 
 use super::config::{ArmConfig, ArmKind, CameraConfig, CarouselConfig, Config, HomingMode, Limits};
-use super::mount::{EmulatedSamples, Mount};
+use super::mount::{scene_of, EmulatedSamples, Mount};
 use super::sync::lock;
 use super::timing::Timing;
 
@@ -66,7 +67,8 @@ pub struct LinkId {
 }
 
 impl LinkId {
-    fn of(path: &Path) -> Option<LinkId> {
+    /// What `path` names now; `None` while it is absent.
+    pub fn of(path: &Path) -> Option<LinkId> {
         use std::os::unix::fs::MetadataExt;
         let own = std::fs::symlink_metadata(path).ok()?;
         let device = std::fs::metadata(path).ok()?;
@@ -176,11 +178,7 @@ fn emulated_board(
             let homes = arm.homing != HomingMode::Off;
             let carousel_mask = carousel.map_or(0, |c| 1 << c.axis().index());
             GrblConfig {
-                arm_axis: match axis {
-                    ArmAxis::X => Axis::X,
-                    ArmAxis::Y => Axis::Y,
-                    ArmAxis::Z => Axis::Z,
-                },
+                arm_axis: emulated_axis(axis),
                 steps_per_deg: arm.steps_per_deg,
                 max_travel_deg: arm.max_travel_deg,
                 max_rate_deg_per_min: arm
@@ -202,6 +200,34 @@ fn emulated_board(
     })
 }
 
+/// The emulated board's name of `axis`.
+fn emulated_axis(axis: ArmAxis) -> Axis {
+    match axis {
+        ArmAxis::X => Axis::X,
+        ArmAxis::Y => Axis::Y,
+        ArmAxis::Z => Axis::Z,
+    }
+}
+
+/// The emulated carousel of `config` before a camera showing `shown`: each slot holds
+/// its sample's scene (a sample without one leaves its slot empty).
+fn emulated_carousel(
+    config: &CarouselConfig,
+    scenes: &BTreeMap<String, String>,
+    shown: &Scene,
+    world: World,
+) -> anyhow::Result<Carousel> {
+    let mut slots = Vec::new();
+    for (sample, slot) in &config.slots {
+        if let Some(spec) = scene_of(scenes, sample) {
+            let scene = load_scene(spec).with_context(|| format!("scene of sample {sample}"))?;
+            slots.push((*slot, scene));
+        }
+    }
+    let empty = shown.without_sample().context("the empty carousel slot")?;
+    Ok(Carousel::new(config.axis().index(), slots, empty, world))
+}
+
 /// Loads a scene by builtin name or file path.
 fn load_scene(name_or_path: &str) -> anyhow::Result<Scene> {
     crate::commands::simulate::load_scene(name_or_path).context("camera.scene")
@@ -214,6 +240,11 @@ pub fn open(config: &Config) -> anyhow::Result<Devices> {
     let (grbl, arm, timing) = match config.arm.kind {
         ArmKind::Emulator => {
             let board = emulated_board(&config.arm, config.carousel.as_ref())?;
+            if let Some(carousel) = &config.carousel {
+                let travel =
+                    gonio_mock_hw::grbl::axis_travel(&board, emulated_axis(carousel.axis()));
+                carousel.check_travel(travel)?;
+            }
             let timing = Timing::emulated(&board, real.capture);
             let emulator =
                 GrblEmulator::start(board, world.clone()).context("starting the GRBL emulator")?;
@@ -244,11 +275,15 @@ pub fn open(config: &Config) -> anyhow::Result<Devices> {
                 time_scale: *time_scale,
                 ..CaptureTiming::default()
             };
-            let camera = EmulatedCamera::new(scene.clone(), world.clone(), capture);
+            let mut camera = EmulatedCamera::new(scene.clone(), world.clone(), capture);
             let facts = SceneFacts::of(&scene)?;
             let body = scene.camera();
             let mut scenes = samples.clone();
             scenes.insert(sample.clone(), spec.clone());
+            if let Some(carousel) = &config.carousel {
+                let carousel = emulated_carousel(carousel, &scenes, &scene, world.clone())?;
+                camera = camera.with_carousel(carousel);
+            }
             let mount =
                 Mount::emulated(sample, EmulatedSamples::new(camera.sample_mount(), scenes)?);
             let emulators = grbl.map(|grbl| {
@@ -311,6 +346,9 @@ pub enum InjectedFault {
     Unplug,
     /// Plug it back in.
     Reconnect,
+    /// The board resets by itself (as when DTR toggles): it greets again and has lost
+    /// its position.
+    ArmReset,
     /// The camera reports busy for the next `count` captures.
     CameraBusy { count: u32 },
     /// The next `count` captures never complete (time out).
@@ -331,6 +369,7 @@ impl Emulators {
             InjectedFault::Reconnect => lock(&self.grbl)
                 .reconnect()
                 .context("reconnecting the GRBL emulator")?,
+            InjectedFault::ArmReset => lock(&self.grbl).inject(Fault::ResetBanner),
             InjectedFault::CameraBusy { count } => {
                 self.camera_faults
                     .inject(CameraFault::Busy { captures: *count });

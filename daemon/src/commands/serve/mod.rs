@@ -143,6 +143,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 device: devices.arm.path().display().to_string(),
                 error: None,
                 settings: Vec::new(),
+                homes: config.arm.homing != config::HomingMode::Off,
+                carousel_travel: None,
             },
             camera: CameraView {
                 model: None,
@@ -159,6 +161,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         arm_position: Mutex::new(None),
         home_requested: AtomicBool::new(false),
         arm_reconnect: AtomicBool::new(false),
+        confirming: tokio::sync::Mutex::new(()),
         timing: devices.timing,
         emulators: devices.emulators.clone(),
         mount: devices.mount.clone(),

@@ -32,15 +32,24 @@ impl EmulatedSamples {
         Ok(Self { mount, scenes })
     }
 
-    /// The scene that shows `sample`, as configured or builtin.
-    fn scene_of(&self, sample: &str) -> Option<&str> {
-        self.scenes.get(sample).map(String::as_str).or_else(|| {
-            Scene::BUILTIN
-                .iter()
-                .copied()
-                .find(|builtin| *builtin == sample)
-        })
+    /// The scene that shows `sample`, as configured or builtin, read.
+    fn load(&self, sample: &str) -> anyhow::Result<Scene> {
+        let spec = scene_of(&self.scenes, sample)
+            .with_context(|| format!("the emulated instrument holds no sample {sample:?}"))?;
+        crate::commands::simulate::load_scene(spec)
+            .with_context(|| format!("scene of sample {sample}"))
     }
+}
+
+/// The scene (builtin name or path) that shows `sample`: its entry in `scenes`, else
+/// the builtin scene of that name.
+pub fn scene_of<'a>(scenes: &'a BTreeMap<String, String>, sample: &str) -> Option<&'a str> {
+    scenes.get(sample).map(String::as_str).or_else(|| {
+        Scene::BUILTIN
+            .iter()
+            .copied()
+            .find(|builtin| *builtin == sample)
+    })
 }
 
 /// What the daemon knows of the sample on the cylinder.
@@ -60,10 +69,12 @@ impl Mount {
         }
     }
 
-    /// The emulated instrument, with `sample` mounted.
+    /// The emulated instrument, with `sample` mounted; with a carousel, none is known
+    /// to be before the camera until the carousel is turned to a slot.
     pub fn emulated(sample: &str, samples: EmulatedSamples) -> Self {
+        let known = (!samples.mount.has_carousel()).then(|| sample.to_owned());
         Self {
-            known: Mutex::new(Some(sample.to_owned())),
+            known: Mutex::new(known),
             emulated: Some(samples),
         }
     }
@@ -84,17 +95,14 @@ impl Mount {
         })
     }
 
-    /// Records that `sample` is mounted now. On the emulator this mounts its scene (read
-    /// from its file or the builtin ones), so the camera renders it from the next
-    /// capture on.
+    /// Records that `sample` is mounted now. On the emulator without a carousel this
+    /// mounts its scene (read from its file or the builtin ones), so the camera renders
+    /// it from the next capture on.
     pub fn mount(&self, sample: &str) -> anyhow::Result<()> {
-        if let Some(emulated) = &self.emulated {
-            let spec = emulated
-                .scene_of(sample)
-                .with_context(|| format!("the emulated instrument holds no sample {sample:?}"))?;
-            let scene = crate::commands::simulate::load_scene(spec)
-                .with_context(|| format!("scene of sample {sample}"))?;
-            emulated.mount.mount(scene);
+        // With a carousel the emulated instrument shows the sample of the slot it is at.
+        let swaps = self.emulated.as_ref().filter(|e| !e.mount.has_carousel());
+        if let Some(emulated) = swaps {
+            emulated.mount.mount(emulated.load(sample)?);
         }
         *lock(&self.known) = Some(sample.to_owned());
         Ok(())
@@ -105,8 +113,16 @@ impl Mount {
         *lock(&self.known) = None;
     }
 
-    /// The scene the emulated camera renders now (`None` on real hardware).
-    pub fn emulated_scene(&self) -> Option<Arc<Scene>> {
-        self.emulated.as_ref().map(|e| e.mount.scene())
+    /// The scene of `sample` on the emulated instrument (`None` on real hardware): with
+    /// a carousel, the scene of its slot (the carousel may not be there yet); else the
+    /// scene the camera renders now (the sample confirmed mounted).
+    pub fn emulated_scene(&self, sample: &str) -> anyhow::Result<Option<Arc<Scene>>> {
+        let Some(emulated) = &self.emulated else {
+            return Ok(None);
+        };
+        if !emulated.mount.has_carousel() {
+            return Ok(Some(emulated.mount.scene()));
+        }
+        Ok(Some(Arc::new(emulated.load(sample)?)))
     }
 }

@@ -41,6 +41,12 @@ pub struct ArmView {
     pub error: Option<String>,
     /// While `refused`: each setting that differs from the configuration, one line each.
     pub settings: Vec<String>,
+    /// Whether the controller runs the homing cycle (else its position is declared).
+    pub homes: bool,
+    /// The carousel axis' travel (`$13N`) as the board reported it on connecting;
+    /// slots beyond it are refused.
+    #[serde(skip)]
+    pub carousel_travel: Option<f64>,
 }
 
 impl ArmView {
@@ -121,6 +127,9 @@ pub struct Shared {
     /// The operator asked to open the arm again (`POST /api/arm/reconnect`), also a
     /// refused one.
     pub arm_reconnect: AtomicBool,
+    /// Held while a confirmation mounts a sample: concurrent confirmations of a scan
+    /// mount it once (the others find it no longer waiting).
+    pub confirming: tokio::sync::Mutex<()>,
     /// What the devices' steps are expected to take.
     pub timing: Timing,
     /// Present when the devices are emulated.
@@ -141,6 +150,15 @@ impl Shared {
     pub fn wake(&self) {
         self.hardware_wake.post(|wake| *wake = true);
         self.processing_wake.post(|wake| *wake = true);
+    }
+
+    /// The sample carousel may have moved (a homing cycle, a reset, a stop, a
+    /// reconnect, a failed arm operation): which sample is before the camera is no
+    /// longer known, so the next capture turns the carousel to its slot first.
+    pub fn carousel_moved(&self) {
+        if self.config.carousel.is_some() {
+            self.mount.forget();
+        }
     }
 
     /// Announces that scan `id` changed: its view is published to event subscribers.

@@ -625,7 +625,8 @@ impl Store {
 
     /// The scan the hardware lane works on next: a running scan with hardware steps
     /// left (resumed after a crash or a reconnect), oldest first, else the oldest queued
-    /// scan whose start time has come.
+    /// scan whose start time has come and whose sweep has no earlier scan waiting (a
+    /// scan waiting on the arm holds the samples after it).
     pub fn next_for_hardware(&self, now: i64) -> Result<Option<ScanRecord>, StoreError> {
         for scan in self.query_scans("WHERE state = 'running' ORDER BY id", [])? {
             if ready_step(&self.steps(scan.id)?, Lane::Hardware).is_some() {
@@ -635,6 +636,8 @@ impl Store {
         Ok(self
             .query_scans(
                 "WHERE state = 'queued' AND (not_before IS NULL OR not_before <= ?1)
+                   AND NOT EXISTS (SELECT 1 FROM scans AS held WHERE held.state = 'waiting'
+                       AND held.sweep_id = scans.sweep_id AND held.id < scans.id)
                  ORDER BY id LIMIT 1",
                 [now],
             )?

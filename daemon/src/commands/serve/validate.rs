@@ -35,6 +35,8 @@ pub struct Bounds {
     /// The samples the instrument can hold, where it knows them (the emulator's
     /// scenes); `None`: any name.
     pub samples: Option<Vec<String>>,
+    /// Samples whose carousel slot lies beyond the board's travel, each with why.
+    pub unreachable: Vec<(String, String)>,
 }
 
 /// Most θL of one scan.
@@ -79,7 +81,10 @@ fn holdable(field: &str, sample: &str, bounds: &Bounds) -> Result<(), FieldError
                 names.join(", ")
             ),
         )),
-        _ => Ok(()),
+        _ => match bounds.unreachable.iter().find(|(name, _)| name == sample) {
+            Some((_, why)) => Err(invalid(field, why.clone())),
+            None => Ok(()),
+        },
     }
 }
 
@@ -366,6 +371,7 @@ mod tests {
             shutter_max_s: 30.0,
             max_steps: 10_000,
             samples: None,
+            unreachable: Vec::new(),
         }
     }
 
@@ -479,6 +485,25 @@ mod tests {
         assert!(scan_request(&json!({"sample": "red", "theta_l": [-20]}), &bounds).is_ok());
         let err = sweep_request(
             &json!({"samples": ["gold", "blue"], "theta_l_sets": [[-20]]}),
+            &bounds,
+        )
+        .unwrap_err();
+        assert_eq!(err.field, "samples[1]", "{err}");
+    }
+
+    #[test]
+    fn a_sample_whose_carousel_slot_is_beyond_the_travel_is_named() {
+        let why = "carousel.slots.red = -250 is beyond the board's travel";
+        let bounds = Bounds {
+            samples: Some(vec!["gold".into(), "red".into()]),
+            unreachable: vec![("red".into(), why.into())],
+            ..bounds()
+        };
+        assert!(scan_request(&json!({"sample": "gold", "theta_l": [-20]}), &bounds).is_ok());
+        let err = scan_request(&json!({"sample": "red", "theta_l": [-20]}), &bounds).unwrap_err();
+        assert_eq!((err.field.as_str(), err.message.as_str()), ("sample", why));
+        let err = sweep_request(
+            &json!({"samples": ["gold", "red"], "theta_l_sets": [[-20]]}),
             &bounds,
         )
         .unwrap_err();

@@ -150,8 +150,11 @@ pub fn scan_view(
         "sample": scan.plan.sample,
         "state": scan.state,
         "error": scan.error,
-        "reason": matches!(scan.state, ScanState::Waiting | ScanState::Interrupted)
-            .then_some(&scan.error),
+        "reason": matches!(
+            scan.state,
+            ScanState::Waiting | ScanState::Interrupted | ScanState::Paused
+        )
+        .then_some(&scan.error),
         "sweep_id": scan.sweep_id,
         "theta_l": scan.plan.theta_l,
         "bracket": bracket,

@@ -10,7 +10,6 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use gonio_drivers::bracket::{auto_bracket, BracketError, BracketRegion, MeteringFrame};
-use gonio_drivers::grbl::ArmAxis;
 use gonio_drivers::{Arm, ArmState, Camera, DeviceError, Exposure};
 use gonio_processing::capture::{sidecar_path, Frame, Sidecar};
 use gonio_processing::geometry::{column_angles, Setup};
@@ -35,6 +34,12 @@ use crate::commands::serve::timing::METER_START_S;
 /// How often the lane looks at the queue and the devices when nothing wakes it.
 const IDLE_POLL: Duration = Duration::from_millis(500);
 
+mod carousel;
+mod device_link;
+mod requests;
+
+use carousel::CarouselTarget;
+
 /// The scan states the hardware lane works in.
 const RUNNING: &[ScanState] = &[ScanState::Running];
 
@@ -55,6 +60,11 @@ pub struct HardwareLane {
     homed: bool,
     /// Where the arm was last sent (degrees), if it got there.
     at_deg: Option<f64>,
+    /// What the arm's device path named when the arm was opened: the driver is let go
+    /// when it vanishes or names another device (unplugged, plugged in again).
+    arm_link: Option<LinkId>,
+    /// The device path was absent at the last look (the board unplugged).
+    arm_absent: bool,
     /// Why the arm could not be opened, when it could not; and when to try again.
     arm_error: Option<String>,
     arm_retry: Backoff,
@@ -67,9 +77,8 @@ pub struct HardwareLane {
     truth: Option<Value>,
     sidecar: SidecarDefaults,
     iso: Option<u32>,
-    /// Where the carousel goes back to after every homing (the cycle moves it): the
-    /// slot of the running scan's sample, its axis.
-    carousel_slot: Option<(ArmAxis, f64)>,
+    /// Where the carousel must be before each capture of the running scan.
+    carousel: Option<CarouselTarget>,
     /// When to look at the free space again while scans wait for it.
     disk_retry: Backoff,
     /// Bytes the step being executed will write (what a full disk leaves it short of).
@@ -90,6 +99,8 @@ impl HardwareLane {
             resume: true,
             homed: false,
             at_deg: None,
+            arm_link: None,
+            arm_absent: false,
             arm_error: None,
             arm_retry: Backoff::now(),
             arm_refused: None,
@@ -98,7 +109,7 @@ impl HardwareLane {
             truth: devices.truth,
             sidecar: devices.sidecar,
             iso: devices.iso,
-            carousel_slot: None,
+            carousel: None,
             disk_retry: Backoff::now(),
             need: 0,
         }
@@ -174,6 +185,7 @@ impl HardwareLane {
     /// the scans the devices interrupted once both are ready, then run the next scan's
     /// hardware steps or wait.
     fn tick(&mut self) -> Result<(), StoreError> {
+        self.check_arm_link();
         let arm_ready = self.arm.is_some() || self.connect_arm()?;
         let camera_ready = self.connect_camera()?;
         self.answer_position_request()?;
@@ -244,23 +256,41 @@ impl HardwareLane {
         if asked {
             self.arm_retry = Backoff::now();
         }
+        if self.arm_device_absent()? {
+            return Ok(false);
+        }
         if !self.arm_retry.due() {
             return Ok(false);
         }
+        let link = self.opener.link();
         match self.opener.open() {
             Ok(mut arm) => {
+                self.arm_link = link;
                 *lock(&self.shared.estop) = Some(arm.emergency_stop());
                 *lock(&self.shared.arm_angle) = Some(arm.live_angle());
                 let state = arm.status().map_or(ArmState::NeedsHoming, |s| s.state);
+                let arm_homes = arm.homes();
+                let carousel = self.shared.config.carousel.as_ref();
+                let carousel_travel = carousel.and_then(|c| arm.axis_travel(c.axis()));
+                let unreachable = carousel
+                    .zip(carousel_travel)
+                    .map(|(c, t)| c.beyond_travel(t));
+                for (_, why) in unreachable.unwrap_or_default() {
+                    tracing::warn!("arm: {why}");
+                    self.log(None, "carousel", &why)?;
+                }
                 self.arm = Some(arm);
                 self.homed = false;
                 self.at_deg = None;
+                self.shared.carousel_moved();
                 self.arm_error = None;
                 self.arm_retry = Backoff::now();
                 self.log(None, "connect", &self.opener.path().display().to_string())?;
                 {
                     let mut status = lock(&self.shared.hardware);
                     status.arm.state = state;
+                    status.arm.homes = arm_homes;
+                    status.arm.carousel_travel = carousel_travel;
                     status.arm.homed = false;
                     status.arm.angle_deg = None;
                     status.arm.error = None;
@@ -429,82 +459,18 @@ impl HardwareLane {
             .unwrap_or(0))
     }
 
-    /// Applies an operator's declared arm position, if one is pending, and answers it.
-    fn answer_position_request(&mut self) -> Result<(), StoreError> {
-        let Some(request) = lock(&self.shared.arm_position).take() else {
-            return Ok(());
-        };
-        let angle = request.angle_deg;
-        let result = match self.arm.as_mut() {
-            Some(arm) => arm.declare_position(angle),
-            None => Err(DeviceError::Disconnected(format!(
-                "arm not available: {}",
-                self.arm_error.as_deref().unwrap_or("not connected")
-            ))),
-        };
-        match &result {
-            Ok(()) => {
-                self.homed = true;
-                self.at_deg = None;
-                self.log(
-                    None,
-                    "declare",
-                    &format!("θL {angle:.3}° declared by the operator"),
-                )?;
-                self.note_arm(Some(angle));
-                self.requeue_waiting("arm position declared")?;
-            }
-            Err(err) => {
-                self.log(None, "declare refused", &format!("θL {angle:.3}°: {err}"))?;
-            }
-        }
-        // The handler may have given up waiting: nothing to tell then.
-        let _ = request.reply.send(result);
-        Ok(())
-    }
-
-    /// Homes the arm if the operator asked (`POST /api/arm/home`); the lane only looks
-    /// between scans, so no scan's step is under way.
-    fn answer_home_request(&mut self) -> Result<(), StoreError> {
-        if !self.shared.home_requested.swap(false, Ordering::AcqRel) {
-            return Ok(());
-        }
-        let Some(arm) = self.arm.as_mut() else {
-            return self.log(None, "home refused", "arm not connected");
-        };
-        {
-            let mut status = lock(&self.shared.hardware);
-            status.arm.state = ArmState::Homing;
-            status.arm.error = None;
-        }
-        let result = arm.home();
-        self.at_deg = None;
-        match result {
-            Ok(()) => {
-                self.homed = true;
-                self.log(None, "home", "asked by the operator")?;
-                self.note_arm(None);
-                self.requeue_waiting("arm homed")?;
-            }
-            Err(err) => {
-                tracing::warn!("homing asked by the operator: {err}");
-                self.homed = false;
-                self.log(None, "home failed", &err.to_string())?;
-                lock(&self.shared.hardware).arm.error = Some(format!("homing failed: {err}"));
-                self.refresh_arm_status();
-            }
-        }
-        Ok(())
-    }
-
     fn refresh_arm_status(&mut self) {
         let Some(arm) = self.arm.as_mut() else {
             return;
         };
         match arm.status() {
             Ok(s) => {
-                if matches!(s.state, ArmState::NeedsHoming | ArmState::NeedsPosition) {
+                if matches!(
+                    s.state,
+                    ArmState::NeedsHoming | ArmState::NeedsPosition | ArmState::Alarm
+                ) {
                     self.homed = false;
+                    self.shared.carousel_moved();
                 }
                 let mut status = lock(&self.shared.hardware);
                 status.arm.state = s.state;
@@ -533,6 +499,7 @@ impl HardwareLane {
         self.arm = None;
         self.homed = false;
         self.at_deg = None;
+        self.shared.carousel_moved();
         *lock(&self.shared.estop) = None;
         *lock(&self.shared.arm_angle) = None;
         let mut status = lock(&self.shared.hardware);
@@ -580,7 +547,7 @@ impl HardwareLane {
         }
         tracing::info!("scan {id} ({}): running", scan.plan.sample);
         self.shared.changed(id);
-        if !self.bring_sample(id, &scan.plan.sample)? {
+        if !self.aim_carousel(id, &scan.plan.sample)? {
             return Ok(());
         }
         let dir = self.shared.scan_dir(id);
@@ -646,54 +613,6 @@ impl HardwareLane {
         Ok(())
     }
 
-    /// With a carousel: turns it to the slot of `sample` unless that sample is known to
-    /// be there (homing the arm first if needed), and remembers the slot to go back to
-    /// after any later homing. Returns whether the scan goes on.
-    fn bring_sample(&mut self, id: i64, sample: &str) -> Result<bool, StoreError> {
-        let carousel = self.shared.config.carousel.as_ref();
-        let Some((axis, slot)) = carousel.map(|c| (c.axis(), c.slot(sample))) else {
-            return Ok(true);
-        };
-        let Some(slot) = slot else {
-            let reason = format!("the carousel has no slot for sample {sample}");
-            step::stop(
-                &self.shared,
-                &mut self.store,
-                id,
-                RUNNING,
-                StepError::Failed(reason),
-            )?;
-            return Ok(false);
-        };
-        self.carousel_slot = Some((axis, slot));
-        if self.shared.mount.is_mounted(sample) {
-            return Ok(true);
-        }
-        let what = format!("turn the carousel to sample {sample}");
-        let turned = self
-            .arm_op(id, &what, true, |arm| arm.move_axis(axis, slot))
-            .and_then(|()| {
-                self.shared
-                    .mount
-                    .mount(sample)
-                    .map_err(|e| StepError::Failed(format!("{what}: {e:#}")))
-            });
-        match turned {
-            Ok(()) => {
-                self.log(
-                    Some(id),
-                    "carousel",
-                    &format!("sample {sample} at {} {slot:.3}", axis.letter()),
-                )?;
-                Ok(true)
-            }
-            Err(err) => {
-                step::stop(&self.shared, &mut self.store, id, RUNNING, err)?;
-                Ok(false)
-            }
-        }
-    }
-
     /// Before a new bracket: waits while the processing lane has as many captured
     /// brackets left as the configuration allows (back-pressure), so a slow disk or
     /// CPU never lets them pile up. Returns whether scan `id` is still running.
@@ -722,9 +641,11 @@ impl HardwareLane {
     }
 
     /// Creates the scan directory with setup.json, plan.json (and truth.json for emulated
-    /// scans, of the scene mounted now, whose levels its capture sidecars then carry).
+    /// scans, of the scene of the plan's sample, whose levels its capture sidecars then
+    /// carry).
     fn prepare_dir(&mut self, dir: &Path, plan: &ScanPlan) -> std::io::Result<()> {
-        if let Some(scene) = self.shared.mount.emulated_scene() {
+        let scene = self.shared.mount.emulated_scene(&plan.sample);
+        if let Some(scene) = scene.map_err(std::io::Error::other)? {
             let facts = SceneFacts::of(&scene).map_err(std::io::Error::other)?;
             self.setup = Some(facts.setup);
             self.truth = Some(facts.truth);
@@ -800,9 +721,7 @@ impl HardwareLane {
                 "the camera reported no shutter speeds to meter with".into(),
             ));
         };
-        if !self.homed || self.at_deg != Some(theta_l) {
-            self.move_to(id, theta_l)?;
-        }
+        self.place_for_capture(id, theta_l)?;
         let path = self
             .shared
             .config
@@ -884,9 +803,11 @@ impl HardwareLane {
         if let Err(StepError::Interrupted(reason)) = &result {
             self.disconnect_arm(reason);
         }
-        if result.is_err() && self.carousel_slot.is_some() {
-            // The carousel may have been moved (homing) and not brought back.
-            self.shared.mount.forget();
+        if result.is_err() {
+            // A reset, a homing or a reconnect may have moved the carousel.
+            self.shared.carousel_moved();
+            // Not `moving` or `homing` any more: what the controller says now.
+            self.refresh_arm_status();
         }
         result
     }
@@ -916,7 +837,13 @@ impl HardwareLane {
                 op(arm.as_mut())
             } else {
                 rehomed = true;
-                home_with_carousel(arm.as_mut(), self.carousel_slot).and_then(|()| op(arm.as_mut()))
+                self.at_deg = None;
+                lock(&self.shared.hardware).arm.state = ArmState::Homing;
+                let homed = arm.home();
+                lock(&self.shared.hardware).arm.state = ArmState::Moving;
+                // The homing cycle moves the carousel too.
+                self.shared.carousel_moved();
+                homed.and_then(|()| op(arm.as_mut()))
             };
             match result {
                 Ok(()) => {
@@ -928,6 +855,8 @@ impl HardwareLane {
                 }
                 Err(err) => {
                     tracing::warn!("scan {id}: {what} (try {}): {err}", attempt + 1);
+                    // The driver may have reset, re-homed or reopened the board.
+                    self.shared.carousel_moved();
                     if self.shared.stops.load(Ordering::Acquire) != stops {
                         self.homed = false;
                         self.at_deg = None;
@@ -998,6 +927,7 @@ impl HardwareLane {
     /// the scan is on its way; wait for it (bounded), else record it here, so the scan
     /// never moves on by itself.
     fn halt_after_stop(&mut self, id: i64) -> Result<(), StepError> {
+        self.shared.carousel_moved();
         let deadline = std::time::Instant::now() + Duration::from_secs(5);
         while self.still_running(id)? && std::time::Instant::now() < deadline {
             std::thread::sleep(Duration::from_millis(20));
@@ -1012,8 +942,12 @@ impl HardwareLane {
     }
 
     fn home(&mut self, id: i64) -> Result<(), StepError> {
-        let slot = self.carousel_slot;
-        self.arm_op(id, "home", false, |arm| home_with_carousel(arm, slot))?;
+        self.at_deg = None;
+        self.arm_busy(ArmState::Homing);
+        let homed = self.arm_op(id, "home", false, |arm| arm.home());
+        // The cycle homes the carousel too: it is turned back before the next capture.
+        self.shared.carousel_moved();
+        homed?;
         self.homed = true;
         self.at_deg = None;
         self.log(Some(id), "home", "")?;
@@ -1023,6 +957,7 @@ impl HardwareLane {
 
     fn move_to(&mut self, id: i64, theta_l: f64) -> Result<(), StepError> {
         self.at_deg = None;
+        self.arm_busy(ArmState::Moving);
         self.arm_op(id, &format!("move to θL {theta_l:.1}°"), true, |arm| {
             arm.move_to(theta_l)
         })?;
@@ -1030,6 +965,13 @@ impl HardwareLane {
         self.log(Some(id), "move", &format!("{theta_l:.1}"))?;
         self.note_arm(Some(theta_l));
         Ok(())
+    }
+
+    /// Shows the arm `moving` or `homing` on `/api/hardware` until the operation ends.
+    fn arm_busy(&self, state: ArmState) {
+        let mut status = lock(&self.shared.hardware);
+        status.arm.state = state;
+        status.arm.error = None;
     }
 
     fn note_arm(&self, angle: Option<f64>) {
@@ -1128,9 +1070,7 @@ impl HardwareLane {
                 (image, exposure)
             }
             None => {
-                if !self.homed || self.at_deg != Some(theta_l) {
-                    self.move_to(id, theta_l)?;
-                }
+                self.place_for_capture(id, theta_l)?;
                 self.camera_op(id, &format!("exposure for {what}"), |c| {
                     c.set_exposure(requested)
                 })?;
@@ -1177,15 +1117,6 @@ impl HardwareLane {
         };
         let text = serde_json::to_vec_pretty(&sidecar).map_err(|e| e.to_string())?;
         write_atomic(path, &text).map_err(|e| format!("{}: {e}", path.display()))
-    }
-}
-
-/// The homing cycle, then the carousel (which the cycle homes too) back to `slot`.
-fn home_with_carousel(arm: &mut dyn Arm, slot: Option<(ArmAxis, f64)>) -> Result<(), DeviceError> {
-    arm.home()?;
-    match slot {
-        Some((axis, position)) => arm.move_axis(axis, position),
-        None => Ok(()),
     }
 }
 

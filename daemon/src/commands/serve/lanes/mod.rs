@@ -3,6 +3,7 @@
 //! brackets into results meanwhile. Both work from the journal of steps in the store,
 //! each with its own connection; a scan is done when both are.
 
+mod arm_watch;
 mod backoff;
 mod hardware;
 mod processing;
@@ -33,6 +34,7 @@ pub fn start(shared: Arc<Shared>, devices: Devices, db_path: &Path) -> anyhow::R
     if removed > 0 {
         tracing::info!("{}: removed {removed} partial file(s)", data.display());
     }
+    arm_watch::spawn(shared.clone(), devices.arm.path().to_path_buf())?;
     let hardware_store = Store::open(db_path)?;
     let hardware = HardwareLane::new(shared.clone(), hardware_store, devices);
     let processing = ProcessingLane::new(shared, Store::open(db_path)?);

@@ -1,0 +1,231 @@
+//! The arm's routes (docs/ARCHITECTURE.md, "HTTP API"): its state and log, the
+//! emergency stop, homing, reconnecting and declaring its position.
+
+use std::sync::atomic::Ordering;
+use std::sync::Arc;
+
+use axum::body::Bytes;
+use axum::extract::{Query, State};
+use axum::http::StatusCode;
+use axum::response::IntoResponse;
+use axum::Json;
+use gonio_drivers::ArmState;
+use serde::Deserialize;
+use serde_json::{json, Value};
+
+use super::{db, internal, parse_json, ApiError, ApiResult, AppState};
+use crate::commands::serve::config::HomingMode;
+use crate::commands::serve::shared::{PositionRequest, Shared, EMERGENCY_STOP};
+use crate::commands::serve::store::ScanState;
+use crate::commands::serve::sync::lock;
+use crate::commands::serve::validate;
+
+/// The scan running now, if any (the hardware lane is busy with it).
+async fn running_scan(shared: &Arc<Shared>) -> ApiResult<Option<i64>> {
+    db(shared, |_, store| {
+        Ok(store
+            .scans()?
+            .iter()
+            .find(|s| s.state == ScanState::Running)
+            .map(|s| s.id))
+    })
+    .await
+}
+
+/// Stops the arm at once (feed hold, then reset) and pauses the running scan.
+pub(super) async fn stop_arm(State(shared): AppState) -> ApiResult<Json<Value>> {
+    shared.stops.fetch_add(1, Ordering::AcqRel);
+    let estop = lock(&shared.estop).clone();
+    let stopped = match estop {
+        Some(estop) => tokio::task::spawn_blocking(move || estop.stop())
+            .await
+            .map_err(internal)?
+            .map_err(|e| ApiError::new(StatusCode::SERVICE_UNAVAILABLE, format!("arm stop: {e}"))),
+        None => Err(ApiError::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "arm stop: the arm is not connected",
+        )),
+    };
+    let paused = db(&shared, |shared, store| {
+        let ids =
+            store.transition_all(ScanState::Running, ScanState::Paused, Some(EMERGENCY_STOP))?;
+        store.log(shared.boot, None, "stop", "emergency stop")?;
+        for id in &ids {
+            shared.changed(*id);
+        }
+        Ok(ids)
+    })
+    .await?;
+    // The stop resets the board: the carousel is turned to its slot again before the
+    // next capture.
+    shared.carousel_moved();
+    stopped?;
+    tracing::warn!("emergency stop; paused scans {paused:?}");
+    Ok(Json(json!({ "stopped": true, "paused": paused })))
+}
+
+/// Homes the arm (after a stop, a reset or a failed homing): 202 at once, the hardware
+/// lane clears an alarm (soft reset) and homes the arm before it runs anything else;
+/// 409 with the reason where it cannot (a scan runs, the board was refused, the
+/// controller does not home), 503 without an arm.
+pub(super) async fn home_arm(State(shared): AppState) -> ApiResult<impl IntoResponse> {
+    if let Some(id) = running_scan(&shared).await? {
+        return Err(ApiError::new(
+            StatusCode::CONFLICT,
+            format!("scan {id} is running: pause or cancel it before homing the arm"),
+        ));
+    }
+    let arm = lock(&shared.hardware).arm.clone();
+    let conflict = |message: &str| Err(ApiError::new(StatusCode::CONFLICT, message));
+    match arm.state {
+        ArmState::Disconnected => {
+            return Err(ApiError::new(
+                StatusCode::SERVICE_UNAVAILABLE,
+                "arm not connected: nothing to home",
+            ))
+        }
+        ArmState::Refused => {
+            return conflict(
+                "the arm's board was refused (its settings differ, see /api/hardware): \
+                 change them on the board, then POST /api/arm/reconnect",
+            )
+        }
+        ArmState::Homing => return conflict("the arm is homing already"),
+        _ if shared.config.arm.homing == HomingMode::Off
+            || !arm.homes
+            || arm.state == ArmState::NeedsPosition =>
+        {
+            return conflict(
+                "this controller does not home: declare the arm's position \
+                 (POST /api/arm/position)",
+            )
+        }
+        _ => {}
+    }
+    let clears_alarm = arm.state == ArmState::Alarm;
+    shared.home_requested.store(true, Ordering::Release);
+    shared.hardware_wake.post(|wake| *wake = true);
+    tracing::info!("homing asked by the operator");
+    Ok((
+        StatusCode::ACCEPTED,
+        Json(json!({ "homing": true, "clears_alarm": clears_alarm })),
+    ))
+}
+
+/// Opens the arm again now: one that is disconnected (instead of waiting for its next
+/// try) or refused for its settings (after they were changed on the board). 409 while
+/// the arm is connected: reopening would reset it.
+pub(super) async fn reconnect_arm(State(shared): AppState) -> ApiResult<Json<Value>> {
+    let state = lock(&shared.hardware).arm.state;
+    if !matches!(state, ArmState::Disconnected | ArmState::Refused) {
+        return Err(ApiError::new(
+            StatusCode::CONFLICT,
+            "the arm is connected: nothing to reconnect (opening it again would reset it)",
+        ));
+    }
+    shared.arm_reconnect.store(true, Ordering::Release);
+    shared.wake();
+    tracing::info!("arm reconnect asked for");
+    Ok(Json(json!({ "reconnecting": true })))
+}
+
+/// How long a declared position may wait for the hardware lane (busy with a step).
+const DECLARE_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(30);
+
+/// Declares where the arm is, for controllers without homing (`{"angle": degrees}`);
+/// the hardware lane applies it (`G92`), records it in the hardware log and queues the
+/// waiting scans again.
+pub(super) async fn declare_arm_position(
+    State(shared): AppState,
+    body: Bytes,
+) -> ApiResult<Json<Value>> {
+    let angle = validate::arm_position(&parse_json(&body)?, shared.config.arm.max_travel_deg)?;
+    if let Some(id) = running_scan(&shared).await? {
+        return Err(ApiError::new(
+            StatusCode::CONFLICT,
+            format!("scan {id} is running: declare the arm's position while it is at rest"),
+        ));
+    }
+    let state = lock(&shared.hardware).arm.state;
+    if matches!(state, ArmState::Moving | ArmState::Homing | ArmState::Hold) {
+        return Err(ApiError::new(
+            StatusCode::CONFLICT,
+            format!(
+                "the arm is {}: declare its position while it is at rest",
+                format!("{state:?}").to_lowercase()
+            ),
+        ));
+    }
+    let (reply, answer) = std::sync::mpsc::sync_channel(1);
+    {
+        let mut pending = lock(&shared.arm_position);
+        if pending.is_some() {
+            return Err(ApiError::new(
+                StatusCode::CONFLICT,
+                "another arm position is being declared",
+            ));
+        }
+        *pending = Some(PositionRequest {
+            angle_deg: angle,
+            reply,
+        });
+    }
+    shared.wake();
+    let answered = tokio::task::spawn_blocking(move || answer.recv_timeout(DECLARE_TIMEOUT))
+        .await
+        .map_err(internal)?;
+    let refused = |status, err: gonio_drivers::DeviceError| {
+        ApiError::new(status, format!("arm position not declared: {err}"))
+    };
+    match answered {
+        Ok(Ok(())) => {
+            tracing::info!("arm position declared: {angle}°");
+            Ok(Json(json!({ "angle": angle, "declared": true })))
+        }
+        Ok(Err(err @ gonio_drivers::DeviceError::OutOfRange { .. })) => Err(ApiError {
+            field: Some("angle".into()),
+            ..refused(StatusCode::UNPROCESSABLE_ENTITY, err)
+        }),
+        Ok(Err(err))
+            if err.is_transient() || matches!(err, gonio_drivers::DeviceError::NotFound(_)) =>
+        {
+            Err(refused(StatusCode::SERVICE_UNAVAILABLE, err))
+        }
+        Ok(Err(err)) => Err(refused(StatusCode::CONFLICT, err)),
+        Err(_) => {
+            // Still pending: withdraw it, so it is not applied behind the caller's back.
+            lock(&shared.arm_position).take();
+            Err(ApiError::new(
+                StatusCode::SERVICE_UNAVAILABLE,
+                "arm position not declared: the hardware is busy, try again",
+            ))
+        }
+    }
+}
+
+pub(super) async fn hardware(State(shared): AppState) -> Json<Value> {
+    let mut status = lock(&shared.hardware).clone();
+    let live = lock(&shared.arm_angle).as_ref().and_then(|a| a.get());
+    // As the arm reported it, also while a move is under way.
+    status.arm.angle_deg = status.arm.shown_angle(live.or(status.arm.angle_deg));
+    Json(json!({
+        "arm": status.arm,
+        "camera": status.camera,
+        "emulated": shared.emulators.is_some(),
+        "boot": shared.boot,
+    }))
+}
+
+#[derive(Deserialize)]
+pub(super) struct LogQuery {
+    #[serde(default)]
+    after: i64,
+}
+
+pub(super) async fn hardware_log(
+    State(shared): AppState,
+    Query(query): Query<LogQuery>,
+) -> ApiResult<Json<Value>> {
+    let entries = db(&shared, move |_, store| store.hardware_log(query.after)).await?;
+    Ok(Json(json!(entries)))
+}
