@@ -300,21 +300,32 @@ fn print_budget(budget: &fit::budget::Budget) {
             " {:>10.2e} {:>10.2e}  [{:.5}, {:.5}]",
             b.combined, b.expanded, b.interval[0], b.interval[1]
         );
+        if b.interval_from == fit::budget::IntervalFrom::RefitEnds {
+            row += &format!(" ({}: not linear in a source)", b.interval_from.describe());
+        }
         println!("{row}");
     }
     if !budget.departure.is_empty() {
         let departure: Vec<String> = budget
             .departure
             .iter()
-            .map(|d| match d.theta_l {
-                Some(t) => format!("{} (θL {t}) {:+.2}", short(&d.source), d.z),
-                None => format!("{} {:+.2}", short(&d.source), d.z),
+            .map(|d| {
+                let std = d.std.map(|s| format!(" ± {s:.2}")).unwrap_or_default();
+                match d.theta_l {
+                    Some(t) => format!("{} (θL {t}) {:+.2}{std}", short(&d.source), d.z),
+                    None => format!("{} {:+.2}{std}", short(&d.source), d.z),
+                }
             })
             .collect();
         println!(
-            "  the lines are taken with the setup departing as the residuals suggest (in u; \
+            "  the lines are taken with the setup departing as the residuals identify it (in u; \
              not applied to the values): {}",
             departure.join(", ")
+        );
+    } else {
+        println!(
+            "  the residuals identify no departure of the setup from the stated one (what they \
+             show beyond the noise is the misfit line)"
         );
     }
     if let Some(mc) = &budget.monte_carlo {
