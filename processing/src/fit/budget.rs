@@ -151,6 +151,10 @@ pub struct SourceDeparture {
 pub struct MonteCarlo {
     pub draws: usize,
     pub parameters: ParameterSet<Distribution>,
+    /// Per parameter, whether its interval agrees with the budget's and which holds
+    /// ([`super::agreement::compare`]; older files lack it).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub agreement: Vec<super::agreement::Agreement>,
 }
 
 impl Budget {
