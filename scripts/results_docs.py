@@ -406,8 +406,8 @@ def coverage_table(name="coverage.json"):
         rows.append(
             [
                 p["parameter"],
-                f"{100 * p['expanded_hits'] / n:.0f} % ({p['expanded_hits']}/{n})",
-                f"{100 * p['noise_only_hits'] / n:.0f} % ({p['noise_only_hits']}/{n})",
+                f"{100 * p['expanded_hits'] / n:.1f} % ({p['expanded_hits']}/{n})",
+                f"{100 * p['noise_only_hits'] / n:.1f} % ({p['noise_only_hits']}/{n})",
             ]
         )
     hits = sum(p["expanded_hits"] for p in report["parameters"])
