@@ -10,7 +10,8 @@
 # section renders each into a scan and judges every model and the table on it (without
 # it, the section is skipped and says so).
 # The coverage of the uncertainty budget's expanded intervals comes from 600 emulated
-# scans whose setup departs from the stated one (tests/tests/budget_coverage.rs).
+# scans whose setup departs from the stated one, and from 400 whose setup.json states no
+# uncertainty, so that gonio's defaults hold (tests/tests/budget_coverage.rs).
 # One function per section; a new section adds its function and its call in main.
 # Usage: bash scripts/results.sh [SCENE...]   (default: gold red blue-green opal)
 #        bash scripts/results.sh --real-materials-only   (that section and the tables)
@@ -106,13 +107,21 @@ real_section() {
 }
 
 # The uncertainty budget's coverage over 600 emulated scans whose setup is off by what
-# their setup.json states (every parameter of Cook–Torrance and Ward; about 7 min).
+# their setup.json states (every parameter of Cook–Torrance and Ward; about 7 min), and
+# over 400 scans with no uncertainty block, their setup off by what gonio's defaults
+# state (six θL, binned 4×4; about 30 min on two cores).
 coverage_section() {
     local out=docs/results/uncertainty
     mkdir -p "$out"
     echo "== uncertainty budget: coverage over 600 scans"
     GONIO_COVERAGE_SCANS=600 GONIO_COVERAGE_OUT="$PWD/$out/coverage.json" \
-        cargo test --locked --workspace --test budget_coverage -- --nocapture
+        cargo test --locked --workspace --test budget_coverage -- --nocapture \
+        expanded_intervals_hold_the_truth_of_scans_whose_setup_is_off
+    echo "== uncertainty budget: coverage on the default uncertainties over 400 scans"
+    GONIO_COVERAGE_JOBS=2 GONIO_COVERAGE_DEFAULTS_SCANS=400 \
+        GONIO_COVERAGE_DEFAULTS_OUT="$PWD/$out/coverage-defaults.json" \
+        cargo test --locked --workspace --test budget_coverage -- --nocapture \
+        expanded_intervals_hold_the_truth_on_the_default_uncertainties
 }
 
 # The tables of docs/results/README.md and the README's summary, from the outputs.

@@ -393,10 +393,10 @@ def real_materials_table():
     )
 
 
-def coverage_table():
+def coverage_table(name="coverage.json"):
     """Per parameter of each model: how often the budget's expanded interval (k = 2) and
-    the fit's noise-only 95 % interval held the truth over the coverage scans."""
-    path = RESULTS / "uncertainty" / "coverage.json"
+    the fit's noise-only 95 % interval held the truth over the coverage scans of `name`."""
+    path = RESULTS / "uncertainty" / name
     if not path.is_file():
         return "*Not run*: `bash scripts/results.sh --coverage-only` writes this table."
     report = read_json(path)
@@ -406,16 +406,22 @@ def coverage_table():
         rows.append(
             [
                 p["parameter"],
-                f"{100 * p['expanded_hits'] / n:.0f} % ({p['expanded_hits']}/{n})",
-                f"{100 * p['noise_only_hits'] / n:.0f} % ({p['noise_only_hits']}/{n})",
+                f"{100 * p['expanded_hits'] / n:.1f} % ({p['expanded_hits']}/{n})",
+                f"{100 * p['noise_only_hits'] / n:.1f} % ({p['noise_only_hits']}/{n})",
             ]
         )
     hits = sum(p["expanded_hits"] for p in report["parameters"])
     total = sum(p["scans"] for p in report["parameters"])
     stated = ", ".join(f"{k} {v}" for k, v in report["stated"].items())
+    if stated:
+        stated = f"stated standard uncertainties: {stated}"
+    else:
+        drawn = ", ".join(f"{k} {v}" for k, v in report["drawn_from"].items())
+        stated = f"no uncertainty block (gonio's defaults: {drawn})"
+    binning = f", binned {report['binning']}×{report['binning']}" if "binning" in report else ""
     return (
-        f"{report['scans']} scans (θL {', '.join(f'{t:g}' for t in report['theta_l_deg'])}°); "
-        f"stated standard uncertainties: {stated}.\n\n"
+        f"{report['scans']} scans (θL {', '.join(f'{t:g}' for t in report['theta_l_deg'])}°"
+        f"{binning}); {stated}.\n\n"
         + table(["parameter", "expanded (k = 2)", "noise-only 95 %"], rows)
         + f"\n\nAll parameters: {100 * hits / total:.1f} %."
     )
@@ -428,6 +434,7 @@ SECTIONS = {
     "tradeoff": ("results", tradeoff_table),
     "real-materials": ("results", real_materials_table),
     "coverage": ("results", coverage_table),
+    "coverage-defaults": ("results", lambda: coverage_table("coverage-defaults.json")),
     "summary": ("readme", summary_table),
 }
 

@@ -24,6 +24,7 @@
 //! by `--model auto`): it then predicts with the table, and its parametric fields are a
 //! parametric fit of the same samples, kept for renderers.
 
+pub mod agreement;
 pub mod budget;
 mod choice;
 mod data;

@@ -5,7 +5,8 @@
 //! rather than counted as misfit.
 
 use gonio_processing::brdf::{Model, Params};
-use gonio_processing::fit::budget::{budget, monte_carlo, Draw};
+use gonio_processing::fit::agreement::{compare, Holds};
+use gonio_processing::fit::budget::{budget, monte_carlo, Draw, MonteCarlo};
 use gonio_processing::fit::{fit, FitOptions, FitResult};
 use gonio_processing::samples::{Sample, SampleUncertainty};
 use gonio_processing::setup_uncertainty::Source;
@@ -170,6 +171,12 @@ fn a_setup_departure_is_found_and_not_counted_as_misfit() {
     // and angles): the most probable departure shares it among them, the offset with its
     // sign.
     assert!(found > 0.3, "camera offset {found} u: {:?}", b.departure);
+    // Every source reported is one the residuals identify: known to within half its
+    // standard uncertainty, and significant.
+    for d in &b.departure {
+        let std = d.std.unwrap();
+        assert!(std <= 0.5 && d.z.abs() >= 2.0 * std, "{d:?}");
+    }
     // The white's departure cannot be seen in the residuals and is not sought.
     assert!(b.departure.iter().all(|d| d.source != "white_reflectance"));
     // What is left is the noise: the misfit line stays small, and the lines are those of
@@ -191,6 +198,10 @@ fn a_model_that_misses_the_data_gets_a_misfit_line() {
     assert!(b.residual_to_noise > 1.5, "{}", b.residual_to_noise);
     let ks = &b.parameters.ks[1];
     assert!(line(ks, "misfit") > line(ks, "noise"), "{ks:?}");
+    // Misfit is misfit, not a setup error: no source is reported beyond 2 u.
+    for d in &b.departure {
+        assert!(d.z.abs() <= 2.0, "{d:?}");
+    }
 }
 
 #[test]
@@ -214,4 +225,34 @@ fn the_law_of_propagation_agrees_with_the_monte_carlo() {
             d.std
         );
     }
+}
+
+#[test]
+fn the_monte_carlo_and_the_budget_intervals_agree_where_both_apply() {
+    // A scan whose setup is as stated, linear in every source over ±2 u: each end of the
+    // Monte Carlo's 95 % interval within a tenth of the budget interval's width.
+    let samples = scan(23);
+    let result = cook_torrance(&samples);
+    let mut b = budget(&samples, &result).unwrap();
+    let parameters = monte_carlo(&samples, &result, 400, Draw::All, 5).unwrap();
+    let mc = MonteCarlo {
+        draws: 400,
+        parameters,
+        agreement: Vec::new(),
+    };
+    let agreement = compare(&b, &mc);
+    assert_eq!(agreement.len(), b.named().len());
+    for a in &agreement {
+        assert_eq!(a.holds, Holds::Both, "{a:?}");
+        assert!(a.end_offset <= 0.1, "{a:?}");
+    }
+    // Where they do not agree the comparison says which holds and why: here the budget's
+    // interval of Kd_r made three times as wide.
+    let kd = &mut b.parameters.kd[0];
+    let half = kd.interval[1] - kd.value;
+    kd.interval = [kd.value - 3.0 * half, kd.value + 3.0 * half];
+    let a = &compare(&b, &mc)[0];
+    assert_eq!(a.parameter, "kd_r");
+    assert_ne!(a.holds, Holds::Both, "{a:?}");
+    assert!(!a.reason.is_empty());
 }

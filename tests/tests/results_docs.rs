@@ -64,9 +64,11 @@ fn copy_inputs(from: &Path, to: &Path) {
             }
         }
     }
-    let coverage = Path::new("docs/results/uncertainty/coverage.json");
-    if from.join(coverage).is_file() {
-        all.push(coverage.to_path_buf());
+    for coverage in ["coverage.json", "coverage-defaults.json"] {
+        let coverage = Path::new("docs/results/uncertainty").join(coverage);
+        if from.join(&coverage).is_file() {
+            all.push(coverage);
+        }
     }
     for file in all {
         let target = to.join(&file);

@@ -157,10 +157,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 MONTE_CARLO_SEED,
             );
             spinner.finish_and_clear();
-            budget.monte_carlo = Some(fit::budget::MonteCarlo {
+            let mut mc = fit::budget::MonteCarlo {
                 draws,
                 parameters: distribution.context("the Monte Carlo budget")?,
-            });
+                agreement: Vec::new(),
+            };
+            mc.agreement = fit::agreement::compare(&budget, &mc);
+            budget.monte_carlo = Some(mc);
         }
         result.budget = Some(budget);
     } else if args.monte_carlo.is_some() {
@@ -300,21 +303,32 @@ fn print_budget(budget: &fit::budget::Budget) {
             " {:>10.2e} {:>10.2e}  [{:.5}, {:.5}]",
             b.combined, b.expanded, b.interval[0], b.interval[1]
         );
+        if b.interval_from == fit::budget::IntervalFrom::RefitEnds {
+            row += &format!(" ({}: not linear in a source)", b.interval_from.describe());
+        }
         println!("{row}");
     }
     if !budget.departure.is_empty() {
         let departure: Vec<String> = budget
             .departure
             .iter()
-            .map(|d| match d.theta_l {
-                Some(t) => format!("{} (θL {t}) {:+.2}", short(&d.source), d.z),
-                None => format!("{} {:+.2}", short(&d.source), d.z),
+            .map(|d| {
+                let std = d.std.map(|s| format!(" ± {s:.2}")).unwrap_or_default();
+                match d.theta_l {
+                    Some(t) => format!("{} (θL {t}) {:+.2}{std}", short(&d.source), d.z),
+                    None => format!("{} {:+.2}{std}", short(&d.source), d.z),
+                }
             })
             .collect();
         println!(
-            "  the lines are taken with the setup departing as the residuals suggest (in u; \
+            "  the lines are taken with the setup departing as the residuals identify it (in u; \
              not applied to the values): {}",
             departure.join(", ")
+        );
+    } else {
+        println!(
+            "  the residuals identify no departure of the setup from the stated one (what they \
+             show beyond the noise is the misfit line)"
         );
     }
     if let Some(mc) = &budget.monte_carlo {
@@ -322,10 +336,22 @@ fn print_budget(budget: &fit::budget::Budget) {
             "  Monte Carlo ({} draws): standard deviation, 95 % coverage interval",
             mc.draws
         );
-        for ((name, _), d) in named.iter().zip(mc.parameters.flat()) {
+        for (((name, _), d), a) in named.iter().zip(mc.parameters.flat()).zip(&mc.agreement) {
+            let holds = match a.holds {
+                fit::agreement::Holds::Both => "agree".to_string(),
+                fit::agreement::Holds::LawOfPropagation => {
+                    format!("the budget's holds: {}", a.reason)
+                }
+                fit::agreement::Holds::MonteCarlo => {
+                    format!("the Monte Carlo's holds: {}", a.reason)
+                }
+            };
             println!(
-                "  {name:<8} {:>10.2e}  [{:.5}, {:.5}]",
-                d.std, d.interval[0], d.interval[1]
+                "  {name:<8} {:>10.2e}  [{:.5}, {:.5}]  ends {:.0} % of the width apart: {holds}",
+                d.std,
+                d.interval[0],
+                d.interval[1],
+                100.0 * a.end_offset
             );
         }
     }

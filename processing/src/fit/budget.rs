@@ -47,6 +47,12 @@ const REFIT_M_RANGE: f64 = 1.5;
 /// over ±1 u gives a fifth of the change at 2 u).
 const SECANT_SPAN: f64 = COVERAGE_FACTOR;
 
+/// A parameter is taken as linear in a source when its refits at ±k u have their midpoint
+/// within this fraction of their span from the unmoved fit (the second-order term is then
+/// a tenth of the first at the interval's ends), or of k·u_c; otherwise the refits' ends
+/// bound its interval where they reach farther ([`IntervalFrom::RefitEnds`]).
+const LINEAR_TOLERANCE: f64 = 0.1;
+
 /// Points of the refits' grid over log m (the fit's own search uses 24 over a wider range).
 const REFIT_GRID_POINTS: usize = 6;
 
@@ -71,8 +77,36 @@ pub struct ParameterBudget {
     /// Expanded uncertainty U = k·u_c.
     pub expanded: f64,
     /// The interval value ± U (the roughness: m·exp(±k·u_c(ln m))), its lower end at
-    /// least 0.
+    /// least 0; or, where the parameter does not follow a source linearly over ±k u, its
+    /// ends from the refits ([`IntervalFrom`]).
     pub interval: [f64; 2],
+    /// How the interval was found (older files lack it: the law of propagation).
+    #[serde(default)]
+    pub interval_from: IntervalFrom,
+}
+
+/// How a parameter's interval was found.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum IntervalFrom {
+    /// value ± k·u_c: every source moves the parameter linearly over ±k u.
+    #[default]
+    LawOfPropagation,
+    /// Some source does not ([`Secant::bend`]) and its refits within ±k u reach farther
+    /// than k times its line on a side: on that side, the distance from the fit to its
+    /// refits' farthest value in place of k times its line, added in quadrature with
+    /// k times the other lines.
+    RefitEnds,
+}
+
+impl IntervalFrom {
+    /// "law of propagation" or "refit ends", for a person.
+    pub fn describe(self) -> &'static str {
+        match self {
+            IntervalFrom::LawOfPropagation => "law of propagation",
+            IntervalFrom::RefitEnds => "refit ends",
+        }
+    }
 }
 
 /// The uncertainty budget of a fit.
@@ -84,9 +118,10 @@ pub struct Budget {
     /// the residuals' scatter over the noise the samples state (1: the model fits to the
     /// noise).
     pub residual_to_noise: f64,
-    /// The departure of the setup that best explains the fit's residuals, per source (the
-    /// arm's angle per θL), in standard uncertainties: the lines are taken at the values
-    /// with it removed. Not a calibration: the fitted values keep the stated setup.
+    /// The departure of the setup that best explains the fit's residuals, for each source
+    /// the residuals identify (the arm's angle per θL; see [`departure`]'s criterion), in
+    /// standard uncertainties: the lines are taken at the values with it removed. Not a
+    /// calibration: the fitted values keep the stated setup.
     #[serde(default)]
     pub departure: Vec<SourceDeparture>,
     pub parameters: ParameterSet<ParameterBudget>,
@@ -106,6 +141,9 @@ pub struct SourceDeparture {
     /// The world's setup as the residuals suggest it: the stated one plus `z` standard
     /// uncertainties of the source.
     pub z: f64,
+    /// Its posterior standard deviation, in standard uncertainties (older files lack it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub std: Option<f64>,
 }
 
 /// A Monte Carlo propagation (JCGM 101) of the budget's model.
@@ -113,6 +151,10 @@ pub struct SourceDeparture {
 pub struct MonteCarlo {
     pub draws: usize,
     pub parameters: ParameterSet<Distribution>,
+    /// Per parameter, whether its interval agrees with the budget's and which holds
+    /// ([`super::agreement::compare`]; older files lack it).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub agreement: Vec<super::agreement::Agreement>,
 }
 
 impl Budget {
@@ -157,6 +199,7 @@ fn vector(kd: [f64; 3], ks: [f64; 3], ks_90: Option<[f64; 3]>, m: &[f64]) -> Vec
 
 /// The fitter of the perturbed samples: the fit's model, roughness and colour-shift
 /// decision, by the robust method, on the same points with other β.
+#[derive(Clone)]
 struct Refit<'a> {
     data: Data,
     options: FitOptions,
@@ -194,16 +237,14 @@ impl Refit<'_> {
             .collect()
     }
 
-    /// A source's line per parameter, from the fits with the samples moved by
-    /// ±[`SECANT_SPAN`]·`change` where `at` and `base`, the fit of the unmoved values:
-    /// √(c₁² + ½·c₂²) with c₁ the secant's slope and c₂ the second difference, both per
-    /// standard uncertainty (JCGM 100 §5.1.2, its note: the second-order term).
-    fn line(
+    /// A source's refits per parameter: the fits with the samples moved by
+    /// ±[`SECANT_SPAN`]·`change` where `at`, against `base`, the fit of the unmoved values.
+    fn secants(
         &self,
         base: &[f64],
         change: impl Fn(&SampleUncertainty) -> [f64; 3] + Copy,
         at: impl Fn(&Sample) -> bool + Copy,
-    ) -> Result<Vec<f64>, FitError> {
+    ) -> Result<Vec<Secant>, FitError> {
         let h = SECANT_SPAN;
         let plus = self.fit(&self.moved(h, change, at))?;
         let minus = self.fit(&self.moved(-h, change, at))?;
@@ -211,12 +252,46 @@ impl Refit<'_> {
             .iter()
             .zip(&minus)
             .zip(base)
-            .map(|((p, m), b)| {
-                let slope = (p - m) / (2.0 * h);
-                let curvature = (p - 2.0 * b + m) / (h * h);
-                (slope * slope + 0.5 * curvature * curvature).sqrt()
-            })
+            .map(|((&plus, &minus), &base)| Secant { base, plus, minus })
             .collect())
+    }
+}
+
+/// One parameter's fits with a source's values moved by ±[`SECANT_SPAN`] standard
+/// uncertainties and unmoved.
+#[derive(Debug, Clone, Copy, Default)]
+struct Secant {
+    base: f64,
+    plus: f64,
+    minus: f64,
+}
+
+impl Secant {
+    /// The line: √(c₁² + ½·c₂²) with c₁ the secant's slope and c₂ the second difference,
+    /// both per standard uncertainty (JCGM 100 §5.1.2, its note: the second-order term).
+    fn line(&self) -> f64 {
+        let h = SECANT_SPAN;
+        let slope = (self.plus - self.minus) / (2.0 * h);
+        let curvature = (self.plus - 2.0 * self.base + self.minus) / (h * h);
+        (slope * slope + 0.5 * curvature * curvature).sqrt()
+    }
+
+    /// How far the refits' midpoint lies from the unmoved fit: 0 where the parameter
+    /// follows the source linearly over ±[`SECANT_SPAN`] u.
+    fn bend(&self) -> f64 {
+        (0.5 * (self.plus + self.minus) - self.base).abs()
+    }
+
+    /// The bend's bound for a linear source: [`LINEAR_TOLERANCE`] of the refits' span.
+    fn bend_bound(&self) -> f64 {
+        LINEAR_TOLERANCE * (self.plus - self.minus).abs()
+    }
+
+    /// How far the parameter goes above and below the unmoved fit within ±k u (each ≥ 0).
+    fn excursions(&self) -> [f64; 2] {
+        let up = (self.plus - self.base).max(self.minus - self.base).max(0.0);
+        let down = (self.base - self.plus).max(self.base - self.minus).max(0.0);
+        [up, down]
     }
 }
 
@@ -311,17 +386,23 @@ pub fn budget(samples: &[Sample], result: &FitResult) -> Result<Budget, FitError
         fresnel,
         result.roughness == Roughness::Shared,
     )?;
-    let departures = departure
+    let departures: Vec<SourceDeparture> = departure
         .z
         .iter()
-        .map(|&(source, theta_l, z)| SourceDeparture {
-            source: source.name().into(),
-            theta_l,
+        .map(|found| SourceDeparture {
+            source: found.source.name().into(),
+            theta_l: found.theta_l,
             // The residuals are the measured values less the truth's, −c·d for a world at
             // the stated setup + d·u.
-            z: -z,
+            z: -found.z,
+            std: Some(found.std),
         })
         .collect();
+    // The values as measured, when a departure is removed from them: the lines are taken
+    // there too, and the larger of each is kept (where a parameter does not follow a
+    // source linearly its sensitivity depends on where it is taken, and the world may
+    // be at either).
+    let measured = (!departures.is_empty()).then(|| refit.clone());
     refit.data = refit.data.with_measured(departure.corrected);
     let (found, ks_90) = robust::fit(&refit.data, &refit.options)?;
     let base = vector(
@@ -377,19 +458,47 @@ pub fn budget(samples: &[Sample], result: &FitResult) -> Result<Budget, FitError
         .position(|&s| s == Source::ArmAngle)
         .expect("the arm's angle is a source");
     jobs.extend(theta_l.iter().map(|&t| (angle, Some(t))));
-    let changes: Vec<(usize, Vec<f64>)> = jobs
+    let mut states = vec![(&refit, base.clone())];
+    if let Some(measured) = &measured {
+        states.push((measured, measured.fit(&measured.data.y)?));
+    }
+    let secants: Vec<(usize, Vec<Secant>)> = jobs
         .par_iter()
         .map(|&(j, at)| {
             let change = move |u: &SampleUncertainty| u.sources[j];
             let within =
                 move |s: &Sample| at.is_none_or(|t| (s.theta_l - t).abs() <= THETA_L_TOLERANCE);
-            Ok((j, refit.line(&base, change, within)?))
+            let mut kept: Vec<Secant> = Vec::new();
+            for (state, base) in &states {
+                let found = state.secants(base, change, within)?;
+                if kept.is_empty() {
+                    kept = found;
+                } else {
+                    for (k, f) in kept.iter_mut().zip(found) {
+                        if f.line() > k.line() {
+                            *k = f;
+                        }
+                    }
+                }
+            }
+            Ok((j, kept))
         })
         .collect::<Result<_, FitError>>()?;
-    let mut lines = vec![vec![0.0; value.len()]; Source::COUNT];
-    for (j, change) in &changes {
-        for (line, d) in lines[*j].iter_mut().zip(change) {
-            *line = (*line * *line + d * d).sqrt();
+    // Per source and parameter: the line, the excursions above and below within ±k u
+    // (the arm's angle's per θL added in quadrature), and whether it is linear.
+    let mut lines = vec![vec![0.0f64; value.len()]; Source::COUNT];
+    let mut ends = vec![vec![[0.0f64; 2]; value.len()]; Source::COUNT];
+    let mut bent = vec![vec![[0.0f64; 2]; value.len()]; Source::COUNT];
+    for (j, secants) in &secants {
+        for (i, secant) in secants.iter().enumerate() {
+            let d = secant.line();
+            lines[*j][i] = lines[*j][i].hypot(d);
+            let [up, down] = secant.excursions();
+            ends[*j][i] = [ends[*j][i][0].hypot(up), ends[*j][i][1].hypot(down)];
+            bent[*j][i] = [
+                bent[*j][i][0].hypot(secant.bend()),
+                bent[*j][i][1].hypot(secant.bend_bound()),
+            ];
         }
     }
 
@@ -421,20 +530,37 @@ pub fn budget(samples: &[Sample], result: &FitResult) -> Result<Budget, FitError
         );
         let combined_raw =
             (scatter * scatter + lines.iter().map(|l| l[i] * l[i]).sum::<f64>()).sqrt();
+        // The half-widths above and below the value (in ln m for the roughness): k·u_c,
+        // or on a side where a source that bends (see [`Secant::bend`]; a bend under a
+        // tenth of k·u_c is immaterial) moves the parameter farther within ±k u than k
+        // times its line, that source's own excursion in its place.
+        let linear =
+            |j: usize| bent[j][i][0] <= bent[j][i][1].max(LINEAR_TOLERANCE * k * combined_raw);
+        let half_width = |side: usize| {
+            let sources: f64 = (0..Source::COUNT)
+                .map(|j| {
+                    let d = k * lines[j][i];
+                    let d = if linear(j) {
+                        d
+                    } else {
+                        d.max(ends[j][i][side])
+                    };
+                    d * d
+                })
+                .sum();
+            ((k * scatter).powi(2) + sources).sqrt()
+        };
+        let [above, below] = [half_width(0), half_width(1)];
+        let from = if above.max(below) > k * combined_raw * (1.0 + 1e-9) {
+            IntervalFrom::RefitEnds
+        } else {
+            IntervalFrom::LawOfPropagation
+        };
         let (reported, interval) = if log {
             let m = value[i].exp();
-            (
-                m,
-                [m * (-k * combined_raw).exp(), m * (k * combined_raw).exp()],
-            )
+            (m, [m * (-below).exp(), m * above.exp()])
         } else {
-            (
-                value[i],
-                [
-                    (value[i] - k * combined_raw).max(0.0),
-                    value[i] + k * combined_raw,
-                ],
-            )
+            (value[i], [(value[i] - below).max(0.0), value[i] + above])
         };
         ParameterBudget {
             value: reported,
@@ -442,6 +568,7 @@ pub fn budget(samples: &[Sample], result: &FitResult) -> Result<Budget, FitError
             combined: unit * combined_raw,
             expanded: k * unit * combined_raw,
             interval,
+            interval_from: from,
         }
     };
     let n_colour = if fresnel { 9 } else { 6 };

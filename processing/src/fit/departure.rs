@@ -37,11 +37,58 @@ const LN_M_STEP: f64 = 1e-3;
 /// Singular values below this fraction of the largest are dropped in the solve.
 const SOLVE_TOLERANCE: f64 = 1e-12;
 
-/// The departure found: per source (the arm's angle per θL) its z, and the values with
-/// it removed.
+/// A source's departure is taken as identified by the residuals only when they know it
+/// at least this much better than the prior does: its posterior standard deviation at
+/// most this many standard uncertainties (the prior's is 1).
+pub const MAX_POSTERIOR_STD: f64 = 0.5;
+
+/// … and when it is significant: |z| at least this many posterior standard deviations.
+pub const MIN_SIGNIFICANCE: f64 = 2.0;
+
+/// … and when the stated uncertainty makes it plausible: |z| at most this many standard
+/// uncertainties (a normal error lies beyond 3.5 u once in 2 000). Residuals that call
+/// for more are the model's misfit, not a setup error.
+pub const MAX_PLAUSIBLE_Z: f64 = 3.5;
+
+/// … and only where what the departure leaves of the residuals is at most this many times
+/// the noise the samples state: residuals well above the noise are the model's misfit,
+/// which the sources' columns would take up in part (a Ward fit of a Cook–Torrance lobe
+/// would read as arm angles several u off).
+pub const MAX_LEFT_SCATTER: f64 = 1.5;
+
+/// Whether a source whose departure is `z` ± `std` (posterior mean and standard
+/// deviation, in its standard uncertainties) is identified by the residuals.
+fn identified(z: f64, std: f64) -> bool {
+    std <= MAX_POSTERIOR_STD && z.abs() >= MIN_SIGNIFICANCE * std && z.abs() <= MAX_PLAUSIBLE_Z
+}
+
+/// How far a source is from being identified (larger: farther), to leave out the worst
+/// first: the largest of its three criteria's ratios to their bounds.
+fn unidentified(z: f64, std: f64) -> f64 {
+    let significance = MIN_SIGNIFICANCE * std / z.abs().max(f64::MIN_POSITIVE);
+    (std / MAX_POSTERIOR_STD)
+        .max(significance)
+        .max(z.abs() / MAX_PLAUSIBLE_Z)
+}
+
+/// One identified source's departure.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Found {
+    pub source: Source,
+    /// The arm angle θL (degrees) for the arm's angle.
+    pub theta_l: Option<f64>,
+    /// Posterior mean, in standard uncertainties (of the residuals' sign: the world's
+    /// departure is −z).
+    pub z: f64,
+    /// Posterior standard deviation, in standard uncertainties.
+    pub std: f64,
+}
+
+/// The departure found: the sources the residuals identify (the arm's angle per θL),
+/// and the values with their departure removed.
 pub(crate) struct Departure {
-    /// (source name, θL for the arm's angle, z in standard uncertainties).
-    pub z: Vec<(Source, Option<f64>, f64)>,
+    /// Every identified source; the others are left at 0.
+    pub z: Vec<Found>,
     /// y − Σ_j c_j·z_j per point (0 where a value was dropped).
     pub corrected: Vec<[f64; 3]>,
 }
@@ -108,47 +155,22 @@ pub(crate) fn estimate(
         });
     }
 
-    let mut scatter2: f64 = 1.0;
-    let mut z = vec![0.0; n_z];
-    for _ in 0..SCATTER_ROUNDS {
-        let mut normal = DMatrix::<f64>::zeros(size, size);
-        let mut rhs = DVector::<f64>::zeros(size);
-        for (row, r, w) in &rows {
-            let w = w / scatter2;
-            for i in 0..size {
-                let wi = w * row[i];
-                rhs[i] += wi * r;
-                for j in i..size {
-                    normal[(i, j)] += wi * row[j];
-                }
-            }
+    // Sources are left out, the least identified first, until every one kept is
+    // identified ([`identified`]); the model's parameters always stay.
+    let mut active: Vec<bool> = vec![true; n_z];
+    let (z, std) = loop {
+        let (z, std, scatter2) = solve_active(&rows, &active, n_z, size)?;
+        let worst = (0..n_z)
+            .filter(|&j| active[j] && !identified(z[j], std[j]))
+            .max_by(|&a, &b| unidentified(z[a], std[a]).total_cmp(&unidentified(z[b], std[b])));
+        match worst {
+            Some(j) => active[j] = false,
+            // Residuals the departure leaves well above the noise are the model's misfit
+            // (or a setup error the sources' columns do not describe): none is identified.
+            None if scatter2 > MAX_LEFT_SCATTER * MAX_LEFT_SCATTER => break (vec![0.0; n_z], std),
+            None => break (z, std),
         }
-        for i in 0..size {
-            if i < n_z {
-                normal[(i, i)] += 1.0;
-            }
-            for j in 0..i {
-                normal[(i, j)] = normal[(j, i)];
-            }
-        }
-        let solution = solve(normal, rhs)?;
-        z.copy_from_slice(&solution.as_slice()[..n_z]);
-        // What is left, over the noise, per value (at least 1).
-        let left: f64 = rows
-            .iter()
-            .map(|(row, r, w)| {
-                let explained: f64 = row.iter().zip(solution.iter()).map(|(a, x)| a * x).sum();
-                (r - explained).powi(2) * w
-            })
-            .sum::<f64>()
-            / (rows.len() - size) as f64;
-        let next = left.max(1.0);
-        let settled = (next - scatter2).abs() <= 1e-3 * scatter2;
-        scatter2 = next;
-        if settled {
-            break;
-        }
-    }
+    };
     let corrected = samples
         .iter()
         .enumerate()
@@ -166,11 +188,80 @@ pub(crate) fn estimate(
     Ok(Departure {
         z: columns
             .iter()
-            .zip(&z)
-            .map(|(&(s, at), &z)| (s, at, z))
+            .zip(z.iter().zip(&std))
+            .filter(|(_, (z, _))| **z != 0.0)
+            .map(|(&(s, at), (&z, &std))| Found {
+                source: s,
+                theta_l: at,
+                z,
+                std,
+            })
             .collect(),
         corrected,
     })
+}
+
+/// The least-squares solution of the rows (row, residual, weight) over the model's
+/// columns and the active sources' (each with its N(0, 1) prior), the scatter s² of
+/// what is left over the noise re-estimated until it settles: every source's posterior
+/// mean and standard deviation (0 and 1, the prior, for an inactive one), and s².
+fn solve_active(
+    rows: &[(Vec<f64>, f64, f64)],
+    active: &[bool],
+    n_z: usize,
+    size: usize,
+) -> Result<(Vec<f64>, Vec<f64>, f64), FitError> {
+    let kept: Vec<usize> = (0..size).filter(|&i| i >= n_z || active[i]).collect();
+    let n = kept.len();
+    let mut scatter2: f64 = 1.0;
+    let mut found = (vec![0.0; n_z], vec![1.0; n_z]);
+    for _ in 0..SCATTER_ROUNDS {
+        let mut normal = DMatrix::<f64>::zeros(n, n);
+        let mut rhs = DVector::<f64>::zeros(n);
+        for (row, r, w) in rows {
+            let w = w / scatter2;
+            for (a, &i) in kept.iter().enumerate() {
+                let wi = w * row[i];
+                rhs[a] += wi * r;
+                for (b, &j) in kept.iter().enumerate().skip(a) {
+                    normal[(a, b)] += wi * row[j];
+                }
+            }
+        }
+        for (a, &i) in kept.iter().enumerate() {
+            if i < n_z {
+                normal[(a, a)] += 1.0;
+            }
+            for b in 0..a {
+                normal[(a, b)] = normal[(b, a)];
+            }
+        }
+        let (solution, variance) = solve(normal, rhs)?;
+        for (a, &i) in kept.iter().enumerate().filter(|(_, &i)| i < n_z) {
+            found.0[i] = solution[a];
+            found.1[i] = variance[a].max(0.0).sqrt();
+        }
+        // What is left, over the noise, per value (at least 1).
+        let left: f64 = rows
+            .iter()
+            .map(|(row, r, w)| {
+                let explained: f64 = kept
+                    .iter()
+                    .zip(solution.iter())
+                    .map(|(&i, x)| row[i] * x)
+                    .sum();
+                (r - explained).powi(2) * w
+            })
+            .sum::<f64>()
+            / (rows.len() - n) as f64;
+        let next = left.max(1.0);
+        let settled = (next - scatter2).abs() <= 1e-3 * scatter2;
+        scatter2 = next;
+        if settled {
+            break;
+        }
+    }
+    Ok((found.0, found.1, scatter2))
 }
 
 /// The model's Jacobian at (`params`, `ks_90`): per parameter (Kd, Ks, Ks_90 when
@@ -229,9 +320,10 @@ fn jacobian(
     columns
 }
 
-/// x of `normal`·x = `rhs`, scaled to a unit diagonal and solved by SVD (directions the
-/// data do not determine are left at 0).
-fn solve(normal: DMatrix<f64>, rhs: DVector<f64>) -> Result<DVector<f64>, FitError> {
+/// x of `normal`·x = `rhs` and the diagonal of `normal`'s inverse (the posterior
+/// variances), scaled to a unit diagonal and solved by SVD (directions the data do not
+/// determine are left at 0).
+fn solve(normal: DMatrix<f64>, rhs: DVector<f64>) -> Result<(DVector<f64>, Vec<f64>), FitError> {
     let n = normal.nrows();
     let scale: Vec<f64> = (0..n)
         .map(|i| {
@@ -250,9 +342,15 @@ fn solve(normal: DMatrix<f64>, rhs: DVector<f64>) -> Result<DVector<f64>, FitErr
     let y = svd
         .solve(&b, SOLVE_TOLERANCE * largest)
         .map_err(|e| FitError::Optimizer(format!("setup departure: {e}")))?;
+    let inverse = svd
+        .pseudo_inverse(SOLVE_TOLERANCE * largest)
+        .map_err(|e| FitError::Optimizer(format!("setup departure: {e}")))?;
     let x = DVector::from_fn(n, |i, _| y[i] * scale[i]);
-    if x.iter().all(|v| v.is_finite()) {
-        Ok(x)
+    let variance: Vec<f64> = (0..n)
+        .map(|i| inverse[(i, i)] * scale[i] * scale[i])
+        .collect();
+    if x.iter().chain(&variance).all(|v| v.is_finite()) {
+        Ok((x, variance))
     } else {
         Err(FitError::Overflow("setup departure"))
     }
