@@ -1,5 +1,4 @@
 """Writes the colorimetry reference tables of processing/data and the CIEDE2000 test pairs
-"""Writes the colorimetry reference tables of processing/data and the CIEDE2000 test pairs
 from the colour-science package (0.4.7; see processing/data/README.md)."""
 import ast, os, sys
 import numpy as np
