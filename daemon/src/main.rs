@@ -38,6 +38,10 @@ enum Command {
     EmulateArm(commands::emulate_arm::Args),
     /// Write a fit for a renderer (Mitsuba 3 BSDF) or as a BRDF table.
     Export(commands::export::Args),
+    /// CIELAB at the standard aspecular angles (45° illumination), with uncertainties.
+    Colour(commands::colour::Args),
+    /// Judge a batch against its standard: ΔL*, ΔC*, ΔH*, ΔE00, flop index per angle.
+    Compare(commands::compare::Args),
     /// Decode captures asked for on stdin (a child of the other commands).
     #[command(hide = true)]
     DecodeWorker(decode_workers::Args),
@@ -71,6 +75,8 @@ fn main() {
         Command::Tradeoff(args) => commands::tradeoff::run(args),
         Command::EmulateArm(args) => commands::emulate_arm::run(args),
         Command::Export(args) => commands::export::run(args),
+        Command::Colour(args) => commands::colour::run(args),
+        Command::Compare(args) => commands::compare::run(args),
         Command::DecodeWorker(args) => decode_workers::serve(args),
     });
     let result = match outcome {
