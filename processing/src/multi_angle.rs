@@ -499,8 +499,8 @@ fn data_value(
                         ));
                     }
                 } else {
-                    for c in 0..3 {
-                        shared[j][c] += w * u.sources[j][c];
+                    for (total, change) in shared[j].iter_mut().zip(u.sources[j]) {
+                        *total += w * change;
                     }
                 }
             }

@@ -53,7 +53,11 @@ pub fn parse_geometry(spec: &str) -> Result<Vec<f64>, String> {
 /// `side` (+1: θi = +45°, −1: θi = −45°).
 pub fn incidence_and_view(aspecular: f64, side: f64) -> (f64, f64) {
     let s = if side < 0.0 { -1.0 } else { 1.0 };
-    (s * ILLUMINATION_DEG, s * (ILLUMINATION_DEG - aspecular))
+    // + 0.0 writes a view along the normal as 0, not −0.
+    (
+        s * ILLUMINATION_DEG,
+        s * (ILLUMINATION_DEG - aspecular) + 0.0,
+    )
 }
 
 /// Signed θh and θd (degrees) of aspecular angle `aspecular` on side `side`, as the

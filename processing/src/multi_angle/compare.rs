@@ -185,14 +185,17 @@ pub struct Comparison {
     pub overall: Verdict,
 }
 
-/// One line of a difference: the standard's and the batch's change.
-type PairLine = (bool, Vec<[f64; 3]>, Vec<[f64; 3]>);
+/// Changes of L*a*b* at each angle compared.
+type Changes = Vec<[f64; 3]>;
+
+/// One line of a difference: whether shared, the standard's and the batch's change.
+type PairLine = (bool, Changes, Changes);
 
 /// The lines of the difference between `standard` and `batch` at the angles given, each
 /// the change of every angle's L*a*b* of each scan: shared lines matched by name.
 fn pair_lines(standard: &[&AngleColour], batch: &[&AngleColour]) -> Vec<PairLine> {
     let n = standard.len();
-    let mut shared: BTreeMap<String, (Vec<[f64; 3]>, Vec<[f64; 3]>)> = BTreeMap::new();
+    let mut shared: BTreeMap<String, (Changes, Changes)> = BTreeMap::new();
     let mut out: Vec<PairLine> = Vec::new();
     for (side, angles) in [standard, batch].into_iter().enumerate() {
         for (k, angle) in angles.iter().enumerate() {
