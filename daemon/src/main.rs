@@ -47,6 +47,10 @@ enum Command {
     Export(commands::export::Args),
     /// Write a scan's report: one self-contained, printable HTML file.
     Report(commands::report::Args),
+    /// CIELAB at the standard aspecular angles (45° illumination), with uncertainties.
+    Colour(commands::colour::Args),
+    /// Judge a batch against its standard: ΔL*, ΔC*, ΔH*, ΔE00, flop index per angle.
+    Compare(commands::compare::Args),
     /// Decode captures asked for on stdin (a child of the other commands).
     #[command(hide = true)]
     DecodeWorker(decode_workers::Args),
@@ -81,6 +85,8 @@ fn main() {
         Command::EmulateArm(args) => commands::emulate_arm::run(args),
         Command::Export(args) => commands::export::run(args),
         Command::Report(args) => commands::report::run(args),
+        Command::Colour(args) => commands::colour::run(args),
+        Command::Compare(args) => commands::compare::run(args),
         Command::DecodeWorker(args) => decode_workers::serve(args),
     });
     let result = match outcome {

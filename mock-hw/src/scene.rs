@@ -673,7 +673,9 @@ impl Scene {
         &self.domain
     }
 
-    pub(crate) fn material(&self) -> &Material {
+    /// The sample prepared for rendering (its spectral radiance factor at a geometry:
+    /// `Material::beta_spectrum`).
+    pub fn material(&self) -> &Material {
         &self.material
     }
 

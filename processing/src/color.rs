@@ -7,7 +7,19 @@
 //! matrix fitted by least squares so that M·(c̄ I) ≈ (x̄ȳz̄ I) over the same wavelengths.
 //!
 //! Built-in tables (processing/data, 390–730 nm at 10 nm): CIE 1931 2° colour matching
-//! functions, CIE illuminant A, Nikon D5100 sensitivities (NPL).
+//! functions, CIE illuminant A, Nikon D5100 sensitivities (NPL); for colour as the
+//! coatings trade states it, CIE 1964 10°, D65 and D50 ([`observer`]).
+//!
+//! Colour beyond u′v′ lives in the children: [`observer`] (illuminant and observer),
+//! [`lab`] (CIELAB), [`delta_e`] (ΔL*, ΔC*, ΔH*, CIEDE2000, flop index), [`geometry`]
+//! (multi-angle geometries) and [`transform`] (camera RGB → XYZ under stated conditions,
+//! with its error).
+
+pub mod delta_e;
+pub mod geometry;
+pub mod lab;
+pub mod observer;
+pub mod transform;
 
 use nalgebra::{DMatrix, Matrix3, Vector3};
 use thiserror::Error;
@@ -98,7 +110,7 @@ impl<const N: usize> SpectralTable<N> {
     }
 
     /// The values at each wavelength of `grid` (exact match within 1e-6 nm).
-    fn at(&self, name: &str, grid: &[f64]) -> Result<Vec<[f64; N]>, ColorError> {
+    pub(crate) fn at(&self, name: &str, grid: &[f64]) -> Result<Vec<[f64; N]>, ColorError> {
         grid.iter()
             .map(|&w| {
                 self.wavelengths_nm

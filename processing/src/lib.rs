@@ -12,6 +12,7 @@ pub mod brdf;
 pub mod fit;
 pub mod geometry;
 pub mod metrics;
+pub mod multi_angle;
 pub mod samples;
 pub mod setup_uncertainty;
 

@@ -1,6 +1,8 @@
 //! One module per `gonio` subcommand: its arguments and its `run`.
 
 pub mod calibrate;
+pub mod colour;
+pub mod compare;
 pub mod emulate_arm;
 pub mod export;
 pub mod extract;

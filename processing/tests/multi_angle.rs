@@ -1,0 +1,122 @@
+//! Multi-angle colour and compare on constructed fits (docs/ARCHITECTURE.md,
+//! "Multi-angle colour").
+
+use gonio_processing::brdf::{Model, Roughness};
+use gonio_processing::color::delta_e::ciede2000;
+use gonio_processing::color::geometry::{half_difference, incidence_and_view, ASTM_E2539};
+use gonio_processing::color::observer::Conditions;
+use gonio_processing::color::transform::ColourTransform;
+use gonio_processing::color::CameraModel;
+use gonio_processing::fit::{FitMethod, FitResult, FittedRoughness, ParameterSet};
+use gonio_processing::multi_angle::compare::{compare, Tolerances, Verdict};
+use gonio_processing::multi_angle::{colour, ColourReport, Origin};
+
+fn fit(kd: [f64; 3], ks: [f64; 3], m: f64) -> FitResult {
+    FitResult {
+        model: Model::CookTorrance,
+        roughness: Roughness::Shared,
+        kd,
+        ks,
+        ks_90: None,
+        m: FittedRoughness::Shared([m]),
+        rho_d: None,
+        loss: 1.0,
+        err_p: [0.0; 3],
+        method: FitMethod::Robust,
+        evaluations: 1,
+        seconds: 0.0,
+        stderr: Some(ParameterSet {
+            kd: kd.map(|v| 0.002 * v),
+            ks: ks.map(|v| 0.005 * v),
+            ks_90: None,
+            m: vec![0.002 * m],
+        }),
+        ci95: None,
+        correlation: None,
+        colour_shift: None,
+        global_minimum: None,
+        selection: None,
+        budget: None,
+        table: None,
+    }
+}
+
+fn report(f: &FitResult) -> ColourReport {
+    let transform = ColourTransform::new(&CameraModel::builtin(), Conditions::D65Ten).unwrap();
+    colour(f, None, &transform, &ASTM_E2539).unwrap()
+}
+
+#[test]
+fn the_geometries_follow_the_aspecular_convention() {
+    assert_eq!(incidence_and_view(15.0, 1.0), (45.0, 30.0));
+    assert_eq!(incidence_and_view(110.0, 1.0), (45.0, -65.0));
+    assert_eq!(incidence_and_view(-15.0, -1.0), (-45.0, -60.0));
+    assert_eq!(half_difference(45.0, 1.0), (22.5, 22.5));
+    assert_eq!(half_difference(110.0, -1.0), (-55.0, 10.0));
+}
+
+#[test]
+fn a_fit_gives_every_angle_from_its_model_with_a_flop_index() {
+    let gold = report(&fit([9.0, 6.5, 2.0], [25.0, 20.0, 7.0], 0.07));
+    assert_eq!(gold.angles.len(), 6);
+    for a in &gold.angles {
+        assert_eq!(a.origin, Origin::Model);
+        for c in [a.l, a.a, a.b, a.c, a.h] {
+            assert!(c.value.is_finite() && c.expanded > 0.0, "{a:?}");
+        }
+    }
+    // Near the specular a gold is light and yellow; far from it dark.
+    let l = |as_: f64| {
+        gold.angles
+            .iter()
+            .find(|a| a.aspecular == as_)
+            .unwrap()
+            .l
+            .value
+    };
+    assert!(l(15.0) > l(45.0) && l(45.0) >= l(110.0));
+    let fi = gold.flop_index.unwrap();
+    assert!(fi.value > 0.0 && fi.expanded > 0.0);
+}
+
+#[test]
+fn compare_fails_gold_against_red_and_passes_a_sample_against_itself() {
+    let gold = report(&fit([9.0, 6.5, 2.0], [25.0, 20.0, 7.0], 0.07));
+    let red = report(&fit([20.0, 3.0, 2.5], [10.0, 10.0, 10.0], 0.15));
+    let c = compare(&gold, &red, &Tolerances::default()).unwrap();
+    assert_eq!(c.overall, Verdict::Fail);
+    let same = compare(&gold, &gold, &Tolerances::default()).unwrap();
+    for a in &same.angles {
+        assert_eq!(a.delta_e00.value, 0.0);
+        // Shared lines (the transform) cancel in a colour against itself; the
+        // independent ones of both scans remain.
+        assert_eq!(a.delta_l.u_shared, 0.0);
+        assert!(a.delta_e00.u_independent > 0.0);
+    }
+    // A diffuse 1 % lighter: the ΔE00 found is the ΔE00 of the two colours.
+    let lighter = report(&fit([9.09, 6.565, 2.02], [25.0, 20.0, 7.0], 0.07));
+    let c = compare(&gold, &lighter, &Tolerances::default()).unwrap();
+    for (a, (s, b)) in c.angles.iter().zip(gold.angles.iter().zip(&lighter.angles)) {
+        assert!((a.delta_e00.value - ciede2000(s.lab(), b.lab())).abs() < 1e-12);
+        assert!(a.delta_l.value > 0.0);
+    }
+}
+
+#[test]
+fn tolerances_name_angles_and_refuse_nonsense() {
+    let t: Tolerances = serde_json::from_str(r#"{"delta_e00":{"default":1.0,"15":2.0}}"#).unwrap();
+    t.check().unwrap();
+    assert_eq!(t.delta_e00_at(15.0), 2.0);
+    assert_eq!(t.delta_e00_at(45.0), 1.0);
+    for bad in [
+        r#"{"delta_e00":{"fifteen":2.0}}"#,
+        r#"{"delta_e00":{"15":-1.0}}"#,
+        r#"{"flop_index":0.0}"#,
+    ] {
+        let t: Tolerances = serde_json::from_str(bad).unwrap();
+        assert!(t.check().is_err(), "{bad}");
+    }
+    assert_eq!(Verdict::judge(0.5, 0.3, 1.0), Verdict::Pass);
+    assert_eq!(Verdict::judge(0.9, 0.3, 1.0), Verdict::Undecided);
+    assert_eq!(Verdict::judge(1.5, 0.3, 1.0), Verdict::Fail);
+}
