@@ -192,6 +192,18 @@ fn best(scores: &[Option<f64>], colours: &[Option<f64>]) -> Option<usize> {
     chosen
 }
 
+/// The best parametric variant of `held` by the choice's rule ([`best`]): the shape a
+/// table judged beside them predicts relative to.
+pub fn best_parametric(held: &[HeldOut]) -> Option<&HeldOut> {
+    let candidates: Vec<Candidate> = held.iter().map(|h| held_out_candidate(h, 0)).collect();
+    let scores: Vec<Option<f64>> = candidates
+        .iter()
+        .map(|c| c.score.filter(|_| c.form.variant().is_some()))
+        .collect();
+    let colours: Vec<Option<f64>> = candidates.iter().map(|c| c.held_out_delta_e_uv).collect();
+    best(&scores, &colours).map(|i| &held[i])
+}
+
 /// The scores of `h`; `table_values`: the stored values of the table of every θL.
 fn held_out_candidate(h: &HeldOut, table_values: usize) -> Candidate {
     let shift_tied = h.colour_shift_count() == (0, h.folds.len()) && !h.folds.is_empty();
@@ -239,12 +251,16 @@ pub fn fit_auto(
     if theta_l.len() >= 3 {
         let (judged, stride) = judged(samples);
         let parametric = leave_one_theta_l_out(&judged, &variants, camera)?;
+        let table = forms
+            .contains(&Form::TABLE)
+            .then(|| table_held_out(&judged, best_parametric(&parametric), camera));
         let mut parametric = parametric.into_iter();
+        let mut table = table.into_iter();
         let held: Vec<HeldOut> = forms
             .iter()
             .filter_map(|form| match form {
                 Form::Parametric(_) => parametric.next(),
-                Form::Table(_) => Some(table_held_out(&judged, camera)),
+                Form::Table(_) => table.next(),
             })
             .collect();
         let mut result = choose_held_out(samples, &held, camera)?;
