@@ -26,6 +26,7 @@
 
 pub mod budget;
 mod choice;
+pub mod colour_change;
 mod data;
 mod departure;
 mod error;
