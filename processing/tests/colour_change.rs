@@ -26,7 +26,11 @@ fn draw(rng: &mut Rng) -> (Params, f64) {
     let tint: [f64; 3] = std::array::from_fn(|_| 0.6 + 0.8 * rng.uniform());
     let m = 0.03 + 0.3 * rng.uniform();
     // One in four scans without noise, the others up to 4 %.
-    let noise = if rng.uniform() < 0.25 { 0.0 } else { 0.04 * rng.uniform() };
+    let noise = if rng.uniform() < 0.25 {
+        0.0
+    } else {
+        0.04 * rng.uniform()
+    };
     (Params::shared(kd, tint.map(|t| grey * t), m), noise)
 }
 
@@ -37,9 +41,22 @@ fn one_specular_colour_is_rarely_significant_and_never_reported() {
     let (mut significant, mut reported, mut tested) = (0, 0, 0);
     for _ in 0..SCANS {
         let (p, noise) = draw(&mut rng);
-        let noise = Noise { relative: noise, absolute: 0.0 };
-        let samples = scan(Model::CookTorrance, &p, &p.ks, &THETA_L, 0.5, noise, &mut rng);
-        let Some(test) = lobe_colour_change(&samples, &camera) else { continue };
+        let noise = Noise {
+            relative: noise,
+            absolute: 0.0,
+        };
+        let samples = scan(
+            Model::CookTorrance,
+            &p,
+            &p.ks,
+            &THETA_L,
+            0.5,
+            noise,
+            &mut rng,
+        );
+        let Some(test) = lobe_colour_change(&samples, &camera) else {
+            continue;
+        };
         tested += 1;
         significant += usize::from(test.p_value < LEVEL);
         reported += usize::from(test.changes);
@@ -58,7 +75,10 @@ fn a_specular_colour_that_changes_with_angle_is_reported() {
     let (mut reported, mut tested) = (0, 0);
     for _ in 0..SCANS {
         let (p, noise) = draw(&mut rng);
-        let noise = Noise { relative: noise, absolute: 0.0 };
+        let noise = Noise {
+            relative: noise,
+            absolute: 0.0,
+        };
         // At 90° the specular takes another hue: its channels' shares rotated.
         let ks_90 = [p.ks[1], p.ks[2], p.ks[0]];
         // The specular's u′v′ at the extreme θL (F linear in 1 − cos γ, γ = |θL|): only
@@ -71,8 +91,18 @@ fn a_specular_colour_that_changes_with_angle_is_reported() {
         if ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt() < 2.0 * MIN_UV_CHANGE {
             continue;
         }
-        let samples = scan(Model::CookTorranceFresnel, &p, &ks_90, &THETA_L, 0.5, noise, &mut rng);
-        let Some(test) = lobe_colour_change(&samples, &camera) else { continue };
+        let samples = scan(
+            Model::CookTorranceFresnel,
+            &p,
+            &ks_90,
+            &THETA_L,
+            0.5,
+            noise,
+            &mut rng,
+        );
+        let Some(test) = lobe_colour_change(&samples, &camera) else {
+            continue;
+        };
         tested += 1;
         reported += usize::from(test.changes);
     }

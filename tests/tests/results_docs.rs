@@ -64,9 +64,14 @@ fn copy_inputs(from: &Path, to: &Path) {
             }
         }
     }
-    let coverage = Path::new("docs/results/uncertainty/coverage.json");
-    if from.join(coverage).is_file() {
-        all.push(coverage.to_path_buf());
+    for output in [
+        "docs/results/uncertainty/coverage.json",
+        "docs/results/verdicts/verdicts.json",
+        "docs/results/verdicts/command.txt",
+    ] {
+        if from.join(output).is_file() {
+            all.push(PathBuf::from(output));
+        }
     }
     for file in all {
         let target = to.join(&file);

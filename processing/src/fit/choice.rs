@@ -449,11 +449,14 @@ fn lobe_words(l: &LobeColourChange, reported: bool) -> String {
     };
     let verdict = match (l.changes, reported) {
         (_, true) => ": a colour shift",
-        (true, false) => ", but no candidate predicts it at the unseen θL: no colour shift reported",
+        (true, false) => {
+            ", but no candidate predicts it at the unseen θL: no colour shift reported"
+        }
         (false, false) => ": no colour shift reported",
     };
     format!(
-        "; the lobe's u′v′ across {} θL moves by up to {:.4} (≥ {MIN_UV_CHANGE} needed), p = {:.3}          (< {} needed), {changes}{verdict}",
+        "; the lobe's u′v′ across {} θL moves by up to {:.4} (≥ {MIN_UV_CHANGE} needed), p = {:.3} \
+         (< {} needed), {changes}{verdict}",
         l.theta_l,
         l.size_uv,
         l.p_value,

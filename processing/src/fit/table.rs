@@ -504,7 +504,7 @@ mod tests {
             (mid[0] - expected).abs() < 1e-9 && (mid[1] - 20.0).abs() < 1e-9,
             "{mid:?}"
         );
-        // Beyond the measured θd and θh: the nearest column, its end point.
+        // Without a shape, beyond the measured θd and θh: the nearest column, its end point.
         assert_eq!(
             table.predict(1e3, 80.0, None),
             table.predict(1e3, 20.0, None)
