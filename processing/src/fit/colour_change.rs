@@ -2,10 +2,13 @@
 //! measured samples, which the colour-shift verdict of `--model auto` requires
 //! ([`super::choice`]).
 //!
-//! Per θL (its points with every channel known): the lobe ([`super::fold_score::lobe`]),
-//! the diffuse colour D (per channel the median of the points off the lobe), and per bin
-//! of [`BIN_DEG`] degrees of signed θh the **specular colour** S = Σ_bin∩lobe (β − D),
-//! whose u′v′ is the lobe's chromaticity there. A lobe's colour may change along θh (a
+//! Per θL (its points with every channel known): the lobe ([`super::fold_score::lobe`],
+//! taken as one interval of θh from its first point to its last, so that no point is in
+//! or out by its own noise), the diffuse colour D (per channel the median of the points
+//! off the lobe), and per bin of [`BIN_DEG`] degrees of signed θh the **specular colour**
+//! S = Σ_bin∩lobe (β − D), whose u′v′ is the lobe's chromaticity there (bins fainter than
+//! [`BRIGHT_BIN`] of the θL's brightest are left out: their chromaticity is too noisy for
+//! a linear propagation of its variance). A lobe's colour may change along θh (a
 //! film's highlight is one colour at its centre and another on its flanks) as well as
 //! with θd; the bins compare like with like: the same θh at every θL. A specular of one
 //! colour over any diffuse gives every bin of every θL the same u′v′ (what the lobe's
@@ -66,23 +69,40 @@ pub fn chi2_even_survival(x: f64, dof: usize) -> f64 {
     if x.is_nan() || x <= 0.0 {
         return 1.0;
     }
+    // In logarithms: the terms overflow where e^(−x/2) underflows.
     let half = x / 2.0;
-    let (mut term, mut sum) = (1.0, 1.0);
-    for i in 1..dof / 2 {
-        term *= half / i as f64;
-        sum += term;
-    }
-    (sum * (-half).exp()).clamp(0.0, 1.0)
+    let logs: Vec<f64> = (0..(dof / 2).max(1))
+        .scan(0.0, |log_term, i| {
+            if i > 0 {
+                *log_term += (half / i as f64).ln();
+            }
+            Some(*log_term)
+        })
+        .collect();
+    let top = logs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let sum: f64 = logs.iter().map(|l| (l - top).exp()).sum();
+    (top + sum.ln() - half).exp().clamp(0.0, 1.0)
 }
 
 /// Width (degrees of θh) of the bins the lobe's chromaticity is compared in across θL.
 pub const BIN_DEG: f64 = 2.0;
 
+/// A bin is compared only when its specular R + G + B is at least this fraction of the
+/// θL's brightest bin's.
+pub const BRIGHT_BIN: f64 = 0.2;
+
 /// One θL's specular colour per bin of θh, and its variance per channel, from its points
 /// (signed θh, β, noise σ), sorted by θh.
 fn specular_bins(points: &[(f64, [f64; 3], [f64; 3])]) -> Vec<(i64, [f64; 3], [f64; 3])> {
     let rgb: Vec<[f64; 3]> = points.iter().map(|p| p.1).collect();
-    let in_lobe = lobe(&rgb);
+    // The lobe as one interval of θh, from its first point to its last: a point is not
+    // in or out by its own noise (which would bias the colour of the lobe's edges).
+    let marked = lobe(&rgb);
+    let first = marked.iter().position(|&l| l);
+    let last = marked.iter().rposition(|&l| l);
+    let in_lobe: Vec<bool> = (0..points.len())
+        .map(|i| first.zip(last).is_some_and(|(a, b)| a <= i && i <= b))
+        .collect();
     let off: Vec<usize> = (0..points.len()).filter(|&i| !in_lobe[i]).collect();
     if off.is_empty() {
         return Vec::new();
@@ -108,7 +128,14 @@ fn specular_bins(points: &[(f64, [f64; 3], [f64; 3])]) -> Vec<(i64, [f64; 3], [f
             b.3 += 1.0;
         }
     }
+    // Bins fainter than BRIGHT_BIN of the brightest carry a chromaticity too noisy for
+    // the linear propagation of its variance.
+    let brightest = bins
+        .iter()
+        .map(|b| b.1.iter().sum::<f64>())
+        .fold(0.0, f64::max);
     bins.into_iter()
+        .filter(|b| b.1.iter().sum::<f64>() >= BRIGHT_BIN * brightest)
         .map(|(bin, s, var, n)| {
             (
                 bin,
@@ -337,5 +364,7 @@ mod tests {
         // dof 10 at its 1 % point, 23.209.
         assert!((chi2_even_survival(23.209, 10) - 0.01).abs() < 1e-4);
         assert_eq!(chi2_even_survival(0.0, 4), 1.0);
+        // Far in the tail: 0, not NaN.
+        assert_eq!(chi2_even_survival(1e12, 240), 0.0);
     }
 }
