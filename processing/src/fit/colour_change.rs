@@ -121,8 +121,8 @@ fn specular_bins(points: &[(f64, [f64; 3], [f64; 3])]) -> Vec<(i64, [f64; 3], [f
             bins.push((bin, [0.0; 3], [0.0; 3], 0.0));
         }
         if let Some(b) = bins.last_mut() {
-            for c in 0..3 {
-                b.1[c] += p.1[c] - diffuse[c];
+            for (c, d) in diffuse.iter().enumerate() {
+                b.1[c] += p.1[c] - d;
                 b.2[c] += p.2[c].powi(2);
             }
             b.3 += 1.0;
@@ -201,6 +201,9 @@ fn inverse(m: [[f64; 2]; 2]) -> Option<[[f64; 2]; 2]> {
     })
 }
 
+/// A point of a θL: signed θh, θd (degrees), β and its noise σ when extraction gave it.
+type ColumnPoint = (f64, f64, [f64; 3], Option<[f64; 3]>);
+
 /// One bin's chromaticity at one θL: θd (degrees), u′v′ and its covariance, and the
 /// bin's specular R + G + B.
 type Binned = (f64, [f64; 2], [[f64; 2]; 2], f64);
@@ -252,7 +255,7 @@ pub fn lobe_colour_change(samples: &[Sample], camera: &CameraModel) -> Option<Lo
     let mut bins: std::collections::BTreeMap<i64, Vec<Binned>> = Default::default();
     let mut with_lobe = 0;
     for t in distinct_theta_l(samples) {
-        let mut column: Vec<(f64, f64, [f64; 3], Option<[f64; 3]>)> = samples
+        let mut column: Vec<ColumnPoint> = samples
             .iter()
             .filter(|s| (s.theta_l - t).abs() <= THETA_L_TOLERANCE && !s.dropped.contains(&true))
             .map(|s| {

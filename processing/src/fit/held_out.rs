@@ -423,6 +423,9 @@ fn table_fold(
     score(theta_l, &held, &estimated, camera)
 }
 
+/// A fold scored with its fit's shape, or why it failed.
+type FoldOutcome = Result<(Fold, Shape), String>;
+
 /// Every variant judged at every θL of `samples` in turn, fits in parallel. Needs two
 /// θL at least (each fit sees the others).
 pub fn leave_one_theta_l_out(
@@ -440,7 +443,7 @@ pub fn leave_one_theta_l_out(
     let jobs: Vec<(usize, f64)> = (0..variants.len())
         .flat_map(|v| theta_l.iter().map(move |&t| (v, t)))
         .collect();
-    let outcomes: Vec<(usize, f64, Result<(Fold, Shape), String>)> = jobs
+    let outcomes: Vec<(usize, f64, FoldOutcome)> = jobs
         .par_iter()
         .map(|&(v, t)| (v, t, fold(samples, variants[v], t, camera)))
         .collect();
