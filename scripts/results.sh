@@ -12,10 +12,14 @@
 # The coverage of the uncertainty budget's expanded intervals comes from 600 emulated
 # scans whose setup departs from the stated one, and from 400 whose setup.json states no
 # uncertainty, so that gonio's defaults hold (tests/tests/budget_coverage.rs).
+# The verdicts of `--model auto` (colour shift reported or not, auto's held-out brightness
+# and colour against Cook–Torrance's) over a randomized family of emulated scans and, with
+# GONIO_RGL_DIR, the RGL files with several noise seeds (tests/tests/choice_family.rs).
 # One function per section; a new section adds its function and its call in main.
 # Usage: bash scripts/results.sh [SCENE...]   (default: gold red blue-green opal)
 #        bash scripts/results.sh --real-materials-only   (that section and the tables)
 #        bash scripts/results.sh --coverage-only         (that section and the tables)
+#        bash scripts/results.sh --verdicts-only         (that section and the tables)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -124,6 +128,19 @@ coverage_section() {
         expanded_intervals_hold_the_truth_on_the_default_uncertainties
 }
 
+# The verdicts of --model auto over 60 family scans and 3 noise seeds of each RGL file
+# (GONIO_CHOICE_SCANS, GONIO_CHOICE_SEEDS override them).
+verdicts_section() {
+    local out=docs/results/verdicts
+    mkdir -p "$out"
+    local scans=${GONIO_CHOICE_SCANS:-60} seeds=${GONIO_CHOICE_SEEDS:-3}
+    echo "== model choice verdicts: $scans family scans, $seeds seeds per RGL file"
+    echo "GONIO_CHOICE_SCANS=$scans GONIO_CHOICE_SEEDS=$seeds GONIO_RGL_DIR=${GONIO_RGL_DIR:+DIR} cargo test -p gonio-tests --test choice_family -- --nocapture" \
+        > "$out/command.txt"
+    GONIO_CHOICE_SCANS=$scans GONIO_CHOICE_SEEDS=$seeds GONIO_CHOICE_OUT="$PWD/$out/verdicts.json" \
+        cargo test --locked -p gonio-tests --test choice_family -- --nocapture
+}
+
 # The tables of docs/results/README.md and the README's summary, from the outputs.
 docs_section() {
     echo "== tables of docs/results/README.md and README.md"
@@ -133,6 +150,11 @@ docs_section() {
 main() {
     if [ "${1:-}" = --coverage-only ]; then
         coverage_section
+        docs_section
+        return
+    fi
+    if [ "${1:-}" = --verdicts-only ]; then
+        verdicts_section
         docs_section
         return
     fi
@@ -152,6 +174,7 @@ main() {
     done
     if [ "${1:-}" != --real-materials-only ]; then
         coverage_section
+        verdicts_section
     fi
     real_section
     docs_section

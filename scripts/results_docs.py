@@ -426,6 +426,99 @@ def coverage_table(name="coverage.json"):
         + f"\n\nAll parameters: {100 * hits / total:.1f} %."
     )
 
+def wilson(k, n):
+    """The 95 % Wilson interval of a rate k/n, in percent."""
+    if n == 0:
+        return "–"
+    z = 1.96
+    p = k / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * ((p * (1 - p) / n + z * z / (4 * n * n)) ** 0.5) / (1 + z * z / n)
+    return f"{100 * p:.0f} % ({k}/{n}; 95 % interval {100 * max(0, centre - half):.0f}–{100 * min(1, centre + half):.0f} %)"
+
+
+def ratio(f, key):
+    a, c = f.get(f"{key}_auto"), f.get(f"{key}_cook_torrance")
+    return None if a is None or c is None or c <= 0 else a / c
+
+
+def verdicts_table():
+    """The colour-shift verdict's false-alarm and detection rates and auto's held-out
+    brightness (mean ΔErr_p over R, G, B, all points of the unseen θL) and colour against
+    Cook–Torrance's, over the randomized family and per RGL material."""
+    path = RESULTS / "verdicts" / "verdicts.json"
+    if not path.is_file():
+        return "*Not run*: `bash scripts/results.sh --verdicts-only` writes this table."
+    report = read_json(path)
+    command = (RESULTS / "verdicts" / "command.txt").read_text(encoding="utf-8").strip()
+    family = report["family"]
+    text = f"Command: `{command}`.\n\n"
+    if family:
+        n = len(family)
+        shifts = sum(1 for f in family if f["colour_shift"])
+        noisy = [f for f in family if f["drawn"]["noise"] > 0 and f["lobe_colour_change"]]
+        significant = sum(1 for f in noisy if f["lobe_colour_change"]["p_value"] < 0.01)
+        saturated = [re.search(r"R/G/B: (\d+)/(\d+)/(\d+) saturated", f["dropped"]) for f in family]
+        clipped = sum(1 for m in saturated if m and any(int(x) > 0 for x in m.groups()))
+        ratios = sorted(r for r in (ratio(f, "err_p") for f in family) if r is not None)
+        over = sum(1 for r in ratios if r > 1.05)
+        noise_free = sum(1 for f in family if f["drawn"]["noise"] == 0)
+        rows = [
+            ["scans (noise-free; with a clipped channel)", f"{n} ({noise_free}; {clipped})"],
+            ["colour shift reported (target ≤ 5 %)", wilson(shifts, n)],
+            [
+                "lobe chromaticity test significant, scans with noise (p < 0.01; stated false-alarm rate 1 %)",
+                wilson(significant, len(noisy)),
+            ],
+            ["auto's / Cook–Torrance's brightness error: median, largest", f"{ratios[len(ratios) // 2]:.3f}, {ratios[-1]:.3f}"],
+            ["scans where it exceeds 1.05 (target: none)", f"{over} of {len(ratios)}"],
+        ]
+        chosen = {}
+        for f in family:
+            chosen[f["chosen"]] = chosen.get(f["chosen"], 0) + 1
+        rows.append(["auto's choice", ", ".join(f"{k} {v}" for k, v in sorted(chosen.items()))])
+        text += "**Family** (one specular colour; extraction's dropped channels in the outputs):\n\n"
+        text += table(["", "value"], rows) + "\n\n"
+    rgl = report["rgl"]
+    if not rgl:
+        return text + "*RGL part skipped*: `GONIO_RGL_DIR` was not set."
+    rows = []
+    for name in sorted({r["material"] for r in rgl}):
+        runs = [r for r in rgl if r["material"] == name]
+        k = sum(1 for r in runs if r["colour_shift"])
+        sizes = [r["lobe_colour_change"]["size_uv"] for r in runs if r["lobe_colour_change"]]
+        bright = [x for x in (ratio(r, "err_p") for r in runs) if x is not None]
+        colour = [x for x in (ratio(r, "delta_e_uv") for r in runs) if x is not None]
+        worst = max(bright) if bright else None
+        if name.startswith("cc_"):
+            ok = k == len(runs) and colour and max(colour) <= 0.5 and worst is not None and worst <= 1.05
+            target = "shift, colour ≤ 0.5×, brightness ≤ 1.05×: " + ("yes" if ok else "no")
+        else:
+            target = "brightness ≤ 1.05×: " + ("yes" if worst is not None and worst <= 1.05 else "no")
+        rows.append(
+            [
+                name,
+                f"{k}/{len(runs)}",
+                ", ".join(f"{x:.4f}" for x in sizes) or "–",
+                "–" if worst is None else f"{worst:.3f}",
+                "–" if not colour else f"{max(colour):.3f}",
+                ", ".join(sorted({r["chosen"] for r in runs})),
+                target,
+            ]
+        )
+    return text + "**RGL-EPFL files**, each with several noise seeds:\n\n" + table(
+        [
+            "material",
+            "colour shift reported",
+            "lobe's largest Δu′v′ across θL",
+            "auto / Cook–Torrance brightness error (largest)",
+            "auto / Cook–Torrance ΔE_u′v′ (largest)",
+            "auto's choice",
+            "target",
+        ],
+        rows,
+    )
+
 
 # Block name → (document, function).
 SECTIONS = {
@@ -435,6 +528,7 @@ SECTIONS = {
     "real-materials": ("results", real_materials_table),
     "coverage": ("results", coverage_table),
     "coverage-defaults": ("results", lambda: coverage_table("coverage-defaults.json")),
+    "verdicts": ("results", verdicts_table),
     "summary": ("readme", summary_table),
 }
 

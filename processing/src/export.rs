@@ -24,8 +24,8 @@
 //!   which no Mitsuba 3 conductor parameter expresses: tabulate it instead.
 //! - A fit that predicts with a measured table (`FitResult::table`) is refused too: its
 //!   parametric fields are only its best parametric fit. Tabulated, the grid holds the
-//!   table's predictions: measured between the θL of the scan, and beyond them constant
-//!   (the nearest θL's column in θd, a column's end point in θh; see `fit::table`).
+//!   table's predictions: measured between the θL of the scan, and beyond them the best
+//!   parametric model's shape scaled to the table at its edge (see `fit::table`).
 
 use std::f64::consts::PI;
 use std::fmt::Write as _;

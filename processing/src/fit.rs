@@ -27,9 +27,11 @@
 pub mod agreement;
 pub mod budget;
 mod choice;
+pub mod colour_change;
 mod data;
 mod departure;
 mod error;
+pub mod fold_score;
 pub mod held_out;
 mod linear;
 mod nelder_mead;
@@ -50,11 +52,11 @@ use crate::metrics;
 use crate::samples::distinct_theta_l;
 use crate::samples::Sample;
 use data::{Data, Found};
-use table::Table;
+use table::{Shape, Table};
 
 pub use choice::{
-    choose_held_out, fit_auto, specular_uv_change, Candidate, Criterion, Selection,
-    COLOUR_SHIFT_GAIN,
+    best_parametric, choose_held_out, fit_auto, specular_uv_change, Candidate, Criterion,
+    Selection, COLOUR_SHIFT_GAIN,
 };
 pub use data::fits_colour_shift;
 pub use error::FitError;
@@ -178,6 +180,15 @@ impl FitResult {
         self.ks_90.unwrap_or(self.ks)
     }
 
+    /// The fit's model and coefficients as the shape a table predicts relative to.
+    pub fn shape(&self) -> Shape {
+        Shape {
+            model: self.model,
+            params: self.params(),
+            ks_90: self.specular_90(),
+        }
+    }
+
     /// β the fit predicts at in-plane (θi, θr) in degrees.
     pub fn predict(&self, theta_i_deg: f64, theta_r_deg: f64) -> [f64; 3] {
         self.predict_at(
@@ -195,7 +206,7 @@ impl FitResult {
     /// (θi ≥ θr) of the specular peak: the table's when it has one, else the model's.
     fn predict_at(&self, cosines: &Cosines, side: bool) -> [f64; 3] {
         match &self.table {
-            Some(table) => table.predict_at(cosines, side),
+            Some(table) => table.predict_at(cosines, side, Some(&self.shape())),
             None => self
                 .model
                 .basis_at(cosines)
@@ -355,18 +366,23 @@ pub fn fit(samples: &[Sample], options: &FitOptions) -> Result<FitResult, FitErr
 }
 
 /// The table of `samples` ([`table`]) with `options`' parametric fit of the same
-/// samples for its parametric fields. With three θL or more its chromaticity window is
-/// the one that predicts unseen θL best ([`held_out::table_held_out`], ΔE_u′v′ through
-/// `camera`); with fewer, none.
+/// samples for its parametric fields, the shape it predicts relative to. With three θL
+/// or more its chromaticity window is the one that predicts unseen θL best
+/// ([`held_out::table_held_out`], ΔE_u′v′ through `camera`, each θL relative to the same
+/// model fitted without it); with fewer, none.
 pub fn fit_table(
     samples: &[Sample],
     options: &FitOptions,
     camera: &CameraModel,
 ) -> Result<FitResult, FitError> {
     let mut result = fit(samples, options)?;
-    let judged = (distinct_theta_l(samples).len() >= 3)
-        .then(|| held_out::table_held_out(samples, camera).table)
-        .flatten();
+    let judged = if distinct_theta_l(samples).len() >= 3 {
+        let variant = Variant::new(options.model, options.roughness);
+        let base = leave_one_theta_l_out(samples, &[variant], camera)?;
+        held_out::table_held_out(samples, base.first(), camera).table
+    } else {
+        None
+    };
     result.table = Some(match judged {
         Some(table) => table,
         None => Table::new(samples, 0.0)?,

@@ -64,10 +64,14 @@ fn copy_inputs(from: &Path, to: &Path) {
             }
         }
     }
-    for coverage in ["coverage.json", "coverage-defaults.json"] {
-        let coverage = Path::new("docs/results/uncertainty").join(coverage);
-        if from.join(&coverage).is_file() {
-            all.push(coverage);
+    for output in [
+        "docs/results/uncertainty/coverage.json",
+        "docs/results/uncertainty/coverage-defaults.json",
+        "docs/results/verdicts/verdicts.json",
+        "docs/results/verdicts/command.txt",
+    ] {
+        if from.join(output).is_file() {
+            all.push(PathBuf::from(output));
         }
     }
     for file in all {

@@ -177,8 +177,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(table) = &result.table {
         let columns = table.columns();
         println!(
-            "predicts with the table of {} θL ({} β values, θd {:.1}°…{:.1}°); beyond them the \
-             nearest θL, beyond a θL's θh its end point; the parametric fields below are {}'s",
+            "predicts with the table of {} θL ({} β values, θd {:.1}°…{:.1}°) relative to the \
+             shape of {}, the parametric fields below; beyond the measured θh and θd, that \
+             shape scaled to the table at its edge",
             columns.len(),
             table.values(),
             columns.first().map_or(0.0, |c| c.theta_d),

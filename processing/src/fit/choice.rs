@@ -43,6 +43,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::colour_change::{lobe_colour_change, LobeColourChange, MIN_UV_CHANGE};
 use super::held_out::{leave_one_theta_l_out, table_held_out, Form, HeldOut};
 use super::stride::judged;
 use super::table::Table;
@@ -108,6 +109,11 @@ pub struct Selection {
     pub chosen: usize,
     /// Whether a colour shift is reported (see the module's rule).
     pub colour_shift: bool,
+    /// The model-free test of the lobe's chromaticity across θL
+    /// ([`super::colour_change`]), which a reported colour shift requires; `None` when
+    /// the choice was not made on held-out θL or no two θL have a lobe.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lobe_colour_change: Option<LobeColourChange>,
     /// The best held-out ΔE_u′v′ over the lobe of the candidates without a colour shift
     /// over the chosen one's; `None` when undefined (or the choice was by BIC).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -192,6 +198,18 @@ fn best(scores: &[Option<f64>], colours: &[Option<f64>]) -> Option<usize> {
     chosen
 }
 
+/// The best parametric variant of `held` by the choice's rule ([`best`]): the shape a
+/// table judged beside them predicts relative to.
+pub fn best_parametric(held: &[HeldOut]) -> Option<&HeldOut> {
+    let candidates: Vec<Candidate> = held.iter().map(|h| held_out_candidate(h, 0)).collect();
+    let scores: Vec<Option<f64>> = candidates
+        .iter()
+        .map(|c| c.score.filter(|_| c.form.variant().is_some()))
+        .collect();
+    let colours: Vec<Option<f64>> = candidates.iter().map(|c| c.held_out_delta_e_uv).collect();
+    best(&scores, &colours).map(|i| &held[i])
+}
+
 /// The scores of `h`; `table_values`: the stored values of the table of every θL.
 fn held_out_candidate(h: &HeldOut, table_values: usize) -> Candidate {
     let shift_tied = h.colour_shift_count() == (0, h.folds.len()) && !h.folds.is_empty();
@@ -239,12 +257,16 @@ pub fn fit_auto(
     if theta_l.len() >= 3 {
         let (judged, stride) = judged(samples);
         let parametric = leave_one_theta_l_out(&judged, &variants, camera)?;
+        let table = forms
+            .contains(&Form::TABLE)
+            .then(|| table_held_out(&judged, best_parametric(&parametric), camera));
         let mut parametric = parametric.into_iter();
+        let mut table = table.into_iter();
         let held: Vec<HeldOut> = forms
             .iter()
             .filter_map(|form| match form {
                 Form::Parametric(_) => parametric.next(),
-                Form::Table(_) => Some(table_held_out(&judged, camera)),
+                Form::Table(_) => table.next(),
             })
             .collect();
         let mut result = choose_held_out(samples, &held, camera)?;
@@ -366,10 +388,14 @@ fn choose(
     }
     let change = specular_uv_change(&result, &theta_l, camera).filter(|_| !tabulated);
     let gain = chromatic_gain(&candidates, chosen);
+    let lobe_change = (criterion == Criterion::LeaveOneThetaLOut)
+        .then(|| lobe_colour_change(samples, camera))
+        .flatten();
     let colour_shift = criterion == Criterion::LeaveOneThetaLOut
         && (tabulated || result.colour_shift.is_some_and(|c| c.fitted))
-        && gain.is_some_and(|g| g >= COLOUR_SHIFT_GAIN);
-    let reason = reason(
+        && gain.is_some_and(|g| g >= COLOUR_SHIFT_GAIN)
+        && lobe_change.as_ref().is_some_and(|l| l.changes);
+    let mut reason = reason(
         criterion,
         &candidates,
         chosen,
@@ -378,11 +404,15 @@ fn choose(
         gain,
         change,
     );
+    if let Some(l) = &lobe_change {
+        reason.push_str(&lobe_words(l, colour_shift));
+    }
     result.selection = Some(Selection {
         criterion,
         candidates,
         chosen,
         colour_shift,
+        lobe_colour_change: lobe_change,
         chromatic_gain: gain,
         specular_uv_change: change,
         judged_stride: None,
@@ -406,6 +436,32 @@ fn chromatic_gain(candidates: &[Candidate], chosen: usize) -> Option<f64> {
         .chain(candidates[chosen].held_out_delta_e_uv_lobe_one_specular_colour)
         .fold(f64::INFINITY, f64::min);
     (others.is_finite() && own > 0.0).then(|| others / own)
+}
+
+/// The lobe's chromaticity test in words.
+fn lobe_words(l: &LobeColourChange, reported: bool) -> String {
+    let changes = if l.changes {
+        "a change"
+    } else if l.size_uv < MIN_UV_CHANGE {
+        "below the smallest change reported"
+    } else {
+        "not significant given the noise"
+    };
+    let verdict = match (l.changes, reported) {
+        (_, true) => ": a colour shift",
+        (true, false) => {
+            ", but no candidate predicts it at the unseen θL: no colour shift reported"
+        }
+        (false, false) => ": no colour shift reported",
+    };
+    format!(
+        "; the lobe's u′v′ across {} θL moves by up to {:.4} (≥ {MIN_UV_CHANGE} needed), p = {:.3} \
+         (< {} needed), {changes}{verdict}",
+        l.theta_l,
+        l.size_uv,
+        l.p_value,
+        super::colour_change::LEVEL
+    )
 }
 
 /// The choice in words: the winner's score against the runner-up's, and the colour
@@ -476,7 +532,7 @@ fn reason(
             Some(g) if g >= COLOUR_SHIFT_GAIN => format!(
                 "; it predicts the unseen highlight's chromaticity {g:.2}× better than any \
                  model without a shift and than itself with one specular colour \
-                 (≥ {COLOUR_SHIFT_GAIN}×): a colour shift"
+                 (≥ {COLOUR_SHIFT_GAIN}×)"
             ),
             Some(g) => format!(
                 "; it predicts the unseen highlight's chromaticity only {g:.2}× better than a \
@@ -495,7 +551,7 @@ fn reason(
             (Some(true), Some(g), Criterion::LeaveOneThetaLOut) if g >= COLOUR_SHIFT_GAIN => {
                 format!(
                     "; it predicts the unseen highlight's chromaticity {g:.2}× better than any \
-                     model without a shift (≥ {COLOUR_SHIFT_GAIN}×){uv}: a colour shift"
+                     model without a shift (≥ {COLOUR_SHIFT_GAIN}×){uv}"
                 )
             }
             (Some(true), Some(g), Criterion::LeaveOneThetaLOut) => format!(

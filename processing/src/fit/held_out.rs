@@ -6,21 +6,23 @@
 //!   RGB → XYZ matrix), over all of the θL's points and over its specular lobe
 //!   ([`lobe`]).
 //!
-//! Only points whose three channels are known are scored (a dropped value has no
-//! chromaticity).
+//! Every point of the θL is scored with the channels it has ([`super::fold_score`]): a
+//! dropped channel is missing, its point is not.
 //!
 //! The table in (θh, θd) ([`super::table`]) is judged the same way: each θL predicted
-//! from the columns of the others ([`table_held_out`]).
+//! from the columns of the others ([`table_held_out`]), relative to the shape of the best
+//! parametric candidate fitted without that θL.
 
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use super::fold_score::score;
+pub use super::fold_score::{errors, lobe, Errors, Fold, LOBE_FRACTION};
 use super::linear::nnls2;
-use super::table::{Table, CHROMATICITY_WINDOWS};
+use super::table::{Shape, Table, CHROMATICITY_WINDOWS};
 use super::{fit, FitError, FitOptions};
 use crate::brdf::{Model, Roughness};
 use crate::color::CameraModel;
-use crate::metrics::{self, MetricsError};
 use crate::samples::{distinct_theta_l, Sample, THETA_L_TOLERANCE};
 
 /// A model with its roughness form: one candidate of a comparison.
@@ -119,65 +121,6 @@ pub const AUTO_CANDIDATES: [Form; 7] = [
     Form::TABLE,
 ];
 
-/// A point of a θL is in its specular lobe when its excess over the θL's darkest point,
-/// in R + G + B, is at least this fraction of the θL's largest excess.
-pub const LOBE_FRACTION: f64 = 0.1;
-
-/// Errors of predictions against measured (or reference) values on a set of points.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Errors {
-    /// Number of points.
-    pub points: usize,
-    /// ΔErr_p (eq. 11) per channel.
-    pub err_p: [f64; 3],
-    /// Mean ΔE_u′v′ (eq. 13) over the points with a defined chromaticity; `None` if none.
-    pub delta_e_uv: Option<f64>,
-}
-
-/// ΔErr_p per channel and mean ΔE_u′v′ of `estimated` (camera RGB) against `measured`
-/// (camera RGB, and its XYZ `measured_xyz`), paired by index.
-pub fn errors(
-    measured: &[[f64; 3]],
-    measured_xyz: &[[f64; 3]],
-    estimated: &[[f64; 3]],
-    camera: &CameraModel,
-) -> Result<Errors, MetricsError> {
-    let err_p = metrics::err_p(measured, estimated)?;
-    let estimated_xyz: Vec<[f64; 3]> = estimated.iter().map(|&rgb| camera.xyz(rgb)).collect();
-    Ok(Errors {
-        points: measured.len(),
-        err_p,
-        delta_e_uv: metrics::delta_e_uv(measured_xyz, &estimated_xyz).ok(),
-    })
-}
-
-/// Which of `rgb` (one θL's measured values) are in its specular lobe ([`LOBE_FRACTION`]).
-pub fn lobe(rgb: &[[f64; 3]]) -> Vec<bool> {
-    let sum = |v: &[f64; 3]| v[0] + v[1] + v[2];
-    let floor = rgb.iter().map(sum).fold(f64::INFINITY, f64::min);
-    let peak = rgb.iter().map(|v| sum(v) - floor).fold(0.0, f64::max);
-    rgb.iter()
-        .map(|v| peak > 0.0 && sum(v) - floor >= LOBE_FRACTION * peak)
-        .collect()
-}
-
-/// The scores of one fit at the θL it left out.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Fold {
-    /// The θL left out.
-    pub theta_l: f64,
-    /// Eq. 10 loss of the prediction at its points.
-    pub loss: f64,
-    /// Σ_p ‖β_p‖ at its points: the loss of predicting 0.
-    pub scale: f64,
-    /// Errors over all of its points and over its specular lobe.
-    pub all: Errors,
-    pub lobe: Option<Errors>,
-    /// Whether the fit kept a colour shift (Cook–Torrance–Fresnel only).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub colour_shift: Option<bool>,
-}
-
 /// A variant (or the table) judged at every θL in turn.
 #[derive(Debug, Clone, PartialEq)]
 pub struct HeldOut {
@@ -192,6 +135,9 @@ pub struct HeldOut {
     /// The table's form only: the median held-out ΔE_u′v′ over the specular lobe of the
     /// same table with a specular of one colour ([`one_specular_colour_lobe_uv`]).
     pub one_specular_colour_lobe_uv: Option<f64>,
+    /// A parametric variant only: per θL left out, the shape ([`Shape`]) of its fit to the
+    /// other θL, which a table judged beside it predicts relative to.
+    pub shapes: Vec<(f64, Shape)>,
 }
 
 /// The median of `values` (mean of the middle two for an even count); `None` if empty.
@@ -243,6 +189,14 @@ impl HeldOut {
         Some([channel(0)?, channel(1)?, channel(2)?])
     }
 
+    /// The shape of the fit without θL `theta_l`.
+    pub fn shape_without(&self, theta_l: f64) -> Option<&Shape> {
+        self.shapes
+            .iter()
+            .find(|(t, _)| (t - theta_l).abs() <= THETA_L_TOLERANCE)
+            .map(|(_, s)| s)
+    }
+
     /// Folds whose fit kept a colour shift, of those that could.
     pub fn colour_shift_count(&self) -> (usize, usize) {
         let tested: Vec<bool> = self.folds.iter().filter_map(|f| f.colour_shift).collect();
@@ -259,13 +213,13 @@ fn split(samples: &[Sample], theta_l: f64, held: bool) -> Vec<Sample> {
         .collect()
 }
 
-/// Fits `variant` without θL `theta_l` and scores it there.
+/// Fits `variant` without θL `theta_l` and scores it there; the fit's shape beside.
 fn fold(
     samples: &[Sample],
     variant: Variant,
     theta_l: f64,
     camera: &CameraModel,
-) -> Result<Fold, String> {
+) -> Result<(Fold, Shape), String> {
     let mut options = variant.options();
     options.uncertainty = false;
     let fitted = fit(&split(samples, theta_l, false), &options).map_err(|e| e.to_string())?;
@@ -273,77 +227,33 @@ fn fold(
     let estimated: Vec<[f64; 3]> = held.iter().map(|s| fitted.predict_sample(s)).collect();
     let mut scored = score(theta_l, &held, &estimated, camera)?;
     scored.colour_shift = fitted.colour_shift.map(|c| c.fitted);
-    Ok(scored)
+    Ok((scored, fitted.shape()))
 }
 
-/// The samples of θL `theta_l` whose three channels are known.
+/// The samples of θL `theta_l` with a channel known.
 fn known(samples: &[Sample], theta_l: f64) -> Result<Vec<Sample>, String> {
     let held: Vec<Sample> = split(samples, theta_l, true)
         .into_iter()
-        .filter(|s| !s.dropped.contains(&true))
+        .filter(|s| s.dropped.contains(&false))
         .collect();
     if held.is_empty() {
-        return Err(format!(
-            "θL {theta_l} has no point with every channel known"
-        ));
+        return Err(format!("θL {theta_l} has no point with a channel known"));
     }
     Ok(held)
-}
-
-/// The fold of θL `theta_l`: `estimated` scored against the samples `held`.
-fn score(
-    theta_l: f64,
-    held: &[Sample],
-    estimated: &[[f64; 3]],
-    camera: &CameraModel,
-) -> Result<Fold, String> {
-    let measured: Vec<[f64; 3]> = held.iter().map(|s| s.rgb).collect();
-    let measured_xyz: Vec<[f64; 3]> = measured.iter().map(|&v| camera.xyz(v)).collect();
-    let all = errors(&measured, &measured_xyz, estimated, camera).map_err(|e| e.to_string())?;
-    let in_lobe = lobe(&measured);
-    let pick = |values: &[[f64; 3]]| -> Vec<[f64; 3]> {
-        values
-            .iter()
-            .zip(&in_lobe)
-            .filter(|(_, &l)| l)
-            .map(|(v, _)| *v)
-            .collect()
-    };
-    let lobe_errors = errors(
-        &pick(&measured),
-        &pick(&measured_xyz),
-        &pick(estimated),
-        camera,
-    )
-    .ok();
-    let loss = metrics::loss(&measured, estimated).map_err(|e| e.to_string())?;
-    let scale = measured
-        .iter()
-        .map(|v| metrics::point_loss(v, &[0.0; 3]))
-        .sum();
-    if !loss.is_finite() {
-        return Err(FitError::Overflow("held-out loss").to_string());
-    }
-    Ok(Fold {
-        theta_l,
-        loss,
-        scale,
-        all,
-        lobe: lobe_errors,
-        colour_shift: None,
-    })
 }
 
 /// The table judged like a model: each θL predicted from the table of the others'
 /// columns ([`Table::without`]), for each chromaticity window of
 /// [`CHROMATICITY_WINDOWS`]; the window kept is the one with the lowest median held-out
-/// ΔE_u′v′ over all points (the narrowest on a tie). The model-free bound of a model's
-/// held-out error: no model reaches below what its own data interpolate to, except by
-/// extrapolating better beyond the measured θd.
-pub fn table_held_out(samples: &[Sample], camera: &CameraModel) -> HeldOut {
+/// ΔE_u′v′ over all points (the narrowest on a tie). Each θL is predicted relative to the
+/// shape of `base`'s fit without it (the best parametric candidate's; none: relative to
+/// nothing, [`super::table`]). The model-free bound of a model's held-out error: no
+/// model reaches below what its own data interpolate to, except by extrapolating better
+/// beyond the measured θd.
+pub fn table_held_out(samples: &[Sample], base: Option<&HeldOut>, camera: &CameraModel) -> HeldOut {
     let mut best: Option<(f64, HeldOut)> = None;
     for window in CHROMATICITY_WINDOWS {
-        let held = table_folds(samples, window, camera);
+        let held = table_folds(samples, window, base, camera);
         let uv = held.median_delta_e_uv(false).unwrap_or(f64::INFINITY);
         if best.as_ref().is_none_or(|(b, _)| uv < *b) {
             best = Some((uv, held));
@@ -351,12 +261,12 @@ pub fn table_held_out(samples: &[Sample], camera: &CameraModel) -> HeldOut {
     }
     let mut held = match best {
         Some((_, held)) => held,
-        None => table_folds(samples, 0.0, camera),
+        None => table_folds(samples, 0.0, base, camera),
     };
     held.one_specular_colour_lobe_uv = held
         .table
         .as_ref()
-        .and_then(|table| one_specular_colour_lobe_uv(samples, table, camera));
+        .and_then(|table| one_specular_colour_lobe_uv(samples, table, base, camera));
     held
 }
 
@@ -367,10 +277,12 @@ pub fn table_held_out(samples: &[Sample], camera: &CameraModel) -> HeldOut {
 /// colour it has at each θd, but not a specular colour that changes: where the highlight
 /// changes colour with angle the full table predicts its chromaticity better; where it
 /// does not (a dielectric's colourless specular over a coloured diffuse) both predict
-/// alike. `None` when no fold could be scored.
+/// alike. Predicted relative to `base`'s shapes as [`table_held_out`]. `None` when no fold
+/// could be scored.
 pub fn one_specular_colour_lobe_uv(
     samples: &[Sample],
     table: &Table,
+    base: Option<&HeldOut>,
     camera: &CameraModel,
 ) -> Option<f64> {
     let folds: Vec<f64> = distinct_theta_l(samples)
@@ -378,7 +290,11 @@ pub fn one_specular_colour_lobe_uv(
         .filter_map(|&t| {
             let held = known(samples, t).ok()?;
             let others = one_specular_colour(&table.without(t)?);
-            let estimated: Vec<[f64; 3]> = held.iter().map(|s| others.predict_sample(s)).collect();
+            let shape = base.and_then(|b| b.shape_without(t));
+            let estimated: Vec<[f64; 3]> = held
+                .iter()
+                .map(|s| others.predict_sample(s, shape))
+                .collect();
             score(t, &held, &estimated, camera).ok()?.lobe?.delta_e_uv
         })
         .collect();
@@ -389,14 +305,17 @@ pub fn one_specular_colour_lobe_uv(
 /// a·D + b·S (a, b ≥ 0, least squares) of its column's diffuse colour D (the median of
 /// the column's points off its lobe, [`lobe`]; of all its points where every one is on
 /// it) and one specular colour S shared by every column (the sum over their lobes of what
-/// rises above D, each channel clipped at 0).
+/// rises above D, each channel clipped at 0). Only points with every channel known enter
+/// D and S; a point missing a channel is kept as it is (its known channels leave a and b
+/// free: any mix fits them).
 fn one_specular_colour(table: &Table) -> Table {
     let rgb = |p: &[f64; 4]| [p[1], p[2], p[3]];
+    let complete = |p: &&[f64; 4]| p.iter().all(|v| v.is_finite());
     let parts: Vec<([f64; 3], Vec<bool>)> = table
         .columns()
         .iter()
         .map(|column| {
-            let values: Vec<[f64; 3]> = column.points.iter().map(rgb).collect();
+            let values: Vec<[f64; 3]> = column.points.iter().filter(complete).map(rgb).collect();
             let in_lobe = lobe(&values);
             let off: Vec<&[f64; 3]> = values
                 .iter()
@@ -417,7 +336,8 @@ fn one_specular_colour(table: &Table) -> Table {
         .collect();
     let mut specular = [0.0; 3];
     for (column, (diffuse, in_lobe)) in table.columns().iter().zip(&parts) {
-        for (p, _) in column.points.iter().zip(in_lobe).filter(|(_, &l)| l) {
+        let points = column.points.iter().filter(complete);
+        for (p, _) in points.zip(in_lobe).filter(|(_, &l)| l) {
             for c in 0..3 {
                 specular[c] += (p[c + 1] - diffuse[c]).max(0.0);
             }
@@ -429,7 +349,13 @@ fn one_specular_colour(table: &Table) -> Table {
         column
             .points
             .iter()
-            .map(|p| two_colours(&rgb(p), &diffuse, &specular))
+            .map(|p| {
+                if complete(&p) {
+                    two_colours(&rgb(p), &diffuse, &specular)
+                } else {
+                    rgb(p)
+                }
+            })
             .collect()
     })
 }
@@ -442,19 +368,31 @@ fn two_colours(y: &[f64; 3], d: &[f64; 3], s: &[f64; 3]) -> [f64; 3] {
 }
 
 /// The table of `samples` with chromaticity window `window`, each θL predicted from the
-/// others' columns.
-fn table_folds(samples: &[Sample], window: f64, camera: &CameraModel) -> HeldOut {
+/// others' columns relative to `base`'s shape without it.
+fn table_folds(
+    samples: &[Sample],
+    window: f64,
+    base: Option<&HeldOut>,
+    camera: &CameraModel,
+) -> HeldOut {
     let mut held = HeldOut {
         form: Form::TABLE,
         folds: Vec::new(),
         failed: Vec::new(),
         table: None,
         one_specular_colour_lobe_uv: None,
+        shapes: Vec::new(),
     };
     let table = Table::new(samples, window).map_err(|e| e.to_string());
     for t in distinct_theta_l(samples) {
         let outcome = match &table {
-            Ok(table) => table_fold(samples, table, t, camera),
+            Ok(table) => table_fold(
+                samples,
+                table,
+                t,
+                base.and_then(|b| b.shape_without(t)),
+                camera,
+            ),
             Err(e) => Err(e.clone()),
         };
         match outcome {
@@ -466,20 +404,27 @@ fn table_folds(samples: &[Sample], window: f64, camera: &CameraModel) -> HeldOut
     held
 }
 
-/// The table of every other θL than `theta_l` scored at its samples.
+/// The table of every other θL than `theta_l` scored at its samples, relative to `shape`.
 fn table_fold(
     samples: &[Sample],
     table: &Table,
     theta_l: f64,
+    shape: Option<&Shape>,
     camera: &CameraModel,
 ) -> Result<Fold, String> {
     let held = known(samples, theta_l)?;
     let others = table
         .without(theta_l)
         .ok_or_else(|| "no other θL to interpolate".to_string())?;
-    let estimated: Vec<[f64; 3]> = held.iter().map(|s| others.predict_sample(s)).collect();
+    let estimated: Vec<[f64; 3]> = held
+        .iter()
+        .map(|s| others.predict_sample(s, shape))
+        .collect();
     score(theta_l, &held, &estimated, camera)
 }
+
+/// A fold scored with its fit's shape, or why it failed.
+type FoldOutcome = Result<(Fold, Shape), String>;
 
 /// Every variant judged at every θL of `samples` in turn, fits in parallel. Needs two
 /// θL at least (each fit sees the others).
@@ -498,7 +443,7 @@ pub fn leave_one_theta_l_out(
     let jobs: Vec<(usize, f64)> = (0..variants.len())
         .flat_map(|v| theta_l.iter().map(move |&t| (v, t)))
         .collect();
-    let outcomes: Vec<(usize, f64, Result<Fold, String>)> = jobs
+    let outcomes: Vec<(usize, f64, FoldOutcome)> = jobs
         .par_iter()
         .map(|&(v, t)| (v, t, fold(samples, variants[v], t, camera)))
         .collect();
@@ -512,10 +457,14 @@ pub fn leave_one_theta_l_out(
                 failed: Vec::new(),
                 table: None,
                 one_specular_colour_lobe_uv: None,
+                shapes: Vec::new(),
             };
             for (_, t, outcome) in outcomes.iter().filter(|(w, _, _)| *w == v) {
                 match outcome {
-                    Ok(f) => held.folds.push(f.clone()),
+                    Ok((f, shape)) => {
+                        held.folds.push(f.clone());
+                        held.shapes.push((*t, *shape));
+                    }
                     Err(e) => held.failed.push((*t, e.clone())),
                 }
             }
@@ -527,20 +476,6 @@ pub fn leave_one_theta_l_out(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn the_lobe_is_what_rises_a_tenth_of_the_peak_above_the_floor() {
-        let rgb = [
-            [1.0; 3],
-            [1.2, 1.2, 1.2],
-            [1.4, 1.4, 1.4],
-            [11.0, 11.0, 11.0],
-        ];
-        // Excesses 0, 0.6, 1.2, 30 (R + G + B): the threshold is 3.
-        assert_eq!(lobe(&rgb), [false, false, false, true]);
-        // A flat θL has no lobe.
-        assert_eq!(lobe(&[[2.0; 3]; 3]), [false; 3]);
-    }
 
     #[test]
     fn the_table_predicts_a_brdf_of_the_half_angle_alone() {
@@ -560,7 +495,7 @@ mod tests {
                 samples.push(Sample::in_plane(theta_l, theta_i, theta_r, beta(h)));
             }
         }
-        let held = table_held_out(&samples, &CameraModel::builtin());
+        let held = table_held_out(&samples, None, &CameraModel::builtin());
         assert_eq!((held.folds.len(), held.failed.len()), (6, 0));
         for fold in held.folds {
             assert!(fold.all.err_p.iter().all(|&e| e < 1e-3), "{fold:?}");

@@ -10,27 +10,39 @@
 //! signed by the side of the specular peak they lie on (the sign of θi − θr; in-plane
 //! θh = (θi − θr)/2), since a real sample need not be symmetric about its peak.
 //!
-//! β at (θh, θd) is linear in θh along each column between its two points around θh (its
-//! end point's beyond its ends), then linear in θd between the two columns whose mean θd
-//! bracket θd (the nearest column beyond the measured θd). Nothing is fitted: the table
-//! reproduces its samples and predicts between them; it extrapolates only as constants.
+//! **Prediction relative to a shape.** A table predicts relative to a parametric fit of
+//! the same samples, its **shape** M ([`Shape`]: the best parametric candidate): per
+//! channel β = M(θh, θd) · R(θh, θd), where R is the ratio of the stored β to M at the
+//! stored points, linear in θh along each column between its two known values around θh,
+//! then linear in θd between the two columns whose mean θd bracket θd. Between stored
+//! points the lobe keeps the model's curvature, so a peak narrower than the spacing of
+//! the points is not flattened as a straight line between them would; the ratio is
+//! measured, so the table still reproduces its samples. **Beyond what was measured** — a
+//! column's θh range, or the θd of the outermost columns — R is held at its value at the
+//! edge: the shape of the model, scaled to the table at the edge. Nothing is
+//! extrapolated from the data's own trend. Without a shape (M ≡ 1) the same rule is
+//! linear interpolation of β and constant extrapolation.
 //!
-//! A column keeps the points of its θL whose three channels are known, every k-th of
-//! them with k the smallest stride that keeps each θL within
-//! [`super::stride::JUDGED_PER_THETA_L`] points (neighbouring pixel columns differ little);
-//! points at the same θh are averaged. The chromaticity of a column's points may be
-//! averaged over a window of θh (its brightness kept point by point): noise in R, G, B
-//! makes a single point's colour scatter where a material's colour changes slowly; the
-//! window ([`CHROMATICITY_WINDOWS`]) is the one that predicts unseen θL best. Read from JSON, a table is checked before it is
-//! used: at most [`MAX_COLUMNS`] columns of at most [`MAX_POINTS_PER_COLUMN`] points each
-//! (counted while reading, before anything larger is allocated), every value finite, θh
-//! strictly increasing along each column.
+//! A column keeps every point of its θL with the channels it has: a channel dropped by
+//! extraction (clipped, or too dark) is missing there (`null` in JSON), and that channel
+//! is interpolated between its known values alone; the point's other channels are kept.
+//! A channel no column knows is the shape's alone. Every k-th point is kept with k the
+//! smallest stride that keeps each θL within [`super::stride::JUDGED_PER_THETA_L`] points
+//! (neighbouring pixel columns differ little); points at the same θh are averaged, each
+//! channel over its known values. The chromaticity of a column's points may be averaged
+//! over a window of θh (its brightness kept point by point): noise in R, G, B makes a
+//! single point's colour scatter where a material's colour changes slowly; the window
+//! ([`CHROMATICITY_WINDOWS`]) is the one that predicts unseen θL best. Read from JSON, a
+//! table is checked before it is used: at most [`MAX_COLUMNS`] columns of at most
+//! [`MAX_POINTS_PER_COLUMN`] points each (counted while reading, before anything larger is
+//! allocated), θh known and strictly increasing along each column, every value finite or
+//! missing.
 
 use serde::de::{self, SeqAccess, Visitor};
 use serde::{Deserialize, Deserializer, Serialize};
 
 use super::stride::{judged, JUDGED_PER_THETA_L};
-use crate::brdf::Cosines;
+use crate::brdf::{Cosines, Model, Params};
 use crate::samples::{distinct_theta_l, Sample, THETA_L_TOLERANCE};
 
 /// Most columns (θL) a table read from JSON may hold.
@@ -47,7 +59,7 @@ pub const MAX_POINTS_PER_COLUMN: usize = JUDGED_PER_THETA_L;
 /// Why a table could not be built or read.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum TableError {
-    #[error("no point with every channel known: the table would be empty")]
+    #[error("no point with a channel known: the table would be empty")]
     Empty,
     #[error("column {column}: {what}")]
     Invalid { column: usize, what: String },
@@ -60,7 +72,8 @@ pub struct Column {
     pub theta_l: f64,
     /// Mean θd of its points (degrees).
     pub theta_d: f64,
-    /// Its points, `[θh (degrees, signed), β_R, β_G, β_B]`, θh strictly increasing.
+    /// Its points, `[θh (degrees, signed), β_R, β_G, β_B]`, θh strictly increasing; a
+    /// missing channel is NaN (`null` in JSON).
     #[serde(deserialize_with = "capped_points")]
     pub points: Vec<[f64; 4]>,
 }
@@ -108,8 +121,12 @@ impl TryFrom<TableFile> for Table {
             if c.points.is_empty() {
                 return Err(invalid("no point"));
             }
-            if c.points.iter().flatten().any(|v| !v.is_finite()) {
-                return Err(invalid("a value is not finite"));
+            // The parser yields no infinity: a NaN is a `null`, a missing channel.
+            if c.points
+                .iter()
+                .any(|p| !p[0].is_finite() || p.iter().any(|v| v.is_infinite()))
+            {
+                return Err(invalid("a θh is missing or a value is not finite"));
             }
             if c.points.windows(2).any(|w| w[1][0] <= w[0][0]) {
                 return Err(invalid("θh is not strictly increasing"));
@@ -154,12 +171,17 @@ impl<'de, T: Deserialize<'de>> Visitor<'de> for Capped<T> {
     }
 }
 
+/// A column's points, each value a number or `null` (missing: NaN).
 fn capped_points<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<[f64; 4]>, D::Error> {
-    d.deserialize_seq(Capped {
+    let points: Vec<[Option<f64>; 4]> = d.deserialize_seq(Capped {
         max: MAX_POINTS_PER_COLUMN,
         what: "points in a table column",
         element: std::marker::PhantomData,
-    })
+    })?;
+    Ok(points
+        .into_iter()
+        .map(|p| p.map(|v| v.unwrap_or(f64::NAN)))
+        .collect())
 }
 
 fn capped_columns<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<Column>, D::Error> {
@@ -183,30 +205,72 @@ fn sample_angles(s: &Sample) -> (f64, f64) {
     half_difference(&s.cosines(), s.theta_i >= s.theta_r)
 }
 
-/// β of a column's points at signed θh `h`: linear between the two points around it, the
-/// end point's beyond.
-fn along(points: &[[f64; 4]], h: f64) -> [f64; 3] {
-    let rgb = |p: &[f64; 4]| [p[1], p[2], p[3]];
-    let k = points.partition_point(|p| p[0] <= h);
-    if k == 0 {
-        return rgb(&points[0]);
+/// The parametric model a table predicts relative to (see the module): a fit of the
+/// same samples.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Shape {
+    pub model: Model,
+    pub params: Params,
+    /// The specular colour at 90° (`params.ks` for the models without one).
+    pub ks_90: [f64; 3],
+}
+
+/// The shape's β is taken at least this fraction of its coefficients' scale (and never
+/// 0), so that a ratio to it is defined where the model vanishes (grazing, far from a
+/// lobe without diffuse).
+const SHAPE_FLOOR: f64 = 1e-9;
+
+impl Shape {
+    /// β of the model at signed θh `h` and θd `d` (degrees) in the plane of the light
+    /// (θi = θd + θh, θr = θd − θh), each channel at least [`SHAPE_FLOOR`] of its
+    /// coefficients.
+    pub fn at(&self, h: f64, d: f64) -> [f64; 3] {
+        let beta = self
+            .model
+            .basis_at(&Cosines::in_plane(d + h, d - h))
+            .evaluate_fresnel(&self.params, &self.ks_90);
+        std::array::from_fn(|c| {
+            let scale = self.params.kd[c].abs() + self.params.ks[c].abs() + self.ks_90[c].abs();
+            let floor = SHAPE_FLOOR * scale + f64::MIN_POSITIVE;
+            if beta[c].is_finite() {
+                beta[c].max(floor)
+            } else {
+                floor
+            }
+        })
     }
-    if k == points.len() {
-        return rgb(&points[k - 1]);
+}
+
+impl Column {
+    /// The ratio of channel `c`'s known values to `shape` (1 without one) at signed θh
+    /// `h`: linear between the two known values around it, the end one's beyond; `None`
+    /// when the column knows no value of `c`.
+    fn ratio_along(&self, h: f64, c: usize, shape: Option<&Shape>) -> Option<f64> {
+        let known = |p: &&[f64; 4]| p[c + 1].is_finite();
+        let ratio = |p: &[f64; 4]| p[c + 1] / shape.map_or(1.0, |s| s.at(p[0], self.theta_d)[c]);
+        let k = self.points.partition_point(|p| p[0] <= h);
+        let left = self.points[..k].iter().rev().find(known);
+        let right = self.points[k..].iter().find(known);
+        match (left, right) {
+            (Some(a), Some(b)) => {
+                let w = if b[0] > a[0] {
+                    (h - a[0]) / (b[0] - a[0])
+                } else {
+                    0.0
+                };
+                let (ra, rb) = (ratio(a), ratio(b));
+                Some(ra + w * (rb - ra))
+            }
+            (Some(p), None) | (None, Some(p)) => Some(ratio(p)),
+            (None, None) => None,
+        }
     }
-    let (a, b) = (&points[k - 1], &points[k]);
-    let w = if b[0] > a[0] {
-        (h - a[0]) / (b[0] - a[0])
-    } else {
-        0.0
-    };
-    std::array::from_fn(|c| a[c + 1] + w * (b[c + 1] - a[c + 1]))
 }
 
 impl Table {
-    /// The table of `samples` (see the module): one column per θL with a point whose
-    /// channels are all known, each point's chromaticity averaged over `window` degrees
-    /// of θh around it.
+    /// The table of `samples` (see the module): one column per θL with a point with a
+    /// channel known, every point with the channels it has (a dropped one NaN), each
+    /// complete point's chromaticity averaged over `window` degrees of θh around it.
     pub fn new(samples: &[Sample], window: f64) -> Result<Table, TableError> {
         let (kept, _) = judged(samples);
         let mut columns: Vec<Column> = distinct_theta_l(&kept)
@@ -215,8 +279,11 @@ impl Table {
                 let angles: Vec<((f64, f64), [f64; 3])> = kept
                     .iter()
                     .filter(|s| (s.theta_l - theta_l).abs() <= THETA_L_TOLERANCE)
-                    .filter(|s| !s.dropped.contains(&true))
-                    .map(|s| (sample_angles(s), s.rgb))
+                    .filter(|s| s.dropped.contains(&false))
+                    .map(|s| {
+                        let rgb = std::array::from_fn(|c| s.channel(c).unwrap_or(f64::NAN));
+                        (sample_angles(s), rgb)
+                    })
                     .collect();
                 if angles.is_empty() {
                     return None;
@@ -252,9 +319,13 @@ impl Table {
         &self.columns
     }
 
-    /// Its stored β values (three per point).
+    /// Its stored β values (the known channels of its points).
     pub fn values(&self) -> usize {
-        3 * self.columns.iter().map(|c| c.points.len()).sum::<usize>()
+        self.columns
+            .iter()
+            .flat_map(|c| &c.points)
+            .map(|p| p[1..].iter().filter(|v| v.is_finite()).count())
+            .sum()
     }
 
     /// The table without the column of θL `theta_l`; `None` if nothing would be left.
@@ -292,41 +363,55 @@ impl Table {
         }
     }
 
-    /// β at signed θh `h` and θd `d` (degrees; see the module).
-    pub fn predict(&self, h: f64, d: f64) -> [f64; 3] {
-        let columns = &self.columns;
-        let k = columns.partition_point(|c| c.theta_d <= d);
-        if k == 0 || k == columns.len() {
-            return along(&columns[k.min(columns.len() - 1)].points, h);
+    /// β at signed θh `h` and θd `d` (degrees) relative to `shape` (see the module).
+    pub fn predict(&self, h: f64, d: f64, shape: Option<&Shape>) -> [f64; 3] {
+        let model = shape.map(|s| s.at(h, d));
+        std::array::from_fn(|c| {
+            let ratio = self.ratio(h, d, c, shape);
+            match model {
+                Some(m) => m[c] * ratio.unwrap_or(1.0),
+                None => ratio.unwrap_or(0.0),
+            }
+        })
+    }
+
+    /// The ratio of channel `c` to `shape` at (`h`, `d`): linear in θd between the two
+    /// columns around `d` that know the channel, the nearest one's beyond; `None` when
+    /// no column knows it.
+    fn ratio(&self, h: f64, d: f64, c: usize, shape: Option<&Shape>) -> Option<f64> {
+        let k = self.columns.partition_point(|col| col.theta_d <= d);
+        let at = |col: &Column| Some((col.theta_d, col.ratio_along(h, c, shape)?));
+        let below = self.columns[..k].iter().rev().find_map(at);
+        let above = self.columns[k..].iter().find_map(at);
+        match (below, above) {
+            (Some((d0, r0)), Some((d1, r1))) => {
+                let span = d1 - d0;
+                let w = if span > 0.0 { (d - d0) / span } else { 0.0 };
+                Some(r0 + w * (r1 - r0))
+            }
+            (Some((_, r)), None) | (None, Some((_, r))) => Some(r),
+            (None, None) => None,
         }
-        let (lo, hi) = (&columns[k - 1], &columns[k]);
-        let (a, b) = (along(&lo.points, h), along(&hi.points, h));
-        let span = hi.theta_d - lo.theta_d;
-        let w = if span > 0.0 {
-            (d - lo.theta_d) / span
-        } else {
-            0.0
-        };
-        std::array::from_fn(|c| a[c] + w * (b[c] - a[c]))
     }
 
     /// β at a point given by its cosines, on the side `side` (θi ≥ θr) of the peak.
-    pub fn predict_at(&self, cosines: &Cosines, side: bool) -> [f64; 3] {
+    pub fn predict_at(&self, cosines: &Cosines, side: bool, shape: Option<&Shape>) -> [f64; 3] {
         let (h, d) = half_difference(cosines, side);
-        self.predict(h, d)
+        self.predict(h, d, shape)
     }
 
     /// β at a sample's point.
-    pub fn predict_sample(&self, s: &Sample) -> [f64; 3] {
+    pub fn predict_sample(&self, s: &Sample, shape: Option<&Shape>) -> [f64; 3] {
         let (h, d) = sample_angles(s);
-        self.predict(h, d)
+        self.predict(h, d, shape)
     }
 }
 
 /// A column's points with each point's chromaticity replaced by that of the sum of its
 /// points within `window` degrees of θh (its own R + G + B kept): the brightness keeps
-/// every point's detail, the colour is averaged over the window. Where that sum or the
-/// point's own is not positive the point is kept as it is.
+/// every point's detail, the colour is averaged over the window (over its points with
+/// every channel known). Where that sum or the point's own is not positive, or the point
+/// misses a channel, it is kept as it is.
 fn smooth_chromaticity(points: Vec<[f64; 4]>, window: f64) -> Vec<[f64; 4]> {
     if window <= 0.0 {
         return points;
@@ -337,14 +422,17 @@ fn smooth_chromaticity(points: Vec<[f64; 4]>, window: f64) -> Vec<[f64; 4]> {
             let lo = points.partition_point(|q| q[0] < p[0] - window);
             let hi = points.partition_point(|q| q[0] <= p[0] + window);
             let mut sum = [0.0; 3];
-            for q in &points[lo..hi] {
+            for q in points[lo..hi]
+                .iter()
+                .filter(|q| q.iter().all(|v| v.is_finite()))
+            {
                 for (c, s) in sum.iter_mut().enumerate() {
                     *s += q[c + 1];
                 }
             }
             let total: f64 = sum.iter().sum();
             let own = p[1] + p[2] + p[3];
-            if total > 0.0 && own > 0.0 {
+            if total > 0.0 && own > 0.0 && own.is_finite() {
                 [
                     p[0],
                     own * sum[0] / total,
@@ -358,15 +446,26 @@ fn smooth_chromaticity(points: Vec<[f64; 4]>, window: f64) -> Vec<[f64; 4]> {
         .collect()
 }
 
-/// Points sorted by θh with those at equal θh averaged.
+/// Points sorted by θh with those at equal θh averaged, each channel over its known
+/// (finite) values, missing (NaN) where none is.
 fn merge_equal(sorted: &[(f64, [f64; 3])]) -> Vec<[f64; 4]> {
     let mut out: Vec<[f64; 4]> = Vec::with_capacity(sorted.len());
     let mut i = 0;
     while i < sorted.len() {
         let h = sorted[i].0;
         let same = sorted[i..].iter().take_while(|p| p.0 == h).count();
-        let n = same as f64;
-        let mean = |c: usize| sorted[i..i + same].iter().map(|p| p.1[c]).sum::<f64>() / n;
+        let mean = |c: usize| {
+            let known: Vec<f64> = sorted[i..i + same]
+                .iter()
+                .map(|p| p.1[c])
+                .filter(|v| v.is_finite())
+                .collect();
+            if known.is_empty() {
+                f64::NAN
+            } else {
+                known.iter().sum::<f64>() / known.len() as f64
+            }
+        };
         out.push([h, mean(0), mean(1), mean(2)]);
         i += same;
     }
@@ -396,31 +495,104 @@ mod tests {
         // θd = |θL|/2 in the plane; columns in order of θd.
         assert!((c[0].theta_d - 10.0).abs() < 1e-9 && (c[1].theta_d - 20.0).abs() < 1e-9);
         // θL −20, θi 0: θr −20, θh = +10°.
-        let at = table.predict(10.0, 10.0);
+        let at = table.predict(10.0, 10.0, None);
         assert!((at[0] - 10.0).abs() < 1e-9, "{at:?}");
         // Halfway in θd, between two points in θh.
-        let mid = table.predict(12.5, 15.0);
+        let mid = table.predict(12.5, 15.0, None);
         let expected = 0.5 * ((10.0 + 2.5) + (30.0 + 2.5 - 10.0));
         assert!(
             (mid[0] - expected).abs() < 1e-9 && (mid[1] - 20.0).abs() < 1e-9,
             "{mid:?}"
         );
-        // Beyond the measured θd and θh: the nearest column, its end point.
-        assert_eq!(table.predict(1e3, 80.0), table.predict(1e3, 20.0));
-        assert_eq!(table.predict(-1e3, 0.0)[1], 10.0);
+        // Without a shape, beyond the measured θd and θh: the nearest column, its end point.
+        assert_eq!(
+            table.predict(1e3, 80.0, None),
+            table.predict(1e3, 20.0, None)
+        );
+        assert_eq!(table.predict(-1e3, 0.0, None)[1], 10.0);
         assert_eq!(table.without(-20.0).unwrap().columns().len(), 1);
         assert!(table.without(-20.0).unwrap().without(-40.0).is_none());
     }
 
     #[test]
-    fn dropped_channels_are_left_out_and_equal_theta_h_averaged() {
+    fn a_dropped_channel_is_missing_and_equal_theta_h_averaged() {
         let mut samples = two_columns();
+        // θL −20, θi −10: θh 0, the column's first point.
         samples[0].dropped = [false, true, false];
         samples.push(Sample::in_plane(-20.0, 5.0, -25.0, [17.0, 12.0, 3.0]));
+        let mut all_dropped = Sample::in_plane(-20.0, 7.0, -27.0, [1.0; 3]);
+        all_dropped.dropped = [true; 3];
+        samples.push(all_dropped);
         let table = Table::new(&samples, 0.0).unwrap();
         let column = &table.columns()[0];
-        assert_eq!(column.points.len(), 3);
-        assert_eq!(column.points[2][1..], [16.0, 11.0, 2.0]);
+        assert_eq!(column.points.len(), 4);
+        assert_eq!(column.points[0][1], 0.0);
+        assert!(column.points[0][2].is_nan() && column.points[0][3] == 1.0);
+        assert_eq!(column.points[3][1..], [16.0, 11.0, 2.0]);
+        assert_eq!(table.values(), 3 * 8 - 1);
+        // Green at θh 0 comes from the column's known green around it (θh 5: 10) alone.
+        assert_eq!(table.predict(0.0, 10.0, None)[1], 10.0);
+        // It survives its JSON, the missing value a null.
+        let json = serde_json::to_string(&table).unwrap();
+        assert!(json.contains("null"), "{json}");
+        let back: Table = serde_json::from_str(&json).unwrap();
+        assert!(back.columns()[0].points[0][2].is_nan());
+        assert_eq!(back.values(), table.values());
+    }
+
+    #[test]
+    fn relative_to_a_shape_it_keeps_the_model_between_and_beyond_its_points() {
+        // Samples of a Cook–Torrance lobe at θL −20 and −40, every 2° of θi (θh steps of
+        // 2°, wider than the lobe): relative to the same model the table reproduces it
+        // everywhere, between points, between columns and beyond both.
+        let shape = Shape {
+            model: Model::CookTorrance,
+            params: Params::shared([5.0, 4.0, 3.0], [40.0, 30.0, 20.0], 0.02),
+            ks_90: [40.0, 30.0, 20.0],
+        };
+        let mut samples = Vec::new();
+        for theta_l in [-20.0, -40.0] {
+            for k in 0..=10 {
+                let theta_i = -15.0 + 3.0 * f64::from(k) + 0.37;
+                let theta_r = theta_l - theta_i;
+                let (h, d) =
+                    half_difference(&Cosines::in_plane(theta_i, theta_r), theta_i >= theta_r);
+                samples.push(Sample::in_plane(theta_l, theta_i, theta_r, shape.at(h, d)));
+            }
+        }
+        let table = Table::new(&samples, 0.0).unwrap();
+        for (h, d) in [
+            (0.0, 10.0),
+            (0.0, 15.0),
+            (0.4, 18.0),
+            (-30.0, 5.0),
+            (25.0, 40.0),
+        ] {
+            let (got, want) = (table.predict(h, d, Some(&shape)), shape.at(h, d));
+            for c in 0..3 {
+                assert!(
+                    (got[c] / want[c] - 1.0).abs() < 1e-9,
+                    "{h} {d}: {got:?} {want:?}"
+                );
+            }
+        }
+        // Without the shape the peak between two points 3° apart is flattened.
+        let flat = table.predict(0.0, 10.0, None);
+        assert!(flat[0] < 0.5 * shape.at(0.0, 10.0)[0], "{flat:?}");
+        // Scaled: a table of twice the model predicts twice it beyond its points.
+        let doubled: Vec<Sample> = samples
+            .iter()
+            .map(|s| Sample {
+                rgb: s.rgb.map(|v| 2.0 * v),
+                ..*s
+            })
+            .collect();
+        let table = Table::new(&doubled, 0.0).unwrap();
+        let (got, want) = (
+            table.predict(30.0, 30.0, Some(&shape)),
+            shape.at(30.0, 30.0),
+        );
+        assert!((got[1] / want[1] - 2.0).abs() < 1e-9, "{got:?} {want:?}");
     }
 
     #[test]

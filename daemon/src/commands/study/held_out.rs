@@ -8,7 +8,9 @@ use std::fmt::Write as _;
 use anyhow::Context;
 use gonio_processing::color::CameraModel;
 use gonio_processing::fit::held_out::{table_held_out, Errors, Form, HeldOut};
-use gonio_processing::fit::{choose_held_out, leave_one_theta_l_out, parameter_count, Variant};
+use gonio_processing::fit::{
+    best_parametric, choose_held_out, leave_one_theta_l_out, parameter_count, Variant,
+};
 use gonio_processing::samples::Sample;
 
 use super::super::output::write_output_files;
@@ -94,7 +96,8 @@ pub fn run(args: &Args, samples: &[Sample], variants: &[Variant]) -> anyhow::Res
         variants.len()
     ));
     let judged = leave_one_theta_l_out(samples, &variants, &camera).and_then(|mut held| {
-        held.push(table_held_out(samples, &camera));
+        let table = table_held_out(samples, best_parametric(&held), &camera);
+        held.push(table);
         let chosen = choose_held_out(samples, &held, &camera)?;
         Ok((held, chosen))
     });
