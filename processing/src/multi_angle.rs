@@ -511,7 +511,9 @@ fn data_value(
             }
         }
     }
-    let beta = measured.table.predict(theta_h, theta_d);
+    // Linear in the measured β between the points around (θh, θd), as the lines above
+    // are taken: no model's shape.
+    let beta = measured.table.predict(theta_h, theta_d, None);
     let mut lines: Vec<BetaLine> = Source::ALL
         .iter()
         .zip(shared)
