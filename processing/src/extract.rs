@@ -46,7 +46,7 @@ use crate::hdr::{self, HdrError, HdrImage, MergeOptions, SATURATED, UNDEREXPOSED
 use crate::samples::{Sample, SampleUncertainty};
 use crate::setup_uncertainty::{Input, Source};
 
-mod captures;
+pub(crate) mod captures;
 use captures::{find_captures, FindError};
 
 /// Rows averaged around each strip's centre row (paper §2.2).

@@ -53,6 +53,11 @@ pub enum PlanError {
     Invalid { path: PathBuf, reason: String },
     #[error(transparent)]
     Capture(#[from] capture::CaptureError),
+    #[error(
+        "{path}: a symbolic link: θL folders and captures must be plain directories and \
+         files (a link is not followed)"
+    )]
+    Link { path: PathBuf },
     #[error("{path}: cannot list: {error}")]
     Walk {
         path: PathBuf,
@@ -225,6 +230,9 @@ impl Frames {
             .map(|(p, _)| p)
             .collect();
         for (path, kind) in &entries {
+            if crate::extract::captures::refused_link(path, kind) {
+                return Err(PlanError::Link { path: path.clone() });
+            }
             if kind.is_dir() {
                 self.walk(path)?;
             } else if kind.is_file() && capture::is_capture_path(path) {

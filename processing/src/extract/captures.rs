@@ -19,6 +19,16 @@ pub(super) enum FindError {
     Link { path: PathBuf },
 }
 
+/// Whether the entry at `path` of type `kind` is a symbolic link named as a θL folder
+/// (`theta_l_…`) or a capture: refused, never followed.
+pub(crate) fn refused_link(path: &Path, kind: &fs::FileType) -> bool {
+    let named_like_capture = capture::is_capture_path(path)
+        || path
+            .file_name()
+            .is_some_and(|n| n.as_encoded_bytes().starts_with(b"theta_l_"));
+    kind.is_symlink() && named_like_capture
+}
+
 /// Adds the capture images below `dir` to `out` (see the module).
 pub(super) fn find_captures(dir: &Path, out: &mut Vec<PathBuf>) -> Result<(), FindError> {
     let walk_error = |error| FindError::Walk {
@@ -29,12 +39,7 @@ pub(super) fn find_captures(dir: &Path, out: &mut Vec<PathBuf>) -> Result<(), Fi
         let entry = entry.map_err(walk_error)?;
         let path = entry.path();
         let kind = entry.file_type().map_err(walk_error)?;
-        let named_like_capture = capture::is_capture_path(&path)
-            || entry
-                .file_name()
-                .as_encoded_bytes()
-                .starts_with(b"theta_l_");
-        if kind.is_symlink() && named_like_capture {
+        if refused_link(&path, &kind) {
             return Err(FindError::Link { path });
         }
         if kind.is_dir() {
