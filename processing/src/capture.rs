@@ -215,10 +215,10 @@ pub const APERTURE_RANGE: (f64, f64) = (0.5, 1024.0);
 /// Largest count a sidecar level may state (16-bit files).
 const MAX_COUNT: f64 = u16::MAX as f64;
 /// How far a sidecar's θL may be from its directory's name, written to 0.1°.
-const THETA_DIR_TOLERANCE_DEG: f64 = 0.05 + 1e-6;
+pub(crate) const THETA_DIR_TOLERANCE_DEG: f64 = 0.05 + 1e-6;
 
 /// The name of the `theta_l_<θL>` directory `image` is in, and its θL.
-fn theta_l_directory(image: &Path) -> Option<(String, f64)> {
+pub(crate) fn theta_l_directory(image: &Path) -> Option<(String, f64)> {
     let dir = image.parent()?.file_name()?.to_str()?;
     let theta_l = dir
         .strip_prefix("theta_l_")?

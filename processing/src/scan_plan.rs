@@ -23,7 +23,7 @@ pub const PLAN_FILE: &str = "plan.json";
 const SHUTTER_MATCH_REL: f64 = 0.02;
 
 /// How far a θL directory's name may be from a planned θL, degrees (names carry 0.1°).
-const THETA_MATCH_DEG: f64 = 0.05 + 1e-6;
+const THETA_MATCH_DEG: f64 = capture::THETA_DIR_TOLERANCE_DEG;
 
 /// What a scan set out to capture.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -237,7 +237,7 @@ impl Frames {
                 self.walk(path)?;
             } else if kind.is_file() && capture::is_capture_path(path) {
                 self.image(path)?;
-            } else if kind.is_file() && is_frame_sidecar(path, dir) {
+            } else if kind.is_file() && is_frame_sidecar(path) {
                 let has_image = images
                     .iter()
                     .any(|image| &capture::sidecar_path(image) == path);
@@ -254,7 +254,7 @@ impl Frames {
             self.without_sidecar.push(image.to_path_buf());
             return Ok(());
         }
-        let Some((name, theta_l)) = theta_dir(image) else {
+        let Some((name, theta_l)) = capture::theta_l_directory(image) else {
             return Ok(());
         };
         let shutter_s = capture::read_sidecar(image)?.shutter_s;
@@ -298,25 +298,10 @@ impl Frames {
 }
 
 /// Whether `path` is a frame's sidecar: a `.json` file inside a `theta_l_<θL>` directory.
-fn is_frame_sidecar(path: &Path, dir: &Path) -> bool {
+fn is_frame_sidecar(path: &Path) -> bool {
     path.extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("json"))
-        && theta_dir_name(dir).is_some()
-}
-
-/// The `theta_l_<θL>` directory `image` is in: its name and θL.
-fn theta_dir(image: &Path) -> Option<(String, f64)> {
-    let dir = image.parent()?;
-    Some((dir.file_name()?.to_str()?.to_owned(), theta_dir_name(dir)?))
-}
-
-fn theta_dir_name(dir: &Path) -> Option<f64> {
-    dir.file_name()?
-        .to_str()?
-        .strip_prefix("theta_l_")?
-        .parse::<f64>()
-        .ok()
-        .filter(|t| t.is_finite())
+        && capture::theta_l_directory(path).is_some()
 }
 
 #[cfg(test)]
