@@ -1,7 +1,6 @@
 //! `gonio`: the measurement daemon (`serve`) and the offline processing commands.
 
 mod commands;
-mod decode_workers;
 mod interrupt;
 mod progress;
 
@@ -53,7 +52,7 @@ enum Command {
     Compare(commands::compare::Args),
     /// Decode captures asked for on stdin (a child of the other commands).
     #[command(hide = true)]
-    DecodeWorker(decode_workers::Args),
+    DecodeWorker(commands::decode_worker::Args),
 }
 
 fn main() {
@@ -71,7 +70,7 @@ fn main() {
     }
     if matches.subcommand_name() != Some("decode-worker") {
         // Captures are decoded in child processes that may die of a file.
-        decode_workers::install();
+        gonio_server::decode_workers::install();
     }
     let outcome = guard::catch(|| match cli.command {
         Command::Serve(args) => commands::serve::run(args),
@@ -87,7 +86,7 @@ fn main() {
         Command::Report(args) => commands::report::run(args),
         Command::Colour(args) => commands::colour::run(args),
         Command::Compare(args) => commands::compare::run(args),
-        Command::DecodeWorker(args) => decode_workers::serve(args),
+        Command::DecodeWorker(args) => commands::decode_worker::run(args),
     });
     let result = match outcome {
         Ok(result) => result,

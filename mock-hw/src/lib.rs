@@ -13,4 +13,6 @@ pub mod grbl;
 
 pub mod camera;
 pub mod render;
+pub mod scan_timing;
 pub mod scene;
+pub mod scene_spec;

@@ -27,3 +27,4 @@ pub mod scan_plan;
 
 pub mod export;
 pub mod study;
+pub mod truth;

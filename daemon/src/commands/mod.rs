@@ -3,6 +3,7 @@
 pub mod calibrate;
 pub mod colour;
 pub mod compare;
+pub mod decode_worker;
 pub mod emulate_arm;
 pub mod export;
 pub mod extract;

@@ -36,7 +36,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 }
 
 /// The time now, RFC 3339 (UTC).
-pub fn now() -> String {
+fn now() -> String {
     time::OffsetDateTime::now_utc()
         .format(&time::format_description::well_known::Rfc3339)
         .unwrap_or_default()

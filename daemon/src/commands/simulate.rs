@@ -8,7 +8,6 @@ use anyhow::Context;
 use gonio_drivers::camera_choice::format_shutter;
 use gonio_files::output::write_atomically;
 use gonio_mock_hw::render::{self, reference};
-use gonio_mock_hw::scene::Scene;
 use gonio_processing::geometry::Setup;
 use gonio_processing::scan_plan::{self, ScanPlan};
 
@@ -33,21 +32,8 @@ pub struct Args {
     pub binning: u32,
 }
 
-/// Help of a `--scene` option: every name of [`Scene::BUILTIN`] (a test checks it).
+/// Help of a `--scene` option: every name of [`gonio_mock_hw::scene::Scene::BUILTIN`] (a test checks it).
 pub const SCENE_HELP: &str = "Scene file (TOML), or a built-in scene: gold, red, blue-green, opal";
-
-/// A built-in scene by name, otherwise a scene file.
-pub fn load_scene(spec: &str) -> anyhow::Result<Scene> {
-    match Scene::builtin(spec) {
-        Some(scene) => Ok(scene),
-        None => Scene::load(Path::new(spec)).with_context(|| {
-            format!(
-                "not a built-in scene ({}), read as a file",
-                Scene::BUILTIN.join(", ")
-            )
-        }),
-    }
-}
 
 fn write_json(path: &Path, value: &serde_json::Value) -> anyhow::Result<()> {
     let mut text = serde_json::to_string_pretty(value)?;
@@ -67,7 +53,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
 /// Writes the scan `args` asks for; returns the number of captures and the scene's name.
 pub fn render_scan(args: Args) -> anyhow::Result<(usize, String)> {
-    let mut scene = load_scene(&args.scene)?;
+    let mut scene = gonio_mock_hw::scene_spec::load_scene(&args.scene)?;
     if args.binning != 1 {
         scene = scene.binned(args.binning).context("--binning")?;
     }
@@ -138,7 +124,7 @@ mod tests {
 
     #[test]
     fn the_scene_help_names_every_built_in_scene() {
-        for name in Scene::BUILTIN {
+        for name in gonio_mock_hw::scene::Scene::BUILTIN {
             assert!(
                 SCENE_HELP.contains(name),
                 "{name} missing from {SCENE_HELP}"

@@ -23,8 +23,6 @@
 //! times).
 
 mod scan;
-mod timing;
-mod truth;
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -45,9 +43,9 @@ use gonio_processing::study::{pareto::pareto_front, subsample};
 use super::output::write_output;
 use crate::interrupt::RemoveOnInterrupt;
 use crate::progress;
+use gonio_mock_hw::scan_timing::{AcquisitionTime, HardwareTiming};
+use gonio_processing::truth::{parameter_errors, Truth, TruthPoints};
 use scan::{discover, extract_subset, spread, Position};
-use timing::{AcquisitionTime, HardwareTiming};
-use truth::{parameter_errors, Truth, TruthPoints};
 
 /// A setting is good enough when its worst-channel ΔErr_p is within this fraction of
 /// the best (or within the absolute `--tolerance`).

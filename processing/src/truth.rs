@@ -1,14 +1,39 @@
-//! The scene's truth (`truth.json` of a simulated scan) and accuracy against it.
+//! A rendered scene's truth (`truth.json` of a simulated scan) and a fit's accuracy
+//! against it.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
-use anyhow::Context;
 use gonio_files::input::{read_input_to_string, MAX_SMALL_FILE_BYTES};
-use gonio_processing::brdf::{Model, Params, Roughness};
-use gonio_processing::fit::FitResult;
-use gonio_processing::reference::Reference;
-use gonio_processing::samples::Sample;
 use serde::Deserialize;
+
+use crate::brdf::{Model, Params, Roughness};
+use crate::fit::FitResult;
+use crate::reference::{Reference, ReferenceError};
+use crate::samples::Sample;
+
+/// Why a scene's truth could not be had.
+#[derive(Debug, thiserror::Error)]
+pub enum TruthError {
+    #[error("reading {}: {source}", path.display())]
+    Read {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("parsing {}: {source}", path.display())]
+    Parse {
+        path: PathBuf,
+        source: serde_json::Error,
+    },
+    #[error("{}: m must hold 1 or 3 values", path.display())]
+    Roughness { path: PathBuf },
+    #[error("reading {}: {source}", path.display())]
+    Reference {
+        path: PathBuf,
+        source: ReferenceError,
+    },
+    #[error("no angle of the scan has a true β to compare with")]
+    NoOverlap,
+}
 
 /// The fields of `truth.json` the tradeoff uses (camera-RGB β domain).
 #[derive(Debug, Clone, Deserialize)]
@@ -34,17 +59,28 @@ pub struct Truth {
 }
 
 impl Truth {
-    pub fn read(path: &Path) -> anyhow::Result<Truth> {
-        let text = read_input_to_string(path, MAX_SMALL_FILE_BYTES)
-            .with_context(|| format!("reading {}", path.display()))?;
-        let file: TruthFile =
-            serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+    /// Reads `truth.json` at `path`.
+    pub fn read(path: &Path) -> Result<Truth, TruthError> {
+        let text = read_input_to_string(path, MAX_SMALL_FILE_BYTES).map_err(|source| {
+            TruthError::Read {
+                path: path.to_path_buf(),
+                source,
+            }
+        })?;
+        let file: TruthFile = serde_json::from_str(&text).map_err(|source| TruthError::Parse {
+            path: path.to_path_buf(),
+            source,
+        })?;
         let model = match (file.model.parse::<Model>(), file.kd, file.ks, &file.m) {
             (Ok(model), Some(kd), Some(ks), Some(m)) => {
                 let (roughness, m) = match m.as_slice() {
                     [m] => (Roughness::Shared, [*m; 3]),
                     [r, g, b] => (Roughness::PerChannel, [*r, *g, *b]),
-                    _ => anyhow::bail!("{}: m must hold 1 or 3 values", path.display()),
+                    _ => {
+                        return Err(TruthError::Roughness {
+                            path: path.to_path_buf(),
+                        })
+                    }
                 };
                 Some((model, roughness, Params { kd, ks, m }))
             }
@@ -69,7 +105,7 @@ impl TruthPoints {
     /// The true β at the (θi, θr) of `samples`: the truth model itself when the material
     /// is Cook–Torrance or Ward, otherwise the scene's noise-free reference interpolated
     /// there (angles it does not cover are left out).
-    pub fn new(truth: &Truth, samples: &[Sample], reference: &Path) -> anyhow::Result<Self> {
+    pub fn new(truth: &Truth, samples: &[Sample], reference: &Path) -> Result<Self, TruthError> {
         let angles: Vec<(f64, f64)> = samples.iter().map(|s| (s.theta_i, s.theta_r)).collect();
         let (angles, beta) = match &truth.model {
             Some((model, _, params)) => {
@@ -80,8 +116,11 @@ impl TruthPoints {
                 (angles, beta)
             }
             None => {
-                let reference = Reference::read_csv(reference)
-                    .with_context(|| format!("reading {}", reference.display()))?;
+                let reference =
+                    Reference::read_csv(reference).map_err(|source| TruthError::Reference {
+                        path: reference.to_path_buf(),
+                        source,
+                    })?;
                 angles
                     .into_iter()
                     .filter_map(|(ti, tr)| reference.interpolate(ti, tr).map(|b| ((ti, tr), b)))
@@ -89,7 +128,7 @@ impl TruthPoints {
             }
         };
         if angles.is_empty() {
-            anyhow::bail!("no angle of the scan has a true β to compare with");
+            return Err(TruthError::NoOverlap);
         }
         Ok(TruthPoints { angles, beta })
     }

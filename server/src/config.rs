@@ -633,8 +633,7 @@ mod tests {
 
     #[test]
     fn example_config_parses_to_the_defaults() {
-        let example =
-            Config::from_toml_str(include_str!("../../../assets/gonio.example.toml")).unwrap();
+        let example = Config::from_toml_str(include_str!("../assets/gonio.example.toml")).unwrap();
         let default = Config::default();
         assert_eq!(example.bind, default.bind);
         assert_eq!(example.data_dir, default.data_dir);

@@ -27,7 +27,7 @@ pub async fn report(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<R
             &render_dir,
             &facts,
             env!("CARGO_PKG_VERSION"),
-            &crate::commands::report::now(),
+            &crate::store::now_rfc3339(),
         )
     })
     .await

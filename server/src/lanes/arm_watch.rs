@@ -12,9 +12,9 @@ use std::time::Duration;
 use anyhow::Context;
 use gonio_drivers::ArmState;
 
-use crate::commands::serve::devices::LinkId;
-use crate::commands::serve::shared::Shared;
-use crate::commands::serve::sync::lock;
+use crate::devices::LinkId;
+use crate::shared::Shared;
+use crate::sync::lock;
 
 /// How often the device path is looked at.
 pub const WATCH_INTERVAL: Duration = Duration::from_millis(250);

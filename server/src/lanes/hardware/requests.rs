@@ -8,8 +8,8 @@ use std::sync::atomic::Ordering;
 use gonio_drivers::{ArmState, DeviceError};
 
 use super::HardwareLane;
-use crate::commands::serve::store::StoreError;
-use crate::commands::serve::sync::lock;
+use crate::store::StoreError;
+use crate::sync::lock;
 
 impl HardwareLane {
     /// Applies an operator's declared arm position, if one is pending, and answers it.

@@ -17,19 +17,15 @@ use serde_json::{json, Value};
 
 use super::backoff::{Backoff, Failures};
 use super::step::{self, Flow, Outcome, StepError};
-use crate::commands::serve::calibration;
-use crate::commands::serve::devices::{ArmOpener, Devices, LinkId, SceneFacts, SidecarDefaults};
-use crate::commands::serve::files::write_atomic;
-use crate::commands::serve::plan::{
-    exposure_stem, mount_reason, theta_dir_name, Lane, ScanPlan, Step,
-};
-use crate::commands::serve::shared::{Shared, EMERGENCY_STOP};
-use crate::commands::serve::storage;
-use crate::commands::serve::store::{
-    now_rfc3339, now_unix, ScanRecord, ScanState, StepState, Store, StoreError,
-};
-use crate::commands::serve::sync::lock;
-use crate::commands::serve::timing::METER_START_S;
+use crate::calibration;
+use crate::devices::{ArmOpener, Devices, LinkId, SceneFacts, SidecarDefaults};
+use crate::files::write_atomic;
+use crate::plan::{exposure_stem, mount_reason, theta_dir_name, Lane, ScanPlan, Step};
+use crate::shared::{Shared, EMERGENCY_STOP};
+use crate::storage;
+use crate::store::{now_rfc3339, now_unix, ScanRecord, ScanState, StepState, Store, StoreError};
+use crate::sync::lock;
+use crate::timing::METER_START_S;
 
 /// How often the lane looks at the queue and the devices when nothing wakes it.
 const IDLE_POLL: Duration = Duration::from_millis(500);

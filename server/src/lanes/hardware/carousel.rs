@@ -8,8 +8,8 @@ use gonio_drivers::grbl::ArmAxis;
 use gonio_drivers::ArmState;
 
 use super::HardwareLane;
-use crate::commands::serve::lanes::step::{self, StepError};
-use crate::commands::serve::store::StoreError;
+use crate::lanes::step::{self, StepError};
+use crate::store::StoreError;
 
 /// Where the carousel must be for the running scan: its sample's slot on `axis`.
 #[derive(Debug, Clone)]

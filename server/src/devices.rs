@@ -230,7 +230,7 @@ fn emulated_carousel(
 
 /// Loads a scene by builtin name or file path.
 fn load_scene(name_or_path: &str) -> anyhow::Result<Scene> {
-    crate::commands::simulate::load_scene(name_or_path).context("camera.scene")
+    gonio_mock_hw::scene_spec::load_scene(name_or_path).context("camera.scene")
 }
 
 /// Opens the devices of `config`.

@@ -1,6 +1,7 @@
-//! `gonio serve`: the measurement daemon. HTTP handlers (tokio + axum) queue scans in
-//! a durable SQLite store; a hardware lane and a processing lane run their steps
-//! (docs/ARCHITECTURE.md, "Daemon").
+//! gonio-server: the measurement daemon behind `gonio serve`. HTTP handlers (tokio +
+//! axum) queue scans in a durable SQLite store; a hardware lane and a processing lane
+//! run their steps (docs/ARCHITECTURE.md, "Daemon"). Captures are decoded in child
+//! processes ([`decode_workers`]).
 
 mod answers;
 mod api;
@@ -8,6 +9,7 @@ mod archive;
 mod calibration;
 mod config;
 mod connections;
+pub mod decode_workers;
 mod devices;
 mod downloads_config;
 mod files;
@@ -53,30 +55,25 @@ const SHUTDOWN_GRACE: std::time::Duration = std::time::Duration::from_secs(2);
 /// Shutter range (s) assumed until the camera has told its own.
 const UNKNOWN_SHUTTER_RANGE_S: (f64, f64) = (1.0 / 8000.0, 30.0);
 
-/// Arguments of `gonio serve`.
-#[derive(clap::Args)]
-pub struct Args {
+/// What `gonio serve` is started with; every field falls back on the configuration
+/// file, then on the defaults.
+#[derive(Debug, Default)]
+pub struct Options {
     /// Configuration file (TOML, every key optional); without one the daemon runs on
     /// emulated hardware with the builtin `gold` scene.
-    #[arg(long)]
-    config: Option<PathBuf>,
+    pub config: Option<PathBuf>,
     /// Listen address (default 127.0.0.1:8080; port 0 picks a free port).
-    #[arg(long)]
-    bind: Option<std::net::SocketAddr>,
+    pub bind: Option<std::net::SocketAddr>,
     /// Data directory: database, token, scans (default ./gonio-data).
-    #[arg(long)]
-    data: Option<PathBuf>,
+    pub data: Option<PathBuf>,
 }
 
-pub fn run(args: Args) -> anyhow::Result<()> {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
-        )
-        .with_writer(std::io::stderr)
-        // Colours only for a person at a terminal: plain text in files and journals.
-        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
-        .init();
+/// Runs the daemon until `stop` ends (it names what stopped it: a signal, say); the
+/// steps running then are redone at the next start.
+pub fn run<S>(args: Options, stop: S) -> anyhow::Result<()>
+where
+    S: std::future::Future<Output = &'static str> + Send,
+{
     let mut config = match &args.config {
         Some(path) => Config::load(path)?,
         None => Config::default(),
@@ -181,12 +178,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     lanes::start(shared.clone(), devices, &db_path)?;
 
     // Stopped on a signal: the steps running are redone at the next start.
-    let served = runtime.block_on(serve(shared.clone(), listener));
+    let served = runtime.block_on(serve(shared.clone(), listener, stop));
     drop(lock_dir);
     served
 }
 
-async fn serve(shared: Arc<Shared>, listener: tokio::net::TcpListener) -> anyhow::Result<()> {
+async fn serve<S>(
+    shared: Arc<Shared>,
+    listener: tokio::net::TcpListener,
+    stop: S,
+) -> anyhow::Result<()>
+where
+    S: std::future::Future<Output = &'static str> + Send,
+{
     let addr = listener.local_addr()?;
     println!("gonio: listening on http://{addr}");
     std::io::stdout().flush()?;
@@ -216,7 +220,7 @@ async fn serve(shared: Arc<Shared>, listener: tokio::net::TcpListener) -> anyhow
         limits.idle_timeout
     );
     let stop = async {
-        let signal = crate::interrupt::wait_for_signal().await;
+        let signal = stop.await;
         tracing::info!(
             "{signal}: stopping; a scan in progress resumes at its first unfinished step \
              when gonio serve starts again"

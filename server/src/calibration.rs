@@ -220,7 +220,7 @@ mod tests {
     fn a_configured_setup_names_its_source_for_every_uncertainty_key() {
         let dir = std::env::temp_dir().join(format!("gonio-setup-json-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
-        let config = super::super::config::Config::from_toml_str(CONFIGURED).unwrap();
+        let config = crate::config::Config::from_toml_str(CONFIGURED).unwrap();
         let value =
             current_setup_json(&dir, config.setup().as_ref(), "configuration [setup]").unwrap();
         std::fs::remove_dir_all(&dir).ok();

@@ -7,10 +7,10 @@
 use gonio_drivers::ArmState;
 
 use super::HardwareLane;
-use crate::commands::serve::lanes::arm_watch;
-use crate::commands::serve::lanes::backoff::Backoff;
-use crate::commands::serve::store::StoreError;
-use crate::commands::serve::sync::lock;
+use crate::lanes::arm_watch;
+use crate::lanes::backoff::Backoff;
+use crate::store::StoreError;
+use crate::sync::lock;
 
 impl HardwareLane {
     /// Lets the driver go when the arm's device path vanished (unplugged) or names

@@ -220,7 +220,7 @@ fn theta_progress(steps: &[StepRecord]) -> ThetaProgress {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::commands::serve::plan::{ScanPlan, AUTO_FIT, FINAL_FITS, FIT_MODELS};
+    use crate::plan::{ScanPlan, AUTO_FIT, FINAL_FITS, FIT_MODELS};
     use serde_json::json;
     use time::Duration;
 

@@ -5,13 +5,13 @@ use axum::response::{Html, IntoResponse};
 
 /// The single-page operator interface (plain HTML and JavaScript).
 pub async fn index() -> Html<&'static str> {
-    Html(include_str!("../../../assets/index.html"))
+    Html(include_str!("../assets/index.html"))
 }
 
 /// `GET /api/openapi.json`.
 pub async fn openapi() -> impl IntoResponse {
     (
         [(header::CONTENT_TYPE, "application/json")],
-        include_str!("../../../assets/openapi.json"),
+        include_str!("../assets/openapi.json"),
     )
 }

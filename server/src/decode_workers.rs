@@ -284,21 +284,9 @@ fn death(
     }
 }
 
-/// Arguments of `gonio decode-worker` (started by the daemon and the commands, not
-/// by a user).
-#[derive(clap::Args)]
-pub struct Args {
-    /// Address space limit, bytes.
-    #[arg(long)]
-    memory_bytes: u64,
-    /// Processor time each decode may use, seconds.
-    #[arg(long)]
-    cpu_seconds: u64,
-}
-
 /// The child: sets its limits, then decodes what its parent asks until its input
 /// ends (or its parent dies).
-pub fn serve(args: Args) -> anyhow::Result<()> {
+pub fn serve(limits: Limits) -> anyhow::Result<()> {
     // SAFETY: plain system calls on this process with valid arguments.
     unsafe {
         // The parent's end ends the child; a stop meant for the parent (Ctrl-C in a
@@ -314,8 +302,8 @@ pub fn serve(args: Args) -> anyhow::Result<()> {
         };
         libc::setrlimit(libc::RLIMIT_CORE, &no_core);
         let memory = libc::rlimit {
-            rlim_cur: args.memory_bytes,
-            rlim_max: args.memory_bytes,
+            rlim_cur: limits.memory_bytes,
+            rlim_max: limits.memory_bytes,
         };
         if libc::setrlimit(libc::RLIMIT_AS, &memory) != 0 {
             anyhow::bail!("setting the memory limit: {}", io::Error::last_os_error());
@@ -330,7 +318,7 @@ pub fn serve(args: Args) -> anyhow::Result<()> {
         {
             std::process::abort();
         }
-        cpu_budget(args.cpu_seconds);
+        cpu_budget(limits.cpu_seconds);
     })?;
     Ok(())
 }

@@ -16,12 +16,12 @@ use std::time::Duration;
 
 use super::backoff::{Backoff, Failures};
 use super::step::{self, Outcome, StepError};
-use crate::commands::serve::plan::{Lane, ScanPlan, Step};
-use crate::commands::serve::process::{self, Prefetched};
-use crate::commands::serve::shared::Shared;
-use crate::commands::serve::step_guard;
-use crate::commands::serve::storage::{self, Probe};
-use crate::commands::serve::store::{ScanState, StepRecord, Store, StoreError, PROCESSABLE};
+use crate::plan::{Lane, ScanPlan, Step};
+use crate::process::{self, Prefetched};
+use crate::shared::Shared;
+use crate::step_guard;
+use crate::storage::{self, Probe};
+use crate::store::{ScanState, StepRecord, Store, StoreError, PROCESSABLE};
 
 /// How often the lane looks for ready steps when nothing wakes it.
 const IDLE_POLL: Duration = Duration::from_millis(500);

@@ -2,8 +2,8 @@
 //! controller's trapezoidal motion profile, then at each θL one capture per bracket
 //! exposure (shutter time plus the camera's download latency).
 
-use gonio_mock_hw::camera::CaptureTiming;
-use gonio_mock_hw::grbl::{move_duration_s, GrblConfig};
+use crate::camera::CaptureTiming;
+use crate::grbl::{move_duration_s, GrblConfig};
 
 /// The arm and camera timing a scan is costed with (real time, seconds).
 #[derive(Debug, Clone, Copy, PartialEq)]

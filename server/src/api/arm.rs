@@ -14,11 +14,11 @@ use serde::Deserialize;
 use serde_json::{json, Value};
 
 use super::{db, internal, parse_json, ApiError, ApiResult, AppState};
-use crate::commands::serve::config::HomingMode;
-use crate::commands::serve::shared::{PositionRequest, Shared, EMERGENCY_STOP};
-use crate::commands::serve::store::ScanState;
-use crate::commands::serve::sync::lock;
-use crate::commands::serve::validate;
+use crate::config::HomingMode;
+use crate::shared::{PositionRequest, Shared, EMERGENCY_STOP};
+use crate::store::ScanState;
+use crate::sync::lock;
+use crate::validate;
 
 /// The scan running now, if any (the hardware lane is busy with it).
 async fn running_scan(shared: &Arc<Shared>) -> ApiResult<Option<i64>> {

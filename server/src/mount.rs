@@ -36,7 +36,7 @@ impl EmulatedSamples {
     fn load(&self, sample: &str) -> anyhow::Result<Scene> {
         let spec = scene_of(&self.scenes, sample)
             .with_context(|| format!("the emulated instrument holds no sample {sample:?}"))?;
-        crate::commands::simulate::load_scene(spec)
+        gonio_mock_hw::scene_spec::load_scene(spec)
             .with_context(|| format!("scene of sample {sample}"))
     }
 }

@@ -5,9 +5,9 @@
 
 use serde_json::Value;
 
-use crate::commands::serve::plan::Step;
-use crate::commands::serve::shared::Shared;
-use crate::commands::serve::store::{ScanState, Store, StoreError};
+use crate::plan::Step;
+use crate::shared::Shared;
+use crate::store::{ScanState, Store, StoreError};
 
 /// Why a step did not complete.
 pub enum StepError {
