@@ -3,9 +3,10 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-# Debian packages the tests need: Chromium for the page's browser test
-# (tests/tests/page_browser.rs); libgphoto2-dev, libclang-dev (bindgen) and pkg-config
-# to build the `gphoto2` feature; python3-venv for the tests' own Python below.
+# Debian packages the tests need: Chromium for the page's browser tests
+# (tests/tests/page_browser.rs, page_states.rs); libgphoto2-dev, libclang-dev (bindgen)
+# and pkg-config to build the `gphoto2` feature; python3-venv for the tests' own Python
+# below.
 missing=()
 for pkg in chromium libgphoto2-dev libclang-dev pkg-config python3-venv; do
     dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")

@@ -1,6 +1,7 @@
 //! End-to-end tests across gonio's crates live in `tests/tests/`; this library holds
 //! their shared helpers: locating the `gonio` binary, running the daemon as a real
-//! process, and a small HTTP client for its API.
+//! process, and a small HTTP client for its API; `browser` and `page` drive the web
+//! page in a headless Chromium.
 
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
@@ -11,6 +12,7 @@ use std::time::{Duration, Instant};
 use serde_json::Value;
 
 pub mod browser;
+pub mod page;
 
 /// The `gonio` binary of the profile the tests were built with, brought up to date on
 /// first use, so `cargo test --workspace` works on a clean checkout. The update runs

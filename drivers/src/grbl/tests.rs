@@ -2,9 +2,11 @@
 
 use std::collections::BTreeMap;
 use std::io::{Read, Write};
+use std::thread;
 use std::time::Instant;
 
 use super::*;
+use crate::{Arm, ArmState};
 use serialport::TTYPort;
 
 /// How the scripted controller behaves.
