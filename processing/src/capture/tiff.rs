@@ -16,7 +16,7 @@ use super::sidecar::{sidecar_path, Sidecar};
 
 /// Extensions read as TIFF; every other extension is tried as camera raw.
 pub(super) const TIFF_EXTENSIONS: [&str; 2] = ["tif", "tiff"];
-/// Camera raw extensions recognised when scanning directories.
+
 /// Writes a 16-bit RGB TIFF of `counts` (RGB interleaved, row-major) and its sidecar.
 pub fn write_tiff_capture(
     path: &Path,
