@@ -165,15 +165,7 @@ impl Frame {
                 reason: format!("{} values for {width}×{height} RGB", data.len()),
             });
         }
-        let decoded = Decoded {
-            width,
-            height,
-            stored: (width, height),
-            data,
-            black_level: 0.0,
-            white_level: max_count,
-            max_count,
-        };
+        let decoded = Decoded::whole(width, height, data, max_count);
         Self::assemble(&path, sidecar, decoded)
     }
 

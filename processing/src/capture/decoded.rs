@@ -22,6 +22,20 @@ pub struct Decoded {
 }
 
 impl Decoded {
+    /// A whole `width`×`height` image of counts as stored, black at 0 and clipping at
+    /// `max_count`, the largest count of its bit depth.
+    pub(super) fn whole(width: usize, height: usize, data: Vec<u16>, max_count: f64) -> Self {
+        Decoded {
+            width,
+            height,
+            stored: (width, height),
+            data,
+            black_level: 0.0,
+            white_level: max_count,
+            max_count,
+        }
+    }
+
     /// The given row ranges of the image, stacked.
     pub(super) fn rows(self, path: &Path, bands: &[Range<usize>]) -> Result<Decoded, CaptureError> {
         if let [band] = bands {

@@ -199,15 +199,7 @@ pub(super) fn decode_tiff(path: &Path) -> Result<Decoded, CaptureError> {
             })
         }
     };
-    Ok(Decoded {
-        width,
-        height,
-        stored: (width, height),
-        data,
-        black_level: 0.0,
-        white_level: max_count,
-        max_count,
-    })
+    Ok(Decoded::whole(width, height, data, max_count))
 }
 
 fn drop_alpha<T: Copy>(rgba: &[T]) -> Vec<T> {

@@ -2,10 +2,8 @@
 //! the log response g(z) recovered per channel ([`response`](super::response)), and the
 //! reading of level z the exposure e^g(z); radiance on the scale fixed by g(128) = 0.
 
-use rayon::prelude::*;
-
 use super::error::HdrError;
-use super::image::{channel_mask, SATURATED, UNDEREXPOSED};
+use super::image::{channel_mask, map_rows, SATURATED, UNDEREXPOSED};
 use super::options::MergeOptions;
 use super::response::{self, Observations, LEVELS};
 use super::weighting::predicted_mean;
@@ -58,42 +56,36 @@ pub(super) fn merge_debevec_malik(
     order.sort_by(|&a, &b| ln_h[b].total_cmp(&ln_h[a]));
     let exposures: Vec<f64> = order.iter().map(|&j| ln_h[j].exp()).collect();
     let width = frames[0].width;
-    let mut rgb = vec![0f32; frames[0].data.len()];
-    let mut mask = vec![0u8; frames[0].width * frames[0].height];
-    rgb.par_chunks_mut(3 * width)
-        .zip(mask.par_chunks_mut(width))
-        .enumerate()
-        .for_each_init(Vec::new, |levels, (y, (row_rgb, row_mask))| {
-            for (i, value) in row_rgb.iter_mut().enumerate() {
-                let index = 3 * width * y + i;
-                let curve = &curves[i % 3];
-                levels.clear();
-                levels.extend(order.iter().map(|&j| level(j, index)));
-                let reference = levels
-                    .iter()
-                    .zip(&exposures)
-                    .find(|(&z, _)| z > 0 && z < LEVELS - 1)
-                    .map(|(&z, h)| curve.exposure[z] / h);
-                let (radiance, flag) = match reference {
-                    Some(l0) => {
-                        let estimate = predicted_mean(
-                            levels.len(),
-                            |k| exposures[k],
-                            |k| (levels[k] < LEVELS - 1).then(|| curve.exposure[levels[k]]),
-                            |predicted| curve.in_range(predicted),
-                            |_, predicted| curve.variance(predicted),
-                            l0,
-                        );
-                        (estimate.max(0.0), 0)
-                    }
-                    None => match levels.iter().rposition(|&z| z == LEVELS - 1) {
-                        Some(k) => ((curve.g[LEVELS - 1] - ln_h[order[k]]).exp(), SATURATED),
-                        None => (0.0, UNDEREXPOSED),
-                    },
-                };
-                *value = radiance as f32;
-                row_mask[i / 3] |= channel_mask(flag, i % 3);
-            }
-        });
-    Ok((rgb, mask))
+    Ok(map_rows(&frames[0], |levels, y, row_rgb, row_mask| {
+        for (i, value) in row_rgb.iter_mut().enumerate() {
+            let index = 3 * width * y + i;
+            let curve = &curves[i % 3];
+            levels.clear();
+            levels.extend(order.iter().map(|&j| level(j, index)));
+            let reference = levels
+                .iter()
+                .zip(&exposures)
+                .find(|(&z, _)| z > 0 && z < LEVELS - 1)
+                .map(|(&z, h)| curve.exposure[z] / h);
+            let (radiance, flag) = match reference {
+                Some(l0) => {
+                    let estimate = predicted_mean(
+                        levels.len(),
+                        |k| exposures[k],
+                        |k| (levels[k] < LEVELS - 1).then(|| curve.exposure[levels[k]]),
+                        |predicted| curve.in_range(predicted),
+                        |_, predicted| curve.variance(predicted),
+                        l0,
+                    );
+                    (estimate.max(0.0), 0)
+                }
+                None => match levels.iter().rposition(|&z| z == LEVELS - 1) {
+                    Some(k) => ((curve.g[LEVELS - 1] - ln_h[order[k]]).exp(), SATURATED),
+                    None => (0.0, UNDEREXPOSED),
+                },
+            };
+            *value = radiance as f32;
+            row_mask[i / 3] |= channel_mask(flag, i % 3);
+        }
+    }))
 }

@@ -1,6 +1,10 @@
 //! A merged radiance map: relative radiance, f32 RGB interleaved and row-major, with a
 //! per-pixel mask of the channels clipped or black in every frame.
 
+use rayon::prelude::*;
+
+use crate::capture::Frame;
+
 /// Mask bit: some channel of the pixel was clipped in every frame that saw it.
 pub const SATURATED: u8 = 1;
 /// Mask bit: some channel of the pixel was near black in every frame.
@@ -58,4 +62,23 @@ impl HdrImage {
     pub fn count_flagged(&self, bit: u8) -> usize {
         self.mask.iter().filter(|&&m| m & bit != 0).count()
     }
+}
+
+/// The values and mask of a map the size of `frame`, computed a row at a time in
+/// parallel: `row(scratch, y, rgb, mask)` fills row `y` (`rgb` RGB interleaved, `mask`
+/// a byte a pixel), `scratch` a buffer of the thread's own, kept from row to row.
+pub(super) fn map_rows<T: Send>(
+    frame: &Frame,
+    row: impl Fn(&mut Vec<T>, usize, &mut [f32], &mut [u8]) + Send + Sync,
+) -> (Vec<f32>, Vec<u8>) {
+    let width = frame.width;
+    let mut rgb = vec![0f32; frame.data.len()];
+    let mut mask = vec![0u8; frame.width * frame.height];
+    rgb.par_chunks_mut(3 * width)
+        .zip(mask.par_chunks_mut(width))
+        .enumerate()
+        .for_each_init(Vec::new, |scratch, (y, (row_rgb, row_mask))| {
+            row(scratch, y, row_rgb, row_mask)
+        });
+    (rgb, mask)
 }

@@ -2,9 +2,7 @@
 //! clipping), usable between `min_signal` and `max_signal`, with shot plus read noise;
 //! radiance is normalised signal per second at ISO 100.
 
-use rayon::prelude::*;
-
-use super::image::{channel_mask, SATURATED, UNDEREXPOSED};
+use super::image::{channel_mask, map_rows, SATURATED, UNDEREXPOSED};
 use super::options::MergeOptions;
 use super::weighting::predicted_mean;
 use crate::capture::Frame;
@@ -45,42 +43,36 @@ pub(super) fn merge_linear(frames: &[Frame], options: &MergeOptions) -> (Vec<f32
     sorted.sort_by(|a, b| b.exposure.total_cmp(&a.exposure));
     let read_var = options.noise.read_noise * options.noise.read_noise;
     let width = frames[0].width;
-    let mut rgb = vec![0f32; frames[0].data.len()];
-    let mut mask = vec![0u8; frames[0].width * frames[0].height];
-    rgb.par_chunks_mut(3 * width)
-        .zip(mask.par_chunks_mut(width))
-        .enumerate()
-        .for_each_init(Vec::new, |dark, (y, (row_rgb, row_mask))| {
-            let offset = 3 * width * y;
-            // The samples too dark in every frame (most of a frame, usually), found
-            // over the whole row at once: no frame's signal is in range or clipped.
-            dark.clear();
-            dark.resize(row_rgb.len(), true);
-            for f in &sorted {
-                let counts = &f.data[offset..offset + row_rgb.len()];
-                for (d, &count) in dark.iter_mut().zip(counts) {
-                    *d &= u32::from(count) < f.usable_from;
-                }
+    map_rows(&frames[0], |dark, y, row_rgb, row_mask| {
+        let offset = 3 * width * y;
+        // The samples too dark in every frame (most of a frame, usually), found
+        // over the whole row at once: no frame's signal is in range or clipped.
+        dark.clear();
+        dark.resize(row_rgb.len(), true);
+        for f in &sorted {
+            let counts = &f.data[offset..offset + row_rgb.len()];
+            for (d, &count) in dark.iter_mut().zip(counts) {
+                *d &= u32::from(count) < f.usable_from;
             }
-            // A pixel's flags are gathered before they are stored.
-            for (p, (pixel, pixel_mask)) in row_rgb
-                .chunks_exact_mut(3)
-                .zip(row_mask.iter_mut())
-                .enumerate()
-            {
-                for (c, value) in pixel.iter_mut().enumerate() {
-                    let i = 3 * p + c;
-                    let (radiance, flag) = if dark[i] {
-                        (0.0, UNDEREXPOSED)
-                    } else {
-                        merge_sample(&sorted, offset + i, lo, hi, read_var)
-                    };
-                    *value = radiance as f32;
-                    *pixel_mask |= channel_mask(flag, c);
-                }
+        }
+        // A pixel's flags are gathered before they are stored.
+        for (p, (pixel, pixel_mask)) in row_rgb
+            .chunks_exact_mut(3)
+            .zip(row_mask.iter_mut())
+            .enumerate()
+        {
+            for (c, value) in pixel.iter_mut().enumerate() {
+                let i = 3 * p + c;
+                let (radiance, flag) = if dark[i] {
+                    (0.0, UNDEREXPOSED)
+                } else {
+                    merge_sample(&sorted, offset + i, lo, hi, read_var)
+                };
+                *value = radiance as f32;
+                *pixel_mask |= channel_mask(flag, c);
             }
-        });
-    (rgb, mask)
+        }
+    })
 }
 
 /// The linear merge of sample `index` of `sorted` (longest exposure first): its
