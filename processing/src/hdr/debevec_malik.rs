@@ -1,6 +1,6 @@
 //! The Debevec–Malik (1997) merge of non-linear frames: counts quantised to 256 levels,
-//! the log response g(z) recovered per channel ([`response`](super::response)), and the
-//! reading of level z the exposure e^g(z); radiance on the scale fixed by g(128) = 0.
+//! the log response g(z) recovered per channel ([`response`]), and the reading of level
+//! z the exposure e^g(z); radiance on the scale fixed by g(128) = 0.
 
 use super::error::HdrError;
 use super::image::{channel_mask, map_rows, SATURATED, UNDEREXPOSED};
