@@ -21,7 +21,8 @@ use std::io::{self, Read, Write};
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
-use super::{check_bands, checked_len, decode_here, max_pixels, set_max_pixels};
+use super::decoded::check_bands;
+use super::{checked_len, decode_here, max_pixels, set_max_pixels};
 use super::{CaptureError, Decoded};
 
 /// Longest path or reason sent, bytes.

@@ -1,0 +1,173 @@
+//! One θL's samples from its merged strips: per column the strips' geometry and values
+//! (five-row means, or the centre row on a sharp peak), the drops, and per channel
+//! β_c = (L̄_sample,c / L̄_white,c) · (Ē_white / Ē_sample) · ρ_white · W_c.
+
+use rayon::prelude::*;
+
+use super::drops::{DropCounts, DropReason};
+use super::layout::{ColumnGeometry, StripLayout, STRIP_ROWS};
+use super::options::ExtractOptions;
+use super::sharp::{is_sharp, pooled_row_noise, Curvature};
+use super::strip::{StripRows, StripValue};
+use crate::geometry::{PixelGeometry, Setup};
+use crate::hdr::HdrImage;
+use crate::samples::{Sample, SampleUncertainty};
+
+/// One column before the samples are made: its strips' pixel geometry (`None` off the
+/// cylinder or unlit), its strips' rows, and how each strip curves per channel.
+struct Column {
+    geometry: Option<(Vec<PixelGeometry>, Vec<PixelGeometry>)>,
+    sample: StripRows,
+    white: StripRows,
+    curvature: [Option<Curvature>; 3],
+    white_curvature: [Option<Curvature>; 3],
+}
+
+impl Column {
+    /// The sample's geometry and the two strips' values: five-row means, or on a
+    /// sharp peak the sample strip's centre row with that pixel's geometry.
+    fn read(&self, sharp: bool) -> Option<(ColumnGeometry, StripValue, StripValue)> {
+        let (sample, white) = self.geometry.as_ref()?;
+        Some(if sharp {
+            let centre = std::slice::from_ref(&sample[STRIP_ROWS / 2]);
+            (
+                ColumnGeometry::new(centre, white),
+                self.sample.centre(),
+                self.white.mean(),
+            )
+        } else {
+            (
+                ColumnGeometry::new(sample, white),
+                self.sample.mean(),
+                self.white.mean(),
+            )
+        })
+    }
+}
+
+pub(super) fn extract_theta(
+    setup: &Setup,
+    map: &HdrImage,
+    layout: &StripLayout,
+    theta_l: f64,
+    options: &ExtractOptions,
+    white_reflectance: f64,
+) -> (Vec<Sample>, Vec<usize>, DropCounts, usize) {
+    let columns: Vec<Column> = (0..map.width)
+        .into_par_iter()
+        .map(|x| {
+            let geometry = layout
+                .strip_geometry(setup, x, layout.sample_row, theta_l)
+                .zip(layout.strip_geometry(setup, x, layout.white_row, theta_l));
+            let sample = StripRows::read(map, x, layout.sample_map_row);
+            let white = StripRows::read(map, x, layout.white_map_row);
+            let (curvature, white_curvature) = match &geometry {
+                Some((sample_pixels, white_pixels)) => (
+                    sample.curvatures(sample_pixels),
+                    white.curvatures(white_pixels),
+                ),
+                None => ([None; 3], [None; 3]),
+            };
+            Column {
+                geometry,
+                sample,
+                white,
+                curvature,
+                white_curvature,
+            }
+        })
+        .collect();
+    let noise = pooled_row_noise(&columns.iter().map(|c| c.curvature).collect::<Vec<_>>());
+    let white_noise = pooled_row_noise(
+        &columns
+            .iter()
+            .map(|c| c.white_curvature)
+            .collect::<Vec<_>>(),
+    );
+    let sharp: Vec<bool> = columns
+        .iter()
+        .zip(&noise)
+        .map(|(column, noise)| is_sharp(&column.curvature, noise))
+        .collect();
+    let columns: Vec<_> = columns
+        .iter()
+        .zip(&sharp)
+        .zip(noise.iter().zip(&white_noise))
+        .map(|((column, &sharp), (&noise, &white_noise))| {
+            column.read(sharp).map(|read| {
+                // One row's relative noise over the rows averaged, both strips.
+                let rows = if sharp { 1.0 } else { STRIP_ROWS as f64 };
+                let relative: [f64; 3] = std::array::from_fn(|c| {
+                    (noise[c] * noise[c] / rows
+                        + white_noise[c] * white_noise[c] / STRIP_ROWS as f64)
+                        .sqrt()
+                });
+                (read, sharp, relative)
+            })
+        })
+        .collect();
+    // The brightest usable white of each channel, for the too-dark threshold.
+    let mut brightest_white = [0.0f64; 3];
+    for ((_, _, white), _, _) in columns.iter().flatten() {
+        for (c, brightest) in brightest_white.iter_mut().enumerate() {
+            if white.flags[c] == 0 {
+                *brightest = brightest.max(white.rgb[c]);
+            }
+        }
+    }
+    let threshold = brightest_white.map(|w| options.min_white_fraction * w);
+    let white_rgb = options.camera.white_rgb();
+    let limit = options.grazing_limit_deg;
+
+    let mut samples = Vec::new();
+    let mut sample_columns = Vec::new();
+    let mut dropped = DropCounts::default();
+    let mut centre_rows = 0;
+    for (x, column) in columns.into_iter().enumerate() {
+        let Some(((g, sample, white), sharp, relative_noise)) = column else {
+            dropped.off_cylinder += 1;
+            continue;
+        };
+        if g.theta_i.abs() > limit || g.theta_r.abs() > limit {
+            dropped.grazing += 1;
+            continue;
+        }
+        let mut point = Sample {
+            theta_l,
+            theta_i: g.theta_i,
+            theta_r: g.theta_r,
+            cosines: Some(g.cosines),
+            ..Sample::default()
+        };
+        let mut noise = [0.0; 3];
+        for c in 0..3 {
+            match DropReason::of(&sample, &white, c, threshold[c]) {
+                Some(reason) => {
+                    dropped.count(reason, c);
+                    point.dropped[c] = true;
+                }
+                None => {
+                    point.rgb[c] = sample.rgb[c] / white.rgb[c]
+                        * g.irradiance_ratio
+                        * white_reflectance
+                        * white_rgb[c];
+                    noise[c] = point.rgb[c] * relative_noise[c];
+                }
+            }
+        }
+        if point.dropped.iter().all(|&d| d) {
+            dropped.no_channel += 1;
+        } else {
+            centre_rows += usize::from(sharp);
+            if options.uncertainty {
+                point.uncertainty = Some(SampleUncertainty {
+                    noise,
+                    ..SampleUncertainty::default()
+                });
+            }
+            samples.push(point);
+            sample_columns.push(x);
+        }
+    }
+    (samples, sample_columns, dropped, centre_rows)
+}

@@ -1,0 +1,151 @@
+//! Where the strips lie in a capture (full resolution or 2×2-superpixel raw) and in the
+//! merged map, and the geometry their pixels see: the point on the cylinder, its normal,
+//! the light and the camera ([`Setup::pixel_geometry`]). Angles in degrees.
+
+use std::ops::Range;
+
+use super::error::ExtractError;
+use crate::brdf::Cosines;
+use crate::geometry::{PixelGeometry, Setup};
+
+/// Rows averaged around each strip's centre row (paper §2.2).
+pub const STRIP_ROWS: usize = 5;
+
+/// Sensor pixels per pixel of a `width`×`height` capture of `setup`'s sensor: 1 for
+/// full resolution, 2 for 2×2-superpixel raw; other sizes are refused.
+pub(crate) fn capture_scale(
+    setup: &Setup,
+    width: usize,
+    height: usize,
+    theta_l: f64,
+) -> Result<usize, ExtractError> {
+    let (sw, sh) = (setup.image_width as usize, setup.image_height as usize);
+    if (width, height) == (sw, sh) {
+        Ok(1)
+    } else if (width, height) == (sw / 2, sh / 2) {
+        Ok(2)
+    } else {
+        Err(ExtractError::SizeMismatch {
+            theta_l,
+            width,
+            height,
+            setup_width: setup.image_width,
+            setup_height: setup.image_height,
+        })
+    }
+}
+
+/// Where the strips lie in a capture of a given size, and in the merged map.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) struct StripLayout {
+    /// Sensor pixels per capture pixel: 1, or 2 for superpixel raw.
+    scale: usize,
+    /// Centre rows of the strips in the capture.
+    pub(super) sample_row: usize,
+    pub(super) white_row: usize,
+    /// Centre rows of the strips in the merged map (the capture's, or those of a map
+    /// holding only [`StripLayout::bands`]).
+    pub(super) sample_map_row: usize,
+    pub(super) white_map_row: usize,
+}
+
+impl StripLayout {
+    pub(super) fn new(
+        setup: &Setup,
+        width: usize,
+        height: usize,
+        theta_l: f64,
+    ) -> Result<Self, ExtractError> {
+        let scale = capture_scale(setup, width, height, theta_l)?;
+        let row = |which: &'static str, sensor_row: u32| {
+            let row = sensor_row as usize / scale;
+            if row < STRIP_ROWS / 2 || row + STRIP_ROWS / 2 >= height {
+                Err(ExtractError::RowOutside { which, row, height })
+            } else {
+                Ok(row)
+            }
+        };
+        let (sample_row, white_row) = (
+            row("sample", setup.sample_row)?,
+            row("white", setup.white_row)?,
+        );
+        Ok(Self {
+            scale,
+            sample_row,
+            white_row,
+            sample_map_row: sample_row,
+            white_map_row: white_row,
+        })
+    }
+
+    /// The capture row ranges of the two strips (sample, then white).
+    pub(super) fn bands(&self) -> Vec<Range<usize>> {
+        let half = STRIP_ROWS / 2;
+        [self.sample_row, self.white_row]
+            .map(|centre| centre - half..centre + half + 1)
+            .to_vec()
+    }
+
+    /// The same strips in a frame holding only [`StripLayout::bands`].
+    pub(super) fn strips_only(self) -> Self {
+        let half = STRIP_ROWS / 2;
+        Self {
+            sample_map_row: half,
+            white_map_row: STRIP_ROWS + half,
+            ..self
+        }
+    }
+
+    /// Sensor coordinate of the centre of capture pixel `i` (a superpixel spans two).
+    fn sensor(&self, i: usize) -> f64 {
+        (self.scale * i) as f64 + (self.scale as f64 - 1.0) / 2.0
+    }
+
+    /// The geometry of the strip rows around capture row `centre` at column `x`:
+    /// `None` if any of those pixels misses the cylinder or is unlit.
+    pub(super) fn strip_geometry(
+        &self,
+        setup: &Setup,
+        x: usize,
+        centre: usize,
+        theta_l: f64,
+    ) -> Option<Vec<PixelGeometry>> {
+        let u = self.sensor(x);
+        (centre - STRIP_ROWS / 2..=centre + STRIP_ROWS / 2)
+            .map(|y| {
+                setup
+                    .pixel_geometry(u, self.sensor(y), theta_l)
+                    .filter(|g| g.irradiance > 0.0 && g.theta_i.abs() < 90.0)
+            })
+            .collect()
+    }
+}
+
+/// The geometry of a column's sample (the mean of its strip pixels', or the centre
+/// pixel's), and the irradiance ratio Ē_white / E_sample of its two strips.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct ColumnGeometry {
+    pub(super) theta_i: f64,
+    pub(super) theta_r: f64,
+    pub(super) cosines: Cosines,
+    pub(super) irradiance_ratio: f64,
+}
+
+impl ColumnGeometry {
+    pub(super) fn new(sample: &[PixelGeometry], white: &[PixelGeometry]) -> Self {
+        let mean = |f: &dyn Fn(&PixelGeometry) -> f64, of: &[PixelGeometry]| {
+            of.iter().map(f).sum::<f64>() / of.len() as f64
+        };
+        Self {
+            theta_i: mean(&|g| g.theta_i, sample),
+            theta_r: mean(&|g| g.theta_r, sample),
+            cosines: Cosines {
+                n_dot_l: mean(&|g| g.cosines.n_dot_l, sample),
+                n_dot_v: mean(&|g| g.cosines.n_dot_v, sample),
+                n_dot_h: mean(&|g| g.cosines.n_dot_h, sample),
+                v_dot_h: mean(&|g| g.cosines.v_dot_h, sample),
+            },
+            irradiance_ratio: mean(&|g| g.irradiance, white) / mean(&|g| g.irradiance, sample),
+        }
+    }
+}

@@ -1,0 +1,91 @@
+//! The Debevec–Malik (1997) merge of non-linear frames: counts quantised to 256 levels,
+//! the log response g(z) recovered per channel ([`response`]), and the reading of level
+//! z the exposure e^g(z); radiance on the scale fixed by g(128) = 0.
+
+use super::error::HdrError;
+use super::image::{channel_mask, map_rows, SATURATED, UNDEREXPOSED};
+use super::options::MergeOptions;
+use super::response::{self, Observations, LEVELS};
+use super::weighting::predicted_mean;
+use crate::capture::Frame;
+
+/// Per-frame table from count to the quantised level 0..=255 of its normalised signal.
+fn level_table(frame: &Frame) -> Vec<u8> {
+    let range = frame.white_level - frame.black_level;
+    (0..=u16::MAX)
+        .map(|count| {
+            let s = (f64::from(count) - frame.black_level) / range;
+            (s.clamp(0.0, 1.0) * (LEVELS - 1) as f64).round() as u8
+        })
+        .collect()
+}
+
+pub(super) fn merge_debevec_malik(
+    frames: &[Frame],
+    options: &MergeOptions,
+) -> Result<(Vec<f32>, Vec<u8>), HdrError> {
+    let ln_h: Vec<f64> = frames.iter().map(|f| f.sidecar.exposure().ln()).collect();
+    let mut distinct = ln_h.clone();
+    distinct.sort_by(f64::total_cmp);
+    distinct.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+    if distinct.len() < 2 {
+        return Err(HdrError::SingleExposure);
+    }
+    let tables: Vec<Vec<u8>> = frames.iter().map(level_table).collect();
+    let level = |j: usize, index: usize| usize::from(tables[j][usize::from(frames[j].data[index])]);
+    let observations = Observations {
+        level: &level,
+        frames: frames.len(),
+        pixels: frames[0].width * frames[0].height,
+        ln_h: &ln_h,
+    };
+    let curves: Vec<response::Curve> = (0..3)
+        .map(|c| {
+            response::recover(
+                &observations,
+                c,
+                options.response_samples,
+                options.smoothness,
+            )
+            .ok_or_else(|| HdrError::Response(format!("channel {c}: degenerate bracket")))
+        })
+        .collect::<Result<_, _>>()?;
+    // Longest exposure first: the first usable reading is the reference estimate, and
+    // the last clipped one the clipped-everywhere bound.
+    let mut order: Vec<usize> = (0..frames.len()).collect();
+    order.sort_by(|&a, &b| ln_h[b].total_cmp(&ln_h[a]));
+    let exposures: Vec<f64> = order.iter().map(|&j| ln_h[j].exp()).collect();
+    let width = frames[0].width;
+    Ok(map_rows(&frames[0], |levels, y, row_rgb, row_mask| {
+        for (i, value) in row_rgb.iter_mut().enumerate() {
+            let index = 3 * width * y + i;
+            let curve = &curves[i % 3];
+            levels.clear();
+            levels.extend(order.iter().map(|&j| level(j, index)));
+            let reference = levels
+                .iter()
+                .zip(&exposures)
+                .find(|(&z, _)| z > 0 && z < LEVELS - 1)
+                .map(|(&z, h)| curve.exposure[z] / h);
+            let (radiance, flag) = match reference {
+                Some(l0) => {
+                    let estimate = predicted_mean(
+                        levels.len(),
+                        |k| exposures[k],
+                        |k| (levels[k] < LEVELS - 1).then(|| curve.exposure[levels[k]]),
+                        |predicted| curve.in_range(predicted),
+                        |_, predicted| curve.variance(predicted),
+                        l0,
+                    );
+                    (estimate.max(0.0), 0)
+                }
+                None => match levels.iter().rposition(|&z| z == LEVELS - 1) {
+                    Some(k) => ((curve.g[LEVELS - 1] - ln_h[order[k]]).exp(), SATURATED),
+                    None => (0.0, UNDEREXPOSED),
+                },
+            };
+            *value = radiance as f32;
+            row_mask[i / 3] |= channel_mask(flag, i % 3);
+        }
+    }))
+}
