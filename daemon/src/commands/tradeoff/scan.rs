@@ -5,8 +5,8 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
-use gonio_processing::capture::{is_capture_path, read_sidecar, sidecar_path};
-use gonio_processing::extract::{extract_scan, ExtractOptions};
+use gonio_processing::capture::{read_sidecar, sidecar_path};
+use gonio_processing::extract::{extract_scan, theta_groups, ExtractOptions};
 use gonio_processing::samples::Sample;
 
 /// One capture: the image file and its shutter time.
@@ -23,47 +23,23 @@ pub struct Position {
     pub exposures: Vec<Exposure>,
 }
 
-fn walk(dir: &Path, out: &mut Vec<PathBuf>) -> anyhow::Result<()> {
-    let entries = std::fs::read_dir(dir).with_context(|| format!("listing {}", dir.display()))?;
-    for entry in entries {
-        let path = entry
-            .with_context(|| format!("listing {}", dir.display()))?
-            .path();
-        if path.is_dir() {
-            walk(&path, out)?;
-        } else if is_capture_path(&path) && sidecar_path(&path).is_file() {
-            out.push(path);
-        }
-    }
-    Ok(())
-}
-
-/// The captures under `dir` grouped by their sidecar's θL, positions in descending θL
-/// (the scan order −20°, −25°, … of the example scenes).
+/// The captures under `dir` grouped by their sidecar's θL (as extraction finds them),
+/// positions in descending θL (the scan order −20°, −25°, … of the example scenes).
 pub fn discover(dir: &Path) -> anyhow::Result<Vec<Position>> {
-    let mut images = Vec::new();
-    walk(dir, &mut images)?;
-    let mut positions: Vec<Position> = Vec::new();
-    for image in images {
-        let sidecar = read_sidecar(&image)?;
-        let exposure = Exposure {
-            image,
-            shutter_s: sidecar.shutter_s,
-        };
-        match positions
-            .iter_mut()
-            .find(|p| (p.theta_l - sidecar.theta_l).abs() < 1e-6)
-        {
-            Some(p) => p.exposures.push(exposure),
-            None => positions.push(Position {
-                theta_l: sidecar.theta_l,
-                exposures: vec![exposure],
-            }),
-        }
-    }
-    if positions.is_empty() {
-        anyhow::bail!("{}: no captures with a .json sidecar", dir.display());
-    }
+    let (groups, _) = theta_groups(dir)?;
+    let mut positions = groups
+        .into_iter()
+        .map(|(theta_l, images)| {
+            let exposures = images
+                .into_iter()
+                .map(|image| {
+                    let shutter_s = read_sidecar(&image)?.shutter_s;
+                    Ok(Exposure { image, shutter_s })
+                })
+                .collect::<anyhow::Result<Vec<_>>>()?;
+            Ok(Position { theta_l, exposures })
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
     positions.sort_by(|a, b| b.theta_l.total_cmp(&a.theta_l));
     for p in &mut positions {
         p.exposures
