@@ -202,7 +202,8 @@ function followPointer({ pts, fits, channels, log, X, Y, box, colour }) {
     const ctm = svg.getScreenCTM();
     if (!ctm) return;
     const q = new DOMPoint(e.clientX, e.clientY).matrixTransform(ctm.inverse());
-    if (q.x < box.L || q.x > box.W - box.R || q.y < box.T || q.y > box.B) {
+    const edge = 5; // markers on the plot area's edge stay within reach
+    if (q.x < box.L - edge || q.x > box.W - box.R + edge || q.y < box.T - edge || q.y > box.B + edge) {
       if (e.pointerType === "mouse") clear();
       return;
     }
