@@ -13,57 +13,29 @@ pub async fn index() -> Html<&'static str> {
     Html(include_str!("../assets/page/index.html"))
 }
 
-/// A file the page loads, by the name it is served under: its content type and text.
-struct PageFile {
-    name: &'static str,
-    content_type: &'static str,
-    text: &'static str,
-}
-
-const CSS: &str = "text/css; charset=utf-8";
-const JAVASCRIPT: &str = "text/javascript; charset=utf-8";
-
-/// Every file under `/page/` besides the markup: the stylesheet and the ES modules.
-const PAGE_FILES: [PageFile; 6] = [
-    PageFile {
-        name: "page.css",
-        content_type: CSS,
-        text: include_str!("../assets/page/page.css"),
-    },
-    PageFile {
-        name: "main.js",
-        content_type: JAVASCRIPT,
-        text: include_str!("../assets/page/main.js"),
-    },
-    PageFile {
-        name: "state.js",
-        content_type: JAVASCRIPT,
-        text: include_str!("../assets/page/state.js"),
-    },
-    PageFile {
-        name: "render.js",
-        content_type: JAVASCRIPT,
-        text: include_str!("../assets/page/render.js"),
-    },
-    PageFile {
-        name: "plot.js",
-        content_type: JAVASCRIPT,
-        text: include_str!("../assets/page/plot.js"),
-    },
-    PageFile {
-        name: "text.js",
-        content_type: JAVASCRIPT,
-        text: include_str!("../assets/page/text.js"),
-    },
+/// Every file under `/page/` besides the markup, by the name it is served under: the
+/// stylesheet and the ES modules.
+const PAGE_FILES: [(&str, &str); 6] = [
+    ("page.css", include_str!("../assets/page/page.css")),
+    ("main.js", include_str!("../assets/page/main.js")),
+    ("state.js", include_str!("../assets/page/state.js")),
+    ("render.js", include_str!("../assets/page/render.js")),
+    ("plot.js", include_str!("../assets/page/plot.js")),
+    ("text.js", include_str!("../assets/page/text.js")),
 ];
 
-/// `GET /page/{file}`: the page's stylesheet or one of its modules; 404 for any
-/// other name.
+/// `GET /page/{file}`: the page's stylesheet (`text/css`) or one of its modules
+/// (`text/javascript`); 404 for any other name.
 pub async fn page_file(Path(file): Path<String>) -> Response {
-    match PAGE_FILES.iter().find(|f| f.name == file) {
-        Some(f) => ([(header::CONTENT_TYPE, f.content_type)], f.text).into_response(),
-        None => ApiError::not_found(format!("page file {file:?}")).into_response(),
-    }
+    let Some((name, text)) = PAGE_FILES.iter().find(|(name, _)| *name == file) else {
+        return ApiError::not_found(format!("page file {file:?}")).into_response();
+    };
+    let content_type = if name.ends_with(".css") {
+        "text/css; charset=utf-8"
+    } else {
+        "text/javascript; charset=utf-8"
+    };
+    ([(header::CONTENT_TYPE, content_type)], *text).into_response()
 }
 
 /// `GET /api/openapi.json`.
@@ -72,4 +44,25 @@ pub async fn openapi() -> impl IntoResponse {
         [(header::CONTENT_TYPE, "application/json")],
         include_str!("../assets/openapi.json"),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::PAGE_FILES;
+
+    /// Every file in `assets/page/` is served: a new module added there without an
+    /// entry in [`PAGE_FILES`] would fail to load in the browser.
+    #[test]
+    fn every_file_of_the_page_is_served() {
+        let dir = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("assets/page");
+        let mut on_disk: Vec<String> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|entry| entry.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|name| name != "index.html")
+            .collect();
+        on_disk.sort();
+        let mut served: Vec<String> = PAGE_FILES.iter().map(|(n, _)| n.to_string()).collect();
+        served.sort();
+        assert_eq!(served, on_disk);
+    }
 }
