@@ -83,6 +83,7 @@ pub fn router(shared: Arc<Shared>) -> Router {
     };
     Router::new()
         .route("/", get(super::web::index))
+        .route("/page/{file}", get(super::web::page_file))
         .route("/api/openapi.json", get(super::web::openapi))
         .route("/api/health", get(super::health::health))
         .merge(reads)

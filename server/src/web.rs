@@ -1,11 +1,41 @@
-//! The web page at `/` and the OpenAPI description, both embedded in the binary.
+//! The web page at `/` with its stylesheet and ES modules under `/page/`, and the
+//! OpenAPI description: all embedded in the binary, so the page needs no build step
+//! and no network beyond the daemon.
 
+use axum::extract::Path;
 use axum::http::header;
-use axum::response::{Html, IntoResponse};
+use axum::response::{Html, IntoResponse, Response};
 
-/// The single-page operator interface (plain HTML and JavaScript).
+use super::answers::ApiError;
+
+/// The operator page's markup (`server/assets/page/index.html`).
 pub async fn index() -> Html<&'static str> {
-    Html(include_str!("../assets/index.html"))
+    Html(include_str!("../assets/page/index.html"))
+}
+
+/// Every file under `/page/` besides the markup, by the name it is served under: the
+/// stylesheet and the ES modules.
+const PAGE_FILES: [(&str, &str); 6] = [
+    ("page.css", include_str!("../assets/page/page.css")),
+    ("main.js", include_str!("../assets/page/main.js")),
+    ("state.js", include_str!("../assets/page/state.js")),
+    ("render.js", include_str!("../assets/page/render.js")),
+    ("plot.js", include_str!("../assets/page/plot.js")),
+    ("text.js", include_str!("../assets/page/text.js")),
+];
+
+/// `GET /page/{file}`: the page's stylesheet (`text/css`) or one of its modules
+/// (`text/javascript`); 404 for any other name.
+pub async fn page_file(Path(file): Path<String>) -> Response {
+    let Some((name, text)) = PAGE_FILES.iter().find(|(name, _)| *name == file) else {
+        return ApiError::not_found(format!("page file {file:?}")).into_response();
+    };
+    let content_type = if name.ends_with(".css") {
+        "text/css; charset=utf-8"
+    } else {
+        "text/javascript; charset=utf-8"
+    };
+    ([(header::CONTENT_TYPE, content_type)], *text).into_response()
 }
 
 /// `GET /api/openapi.json`.
@@ -14,4 +44,25 @@ pub async fn openapi() -> impl IntoResponse {
         [(header::CONTENT_TYPE, "application/json")],
         include_str!("../assets/openapi.json"),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::PAGE_FILES;
+
+    /// Every file in `assets/page/` is served: a new module added there without an
+    /// entry in [`PAGE_FILES`] would fail to load in the browser.
+    #[test]
+    fn every_file_of_the_page_is_served() {
+        let dir = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("assets/page");
+        let mut on_disk: Vec<String> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|entry| entry.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|name| name != "index.html")
+            .collect();
+        on_disk.sort();
+        let mut served: Vec<String> = PAGE_FILES.iter().map(|(n, _)| n.to_string()).collect();
+        served.sort();
+        assert_eq!(served, on_disk);
+    }
 }

@@ -1,0 +1,184 @@
+// The page's controls and its start: the scan and sweep forms, STOP ARM, Home, the
+// arm's declared position, a scan's actions and calibration, downloads carrying the
+// token, selecting a scan, and the polling (every 1.5 s) with the time-left countdown.
+
+import { $, page, hasToken, post, overview, fetchFile, watch } from "./state.js";
+import { escapeHtml, localTime } from "./text.js";
+import { show, showOverview, clearFrame, setupTable, paintTimeLeft } from "./render.js";
+
+// Numbers written comma separated.
+function numbers(text) {
+  return text.split(",").map((s) => s.trim()).filter((s) => s !== "").map(Number);
+}
+
+// Shutter times as written in the Bracket field: seconds ("0.5") or fractions ("1/30"),
+// comma separated; anything else is refused naming the entry.
+function shutterTimes(text) {
+  return text.split(",").map((s) => s.trim()).filter((s) => s !== "").map((s) => {
+    const f = /^(\d+(?:\.\d+)?)\s*\/\s*(\d+(?:\.\d+)?)$/.exec(s);
+    const t = f ? Number(f[1]) / Number(f[2]) : (/^\d*\.?\d+(?:e-?\d+)?$/i.test(s) ? Number(s) : NaN);
+    if (!(t > 0 && Number.isFinite(t))) throw new Error(`bracket: "${s}" is not a shutter time (seconds, e.g. 0.5 or 1/30)`);
+    return t;
+  });
+}
+
+// The bracket field as the API takes it: "auto" or the shutter times.
+function bracketBody() {
+  const b = $("bracket").value.trim();
+  return b === "auto" || b === "" ? "auto" : { shutter_s: shutterTimes(b) };
+}
+
+// Where a form sends what it creates: its own `action` (the API route).
+const target = (form) => $(form).getAttribute("action");
+
+$("scanform").addEventListener("submit", async (e) => {
+  e.preventDefault();
+  try {
+    const body = { sample: $("sample").value.trim(), theta_l: numbers($("theta").value), bracket: bracketBody() };
+    const r = await post(target("scanform"), body);
+    $("scanmsg").innerHTML = `<span class="ok">scan ${r.id} queued</span>`;
+    select(r.id);
+    refresh();
+  } catch (err) { $("scanmsg").textContent = err.message; }
+});
+
+$("sweepform").addEventListener("submit", async (e) => {
+  e.preventDefault();
+  try {
+    const body = {
+      samples: $("samples").value.split(",").map((s) => s.trim()).filter((s) => s),
+      theta_l_sets: $("sets").value.split(";").map(numbers),
+      repeats: Number($("repeats").value || 1),
+      bracket: bracketBody(),
+    };
+    // datetime-local gives the local wall time without a zone: Date reads it as local.
+    if ($("startat").value) body.start_at = new Date($("startat").value).toISOString();
+    const r = await post(target("sweepform"), body);
+    const when = body.start_at ? `, starting ${localTime(body.start_at)}` : "";
+    $("sweepmsg").innerHTML = `<span class="ok">sweep ${r.id} queued: ${r.scans.length} scans${escapeHtml(when)}</span>`;
+    refresh();
+  } catch (err) { $("sweepmsg").textContent = err.message; }
+});
+
+$("livemodel").addEventListener("change", () => { if (page.lastScan) show(page.lastScan); });
+
+// A note in the header: plain for news, red for a failure.
+function say(el, text, failed) {
+  el.textContent = text;
+  el.className = failed ? "msg" : "note";
+}
+
+$("stop").addEventListener("click", async () => {
+  try {
+    const r = await post("/api/arm/stop");
+    say($("stopmsg"), "arm stopped" + (r.paused.length ? "; paused scan " + r.paused.join(", ") : ""), false);
+  } catch (err) { say($("stopmsg"), err.message, true); }
+  refresh();
+});
+
+$("home").addEventListener("click", async () => {
+  try {
+    await post("/api/arm/home");
+    say($("stopmsg"), "homing the arm", false);
+  } catch (err) { say($("stopmsg"), err.message, true); }
+  refresh();
+});
+
+$("armpos").addEventListener("submit", async (ev) => {
+  ev.preventDefault();
+  try {
+    const r = await post("/api/arm/position", { angle: Number($("armangle").value) });
+    $("armposmsg").textContent = `declared θL ${r.angle}°`;
+  } catch (err) { $("armposmsg").textContent = err.message; }
+});
+
+document.querySelectorAll("#detail button[data-act]").forEach((btn) => {
+  btn.addEventListener("click", async () => {
+    if (page.selected === null) return;
+    try {
+      await post(`/api/scans/${page.selected}/${btn.dataset.act}`);
+      $("actmsg").textContent = "";
+      refresh();
+    } catch (err) { $("actmsg").textContent = err.message; }
+  });
+});
+
+// Calibrating takes seconds: the button says how long it has been at it, then the
+// setup it stored is shown with where each value came from.
+$("calibrate").addEventListener("click", async () => {
+  if (page.selected === null) return;
+  const id = page.selected, btn = $("calibrate"), box = $("calbox"), t0 = Date.now();
+  btn.disabled = true;
+  page.calibrating = true;
+  box.hidden = false;
+  const tick = () => { box.innerHTML = `<p class="muted" id="calprogress">calibrating from scan ${id}… ${Math.round((Date.now() - t0) / 1000)} s</p>`; };
+  tick();
+  const timer = setInterval(tick, 500);
+  try {
+    const setup = await post(`/api/scans/${id}/calibrate`);
+    clearInterval(timer);
+    if (page.selected === id) box.innerHTML = setupTable(setup, id);
+  } catch (err) {
+    clearInterval(timer);
+    if (page.selected === id) box.innerHTML = `<p class="msg">${escapeHtml(err.message)}</p>`;
+  }
+  page.calibrating = false;
+  btn.disabled = false;
+});
+
+// Polls the scans, the sweeps and the hardware; selects the newest scan when none is.
+async function refresh() {
+  try {
+    const [scans, sweeps, hw] = await overview();
+    showOverview(scans, sweeps, hw);
+    if (page.selected === null && scans.length) select(scans[scans.length - 1].id);
+  } catch (err) {
+    // The daemon may be restarting; a 401 means reads need the token.
+    if (err.message.startsWith("401")) $("arm").textContent = "reads need the token: " + err.message;
+  }
+}
+
+// Shows scan `id` in the detail panel, emptied until its first view arrives.
+function select(id) {
+  if (page.selected === id) return;
+  page.selected = id;
+  page.lastDone = -1;
+  page.lastScan = null;
+  $("detail").hidden = false;
+  $("plot").innerHTML = "";
+  $("files").hidden = true;
+  $("calbox").hidden = true;
+  $("results").innerHTML = "";
+  $("dstate").innerHTML = "";
+  $("dtimes").textContent = "";
+  clearFrame();
+  watch(id, show);
+}
+
+// A queue row selects its scan.
+$("scans").addEventListener("click", (e) => {
+  const tr = e.target.closest("tr[data-id]");
+  if (tr) select(Number(tr.dataset.id));
+});
+
+// Links to results and files download through fetch when a token is entered, under
+// the name the daemon gives them (Content-Disposition).
+for (const box of ["results", "files"]) {
+  $(box).addEventListener("click", async (e) => {
+    const a = e.target.closest("a");
+    if (!a || !a.getAttribute("href").startsWith("/api/") || !hasToken()) return;
+    e.preventDefault();
+    try {
+      const file = await fetchFile(a.getAttribute("href"));
+      const link = document.createElement("a");
+      link.href = file.url;
+      link.download = file.name;
+      link.click();
+      setTimeout(() => URL.revokeObjectURL(file.url), 60000);
+    } catch (err) { $("actmsg").textContent = err.message; }
+  });
+}
+
+refresh();
+setInterval(refresh, 1500);
+setInterval(paintTimeLeft, 1000);

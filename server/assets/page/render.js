@@ -1,0 +1,206 @@
+// Rendering the daemon's views into the page: the queue and sweep tables, the
+// hardware line, the selected scan's detail (state, reason, times, bracket, controls,
+// latest frame, result links, live fit), its file listing and a calibrated setup.
+// Reads the page's state; sends no command (main.js does).
+
+import { $, page, FINAL, get, fetchFile, remember, timeLeft } from "./state.js";
+import { escapeHtml, formatShutter, localTime, duration, percent } from "./text.js";
+import { plot } from "./plot.js";
+
+// Writes every time-left slot of the page (queue rows and detail) from `timeLeft`.
+export function paintTimeLeft() {
+  document.querySelectorAll(".left[data-id]").forEach((el) => {
+    const text = timeLeft(Number(el.dataset.id));
+    el.textContent = text ? " · " + text : "";
+  });
+}
+
+// Whether a queued scan waits for a start time still ahead.
+function scheduled(s) {
+  return s.state === "queued" && s.not_before && new Date(s.not_before).getTime() > Date.now();
+}
+
+// The state as the operator reads it: a queued scan with a later start is "scheduled".
+function stateLabel(s) {
+  return scheduled(s) ? "scheduled" : s.state;
+}
+
+function liveTable(live, model) {
+  const rows = (live || []).map((e) => {
+    const f = e.fits[model];
+    if (!f || f.error) return `<tr><td>${e.theta_l.length}</td><td colspan="7" class="muted">${escapeHtml(f ? f.error : "no fit")}</td></tr>`;
+    const held = f.held_out_err_p ? f.held_out_err_p[1] : null;
+    const change = f.change_p ? f.change_p[1] : null;
+    return `<tr><td>${e.theta_l.length} (${e.theta_l[e.theta_l.length - 1]}°)</td><td>${e.samples}</td>` +
+      `<td>${f.ks[1].toFixed(2)}</td><td>${f.kd[1].toFixed(2)}</td><td>${f.m.map((v) => v.toFixed(4)).join("/")}</td>` +
+      `<td>${percent(f.err_p[1])}</td><td>${percent(held)}</td><td>${percent(change)}</td></tr>`;
+  });
+  return `<table><thead><tr><th>θL so far</th><th>points</th><th>Ks</th><th>Kd</th><th>m</th><th>ΔErr_p</th>` +
+    `<th>at new θL</th><th>fit moved</th></tr></thead><tbody>${rows.join("")}</tbody></table>`;
+}
+
+function bar(done, total) {
+  const pct = total ? Math.round(100 * done / total) : 0;
+  return `<div class="bar" title="${done}/${total}"><div style="width:${pct}%"></div></div>`;
+}
+
+// A calibrated setup as a table: field, value (± its standard uncertainty where it was
+// estimated), and where it came from; the uncertainty block one row per key
+// (`uncertainty.<key>`, its provenance per key).
+export function setupTable(setup, id) {
+  const cal = setup.calibration || {}, from = setup.provenance || {};
+  const fmt = (v) => typeof v === "number" ? +v.toPrecision(6) : (v === null ? "–" : escapeHtml(JSON.stringify(v)));
+  const row = (name, value, source) =>
+    `<tr><td>${escapeHtml(name)}</td><td>${value}</td><td class="muted">${escapeHtml(typeof source === "string" ? source : "")}</td></tr>`;
+  const rows = Object.entries(setup).filter(([k]) => k !== "calibration" && k !== "provenance").flatMap(([k, v]) => {
+    if (k === "uncertainty" && v && typeof v === "object") {
+      const fromU = from.uncertainty || {};
+      return Object.entries(v).map(([u, x]) => row(`uncertainty.${u}`, fmt(x), typeof fromU === "string" ? fromU : fromU[u]));
+    }
+    const est = cal[k] && typeof cal[k] === "object" && cal[k].stderr != null ? ` ± ${+cal[k].stderr.toPrecision(2)}` : "";
+    return [row(k, `${fmt(v)}${est}`, from[k])];
+  });
+  const notes = (cal.notes || []).map((n) => `<li>${escapeHtml(n)}</li>`).join("");
+  return `<p class="ok">setup calibrated from scan ${id}: later scans use it</p>` +
+    `<div class="scroll"><table class="setup"><thead><tr><th>field</th><th>value</th><th>from</th></tr></thead>` +
+    `<tbody>${rows.join("")}</tbody></table></div>${notes ? `<ul class="muted">${notes}</ul>` : ""}`;
+}
+
+// What the queue row says beside the bar: the reason of a waiting scan, the error of a
+// failed or interrupted one, the start of a scheduled one, the step of a running one.
+function rowNote(s) {
+  if (s.state === "waiting") return s.reason || s.error || "";
+  if (s.error) return s.error;
+  if (scheduled(s)) return `starts ${localTime(s.not_before)}`;
+  if (s.state === "running") return s.current_step || "";
+  return "";
+}
+
+function armLine(a) {
+  const unknown = ["alarm", "homing", "needs_homing", "needs_position", "disconnected"].includes(a.state);
+  const state = {
+    alarm: "alarm, position unknown, home it",
+    needs_homing: "position unknown, home it",
+    needs_position: "position unknown, declare it",
+  }[a.state] || a.state;
+  return `arm: ${state}` + (a.angle_deg != null && !unknown ? ` at ${a.angle_deg.toFixed(1)}°` : "") +
+    (a.error ? ` (${a.error})` : "");
+}
+
+// The queue, the sweeps and the header's hardware line from what the page polls.
+export function showOverview(scans, sweeps, hw) {
+  scans.forEach(remember);
+  $("scans").innerHTML = scans.slice().reverse().map((s) =>
+    `<tr data-id="${s.id}" class="${s.id === page.selected ? "sel" : ""}"><td>${s.id}</td><td>${escapeHtml(s.sample)}</td>` +
+    `<td class="state-${s.state}">${stateLabel(s)}</td><td>${bar(s.progress.done, s.progress.total)}</td>` +
+    `<td class="muted">${escapeHtml(rowNote(s))}<span class="left" data-id="${s.id}"></span></td></tr>`).join("");
+  $("sweeps").innerHTML = sweeps.slice().reverse().map((w) =>
+    `<tr><td>${w.id}</td><td>${w.state}</td><td>${bar(w.progress.done, w.progress.total)}</td>` +
+    `<td class="muted">${escapeHtml(w.start_at ? localTime(w.start_at) : "now")}</td></tr>`).join("");
+  const a = hw.arm;
+  $("arm").textContent = armLine(a);
+  $("armpos").hidden = a.state !== "needs_position";
+  $("home").hidden = !["needs_homing", "alarm", "hold"].includes(a.state);
+  const c = hw.camera;
+  $("camera").textContent = `camera: ${c.model || "?"} ${c.state}` + (c.error ? ` (${c.error})` : "") + (hw.emulated ? " · emulated" : "");
+  paintTimeLeft();
+}
+
+// Shows no frame: a scan without one never shows another scan's.
+export function clearFrame() {
+  const img = $("thumb");
+  if (img.src.startsWith("blob:")) URL.revokeObjectURL(img.src);
+  img.removeAttribute("src");
+  delete img.dataset.scan;
+  img.hidden = true;
+  $("noframe").hidden = false;
+}
+
+// The bracket as used: the shutter times given, or those the metering chose (per θL
+// in the tooltip), or that it is not metered yet.
+function bracketText(b) {
+  const list = (b.shutter_s || []).map(formatShutter).join(", ");
+  if (!b.auto) return list;
+  return list ? `auto: ${list}` : "auto (not metered yet)";
+}
+
+// Shows scan view `s` in the detail panel (and fetches its plot once it has ended).
+export function show(s) {
+  page.lastScan = s;
+  remember(s);
+  const p = s.progress;
+  const ended = FINAL.includes(s.state);
+  const angles = p.theta_l ? ` · θL ${p.theta_l.captured}/${p.theta_l.total} captured, ${p.theta_l.processed} processed` : "";
+  $("dtitle").textContent = `Scan ${s.id}: ${s.sample}`;
+  const perTheta = (s.bracket.by_theta_l || []).map((m) => `θL ${m.theta_l}°: ${m.shutter_s.map(formatShutter).join(", ")}`).join("\n");
+  // Work under way: the hardware step only while running, the processing step until
+  // the scan has ended.
+  const work = [
+    s.state === "running" && s.current_step ? s.current_step : "",
+    !ended && s.processing_step ? "processing: " + s.processing_step : "",
+  ].filter((w) => w).join(" · ");
+  const why = s.state === "waiting" ? s.reason || s.error : s.error;
+  $("dstate").innerHTML = `<span class="state-${s.state}">${stateLabel(s)}</span> ${p.done}/${p.total}` +
+    ` ${bar(p.done, p.total)}${angles}<span class="left" data-id="${s.id}"></span>` +
+    `<div class="muted" id="dwork">${escapeHtml(work)}</div>` +
+    `<div class="muted">θL ${s.theta_l.map((t) => t + "°").join(", ")} · bracket <span id="dbracket" title="${escapeHtml(perTheta)}">${escapeHtml(bracketText(s.bracket))}</span></div>` +
+    (why ? `<div class="msg" id="dwhy">${s.state === "waiting" ? "waiting: " : ""}${escapeHtml(why)}</div>` : "");
+  const times = [`created ${localTime(s.created)}`];
+  if (scheduled(s)) times.push(`starts ${localTime(s.not_before)}`);
+  if (s.started) times.push(`started ${localTime(s.started)}`);
+  if (s.finished) times.push(`ended ${localTime(s.finished)}`);
+  if (s.started && s.finished) times.push(`took ${duration((new Date(s.finished) - new Date(s.started)) / 1000)}`);
+  $("dtimes").textContent = times.join(" · ") + " (local time)";
+  paintTimeLeft();
+  // Only the controls the scan's state allows (the daemon lists them).
+  document.querySelectorAll("#detail button[data-act]").forEach((btn) => {
+    const allowed = (s.actions || []).includes(btn.dataset.act);
+    btn.disabled = !allowed;
+    if (btn.dataset.act === "confirm") btn.hidden = !allowed;
+  });
+  if (!page.calibrating) $("calibrate").disabled = !(ended && s.results.thumbnail);
+  $("livebox").hidden = !(s.live && s.live.length);
+  $("live").innerHTML = liveTable(s.live, $("livemodel").value);
+  if (!s.results.thumbnail) clearFrame();
+  else if (p.steps.done !== page.lastDone) {
+    page.lastDone = p.steps.done;
+    fetchFile(`${s.results.thumbnail}?t=${Date.now()}`).then(({ url }) => {
+      if (page.selected !== s.id) { URL.revokeObjectURL(url); return; }
+      const img = $("thumb");
+      if (img.src.startsWith("blob:")) URL.revokeObjectURL(img.src);
+      img.src = url;
+      img.dataset.scan = s.id;
+      img.hidden = false;
+      $("noframe").hidden = true;
+    }, () => { /* no frame yet */ });
+  }
+  const links = [];
+  if (s.results.samples) links.push(`<a href="${s.results.samples}" download>samples.csv</a>`);
+  for (const [m, url] of Object.entries(s.results.fits)) links.push(`<a href="${url}" download>fit ${m}</a>`);
+  for (const url of s.results.hdr) links.push(`<a href="${url}" download>${url.split("/").pop()}</a>`);
+  if (s.state !== "queued") links.push(`<a href="${s.links.self}/archive" download id="archive">whole scan (.tar)</a>`);
+  if (s.results.samples) links.push(`<a href="${s.links.self}/report" target="_blank" id="report">report (HTML)</a>`);
+  $("results").innerHTML = `<p>${links.join(" · ")}${links.length ? " · " : ""}<a href="#" id="allfiles">all files</a></p>`;
+  $("allfiles").addEventListener("click", (e) => { e.preventDefault(); listFiles(s); });
+  if (ended && Object.keys(s.results.fits).length && !$("plot").innerHTML) plot(s.id);
+}
+
+// The scan's files as links, grouped by directory (the API gives a flat JSON list).
+async function listFiles(s) {
+  const box = $("files");
+  if (!box.hidden) { box.hidden = true; return; }
+  const res = await get(s.links.files);
+  const files = res.ok ? await res.json() : [];
+  const groups = {};
+  for (const f of files) {
+    const cut = f.lastIndexOf("/");
+    (groups[cut < 0 ? "" : f.slice(0, cut)] ||= []).push(f);
+  }
+  box.innerHTML = files.length ? Object.entries(groups).map(([dir, list]) =>
+    `<h3>${escapeHtml(dir || "scan directory")} <span class="muted">(${list.length})</span></h3><ul>` +
+    list.map((f) => `<li><a download href="${s.links.files}/${f.split("/").map(encodeURIComponent).join("/")}">` +
+      `${escapeHtml(f.slice(f.lastIndexOf("/") + 1))}</a></li>`).join("") + "</ul>").join("")
+    : `<p class="muted">no files yet</p>`;
+  box.hidden = false;
+}
+
