@@ -5,7 +5,9 @@
 # from what it measured (scripts/bench_table.py): no number in it is written by hand.
 # The peers go into a virtual environment of their own, .venv-bench/ (numpy, scipy,
 # opencv-python-headless from PyPI); --no-peers skips them.
-# The machine should be idle: the table states the load average when the run started.
+# The machine must be idle: with a load average above 0.5 it refuses to start, and the
+# table is not written when a measurement was too unsteady (scripts/bench_table.py); the
+# table states the load average when the run started.
 # Usage: bash scripts/bench.sh [--no-peers]
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -13,6 +15,13 @@ cd "$(dirname "$0")/.."
 peers=1
 if [ "${1:-}" = --no-peers ]; then
     peers=0
+fi
+# Busier than this (the 1-minute load average), the numbers would measure the other work.
+max_load=0.5
+load=$(cut -d' ' -f1 /proc/loadavg)
+if ! python3 -c 'import sys; sys.exit(float(sys.argv[1]) > float(sys.argv[2]))' "$load" "$max_load"; then
+    echo "bench.sh: the machine is busy (load average $load, above $max_load): not measuring" >&2
+    exit 1
 fi
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT

@@ -4,6 +4,11 @@
 measured: criterion's medians under target/criterion and the JSON lines the other
 benchmarks and the peers appended to the results file. Every row names the command that
 measures it; a row whose measurement is missing says so instead of keeping an old number.
+It refuses to write the table (exit status 1, the README left as it was) when a
+measurement it uses was too unsteady to stand for the code: a criterion median whose 95 %
+confidence interval is wider than MAX_CI_WIDTH of it, or a whole-process benchmark whose
+runs spread ((largest − smallest) / median) wider than MAX_RUN_SPREAD: a busy machine,
+whose numbers would read as slower code.
 
 Usage: python3 scripts/bench_table.py RESULTS.jsonl [--criterion DIR] [--readme FILE]
 Needs only the Python standard library.
@@ -23,14 +28,25 @@ PEERS_FIT = "`python3 scripts/bench_peers.py fit samples.csv`"
 PEERS_HDR = "`python3 scripts/bench_peers.py hdr --gonio target/release/gonio FRAME...`"
 
 
+# Widest 95 % confidence interval of a criterion median, relative to the median.
+MAX_CI_WIDTH = 0.10
+# Widest spread of a whole-process benchmark's runs, (largest − smallest) / median.
+MAX_RUN_SPREAD = 0.25
+
+
 def criterion_medians(root):
-    """full id → median seconds, from each benchmark's latest run."""
+    """full id → (median seconds, relative width of its 95 % confidence interval), from
+    each benchmark's latest run."""
     medians = {}
     for bench in Path(root).glob("**/new/benchmark.json"):
         with open(bench, encoding="utf-8") as f:
             full_id = json.load(f)["full_id"]
         with open(bench.parent / "estimates.json", encoding="utf-8") as f:
-            medians[full_id] = json.load(f)["median"]["point_estimate"] * 1e-9
+            median = json.load(f)["median"]
+        point = median["point_estimate"]
+        interval = median["confidence_interval"]
+        width = (interval["upper_bound"] - interval["lower_bound"]) / point if point > 0 else 0.0
+        medians[full_id] = (point * 1e-9, width)
     return medians
 
 
@@ -66,9 +82,26 @@ def megabytes(size):
 class Table:
     def __init__(self, medians, results):
         self.medians, self.results, self.rows = medians, results, []
+        self.used = set()
 
     def median(self, full_id):
-        return self.medians.get(full_id)
+        self.used.add(full_id)
+        found = self.medians.get(full_id)
+        return found[0] if found else None
+
+    def unsteady(self):
+        """What the table uses that was measured too unsteadily, one line each."""
+        lines = [
+            f"criterion `{full_id}`: 95 % interval {width:.0%} of its median (limit {MAX_CI_WIDTH:.0%})"
+            for full_id, (_, width) in sorted(self.medians.items())
+            if full_id in self.used and width > MAX_CI_WIDTH
+        ]
+        lines += [
+            f"`{name}`: runs spread {record['spread']:.0%} of their median (limit {MAX_RUN_SPREAD:.0%})"
+            for name, record in sorted(self.results.items())
+            if record.get("spread", 0.0) > MAX_RUN_SPREAD
+        ]
+        return lines
 
     def row(self, what, values, target, command):
         """A row; `values` None or holding None means not measured in this run."""
@@ -312,6 +345,13 @@ def main():
     t = Table(criterion_medians(args.criterion), results)
     for rows in (fit_rows, peer_fit_rows, budget_rows, study_rows, hdr_rows, scan_rows):
         rows(t)
+    unsteady = t.unsteady()
+    if unsteady:
+        print(t.markdown())
+        raise SystemExit(
+            "the table is not written: measurements too unsteady to stand for the code "
+            "(run again on an idle machine):\n  " + "\n  ".join(unsteady)
+        )
     block = t.markdown() + "\n\n" + conditions(results) + "\n"
     readme = Path(args.readme)
     text = readme.read_text(encoding="utf-8")

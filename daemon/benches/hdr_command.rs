@@ -9,23 +9,20 @@
 //! scripts/bench.sh keeps.
 
 mod common;
+mod stats;
 
 use std::path::PathBuf;
 use std::process::Command;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use gonio_processing::capture::{is_capture_path, Frame};
 use gonio_processing::hdr::{merge, MergeOptions};
 
-fn median(mut values: Vec<Duration>) -> f64 {
-    values.sort();
-    values[values.len() / 2].as_secs_f64()
-}
-
-fn timed<T>(f: impl FnOnce() -> T) -> (T, Duration) {
+/// `f`'s value and the seconds it took.
+fn timed<T>(f: impl FnOnce() -> T) -> (T, f64) {
     let started = Instant::now();
     let value = f();
-    (value, started.elapsed())
+    (value, started.elapsed().as_secs_f64())
 }
 
 fn main() {
@@ -70,19 +67,25 @@ fn main() {
         drop(decoded);
         write.push(timed(|| map.write_exr(&out).expect("writing")).1);
     }
-    let (whole, merge_s) = (median(whole), median(merged));
+    let (whole_spread, merge_spread) = (stats::spread(&whole), stats::spread(&merged));
+    let (whole, merge_s) = (stats::median(&whole), stats::median(&merged));
     println!(
         "gonio hdr, {} frames of the gold scene at θL −20°, median of {runs}:",
         frames.len()
     );
     println!("  whole process {whole:.3} s");
-    println!("  decode alone  {:.3} s (parallel)", median(decode));
+    println!("  decode alone  {:.3} s (parallel)", stats::median(&decode));
     println!("  merge alone   {merge_s:.3} s");
-    println!("  EXR write     {:.3} s", median(write));
+    println!("  EXR write     {:.3} s", stats::median(&write));
     println!("  whole / merge {:.2} (target ≤ 1.5)", whole / merge_s);
     // The line scripts/bench.sh keeps for the README's table.
     println!(
         "{}",
-        serde_json::json!({ "bench": "hdr_command", "whole_s": whole, "merge_s": merge_s })
+        serde_json::json!({
+            "bench": "hdr_command",
+            "whole_s": whole,
+            "merge_s": merge_s,
+            "spread": whole_spread.max(merge_spread),
+        })
     );
 }

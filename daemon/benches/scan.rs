@@ -9,6 +9,8 @@
 //! (0.1) with an automatic bracket, as `gonio serve` runs without a configuration.
 //! `GONIO_BIN=path` runs another build of `gonio` (to compare with an older one).
 
+mod stats;
+
 use std::io::{BufRead, BufReader, Read};
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
@@ -236,6 +238,8 @@ fn main() {
             .collect();
         println!("     hardware steps: {}", kinds.join(", "));
     }
+    let walls: Vec<f64> = ratios.iter().map(|r| r.0).collect();
+    let spread = stats::spread(&walls);
     ratios.sort_by(|a, b| a.0.total_cmp(&b.0));
     let (ratio, wall_s, hardware_s) = ratios[ratios.len() / 2];
     println!(
@@ -245,6 +249,12 @@ fn main() {
     // The line scripts/bench.sh keeps for the README's table: the median run.
     println!(
         "{}",
-        json!({ "bench": "scan", "ratio": ratio, "wall_s": wall_s, "hardware_s": hardware_s })
+        json!({
+            "bench": "scan",
+            "ratio": ratio,
+            "wall_s": wall_s,
+            "hardware_s": hardware_s,
+            "spread": spread,
+        })
     );
 }

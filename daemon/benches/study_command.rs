@@ -10,15 +10,11 @@
 //!     cargo bench -p gonio-daemon --bench study_command [-- --runs N]
 
 mod common;
+mod stats;
 
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::Instant;
-
-fn median(mut values: Vec<f64>) -> f64 {
-    values.sort_by(f64::total_cmp);
-    values[values.len() / 2]
-}
 
 fn run(gonio: &str, args: &[&str], dir: &Path) {
     let output = Command::new(gonio)
@@ -73,11 +69,17 @@ fn main() {
         wall.push(started.elapsed().as_secs_f64());
         cpu.push(children_cpu_s() - before);
     }
-    let (wall_s, cpu_s) = (median(wall), median(cpu));
+    let spread = stats::spread(&wall);
+    let (wall_s, cpu_s) = (stats::median(&wall), stats::median(&cpu));
     println!("gonio study, full-size gold scan, 3 models, Nelder–Mead compared, median of {runs}:");
     println!("  wall {wall_s:.2} s (target ≤ 4 s), CPU {cpu_s:.2} s");
     println!(
         "{}",
-        serde_json::json!({ "bench": "study_command", "wall_s": wall_s, "cpu_s": cpu_s })
+        serde_json::json!({
+            "bench": "study_command",
+            "wall_s": wall_s,
+            "cpu_s": cpu_s,
+            "spread": spread,
+        })
     );
 }
