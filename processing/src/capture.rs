@@ -14,6 +14,7 @@
 //! process that can die of a file without taking the program along) by installing a
 //! [`Decoder`]; [`wire`] is the protocol of such a child. Without one, files are
 //! decoded in this process.
+#![doc = include_str!("capture.md")]
 
 mod tiff_ifd;
 pub mod wire;

@@ -51,6 +51,7 @@
 //! # Ok(())
 //! # }
 //! ```
+#![doc = include_str!("../grbl.md")]
 
 mod codes;
 mod config;
