@@ -15,7 +15,6 @@ mod archive;
 mod calibration;
 mod config;
 mod connections;
-#[doc = include_str!("decode_workers.md")]
 pub mod decode_workers;
 mod devices;
 mod downloads_config;
