@@ -8,10 +8,10 @@
 //! The known quantities come from a prior [`Setup`] (the scan's setup.json): cylinder
 //! radius, focal length, pixel pitch, principal point, light distance, and the camera
 //! distance when only one limb is lit. Per θL the bracket is merged ([`hdr::merge`]),
-//! and [`observe`] measures, with no model: the lit bands of rows (the two strips),
+//! and `observe` measures, with no model: the lit bands of rows (the two strips),
 //! the white strip's limbs (a step to black where the camera ray grazes the cylinder),
 //! its terminator ramp (where the light grazes it) and the sample strip's specular peak
-//! relative to the white. [`solve`] then fits the free setup fields to all of them.
+//! relative to the white. `solve` then fits the free setup fields to all of them.
 #![doc = include_str!("calibrate.md")]
 
 mod observe;

@@ -76,7 +76,7 @@ pub fn srgb_unit_spectra() -> [Spectrum; 3] {
 
 /// Reads a table with a header line and rows `wavelength_nm,v1,..,vN` covering exactly
 /// 390–730 nm in 10 nm steps.
-/// At most [`MAX_TABLE_BYTES`] are read: a scene may name any path (even `/dev/zero`).
+/// At most `MAX_TABLE_BYTES` are read: a scene may name any path (even `/dev/zero`).
 pub fn read_table<const N: usize>(path: &Path) -> Result<[Spectrum; N], SceneError> {
     let text = read_capped(path, MAX_TABLE_BYTES)?;
     parse_table::<N>(&text, &path.display().to_string())

@@ -7,13 +7,13 @@
 //! uncertainties, with c_pj the change of β_p for z_j = 1 ([`SampleUncertainty::sources`],
 //! common to every point, or to one θL's points for the arm's angle), and e_p the
 //! independent noise. The lines are taken at the values with the setup's departure that
-//! best explains the residuals removed ([`super::departure`]). Each source's contribution
+//! best explains the residuals removed (`super::departure`). Each source's contribution
 //! to a parameter comes from fitting again with the samples moved by ±k·c_·j and unmoved:
 //! the secant's slope and the second difference per standard uncertainty (the law of
 //! propagation with numerical sensitivity coefficients and its second-order term, JCGM 100
 //! §5.1.2–5.1.3). The arm's angle is one source per θL, its contributions added in
 //! quadrature. The noise and the model misfit come from the unmoved fit's residuals (the
-//! HC1 sandwich, see [`super::uncertainty`]): its variance is split between them in the
+//! HC1 sandwich, see `super::uncertainty`): its variance is split between them in the
 //! ratio of the residuals' Σ r² to the noise's Σ u² the samples state (what the residuals
 //! show beyond the noise is misfit). The combined standard uncertainty is the root sum of
 //! squares of the lines (the sources are independent); U = k·u_c with k = 2.
@@ -93,7 +93,7 @@ pub enum IntervalFrom {
     /// value ± k·u_c: every source moves the parameter linearly over ±k u.
     #[default]
     LawOfPropagation,
-    /// Some source does not ([`Secant::bend`]) and its refits within ±k u reach farther
+    /// Some source does not (`Secant::bend`) and its refits within ±k u reach farther
     /// than k times its line on a side: on that side, the distance from the fit to its
     /// refits' farthest value in place of k times its line, added in quadrature with
     /// k times the other lines.
@@ -120,7 +120,7 @@ pub struct Budget {
     /// noise).
     pub residual_to_noise: f64,
     /// The departure of the setup that best explains the fit's residuals, for each source
-    /// the residuals identify (the arm's angle per θL; see [`departure`]'s criterion), in
+    /// the residuals identify (the arm's angle per θL; see `departure`'s criterion), in
     /// standard uncertainties: the lines are taken at the values with it removed. Not a
     /// calibration: the fitted values keep the stated setup.
     #[serde(default)]

@@ -198,7 +198,7 @@ fn best(scores: &[Option<f64>], colours: &[Option<f64>]) -> Option<usize> {
     chosen
 }
 
-/// The best parametric variant of `held` by the choice's rule ([`best`]): the shape a
+/// The best parametric variant of `held` by the choice's rule (`best`): the shape a
 /// table judged beside them predicts relative to.
 pub fn best_parametric(held: &[HeldOut]) -> Option<&HeldOut> {
     let candidates: Vec<Candidate> = held.iter().map(|h| held_out_candidate(h, 0)).collect();

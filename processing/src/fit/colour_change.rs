@@ -1,6 +1,6 @@
 //! Whether the specular lobe's chromaticity changes across θL: a model-free test of the
 //! measured samples, which the colour-shift verdict of `--model auto` requires
-//! ([`super::choice`]).
+//! (`super::choice`).
 //!
 //! Per θL (its points with every channel known): the lobe ([`super::fold_score::lobe`],
 //! taken as one interval of θh from its first point to its last, so that no point is in

@@ -272,7 +272,7 @@ pub fn table_held_out(samples: &[Sample], base: Option<&HeldOut>, camera: &Camer
 }
 
 /// The median held-out ΔE_u′v′ over the specular lobe of `table` (of every θL of
-/// `samples`) with a specular of one colour ([`one_specular_colour`]): each θL predicted
+/// `samples`) with a specular of one colour (`one_specular_colour`): each θL predicted
 /// from the others' columns with their specular's colour replaced by the one colour they
 /// share. It keeps each point's brightness, the diffuse under the lobe with whatever
 /// colour it has at each θd, but not a specular colour that changes: where the highlight

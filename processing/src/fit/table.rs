@@ -223,7 +223,7 @@ const SHAPE_FLOOR: f64 = 1e-9;
 
 impl Shape {
     /// β of the model at signed θh `h` and θd `d` (degrees) in the plane of the light
-    /// (θi = θd + θh, θr = θd − θh), each channel at least [`SHAPE_FLOOR`] of its
+    /// (θi = θd + θh, θr = θd − θh), each channel at least `SHAPE_FLOOR` of its
     /// coefficients.
     pub fn at(&self, h: f64, d: f64) -> [f64; 3] {
         let beta = self
