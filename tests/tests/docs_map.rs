@@ -50,6 +50,11 @@ fn normalise(path: &Path) -> PathBuf {
     out
 }
 
+/// The map's text.
+fn map_text() -> String {
+    fs::read_to_string(repository().join(MAP)).expect("the map is readable")
+}
+
 /// The links of `text` (a file in `dir`) that name no existing file or directory.
 fn broken_links(text: &str, dir: &Path) -> Vec<String> {
     relative_links(text)
@@ -83,8 +88,7 @@ fn included_files(source: &Path) -> Vec<PathBuf> {
 
 #[test]
 fn the_map_is_at_most_500_lines() {
-    let text = fs::read_to_string(repository().join(MAP)).expect("the map is readable");
-    let lines = text.lines().count();
+    let lines = map_text().lines().count();
     assert!(
         lines <= MAX_LINES,
         "{MAP} has {lines} lines; at most {MAX_LINES}: move detail into the Markdown file \
@@ -95,7 +99,7 @@ fn the_map_is_at_most_500_lines() {
 #[test]
 fn every_relative_link_of_the_map_resolves() {
     let root = repository();
-    let text = fs::read_to_string(root.join(MAP)).expect("the map is readable");
+    let text = map_text();
     assert!(
         relative_links(&text).len() >= 20,
         "the map links its detail files"
@@ -110,7 +114,7 @@ fn every_relative_link_of_the_map_resolves() {
 #[test]
 fn every_detail_file_the_map_links_is_a_modules_documentation() {
     let root = repository();
-    let text = fs::read_to_string(root.join(MAP)).expect("the map is readable");
+    let text = map_text();
     let mut missing = Vec::new();
     for link in relative_links(&text) {
         let target = normalise(&root.join("docs").join(&link));
