@@ -8,6 +8,7 @@
 //! `RESOLVE_BENEATH | RESOLVE_NO_SYMLINKS`; elsewhere (an older kernel, a sandbox that
 //! filters the call) each component is opened with `openat` and `O_NOFOLLOW` from the
 //! one before.
+#![doc = include_str!("beneath.md")]
 
 use std::ffi::CString;
 use std::fs::{File, OpenOptions};

@@ -2,6 +2,7 @@
 //! (a device such as `/dev/zero` or `/dev/urandom`, a FIFO or a socket is refused before
 //! it is opened, and opening never blocks), of at most the size its reader allows, and
 //! no more than that is ever read (a file growing meanwhile included).
+#![doc = include_str!("input.md")]
 
 use std::fs::{self, File, OpenOptions};
 use std::io::{self, Read};

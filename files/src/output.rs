@@ -8,6 +8,7 @@
 //! Whatever else exists at the path is never replaced: a device (`/dev/null`), a FIFO
 //! or a socket is written in place, a directory is refused. After a crash only
 //! temporaries can be left behind ([`is_partial`] recognises them).
+#![doc = include_str!("output.md")]
 
 use std::fs::{self, File, OpenOptions};
 use std::io::{self, Write};

@@ -29,6 +29,7 @@
 //! the safety door and the control pins, and junction blending between consecutive
 //! blocks; a homing phase moves every axis of its cycle in one block rather than
 //! stopping each at its switch. Jogging (`$J=`, jog cancel 0x85) is emulated.
+#![doc = include_str!("grbl.md")]
 
 mod config;
 mod faults;

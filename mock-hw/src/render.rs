@@ -85,7 +85,7 @@ impl Frame16 {
     }
 
     /// Encodes as an RGB 16-bit TIFF that common readers decode with no extra codec
-    /// (docs/ARCHITECTURE.md, "Captures"): Deflate (zlib level `DEFLATE_LEVEL`) with
+    /// (processing/src/capture.md): Deflate (zlib level `DEFLATE_LEVEL`) with
     /// horizontal differencing, values as [`Frame16::stored`], in strips of
     /// `ROWS_PER_STRIP` rows compressed in parallel.
     pub fn encode_tiff(&self) -> std::io::Result<Vec<u8>> {

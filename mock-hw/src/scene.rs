@@ -5,6 +5,8 @@
 //! naming the key. Sample parameters are in the camera-RGB β domain of paper eq. 4/5 (a
 //! perfect white gives β_G = 100), the domain of fit results and `truth.json`.
 //! Relative paths inside a scene file resolve against the file's directory.
+#![doc = include_str!("scene.md")]
+#![doc = include_str!("scene/rgl.md")]
 
 mod effects;
 mod empty_slot;

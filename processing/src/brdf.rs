@@ -21,6 +21,7 @@
 //! where tan²α/m² exceeds the exponent at which exp(−x) leaves the normal f64 range;
 //! a direction at or past grazing (cos θ < 1e−9, or a non-finite angle) makes β exactly 0
 //! (no light arrives, or the point is not seen); m is clamped to [1e−6, 1e6].
+#![doc = include_str!("brdf.md")]
 
 use std::f64::consts::PI;
 use std::fmt;

@@ -12,6 +12,7 @@
 //! the white strip's limbs (a step to black where the camera ray grazes the cylinder),
 //! its terminator ramp (where the light grazes it) and the sample strip's specular peak
 //! relative to the white. `solve` then fits the free setup fields to all of them.
+#![doc = include_str!("calibrate.md")]
 
 mod observe;
 mod solve;

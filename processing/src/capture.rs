@@ -9,11 +9,12 @@
 //!
 //! Hostile files are expected: before any decoder allocates, the image size a file
 //! claims is checked against [`max_pixels`] and against the file's own size (see
-//! docs/ARCHITECTURE.md, "Limits"), and a decoder that panics becomes a
+//! processing/src/capture.md, "Limits"), and a decoder that panics becomes a
 //! [`CaptureError::Image`]. A program may have the files decoded elsewhere (in a child
 //! process that can die of a file without taking the program along) by installing a
 //! [`Decoder`]; [`wire`] is the protocol of such a child. Without one, files are
 //! decoded in this process.
+#![doc = include_str!("capture.md")]
 
 mod decoded;
 mod error;

@@ -26,6 +26,7 @@
 //!   parametric fields are only its best parametric fit. Tabulated, the grid holds the
 //!   table's predictions: measured between the θL of the scan, and beyond them the best
 //!   parametric model's shape scaled to the table at its edge (see `fit::table`).
+#![doc = include_str!("export.md")]
 
 use std::f64::consts::PI;
 use std::fmt::Write as _;

@@ -29,6 +29,7 @@
 //! the sample is below the noise floor in every exposure, or the white is too dark to
 //! divide by; the sample keeps its other channels ([`Sample::dropped`]), and a column
 //! that keeps none is dropped.
+#![doc = include_str!("extract.md")]
 
 use std::collections::BTreeMap;
 use std::fs;

@@ -23,6 +23,8 @@
 //! A fit may also carry a measured table in (θh, θd) (`table`; [`fit_table`], or chosen
 //! by `--model auto`): it then predicts with the table, and its parametric fields are a
 //! parametric fit of the same samples, kept for renderers.
+#![doc = include_str!("fit.md")]
+#![doc = include_str!("fit/choice.md")]
 
 pub mod agreement;
 pub mod budget;

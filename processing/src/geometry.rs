@@ -12,6 +12,7 @@
 //! through the origin along (0, sin τ, cos τ), τ = `cylinder_tilt_deg` (its top leans
 //! toward +y). A surface point's azimuth φ is that of its normal, counter-clockwise
 //! from +x about the cylinder's axis.
+#![doc = include_str!("geometry.md")]
 
 use serde::{Deserialize, Serialize};
 

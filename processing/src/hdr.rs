@@ -27,6 +27,7 @@
 //! A channel with no usable frame is flagged in [`HdrImage::mask`] and given a finite
 //! value: if any frame clipped, the lower bound from the shortest clipped exposure
 //! ([`SATURATED`]); otherwise (black in every frame) 0 ([`UNDEREXPOSED`]).
+#![doc = include_str!("hdr.md")]
 
 mod debevec_malik;
 mod error;

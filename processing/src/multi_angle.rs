@@ -19,6 +19,7 @@
 //!   interpolates between them.
 //! - The **transform** (camera RGB → XYZ): one line per principal axis of its relative
 //!   covariance, √λ·Y·e in XYZ.
+#![doc = include_str!("multi_angle.md")]
 
 pub mod compare;
 

@@ -12,6 +12,7 @@
 //! for each [`Source`] `u_<source>_r,…`: the signed change of β at the point's geometry
 //! for a change of that source by +1 standard uncertainty ([`SampleUncertainty`]). A
 //! dropped channel's fields are empty.
+#![doc = include_str!("samples.md")]
 
 use std::fs::File;
 use std::io::{BufWriter, Read, Write};

@@ -5,6 +5,7 @@
 //! fixed bracket, its shutter times. The offline commands compare a directory with it
 //! before they read it, so that a θL or frame lost to a crash, a copy or a hand is named
 //! rather than silently left out of every result.
+#![doc = include_str!("scan_plan.md")]
 
 use std::collections::BTreeMap;
 use std::fmt;

@@ -6,6 +6,7 @@
 //! plus what the caller knows of the scan ([`ScanFacts`]): nothing it shows is computed
 //! anew but the fits' predictions at the measured points, for the plots. It loads
 //! nothing from the network: styles inline, plots as inline SVG.
+#![doc = include_str!("report.md")]
 
 mod html;
 mod plots;

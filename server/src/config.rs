@@ -281,7 +281,7 @@ impl Default for CameraConfig {
 }
 
 /// A sample carousel on a spare axis of the arm's GRBL board: the daemon turns it to a
-/// scan's sample itself instead of waiting for the operator (docs/ARCHITECTURE.md,
+/// scan's sample itself instead of waiting for the operator (server/src/lanes/hardware.md,
 /// "Sample changes").
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -17,6 +17,7 @@
 //!
 //! No system-call filter (seccomp) is applied: a decoder runs with the rights of the
 //! user, bounded in memory and time only.
+#![doc = include_str!("decode_workers.md")]
 
 use std::io::{self, BufReader, BufWriter, Read};
 use std::ops::Range;

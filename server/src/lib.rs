@@ -2,6 +2,12 @@
 //! axum) queue scans in a durable SQLite store; a hardware lane and a processing lane
 //! run their steps (docs/ARCHITECTURE.md, "Daemon"). Captures are decoded in child
 //! processes ([`decode_workers`]).
+#![doc = include_str!("daemon.md")]
+#![doc = include_str!("storage.md")]
+#![doc = include_str!("lanes/hardware.md")]
+#![doc = include_str!("limits.md")]
+#![doc = include_str!("api.md")]
+#![doc = include_str!("web.md")]
 
 mod answers;
 mod api;

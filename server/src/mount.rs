@@ -1,4 +1,4 @@
-//! The sample on the cylinder (docs/ARCHITECTURE.md, "Daemon", "Sample changes"): the
+//! The sample on the cylinder (server/src/lanes/hardware.md, "Sample changes"): the
 //! one the daemon knows is mounted, if any, and on the emulator the emulated
 //! instrument's mounted scene, which mounting a sample changes.
 

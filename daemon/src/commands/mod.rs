@@ -1,4 +1,5 @@
 //! One module per `gonio` subcommand: its arguments and its `run`.
+#![doc = include_str!("../commands.md")]
 
 pub mod calibrate;
 pub mod colour;

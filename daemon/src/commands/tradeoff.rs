@@ -4,7 +4,7 @@
 //! into cheaper scans: the first n of the θL spread over the scanned range, b of the
 //! bracket's exposures spread over its range (longest and shortest kept for b ≥ 2, the
 //! middle one for b = 1), every s-th pixel column, and a fit method. For each setting:
-//! - acquisition time from the hardware timing model (`gonio_mock_hw::scan_timing`): arm travel from home
+//! - acquisition time from the hardware timing model ([`HardwareTiming`]): arm travel from home
 //!   through the θL under the GRBL trapezoidal profile, and per θL each exposure plus
 //!   the camera's download latency;
 //! - processing time, measured: HDR merge + extraction of each θL used (with that

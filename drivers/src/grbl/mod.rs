@@ -54,6 +54,7 @@
 //!
 //! [`Arm::live_angle`]: crate::Arm::live_angle
 //! [`Arm::clear_fault`]: crate::Arm::clear_fault
+#![doc = include_str!("../grbl.md")]
 
 mod arm;
 mod codes;

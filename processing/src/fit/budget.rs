@@ -22,6 +22,7 @@
 //!
 //! [`monte_carlo`] propagates the same model by JCGM 101: every source and the noise drawn
 //! at once, the fit repeated per draw.
+#![doc = include_str!("budget.md")]
 
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};

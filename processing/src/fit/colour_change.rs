@@ -29,6 +29,7 @@
 //! θd; their mean weighted by the bins' specular R + G + B must be at least
 //! [`MIN_UV_CHANGE`]: a change no observer would see is not reported, however significant
 //! (without noise every bias is significant).
+#![doc = include_str!("colour_change.md")]
 
 use serde::{Deserialize, Serialize};
 

@@ -12,6 +12,7 @@
 //! The table in (θh, θd) ([`super::table`]) is judged the same way: each θL predicted
 //! from the columns of the others ([`table_held_out`]), relative to the shape of the best
 //! parametric candidate fitted without that θL.
+#![doc = include_str!("held_out.md")]
 
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};

@@ -37,6 +37,7 @@
 //! [`MAX_POINTS_PER_COLUMN`] points each (counted while reading, before anything larger is
 //! allocated), θh known and strictly increasing along each column, every value finite or
 //! missing.
+#![doc = include_str!("table.md")]
 
 use serde::de::{self, SeqAccess, Visitor};
 use serde::{Deserialize, Deserializer, Serialize};

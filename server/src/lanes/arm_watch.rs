@@ -1,4 +1,4 @@
-//! Watches the arm's device path beside the hardware lane (docs/ARCHITECTURE.md,
+//! Watches the arm's device path beside the hardware lane (server/src/lanes/hardware.md,
 //! "Device faults"): whatever the lane is doing (a long move, a homing cycle, waiting
 //! for the processing lane), an arm whose device is gone (unplugged) is shown
 //! `disconnected` on `/api/hardware` within a poll. The path is looked at, never

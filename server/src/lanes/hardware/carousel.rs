@@ -1,4 +1,4 @@
-//! The sample carousel (docs/ARCHITECTURE.md, "Sample carousel"): which sample the
+//! The sample carousel (server/src/lanes/hardware.md, "Sample carousel"): which sample the
 //! running scan needs before the camera, and turning the carousel there before each
 //! capture. Anything that may have moved the carousel (a homing cycle, a reset, an
 //! emergency stop, a reconnect, a failed arm operation) forgets which sample is in

@@ -1,4 +1,4 @@
-//! The arm's device path as the hardware lane sees it (docs/ARCHITECTURE.md, "Device
+//! The arm's device path as the hardware lane sees it (server/src/lanes/hardware.md, "Device
 //! faults"): the driver is let go as soon as the path vanishes (unplugged) or names
 //! another device (plugged in again), and nothing is opened while it is absent, so the
 //! arm is reopened the moment it is back rather than after a grown backoff. Only the
