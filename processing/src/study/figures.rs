@@ -4,6 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
 use super::boxplot::BoxStats;
@@ -189,13 +190,7 @@ pub fn box_plot_svg(
             .draw_series(outliers.map(|p| Circle::new(p, 4, color.stroke_width(1))))
             .map_err(|e| err(&e))?;
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(|e| err(&e))?;
-    root.present().map_err(|e| err(&e))
+    legend_and_present(&mut chart, &root).map_err(|e| err(&e))
 }
 
 /// An x–y chart of points and polylines with a legend, written to `path`.
@@ -300,11 +295,20 @@ fn draw_xy(
             PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(3))
         });
     }
+    legend_and_present(&mut chart, &root).map_err(|e| err(&e))
+}
+
+/// Draws the legend (inside the plot, on a pale box with a black border) and writes the
+/// figure out.
+fn legend_and_present<'a, 'b: 'a>(
+    chart: &mut ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    root: &DrawingArea<SVGBackend<'b>, plotters::coord::Shift>,
+) -> Result<(), String> {
     chart
         .configure_series_labels()
         .background_style(WHITE.mix(0.8))
         .border_style(BLACK)
         .draw()
-        .map_err(|e| err(&e))?;
-    root.present().map_err(|e| err(&e))
+        .map_err(|e| e.to_string())?;
+    root.present().map_err(|e| e.to_string())
 }

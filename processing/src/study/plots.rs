@@ -16,6 +16,7 @@ use super::boxplot::BoxStats;
 use super::error::StudyError;
 use super::figures::{box_plot_svg, xy_svg, BoxSeries, Mark, XyPlot, XySeries};
 use super::report::{EvalPoint, GroupSummary, StudyReport};
+use crate::fit::FitResult;
 use crate::metrics;
 
 /// Most points drawn per point series and per polyline (evenly thinned beyond), to keep
@@ -126,6 +127,26 @@ fn lines(report: &StudyReport) -> Vec<Vec<EvalPoint>> {
         .collect()
 }
 
+/// Each variant's successful fit on the single θL nearest `theta_l`, named by the
+/// variant, and that θL (`None` when no such fit succeeded).
+fn single_theta_l_fits(
+    report: &StudyReport,
+    theta_l: f64,
+) -> (Option<f64>, Vec<(String, &FitResult)>) {
+    let mut fitted_on = None;
+    let mut fits = Vec::new();
+    for &v in &report.options.variants {
+        let Some(result) = report.single(v, theta_l) else {
+            continue;
+        };
+        if let Ok(scores) = &result.outcome {
+            fitted_on = Some(result.theta_l[0]);
+            fits.push((v.label(), &scores.fit));
+        }
+    }
+    (fitted_on, fits)
+}
+
 fn g_channel_plot(report: &StudyReport) -> XyPlot {
     let lines = lines(report);
     let mut series = vec![XySeries {
@@ -136,24 +157,17 @@ fn g_channel_plot(report: &StudyReport) -> XyPlot {
             MAX_MARKERS,
         )],
     }];
-    let mut fitted_on = None;
-    for &v in &report.options.variants {
-        let Some(result) = report.single(v, FIG6_THETA_L) else {
-            continue;
-        };
-        let Ok(scores) = &result.outcome else {
-            continue;
-        };
-        fitted_on = Some(result.theta_l[0]);
+    let (fitted_on, fits) = single_theta_l_fits(report, FIG6_THETA_L);
+    for (name, fit) in fits {
         series.push(XySeries {
-            name: v.label(),
+            name,
             mark: Mark::Lines,
             segments: lines
                 .iter()
                 .map(|line| {
                     thin(
                         line.iter()
-                            .map(|p| (p.theta_r, scores.fit.predict(p.theta_i, p.theta_r)[1])),
+                            .map(|p| (p.theta_r, fit.predict(p.theta_i, p.theta_r)[1])),
                         MAX_LINE_POINTS,
                     )
                 })
@@ -183,22 +197,16 @@ fn uv_plot(report: &StudyReport) -> XyPlot {
             MAX_MARKERS,
         )],
     }];
-    let mut fitted_on = None;
-    for &v in &report.options.variants {
-        let Some(result) = report.single(v, FIG8_THETA_L) else {
-            continue;
-        };
-        let Ok(scores) = &result.outcome else {
-            continue;
-        };
-        fitted_on = Some(result.theta_l[0]);
+    let (fitted_on, fits) = single_theta_l_fits(report, FIG8_THETA_L);
+    for (name, fit) in fits {
         series.push(XySeries {
-            name: v.label(),
+            name,
             mark: Mark::Points,
             segments: vec![thin(
-                report.points.iter().filter_map(|p| {
-                    uv(report.camera.xyz(scores.fit.predict(p.theta_i, p.theta_r)))
-                }),
+                report
+                    .points
+                    .iter()
+                    .filter_map(|p| uv(report.camera.xyz(fit.predict(p.theta_i, p.theta_r)))),
                 MAX_MARKERS,
             )],
         });
