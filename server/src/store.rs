@@ -1,5 +1,10 @@
 //! The durable queue: scans, their steps, sweeps and the hardware log in SQLite
 //! (WAL journal, `synchronous = FULL`, so a committed step survives power loss).
+//!
+//! Here: the schema and the connection (opened, written with the journal's reserve as
+//! the last room). What is stored is in `records`; reading and writing scans, sweeps,
+//! steps, the queue the lanes take from, daemon starts and the hardware log, in
+//! submodules of those names.
 
 mod boots;
 mod hardware_log;
