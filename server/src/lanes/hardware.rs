@@ -11,6 +11,7 @@ use std::path::Path;
 use std::sync::Arc;
 use std::time::Duration;
 
+use gonio_drivers::grbl::ArmAxis;
 use gonio_drivers::{Arm, Camera, DeviceError};
 use gonio_processing::geometry::Setup;
 use serde_json::{json, Value};
@@ -38,10 +39,17 @@ mod moves;
 mod requests;
 mod scan_waits;
 
-use carousel::CarouselTarget;
-
 /// The scan states the hardware lane works in.
 const RUNNING: &[ScanState] = &[ScanState::Running];
+
+/// Where the carousel must be for the running scan: its sample's slot on `axis`
+/// (aimed and reached in `carousel.rs`).
+#[derive(Debug, Clone)]
+struct CarouselTarget {
+    axis: ArmAxis,
+    slot: f64,
+    sample: String,
+}
 
 /// The hardware lane's state.
 pub struct HardwareLane {

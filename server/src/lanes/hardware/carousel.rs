@@ -4,20 +4,11 @@
 //! emergency stop, a reconnect, a failed arm operation) forgets which sample is in
 //! place, so the next capture turns it back first.
 
-use gonio_drivers::grbl::ArmAxis;
 use gonio_drivers::ArmState;
 
-use super::HardwareLane;
+use super::{CarouselTarget, HardwareLane};
 use crate::lanes::step::{self, StepError};
 use crate::store::StoreError;
-
-/// Where the carousel must be for the running scan: its sample's slot on `axis`.
-#[derive(Debug, Clone)]
-pub(super) struct CarouselTarget {
-    axis: ArmAxis,
-    slot: f64,
-    sample: String,
-}
 
 /// Rounds of "arm to θL, carousel to its slot" before a capture gives up: each round
 /// only repeats when putting one in place moved the other (a re-homing).
