@@ -1,17 +1,11 @@
-//! The web page at `/` and the OpenAPI description, both embedded in the binary.
+//! The web page at `/`, embedded in the binary.
 
-use axum::http::header;
-use axum::response::{Html, IntoResponse};
+use axum::response::Html;
 
 /// The single-page operator interface (plain HTML and JavaScript).
+#[utoipa::path(get, path = "/",
+    summary = "The operator's page: one HTML file with its script, needing no network",
+    responses((status = 200, description = "The page", content_type = "text/html", body = String)))]
 pub async fn index() -> Html<&'static str> {
     Html(include_str!("../assets/index.html"))
-}
-
-/// `GET /api/openapi.json`.
-pub async fn openapi() -> impl IntoResponse {
-    (
-        [(header::CONTENT_TYPE, "application/json")],
-        include_str!("../assets/openapi.json"),
-    )
 }
