@@ -16,6 +16,7 @@
 //! per group; and the schema derives work on the existing serde types (internally
 //! tagged enums, `Option` as `null`) without a second trait such as `JsonSchema`.
 
+use utoipa::openapi::extensions::ExtensionsBuilder;
 use utoipa::openapi::path::Operation;
 use utoipa::openapi::response::{Response, ResponseBuilder};
 use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityRequirement, SecurityScheme};
@@ -36,6 +37,10 @@ pub enum Access {
     /// Changes with a JSON body: behind the token and `Content-Type: application/json`.
     TokenJson,
 }
+
+/// The extension naming a path's last parameter that takes the rest of the path,
+/// slashes included (axum's `{*name}`; OpenAPI's parameters take one segment).
+const REST_OF_PATH: &str = "x-rest-of-path";
 
 /// The security scheme's name: `Authorization: Bearer <token>`.
 const BEARER: &str = "bearer";
@@ -113,7 +118,7 @@ pub fn describe_access(access: Access, api: &mut OpenApi) {
 
 /// Completes the description the routes gave: its title and conventions, the error
 /// shape and shared answers, the bearer scheme, the 421 every route may answer, and
-/// axum's catch-all `{*path}` written as OpenAPI's `{path}`.
+/// axum's catch-all `{*path}` written as OpenAPI's `{path}` (with [`REST_OF_PATH`]).
 pub fn finish(mut api: OpenApi) -> OpenApi {
     api.info = InfoBuilder::new()
         .title("gonio daemon")
@@ -135,7 +140,13 @@ pub fn finish(mut api: OpenApi) -> OpenApi {
     }
     api.paths.paths = std::mem::take(&mut api.paths.paths)
         .into_iter()
-        .map(|(path, item)| (path.replace("{*", "{"), item))
+        .map(|(path, mut item)| {
+            if let Some((_, rest)) = path.split_once("{*") {
+                let name = rest.trim_end_matches('}');
+                item.extensions = Some(ExtensionsBuilder::new().add(REST_OF_PATH, name).build());
+            }
+            (path.replace("{*", "{"), item)
+        })
         .collect();
     let components = api.components.get_or_insert_with(Default::default);
     components
