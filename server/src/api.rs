@@ -204,7 +204,9 @@ struct Queued {
     request_body = ScanRequest,
     responses(
         (status = 201, description = "Queued", body = Queued),
+        (status = 400, description = "The body is not valid JSON; nothing changed", body = ErrorBody),
         (status = 422, description = "An invalid field, named in `field`; nothing queued", body = ErrorBody),
+        (status = 503, description = "The disk is full and the journal cannot be written; nothing changed. Try again once space is freed", body = ErrorBody),
     ))]
 async fn create_scan(State(shared): AppState, body: Bytes) -> ApiResult<impl IntoResponse> {
     let value = parse_json(&body)?;
@@ -322,6 +324,7 @@ async fn control(
         (status = 200, description = "Scan", body = ScanView),
         (status = 404, description = "No such scan", body = ErrorBody),
         (status = 409, description = "The scan's state does not allow it", body = ErrorBody),
+        (status = 503, description = "The disk is full and the journal cannot be written; nothing changed. Try again once space is freed", body = ErrorBody),
     ))]
 async fn pause_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
     control(shared, id, applies_to("pause"), ScanState::Paused, "pause").await
@@ -334,6 +337,7 @@ async fn pause_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<J
         (status = 200, description = "Scan", body = ScanView),
         (status = 404, description = "No such scan", body = ErrorBody),
         (status = 409, description = "The scan's state does not allow it", body = ErrorBody),
+        (status = 503, description = "The disk is full and the journal cannot be written; nothing changed. Try again once space is freed", body = ErrorBody),
     ))]
 async fn resume_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
     control(
@@ -353,6 +357,7 @@ async fn resume_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<
         (status = 200, description = "Scan", body = ScanView),
         (status = 404, description = "No such scan", body = ErrorBody),
         (status = 409, description = "The scan's state does not allow it", body = ErrorBody),
+        (status = 503, description = "The disk is full and the journal cannot be written; nothing changed. Try again once space is freed", body = ErrorBody),
     ))]
 async fn cancel_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
     control(
@@ -375,6 +380,7 @@ async fn cancel_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<
         (status = 200, description = "Scan", body = ScanView),
         (status = 404, description = "No such scan", body = ErrorBody),
         (status = 409, description = "The scan does not wait for its sample to be mounted, or the sample cannot be mounted (its scene file missing or invalid; the file is named, not its path on the server)", body = ErrorBody),
+        (status = 503, description = "The disk is full and the journal cannot be written; nothing changed. Try again once space is freed", body = ErrorBody),
     ))]
 async fn confirm_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
     let _one_at_a_time = shared.confirming.lock().await;

@@ -46,7 +46,7 @@ const REST_OF_PATH: &str = "x-rest-of-path";
 const BEARER: &str = "bearer";
 
 /// The shared answers, by name (`#/components/responses/<name>`), and what they say.
-const SHARED_ANSWERS: [(&str, &str); 8] = [
+const SHARED_ANSWERS: [(&str, &str); 6] = [
     (
         "MisdirectedRequest",
         "The Host header is not the bind address, localhost or a name of allowed_hosts \
@@ -65,17 +65,10 @@ const SHARED_ANSWERS: [(&str, &str); 8] = [
         "Bound beyond loopback without public_read: missing or wrong bearer token",
     ),
     (
-        "DiskFull",
-        "The disk is full and the journal cannot be written (another process filled it \
-         past the space held for the journal); nothing changed. Try again once space is \
-         freed",
-    ),
-    (
         "BodyTooLarge",
         "The body is over max_body_bytes (the connection closes after the answer); \
          nothing changed",
     ),
-    ("NotJson", "The body is not valid JSON; nothing changed"),
     (
         "Internal",
         "An internal fault (the journal could not be read, a worker task failed), named",
@@ -88,18 +81,12 @@ pub fn describe_access(access: Access, api: &mut OpenApi) {
     let answers: &[(&str, &str)] = match access {
         Access::Open => &[],
         Access::Read => &[("401", "ReadUnauthorized"), ("500", "Internal")],
-        Access::Token => &[
-            ("401", "Unauthorized"),
-            ("500", "Internal"),
-            ("503", "DiskFull"),
-        ],
+        Access::Token => &[("401", "Unauthorized"), ("500", "Internal")],
         Access::TokenJson => &[
-            ("400", "NotJson"),
             ("401", "Unauthorized"),
             ("413", "BodyTooLarge"),
             ("415", "UnsupportedMediaType"),
             ("500", "Internal"),
-            ("503", "DiskFull"),
         ],
     };
     let bearer = || SecurityRequirement::new(BEARER, Vec::<String>::new());
@@ -165,7 +152,7 @@ pub fn finish(mut api: OpenApi) -> OpenApi {
 }
 
 /// Every operation of a path, whatever its method.
-pub fn operations(item: &mut PathItem) -> impl Iterator<Item = &mut Operation> {
+fn operations(item: &mut PathItem) -> impl Iterator<Item = &mut Operation> {
     [
         &mut item.get,
         &mut item.put,

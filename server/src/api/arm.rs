@@ -196,6 +196,7 @@ const DECLARE_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(30);
     request_body = ArmPosition,
     responses(
         (status = 200, description = "Declared", body = Declared),
+        (status = 400, description = "The body is not valid JSON; nothing changed", body = ErrorBody),
         (status = 409, description = "Refused: homing is required, a scan is running, the arm is moving, homing or in hold (a position is declared only while the arm is at rest), or another declaration is under way", body = ErrorBody),
         (status = 422, description = "Invalid angle (the field is named)", body = ErrorBody),
         (status = 503, description = "Arm not connected, or the hardware is busy", body = ErrorBody),

@@ -32,7 +32,9 @@ pub(super) struct SweepQueued {
     request_body = SweepRequest,
     responses(
         (status = 201, description = "Queued", body = SweepQueued),
+        (status = 400, description = "The body is not valid JSON; nothing changed", body = ErrorBody),
         (status = 422, description = "An invalid field, named in `field`; nothing queued", body = ErrorBody),
+        (status = 503, description = "The disk is full and the journal cannot be written; nothing changed. Try again once space is freed", body = ErrorBody),
     ))]
 pub(super) async fn create_sweep(
     State(shared): AppState,
