@@ -483,13 +483,13 @@ async fn calibrate_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResu
     Ok(Json(stored))
 }
 
-/// Forgets the calibrated setup: later scans use the configured (or scene) setup.
 /// Whether a calibrated setup was removed.
 #[derive(Serialize, ToSchema)]
 struct Removed {
     removed: bool,
 }
 
+/// Forgets the calibrated setup: later scans use the configured (or scene) setup.
 #[utoipa::path(delete, path = "/api/setup",
     summary = "Forget the calibrated setup: later scans use the configured (or emulated scene's) setup",
     responses((status = 200, description = "Whether a calibrated setup was removed", body = Removed)))]
@@ -581,14 +581,14 @@ async fn plot(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Va
     Ok(Json(plot))
 }
 
-/// Test hook (only with `emulator.fault_injection = true`): injects a fault into the
-/// emulated devices.
 /// The fault is injected.
 #[derive(Serialize, ToSchema)]
 struct Injected {
     injected: bool,
 }
 
+/// Test hook (only with `emulator.fault_injection = true`): injects a fault into the
+/// emulated devices.
 #[utoipa::path(post, path = "/api/emulator/fault",
     summary = "Test hook, only with `emulator.fault_injection = true`: inject a fault into the emulated devices",
     request_body = InjectedFault,

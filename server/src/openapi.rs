@@ -20,7 +20,10 @@ use utoipa::openapi::extensions::ExtensionsBuilder;
 use utoipa::openapi::path::Operation;
 use utoipa::openapi::response::{Response, ResponseBuilder};
 use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityRequirement, SecurityScheme};
-use utoipa::openapi::{ContentBuilder, InfoBuilder, OpenApi, PathItem, Ref, RefOr};
+use utoipa::openapi::{
+    ContentBuilder, InfoBuilder, KnownFormat, ObjectBuilder, OpenApi, PathItem, Ref, RefOr,
+    SchemaFormat, Type,
+};
 use utoipa::PartialSchema;
 
 use crate::answers::ErrorBody;
@@ -124,6 +127,11 @@ pub fn finish(mut api: OpenApi) -> OpenApi {
         .build();
     for operation in api.paths.paths.values_mut().flat_map(operations) {
         add_answers(operation, &[("421", "MisdirectedRequest")]);
+        for answer in operation.responses.responses.values_mut() {
+            if let RefOr::T(answer) = answer {
+                bytes_as_binary(answer);
+            }
+        }
     }
     api.paths.paths = std::mem::take(&mut api.paths.paths)
         .into_iter()
@@ -175,6 +183,19 @@ fn add_answers(operation: &mut Operation, answers: &[(&str, &str)]) {
             .responses
             .entry((*status).to_owned())
             .or_insert_with(|| RefOr::Ref(Ref::from_response_name(*name)));
+    }
+}
+
+/// A body that is neither JSON nor text (a file, an archive, a PNG) as OpenAPI's
+/// binary string, not the array of integers a `Vec<u8>` is described as.
+fn bytes_as_binary(answer: &mut Response) {
+    for (media_type, content) in &mut answer.content {
+        if media_type != "application/json" && !media_type.starts_with("text/") {
+            let binary = ObjectBuilder::new()
+                .schema_type(Type::String)
+                .format(Some(SchemaFormat::KnownFormat(KnownFormat::Binary)));
+            content.schema = Some(RefOr::T(binary.into()));
+        }
     }
 }
 
