@@ -109,7 +109,7 @@ pub struct ScanView {
     pub theta_l: Vec<f64>,
     pub bracket: BracketView,
     pub progress: ScanProgress,
-    /// The control routes (POST /api/scans/{id}/<action>) the scan's state allows:
+    /// The control routes (`POST /api/scans/{id}/<action>`) the scan's state allows:
     /// `pause`, `resume`, `cancel`; `confirm` while it waits for its sample to be
     /// mounted.
     pub actions: Vec<String>,
