@@ -29,6 +29,7 @@ use serde::{Deserialize, Serialize};
 
 /// State of the light arm as the controller reports it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
 #[serde(rename_all = "snake_case")]
 pub enum ArmState {
     Idle,

@@ -8,12 +8,24 @@ use axum::extract::State;
 use axum::http::{header, HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
 use axum::Json;
-use serde_json::json;
+use serde::Serialize;
+use utoipa::ToSchema;
 
 use super::shared::Shared;
 use super::store::{ScanRecord, Store, StoreError};
 use super::sync::lock;
 use super::validate::FieldError;
+
+/// The body of every error answer.
+#[derive(Serialize, ToSchema)]
+#[schema(as = Error)]
+pub struct ErrorBody {
+    /// What is wrong, one line.
+    pub error: String,
+    /// The invalid field, e.g. `theta_l[2]` or `bracket.shutter_s`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub field: Option<String>,
+}
 
 /// An error answer: status and `{"error": "...", "field": ...}`.
 pub struct ApiError {
@@ -49,10 +61,9 @@ impl ApiError {
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
         // One line, whatever a cause's message holds.
-        let message = gonio_processing::guard::one_line(&self.message);
-        let body = match self.field {
-            Some(field) => json!({ "error": message, "field": field }),
-            None => json!({ "error": message }),
+        let body = ErrorBody {
+            error: gonio_processing::guard::one_line(&self.message),
+            field: self.field,
         };
         (self.status, Json(body)).into_response()
     }

@@ -2,259 +2,146 @@
 //! Mutating routes need the bearer token; reads are open.
 
 use std::convert::Infallible;
-use std::sync::Arc;
+use std::sync::{Arc, LazyLock};
 
 use axum::body::Bytes;
-use axum::extract::{DefaultBodyLimit, Path, Request, State};
-use axum::http::{header, HeaderValue, StatusCode};
-use axum::middleware::{self, Next};
+use axum::extract::{DefaultBodyLimit, Path, State};
+use axum::http::{header, StatusCode};
+use axum::middleware;
 use axum::response::sse::{Event, KeepAlive, Sse};
-use axum::response::{IntoResponse, Response};
-use axum::routing::{delete, get, post};
+use axum::response::IntoResponse;
 use axum::{Json, Router};
 use futures_util::{Stream, StreamExt};
-use serde_json::{json, Value};
+use serde::Serialize;
+use serde_json::Value;
 use tokio_stream::wrappers::BroadcastStream;
+use utoipa::ToSchema;
+use utoipa_axum::router::OpenApiRouter;
+use utoipa_axum::routes;
 
 use super::answers::{
     db, internal, load_scan, without_absolute_paths, without_server_paths, ApiError, ApiResult,
-    AppState,
+    AppState, ErrorBody,
 };
 use super::calibration;
-use super::config::Config;
 use super::devices::InjectedFault;
+use super::health;
+use super::openapi::{self, Access};
 use super::preview;
 use super::scan_files;
 use super::scan_report;
+use super::schemas::{ScanRequest, ScanView};
 use super::shared::Shared;
-use super::store::{NewScan, ScanState, Store, StoreError};
+use super::store::{NewScan, ScanState, StepRecord};
 use super::sync::{lock, Slots};
 use super::thumbnails;
 use super::validate::{self, Bounds};
-use super::view::{applies_to, rfc3339, scan_view};
+use super::view::{applies_to, scan_view};
+use super::web;
 
 mod arm;
+mod guards;
+mod sweeps;
 
-use arm::{declare_arm_position, hardware, hardware_log, home_arm, reconnect_arm, stop_arm};
+/// Routes with their description, before the state is given.
+type Routes = OpenApiRouter<Arc<Shared>>;
+
+/// Every route of the daemon by group, each registered with its description
+/// (`routes!` takes the route and its description from the handler's
+/// `#[utoipa::path]`: no route goes undescribed); `guard` puts a group behind its
+/// checks, whose answers `openapi::describe_access` adds to the group's description.
+fn routes(guard: &dyn Fn(Access, Routes) -> Routes) -> Routes {
+    let group = |access, mut routes: Routes| {
+        openapi::describe_access(access, routes.get_openapi_mut());
+        guard(access, routes)
+    };
+    let open = Routes::new()
+        .routes(routes!(web::index))
+        .routes(routes!(web::page_file))
+        .routes(routes!(description))
+        .routes(routes!(health::health));
+    let reads = Routes::new()
+        .routes(routes!(arm::hardware))
+        .routes(routes!(arm::hardware_log))
+        .routes(routes!(list_scans))
+        .routes(routes!(get_scan))
+        .routes(routes!(scan_steps))
+        .routes(routes!(scan_events))
+        .routes(routes!(thumbnails::thumbnail))
+        .routes(routes!(plot))
+        .routes(routes!(scan_report::report))
+        .routes(routes!(scan_files::list_files))
+        .routes(routes!(scan_files::get_file))
+        .routes(routes!(scan_files::scan_archive))
+        .routes(routes!(sweeps::list_sweeps))
+        .routes(routes!(sweeps::get_sweep));
+    let mutating = Routes::new()
+        .routes(routes!(pause_scan))
+        .routes(routes!(resume_scan))
+        .routes(routes!(cancel_scan))
+        .routes(routes!(confirm_scan))
+        .routes(routes!(calibrate_scan))
+        .routes(routes!(forget_calibration))
+        .routes(routes!(arm::stop_arm))
+        .routes(routes!(arm::home_arm))
+        .routes(routes!(arm::reconnect_arm));
+    let json_bodies = Routes::new()
+        .routes(routes!(create_scan))
+        .routes(routes!(sweeps::create_sweep))
+        .routes(routes!(arm::declare_arm_position))
+        .routes(routes!(inject_fault));
+    group(Access::Open, open)
+        .merge(group(Access::Read, reads))
+        .merge(group(Access::Token, mutating))
+        .merge(group(Access::TokenJson, json_bodies))
+}
 
 /// The routes of the daemon. Every request first passes the Host check; mutating
 /// routes need the token (reads too when bound beyond loopback without
 /// `public_read`); JSON bodies need `Content-Type: application/json`; every error
 /// answer is JSON.
 pub fn router(shared: Arc<Shared>) -> Router {
-    let token = || middleware::from_fn_with_state(shared.clone(), require_token);
-    let json_bodies = Router::new()
-        .route("/api/scans", post(create_scan))
-        .route("/api/sweeps", post(create_sweep))
-        .route("/api/arm/position", post(declare_arm_position))
-        .route("/api/emulator/fault", post(inject_fault))
-        .route_layer(middleware::from_fn(require_json));
-    let mutating = Router::new()
-        .route("/api/scans/{id}/pause", post(pause_scan))
-        .route("/api/scans/{id}/resume", post(resume_scan))
-        .route("/api/scans/{id}/cancel", post(cancel_scan))
-        .route("/api/scans/{id}/confirm", post(confirm_scan))
-        .route("/api/scans/{id}/calibrate", post(calibrate_scan))
-        .route("/api/setup", delete(forget_calibration))
-        .route("/api/arm/stop", post(stop_arm))
-        .route("/api/arm/home", post(home_arm))
-        .route("/api/arm/reconnect", post(reconnect_arm))
-        .merge(json_bodies)
-        .route_layer(token());
-    let reads = Router::new()
-        .route("/api/hardware", get(hardware))
-        .route("/api/hardware/log", get(hardware_log))
-        .route("/api/scans", get(list_scans))
-        .route("/api/scans/{id}", get(get_scan))
-        .route("/api/scans/{id}/steps", get(scan_steps))
-        .route("/api/scans/{id}/events", get(scan_events))
-        .route("/api/scans/{id}/thumbnail.png", get(thumbnails::thumbnail))
-        .route("/api/scans/{id}/plot", get(plot))
-        .route("/api/scans/{id}/report", get(scan_report::report))
-        .route("/api/scans/{id}/files", get(scan_files::list_files))
-        .route("/api/scans/{id}/files/{*path}", get(scan_files::get_file))
-        .route("/api/scans/{id}/archive", get(scan_files::scan_archive))
-        .route("/api/sweeps", get(list_sweeps))
-        .route("/api/sweeps/{id}", get(get_sweep));
-    let reads = if reads_need_token(&shared.config) {
-        reads.route_layer(token())
-    } else {
-        reads
-    };
-    Router::new()
-        .route("/", get(super::web::index))
-        .route("/page/{file}", get(super::web::page_file))
-        .route("/api/openapi.json", get(super::web::openapi))
-        .route("/api/health", get(super::health::health))
-        .merge(reads)
-        .merge(mutating)
+    let token = || middleware::from_fn_with_state(shared.clone(), guards::require_token);
+    let reads_need_token = guards::reads_need_token(&shared.config);
+    let (routes, _) = routes(&|access, routes| match access {
+        Access::Open => routes,
+        Access::Read if !reads_need_token => routes,
+        Access::Read | Access::Token => routes.route_layer(token()),
+        Access::TokenJson => routes
+            .route_layer(middleware::from_fn(guards::require_json))
+            .route_layer(token()),
+    })
+    .split_for_parts();
+    routes
         .fallback(|| async { ApiError::not_found("no such route:") })
         .layer(DefaultBodyLimit::max(shared.config.max_body_bytes))
         .layer(middleware::from_fn_with_state(
             shared.clone(),
-            refuse_oversized,
+            guards::refuse_oversized,
         ))
-        .layer(middleware::from_fn(json_errors))
-        .layer(middleware::from_fn_with_state(shared.clone(), check_host))
+        .layer(middleware::from_fn(guards::json_errors))
+        .layer(middleware::from_fn_with_state(
+            shared.clone(),
+            guards::check_host,
+        ))
         .with_state(shared)
 }
 
-/// Most bytes of an oversized body read and discarded before its 413: a client still
-/// sending it then reads the answer instead of a reset connection. Larger bodies are
-/// answered at once.
-const DRAIN_CAP: u64 = 1 << 20;
-
-/// 413 for a body whose declared length is over `max_body_bytes`, after draining it
-/// (up to [`DRAIN_CAP`]); the connection closes after the answer.
-async fn refuse_oversized(State(shared): AppState, request: Request, next: Next) -> Response {
-    let limit = shared.config.max_body_bytes as u64;
-    let declared = request
-        .headers()
-        .get(header::CONTENT_LENGTH)
-        .and_then(|v| v.to_str().ok())
-        .and_then(|v| v.parse::<u64>().ok());
-    let Some(length) = declared.filter(|&n| n > limit) else {
-        return next.run(request).await;
-    };
-    if length <= DRAIN_CAP {
-        let _ = axum::body::to_bytes(request.into_body(), DRAIN_CAP as usize).await;
-    }
-    let mut answer = ApiError::new(
-        StatusCode::PAYLOAD_TOO_LARGE,
-        format!("request body of {length} bytes is over max_body_bytes ({limit})"),
-    )
-    .into_response();
-    answer
-        .headers_mut()
-        .insert(header::CONNECTION, HeaderValue::from_static("close"));
-    answer
+/// The API's OpenAPI description, made from the routes once.
+fn openapi_json() -> &'static str {
+    static JSON: LazyLock<String> = LazyLock::new(|| {
+        let api = openapi::finish(routes(&|_, routes| routes).into_openapi());
+        serde_json::to_string(&api).expect("the OpenAPI description serializes")
+    });
+    &JSON
 }
 
-/// Whether read routes need the token: bound beyond loopback without `public_read`.
-fn reads_need_token(config: &Config) -> bool {
-    !config.bind.ip().is_loopback() && !config.public_read
-}
-
-/// Whether the daemon answers to `Host` (port ignored): the bind address, `localhost`,
-/// a loopback address, a name of `allowed_hosts`, or, when bound to every interface,
-/// any IP address (a DNS-rebinding page always sends a name, never an address).
-fn host_allowed(config: &Config, host: &str) -> bool {
-    let name = match host.strip_prefix('[') {
-        Some(rest) => rest.split_once(']').map_or("", |(name, _)| name),
-        None => host.rsplit_once(':').map_or(host, |(name, _)| name),
-    };
-    if name.eq_ignore_ascii_case("localhost")
-        || config
-            .allowed_hosts
-            .iter()
-            .any(|h| h.eq_ignore_ascii_case(name))
-    {
-        return true;
-    }
-    let bind = config.bind.ip();
-    name.parse::<std::net::IpAddr>()
-        .is_ok_and(|ip| ip == bind || ip.is_loopback() || bind.is_unspecified())
-}
-
-/// 421 for a request whose Host the daemon does not answer to (DNS rebinding).
-async fn check_host(State(shared): AppState, request: Request, next: Next) -> Response {
-    let host = request
-        .headers()
-        .get(header::HOST)
-        .and_then(|v| v.to_str().ok())
-        .or_else(|| request.uri().authority().map(|a| a.as_str()))
-        .unwrap_or("");
-    if host_allowed(&shared.config, host) {
-        return next.run(request).await;
-    }
-    ApiError::new(
-        StatusCode::MISDIRECTED_REQUEST,
-        format!(
-            "Host {host:?} is not this daemon's: use its address, localhost, or a name of \
-             allowed_hosts"
-        ),
-    )
-    .into_response()
-}
-
-/// 415 unless the request says its body is JSON.
-async fn require_json(request: Request, next: Next) -> Response {
-    let content_type = request
-        .headers()
-        .get(header::CONTENT_TYPE)
-        .and_then(|v| v.to_str().ok())
-        .unwrap_or("");
-    let essence = content_type.split(';').next().unwrap_or("").trim();
-    if essence.eq_ignore_ascii_case("application/json") {
-        return next.run(request).await;
-    }
-    ApiError::new(
-        StatusCode::UNSUPPORTED_MEDIA_TYPE,
-        format!("Content-Type must be application/json, got {content_type:?}"),
-    )
-    .into_response()
-}
-
-/// Gives every error answer the API's JSON shape: axum's rejections (a bad path
-/// parameter, a body over the limit, an unknown method) come as plain text.
-async fn json_errors(request: Request, next: Next) -> Response {
-    let response = next.run(request).await;
-    let status = response.status();
-    let is_json = response
-        .headers()
-        .get(header::CONTENT_TYPE)
-        .and_then(|v| v.to_str().ok())
-        .is_some_and(|v| v.starts_with("application/json"));
-    if !(status.is_client_error() || status.is_server_error()) || is_json {
-        return response;
-    }
-    let (parts, body) = response.into_parts();
-    let text = axum::body::to_bytes(body, 4096).await.unwrap_or_default();
-    let text = String::from_utf8_lossy(&text).trim().to_owned();
-    let message = if text.is_empty() {
-        status
-            .canonical_reason()
-            .unwrap_or("error")
-            .to_ascii_lowercase()
-    } else {
-        text
-    };
-    let mut answer = ApiError::new(status, message).into_response();
-    for (name, value) in &parts.headers {
-        if name != header::CONTENT_TYPE && name != header::CONTENT_LENGTH {
-            answer.headers_mut().insert(name.clone(), value.clone());
-        }
-    }
-    answer
-}
-
-/// Rejects a request without the right `Authorization: Bearer` token before its body
-/// is read, so nothing changes. The scheme is case-insensitive (RFC 9110).
-async fn require_token(State(shared): AppState, request: Request, next: Next) -> Response {
-    let given = request
-        .headers()
-        .get(header::AUTHORIZATION)
-        .and_then(|v| v.to_str().ok())
-        .and_then(|v| v.trim_start().split_once(' '))
-        .filter(|(scheme, _)| scheme.eq_ignore_ascii_case("bearer"))
-        .map(|(_, token)| token.trim());
-    if given.is_some_and(|t| constant_time_eq(t.as_bytes(), shared.token.as_bytes())) {
-        return next.run(request).await;
-    }
-    let mut response = ApiError::new(
-        StatusCode::UNAUTHORIZED,
-        "missing or wrong bearer token (Authorization: Bearer <token>)",
-    )
-    .into_response();
-    response
-        .headers_mut()
-        .insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
-    response
-}
-
-/// Compares two byte strings in time independent of where they differ.
-fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
-    a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
+/// This description.
+#[utoipa::path(get, path = "/api/openapi.json",
+    summary = "This description of the API (OpenAPI 3.1), generated from the handlers",
+    responses((status = 200, description = "The description", content_type = "application/json", body = Object)))]
+async fn description() -> impl IntoResponse {
+    ([(header::CONTENT_TYPE, "application/json")], openapi_json())
 }
 
 fn parse_json(body: &Bytes) -> ApiResult<Value> {
@@ -305,6 +192,23 @@ fn holdable(shared: &Shared) -> Option<Vec<String>> {
     }
 }
 
+/// The answer to a queued scan.
+#[derive(Serialize, ToSchema)]
+struct Queued {
+    id: i64,
+    /// The scan's URL.
+    url: String,
+}
+
+#[utoipa::path(post, path = "/api/scans",
+    summary = "Queue a scan (validated, planned and stored before anything moves)",
+    request_body = ScanRequest,
+    responses(
+        (status = 201, description = "Queued", body = Queued),
+        (status = 400, description = "The body is not valid JSON; nothing changed", body = ErrorBody),
+        (status = 422, description = "An invalid field, named in `field`; nothing queued", body = ErrorBody),
+        (status = 503, description = "The disk is full and the journal cannot be written; nothing changed. Try again once space is freed", body = ErrorBody),
+    ))]
 async fn create_scan(State(shared): AppState, body: Bytes) -> ApiResult<impl IntoResponse> {
     let value = parse_json(&body)?;
     let plan = validate::scan_request(&value, &bounds(&shared))?;
@@ -322,10 +226,16 @@ async fn create_scan(State(shared): AppState, body: Bytes) -> ApiResult<impl Int
     tracing::info!("scan {id} queued");
     Ok((
         StatusCode::CREATED,
-        Json(json!({ "id": id, "url": format!("/api/scans/{id}") })),
+        Json(Queued {
+            id,
+            url: format!("/api/scans/{id}"),
+        }),
     ))
 }
 
+#[utoipa::path(get, path = "/api/scans",
+    summary = "All scans, oldest first",
+    responses((status = 200, description = "Scans", body = Vec<ScanView>)))]
 async fn list_scans(State(shared): AppState) -> ApiResult<Json<Value>> {
     let views = db(&shared, |shared, store| {
         store
@@ -350,14 +260,31 @@ async fn load_view(shared: &Arc<Shared>, id: i64) -> ApiResult<Value> {
     .ok_or_else(|| ApiError::not_found(format!("scan {id}")))
 }
 
+#[utoipa::path(get, path = "/api/scans/{id}",
+    summary = "One scan",
+    params(("id" = i64, Path, description = "The scan's id")),
+    responses(
+        (status = 200, description = "Scan", body = ScanView),
+        (status = 404, description = "No such scan", body = ErrorBody),
+    ))]
 async fn get_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
     Ok(Json(load_view(&shared, id).await?))
 }
 
-async fn scan_steps(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
+#[utoipa::path(get, path = "/api/scans/{id}/steps",
+    summary = "The scan's plan: every step with its state and result",
+    params(("id" = i64, Path, description = "The scan's id")),
+    responses(
+        (status = 200, description = "Steps", body = Vec<StepRecord>),
+        (status = 404, description = "No such scan", body = ErrorBody),
+    ))]
+async fn scan_steps(
+    State(shared): AppState,
+    Path(id): Path<i64>,
+) -> ApiResult<Json<Vec<StepRecord>>> {
     load_scan(&shared, id).await?;
     let steps = db(&shared, move |_, store| store.steps(id)).await?;
-    Ok(Json(json!(steps)))
+    Ok(Json(steps))
 }
 
 /// Applies an operator transition to a scan: 409 if its state does not allow it.
@@ -391,10 +318,28 @@ async fn control(
     Ok(Json(load_view(&shared, id).await?))
 }
 
+#[utoipa::path(post, path = "/api/scans/{id}/pause",
+    summary = "Pause at the next step boundary (queued, running or interrupted scans)",
+    params(("id" = i64, Path, description = "The scan's id")),
+    responses(
+        (status = 200, description = "Scan", body = ScanView),
+        (status = 404, description = "No such scan", body = ErrorBody),
+        (status = 409, description = "The scan's state does not allow it", body = ErrorBody),
+        (status = 503, description = "The disk is full and the journal cannot be written; nothing changed. Try again once space is freed", body = ErrorBody),
+    ))]
 async fn pause_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
     control(shared, id, applies_to("pause"), ScanState::Paused, "pause").await
 }
 
+#[utoipa::path(post, path = "/api/scans/{id}/resume",
+    summary = "Re-queue a paused scan, or retry a failed one from its first step not done",
+    params(("id" = i64, Path, description = "The scan's id")),
+    responses(
+        (status = 200, description = "Scan", body = ScanView),
+        (status = 404, description = "No such scan", body = ErrorBody),
+        (status = 409, description = "The scan's state does not allow it", body = ErrorBody),
+        (status = 503, description = "The disk is full and the journal cannot be written; nothing changed. Try again once space is freed", body = ErrorBody),
+    ))]
 async fn resume_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
     control(
         shared,
@@ -406,6 +351,15 @@ async fn resume_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<
     .await
 }
 
+#[utoipa::path(post, path = "/api/scans/{id}/cancel",
+    summary = "Cancel at the next step boundary",
+    params(("id" = i64, Path, description = "The scan's id")),
+    responses(
+        (status = 200, description = "Scan", body = ScanView),
+        (status = 404, description = "No such scan", body = ErrorBody),
+        (status = 409, description = "The scan's state does not allow it", body = ErrorBody),
+        (status = 503, description = "The disk is full and the journal cannot be written; nothing changed. Try again once space is freed", body = ErrorBody),
+    ))]
 async fn cancel_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
     control(
         shared,
@@ -420,6 +374,15 @@ async fn cancel_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<
 /// The operator confirms that the sample a waiting scan asks for is on the cylinder:
 /// it is recorded as mounted (on the emulator, its scene is mounted) and the scan is
 /// queued again. 409 unless the scan waits for its sample.
+#[utoipa::path(post, path = "/api/scans/{id}/confirm",
+    summary = "Confirm that the sample a waiting scan asks for is mounted: it is recorded as mounted (on the emulator, its scene is mounted) and the scan is queued again",
+    params(("id" = i64, Path, description = "The scan's id")),
+    responses(
+        (status = 200, description = "Scan", body = ScanView),
+        (status = 404, description = "No such scan", body = ErrorBody),
+        (status = 409, description = "The scan does not wait for its sample to be mounted, or the sample cannot be mounted (its scene file missing or invalid; the file is named, not its path on the server)", body = ErrorBody),
+        (status = 503, description = "The disk is full and the journal cannot be written; nothing changed. Try again once space is freed", body = ErrorBody),
+    ))]
 async fn confirm_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
     let _one_at_a_time = shared.confirming.lock().await;
     let scan = load_scan(&shared, id).await?;
@@ -482,6 +445,15 @@ async fn confirm_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult
 
 /// Calibrates the setup from a scan that is no longer running and stores it as the
 /// setup of later scans (see `calibration`).
+#[utoipa::path(post, path = "/api/scans/{id}/calibrate",
+    summary = "Calibrate the setup from this ended scan's captures (strip rows, camera offset, cylinder tilt, arm zero offset, with standard uncertainties and residuals) and use it as the setup of later scans",
+    params(("id" = i64, Path, description = "The scan's id")),
+    responses(
+        (status = 200, description = "The stored setup (setup.json fields) with its `calibration` and `provenance` (where each field came from: `calibrated from scan N`, or as the calibrated scan's setup.json said: `emulated scene`, `configuration [setup]`, an earlier calibration; for the `uncertainty` block an object naming each key's source); later scans' setup.json keep both", body = Object),
+        (status = 404, description = "No such scan", body = ErrorBody),
+        (status = 409, description = "The scan has not ended", body = ErrorBody),
+        (status = 422, description = "The captures do not allow a calibration (the reason is named)", body = ErrorBody),
+    ))]
 async fn calibrate_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
     let scan = load_scan(&shared, id).await?;
     if !matches!(
@@ -512,100 +484,35 @@ async fn calibrate_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResu
     Ok(Json(stored))
 }
 
+/// Whether a calibrated setup was removed.
+#[derive(Serialize, ToSchema)]
+struct Removed {
+    removed: bool,
+}
+
 /// Forgets the calibrated setup: later scans use the configured (or scene) setup.
-async fn forget_calibration(State(shared): AppState) -> ApiResult<Json<Value>> {
+#[utoipa::path(delete, path = "/api/setup",
+    summary = "Forget the calibrated setup: later scans use the configured (or emulated scene's) setup",
+    responses((status = 200, description = "Whether a calibrated setup was removed", body = Removed)))]
+async fn forget_calibration(State(shared): AppState) -> ApiResult<Json<Removed>> {
     let data = shared.config.data_dir.clone();
     let removed = tokio::task::spawn_blocking(move || calibration::forget(&data))
         .await
         .map_err(internal)?
         .map_err(internal)?;
-    Ok(Json(json!({ "removed": removed })))
-}
-
-async fn create_sweep(State(shared): AppState, body: Bytes) -> ApiResult<impl IntoResponse> {
-    let value = parse_json(&body)?;
-    let sweep = validate::sweep_request(&value, &bounds(&shared))?;
-    let (id, scans) = db(&shared, move |_, store| {
-        store.insert_sweep(&value, sweep.start_at, sweep.scans)
-    })
-    .await?;
-    shared.wake();
-    tracing::info!("sweep {id} queued: {} scans", scans.len());
-    Ok((
-        StatusCode::CREATED,
-        Json(json!({ "id": id, "scans": scans, "url": format!("/api/sweeps/{id}") })),
-    ))
-}
-
-/// One view of a sweep: its scans and their summed progress.
-fn sweep_view(shared: &Shared, store: &Store, id: i64) -> Result<Option<Value>, StoreError> {
-    let Some(sweep) = store.sweep(id)? else {
-        return Ok(None);
-    };
-    let scans = store.scans_of_sweep(id)?;
-    let done: u32 = scans.iter().map(|s| s.done).sum();
-    let total: u32 = scans.iter().map(|s| s.total).sum();
-    let count = |state: ScanState| scans.iter().filter(|s| s.state == state).count();
-    let state = if scans.iter().all(|s| s.state.is_final()) {
-        if count(ScanState::Done) == scans.len() {
-            "done"
-        } else {
-            "finished"
-        }
-    } else if scans.iter().any(|s| s.state == ScanState::Running) {
-        "running"
-    } else {
-        "waiting"
-    };
-    let states: serde_json::Map<String, Value> = [
-        ScanState::Queued,
-        ScanState::Running,
-        ScanState::Paused,
-        ScanState::Done,
-        ScanState::Failed,
-        ScanState::Cancelled,
-        ScanState::Interrupted,
-        ScanState::Waiting,
-    ]
-    .into_iter()
-    .map(|s| (s.as_str().to_owned(), json!(count(s))))
-    .collect();
-    Ok(Some(json!({
-        "id": sweep.id,
-        "created": sweep.created,
-        "start_at": sweep.start_at.and_then(rfc3339),
-        "request": sweep.request,
-        "state": state,
-        "progress": { "done": done, "total": total },
-        "scans_by_state": states,
-        "scans": scans
-            .iter()
-            .map(|s| scan_view(shared, store, s, false))
-            .collect::<Result<Vec<_>, _>>()?,
-    })))
-}
-
-async fn get_sweep(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
-    db(&shared, move |shared, store| sweep_view(shared, store, id))
-        .await?
-        .map(Json)
-        .ok_or_else(|| ApiError::not_found(format!("sweep {id}")))
-}
-
-async fn list_sweeps(State(shared): AppState) -> ApiResult<Json<Value>> {
-    let sweeps = db(&shared, |shared, store| {
-        store
-            .sweep_ids()?
-            .into_iter()
-            .filter_map(|id| sweep_view(shared, store, id).transpose())
-            .collect::<Result<Vec<_>, _>>()
-    })
-    .await?;
-    Ok(Json(Value::Array(sweeps)))
+    Ok(Json(Removed { removed }))
 }
 
 /// Server-sent events of one scan: its view now, then at every change; the stream
 /// ends after a final state (done, failed, cancelled).
+#[utoipa::path(get, path = "/api/scans/{id}/events",
+    summary = "Server-sent events: `progress` events carrying the Scan JSON now and at every change; the stream ends right after the event of done, failed or cancelled",
+    params(("id" = i64, Path, description = "The scan's id")),
+    responses(
+        (status = 200, description = "Event stream: `event: progress`, `data:` the Scan JSON", content_type = "text/event-stream", body = String),
+        (status = 404, description = "No such scan", body = ErrorBody),
+        (status = 503, description = "max_event_streams event streams are open: close one or poll the scan", body = ErrorBody),
+    ))]
 async fn scan_events(
     State(shared): AppState,
     Path(id): Path<i64>,
@@ -658,6 +565,13 @@ async fn scan_events(
 static EVENT_STREAMS: Slots = Slots::new();
 
 /// Measured samples and the fitted models' predictions, for the page's plots.
+#[utoipa::path(get, path = "/api/scans/{id}/plot",
+    summary = "Samples and each fitted model's predicted β at their angles",
+    params(("id" = i64, Path, description = "The scan's id")),
+    responses(
+        (status = 200, description = "Plot data", body = Object),
+        (status = 404, description = "No such scan, or no samples yet", body = ErrorBody),
+    ))]
 async fn plot(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
     load_scan(&shared, id).await?;
     let dir = shared.scan_dir(id);
@@ -668,9 +582,23 @@ async fn plot(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Va
     Ok(Json(plot))
 }
 
+/// The fault is injected.
+#[derive(Serialize, ToSchema)]
+struct Injected {
+    injected: bool,
+}
+
 /// Test hook (only with `emulator.fault_injection = true`): injects a fault into the
 /// emulated devices.
-async fn inject_fault(State(shared): AppState, body: Bytes) -> ApiResult<Json<Value>> {
+#[utoipa::path(post, path = "/api/emulator/fault",
+    summary = "Test hook, only with `emulator.fault_injection = true`: inject a fault into the emulated devices",
+    request_body = InjectedFault,
+    responses(
+        (status = 200, description = "Injected", body = Injected),
+        (status = 404, description = "Fault injection off", body = ErrorBody),
+        (status = 422, description = "Not a fault (`field`: `fault`)", body = ErrorBody),
+    ))]
+async fn inject_fault(State(shared): AppState, body: Bytes) -> ApiResult<Json<Injected>> {
     let emulators = match (&shared.emulators, shared.config.emulator.fault_injection) {
         (Some(emulators), true) => emulators.clone(),
         _ => {
@@ -688,42 +616,8 @@ async fn inject_fault(State(shared): AppState, body: Bytes) -> ApiResult<Json<Va
         .await
         .map_err(internal)?
         .map_err(internal)?;
-    Ok(Json(json!({ "injected": true })))
+    Ok(Json(Injected { injected: true }))
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn host_check_answers_the_bind_address_localhost_and_allowed_names() {
-        let mut config = Config {
-            allowed_hosts: vec!["gonio.lab".into()],
-            ..Config::default()
-        };
-        for host in [
-            "127.0.0.1:8080",
-            "localhost",
-            "LOCALHOST:1",
-            "[::1]:8080",
-            "gonio.lab:80",
-        ] {
-            assert!(host_allowed(&config, host), "{host}");
-        }
-        for host in [
-            "evil.example",
-            "evil.example:8080",
-            "192.168.1.9",
-            "",
-            "[::1",
-        ] {
-            assert!(!host_allowed(&config, host), "{host}");
-        }
-        config.bind = "0.0.0.0:8080".parse().unwrap();
-        assert!(host_allowed(&config, "192.168.1.9:8080"));
-        assert!(!host_allowed(&config, "rebind.evil.example"));
-        assert!(reads_need_token(&config));
-        config.public_read = true;
-        assert!(!reads_need_token(&config));
-    }
-}
+mod described;

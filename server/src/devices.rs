@@ -339,7 +339,7 @@ fn open_gphoto2(model: Option<&str>, port: Option<&str>) -> anyhow::Result<Box<d
 }
 
 /// A fault the test hook injects into an emulator.
-#[derive(Debug, Clone, serde::Deserialize)]
+#[derive(Debug, Clone, serde::Deserialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case", tag = "fault")]
 pub enum InjectedFault {
     /// Pull the emulated serial cable.

@@ -4,7 +4,8 @@
 use axum::extract::State;
 use axum::Json;
 use gonio_drivers::ArmState;
-use serde_json::{json, Value};
+use serde::Serialize;
+use utoipa::ToSchema;
 
 use super::answers::AppState;
 use super::shared::Shared;
@@ -46,16 +47,36 @@ fn status(problems: &[&str]) -> &'static str {
     }
 }
 
+/// The health answer.
+#[derive(Serialize, ToSchema)]
+pub struct Health {
+    /// `disk_full` while the data directory's free space is below
+    /// `storage.reserve_bytes`; else `degraded` while `problems` names any; else `ok`.
+    #[schema(value_type = String, pattern = "^(ok|disk_full|degraded)$")]
+    status: &'static str,
+    /// What keeps the instrument from measuring now, most serious first (`disk_full`,
+    /// `arm_alarm`, `arm_disconnected`, `arm_refused`, `camera_disconnected`,
+    /// `camera_error`); empty when `status` is `ok`.
+    #[schema(value_type = Vec<String>)]
+    problems: Vec<&'static str>,
+    /// Bytes free for the daemon on the data directory's filesystem; null when it
+    /// cannot be measured.
+    disk_free_bytes: Option<u64>,
+}
+
 /// Liveness (always 200), the state of the instrument and the data directory's free
 /// space (`null` when it cannot be measured).
-pub async fn health(State(shared): AppState) -> Json<Value> {
+#[utoipa::path(get, path = "/api/health",
+    summary = "Liveness (always 200), what keeps the instrument from measuring, and the data directory's free space",
+    responses((status = 200, description = "ok", body = Health)))]
+pub async fn health(State(shared): AppState) -> Json<Health> {
     let free = shared.storage.free_bytes().ok();
     let problems = problems(&shared);
-    Json(json!({
-        "status": status(&problems),
-        "problems": problems,
-        "disk_free_bytes": free,
-    }))
+    Json(Health {
+        status: status(&problems),
+        problems,
+        disk_free_bytes: free,
+    })
 }
 
 #[cfg(test)]

@@ -63,8 +63,9 @@ impl Lane {
 
 /// One unit of work of a scan. Every step is idempotent on resume: a capture whose
 /// frame already exists is not taken again, a processing step rewrites its outputs.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(tag = "kind", rename_all = "snake_case")]
+#[schema(as = StepKind)]
 pub enum Step {
     /// Run the homing cycle.
     Home,

@@ -17,11 +17,11 @@ use axum::extract::{Path, State};
 use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
 use axum::Json;
-use serde_json::{json, Value};
+use serde_json::json;
 use tokio::io::{AsyncReadExt, AsyncSeekExt};
 use tokio::sync::mpsc;
 
-use super::answers::{db, internal, load_scan, ApiError, ApiResult, AppState};
+use super::answers::{db, internal, load_scan, ApiError, ApiResult, AppState, ErrorBody};
 use super::archive::{file_name_part, TarWriter};
 use super::files::{open_under, servable_files};
 use super::shared::Shared;
@@ -126,7 +126,17 @@ fn stall_timeout(shared: &Shared) -> Duration {
 
 /// The files of a scan a client may read (as the files route serves them), sorted.
 /// Names that are not UTF-8 cannot be asked for by path: they are in the archive only.
-pub async fn list_files(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
+#[utoipa::path(get, path = "/api/scans/{id}/files",
+    summary = "Relative paths of the scan's files the files route serves (regular files with one link, no hidden name, UTF-8 names), sorted",
+    params(("id" = i64, Path, description = "The scan's id")),
+    responses(
+        (status = 200, description = "Paths", body = Vec<String>),
+        (status = 404, description = "No such scan", body = ErrorBody),
+    ))]
+pub async fn list_files(
+    State(shared): AppState,
+    Path(id): Path<i64>,
+) -> ApiResult<Json<Vec<String>>> {
     load_scan(&shared, id).await?;
     let dir = shared.scan_dir(id);
     let files = tokio::task::spawn_blocking(move || {
@@ -142,7 +152,7 @@ pub async fn list_files(State(shared): AppState, Path(id): Path<i64>) -> ApiResu
     })
     .await
     .map_err(internal)?;
-    Ok(Json(json!(files)))
+    Ok(Json(files))
 }
 
 fn content_type(path: &FsPath) -> &'static str {
@@ -204,6 +214,22 @@ fn wanted(range: Option<&HeaderValue>, len: u64) -> Wanted {
 
 /// One file of a scan, streamed, with `Accept-Ranges: bytes`: 206 with
 /// `Content-Range` for one range of bytes, 416 for a range beyond its end.
+#[utoipa::path(get, path = "/api/scans/{id}/files/{*path}",
+    summary = "A file of the scan: captures (TIFF + JSON sidecar), hdr/*.exr, setup.json, samples.csv, fit-*.json; downloaded as `<id>-<sample>-<path with / as ->` (Content-Disposition); streamed, with `Accept-Ranges: bytes` and `Content-Length`; one range of bytes (`Range: bytes=a-b`, `a-`, `-n`) gets 206, others are ignored",
+    params(
+        ("id" = i64, Path, description = "The scan's id"),
+        ("path" = String, Path, description = "The file's path below the scan directory, as the files list gives it"),
+        ("Range" = Option<String>, Header, description = "One range of bytes, e.g. `bytes=0-1023`, `bytes=1024-`, `bytes=-512`; several ranges or another unit are ignored (the whole file)"),
+    ),
+    responses(
+        (status = 200, description = "File", content_type = "application/octet-stream", body = Vec<u8>,
+            headers(("Accept-Ranges" = String, description = "`bytes`"), ("Content-Length" = u64), ("Content-Disposition" = String, description = "`attachment; filename=\"<id>-<sample>-<path, / as ->\"`"))),
+        (status = 206, description = "The range asked for", content_type = "application/octet-stream", body = Vec<u8>,
+            headers(("Content-Range" = String, description = "`bytes a-b/length`"), ("Accept-Ranges" = String, description = "`bytes`"))),
+        (status = 404, description = "No such regular file below the scan directory (links, FIFOs, devices, hidden names and files with more than one hard link are not served)", body = ErrorBody),
+        (status = 416, description = "The range starts beyond the end of the file", body = ErrorBody,
+            headers(("Content-Range" = String, description = "`bytes */length`"))),
+    ))]
 pub async fn get_file(
     State(shared): AppState,
     Path((id, rel)): Path<(i64, String)>,
@@ -310,6 +336,15 @@ fn mtime(meta: &std::fs::Metadata) -> u64 {
 /// and `log.json` (its journal and its entries of the hardware log), under
 /// `<id>-<sample>/`. 503 with `Retry-After` while `downloads.max_archives` are being
 /// written.
+#[utoipa::path(get, path = "/api/scans/{id}/archive",
+    summary = "The whole scan as one tar archive, streamed: exactly the files the files route serves (captures and sidecars, HDR maps, samples, fits, setup.json, truth.json), each read from the handle its walk opened, plus files whose names are not UTF-8, and log.json (its step journal and its hardware-log entries), under `<id>-<sample>/`; downloaded as `<id>-<sample>.tar`. A download whose client reads nothing for `downloads.stall_timeout_s` is cut",
+    params(("id" = i64, Path, description = "The scan's id")),
+    responses(
+        (status = 200, description = "Archive (POSIX pax: a name over 100 bytes or a size of 8 GiB or more in a pax extended header)", content_type = "application/x-tar", body = Vec<u8>),
+        (status = 404, description = "No such scan", body = ErrorBody),
+        (status = 503, description = "`downloads.max_archives` archives are being written; ask again after Retry-After seconds", body = ErrorBody,
+            headers(("Retry-After" = u64, description = "Seconds to wait before asking again"))),
+    ))]
 pub async fn scan_archive(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Response> {
     let scan = load_scan(&shared, id).await?;
     let max = shared.config.downloads.max_archives;

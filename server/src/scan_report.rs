@@ -5,10 +5,22 @@ use axum::extract::{Path, State};
 use axum::http::{header, StatusCode};
 use axum::response::{IntoResponse, Response};
 
-use super::answers::{internal, load_scan, without_server_paths, ApiError, ApiResult, AppState};
+use super::answers::{
+    internal, load_scan, without_server_paths, ApiError, ApiResult, AppState, ErrorBody,
+};
 
 /// The scan's report: one self-contained, printable HTML file (`gonio report`'s, with
 /// what the daemon knows of the scan). 409 while the scan has no samples or fit yet.
+#[utoipa::path(get, path = "/api/scans/{id}/report",
+    summary = "The scan's report: one self-contained, printable HTML file",
+    description = "Sample, dates, plan, setup with the source of each value, the chosen model with its parameters, uncertainty budget (GUM layout) and held-out errors, plots as inline SVG, the software version. Needs no network to open.",
+    params(("id" = i64, Path, description = "The scan's id")),
+    responses(
+        (status = 200, description = "The report", content_type = "text/html", body = String),
+        (status = 404, description = "No such scan", body = ErrorBody),
+        (status = 409, description = "The scan has no samples or fit to report yet", body = ErrorBody),
+        (status = 500, description = "A file of the scan could not be read", body = ErrorBody),
+    ))]
 pub async fn report(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Response> {
     let scan = load_scan(&shared, id).await?;
     let dir = shared.scan_dir(id);

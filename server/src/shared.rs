@@ -28,7 +28,8 @@ pub struct HardwareStatus {
     pub camera: CameraView,
 }
 
-#[derive(Debug, Clone, Serialize)]
+/// The arm as `GET /api/hardware` shows it.
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
 pub struct ArmView {
     pub state: ArmState,
     /// Angle θL, degrees; `None` while the position is unknown (not homed or declared
@@ -46,6 +47,7 @@ pub struct ArmView {
     /// The carousel axis' travel (`$13N`) as the board reported it on connecting;
     /// slots beyond it are refused.
     #[serde(skip)]
+    #[schema(ignore)]
     pub carousel_travel: Option<f64>,
 }
 
@@ -67,11 +69,14 @@ impl ArmView {
     }
 }
 
-#[derive(Debug, Clone, Serialize)]
+/// The camera as `GET /api/hardware` shows it.
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
 pub struct CameraView {
     pub model: Option<String>,
     pub port: Option<String>,
-    /// `idle`, `capturing`, `error` or `disconnected` (looked for again with backoff).
+    /// `idle`, `capturing`, `error` or `disconnected` (looked for again with backoff;
+    /// the scan it interrupted resumes once it is back).
+    #[schema(value_type = String, pattern = "^(idle|capturing|error|disconnected)$")]
     pub state: &'static str,
     /// Allowed shutter range, seconds.
     pub shutter_min_s: f64,

@@ -25,8 +25,8 @@ use rusqlite::{Connection, Transaction, TransactionBehavior};
 use super::storage;
 
 pub use records::{
-    now_rfc3339, now_unix, NewScan, ScanRecord, ScanState, StepRecord, StepState, StoreError,
-    PROCESSABLE,
+    now_rfc3339, now_unix, LogEntry, NewScan, ScanRecord, ScanState, StepRecord, StepState,
+    StoreError, PROCESSABLE,
 };
 
 const SCHEMA: &str = "

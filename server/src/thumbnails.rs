@@ -67,6 +67,15 @@ fn png_answer(png: Bytes) -> Response {
 }
 
 /// The latest captured frame of a scan as a small PNG.
+#[utoipa::path(get, path = "/api/scans/{id}/thumbnail.png",
+    summary = "The latest frame, downscaled, as PNG (kept per frame; at most `downloads.max_thumbnail_decodes` decoded at once)",
+    params(("id" = i64, Path, description = "The scan's id")),
+    responses(
+        (status = 200, description = "PNG", content_type = "image/png", body = Vec<u8>),
+        (status = 404, description = "No frame yet", body = crate::answers::ErrorBody),
+        (status = 503, description = "No decode free within `downloads.thumbnail_wait_s`; ask again after Retry-After seconds", body = crate::answers::ErrorBody,
+            headers(("Retry-After" = u64, description = "Seconds to wait before asking again"))),
+    ))]
 pub async fn thumbnail(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Response> {
     let steps = db(&shared, move |_, store| store.steps(id)).await?;
     let latest = steps

@@ -9,6 +9,9 @@ use axum::response::{Html, IntoResponse, Response};
 use super::answers::ApiError;
 
 /// The operator page's markup (`server/assets/page/index.html`).
+#[utoipa::path(get, path = "/",
+    summary = "The operator's page: its markup, loading its stylesheet and modules from /page/; no network beyond the daemon",
+    responses((status = 200, description = "The page", content_type = "text/html", body = String)))]
 pub async fn index() -> Html<&'static str> {
     Html(include_str!("../assets/page/index.html"))
 }
@@ -26,6 +29,12 @@ const PAGE_FILES: [(&str, &str); 6] = [
 
 /// `GET /page/{file}`: the page's stylesheet (`text/css`) or one of its modules
 /// (`text/javascript`); 404 for any other name.
+#[utoipa::path(get, path = "/page/{file}",
+    summary = "A file of the operator's page: its stylesheet or one of its ES modules",
+    params(("file" = String, Path, description = "page.css, main.js, state.js, render.js, plot.js or text.js")),
+    responses(
+        (status = 200, description = "The file", content_type = "text/javascript", body = String),
+        (status = 404, description = "No page file of that name", body = crate::answers::ErrorBody)))]
 pub async fn page_file(Path(file): Path<String>) -> Response {
     let Some((name, text)) = PAGE_FILES.iter().find(|(name, _)| *name == file) else {
         return ApiError::not_found(format!("page file {file:?}")).into_response();
@@ -36,14 +45,6 @@ pub async fn page_file(Path(file): Path<String>) -> Response {
         "text/javascript; charset=utf-8"
     };
     ([(header::CONTENT_TYPE, content_type)], *text).into_response()
-}
-
-/// `GET /api/openapi.json`.
-pub async fn openapi() -> impl IntoResponse {
-    (
-        [(header::CONTENT_TYPE, "application/json")],
-        include_str!("../assets/openapi.json"),
-    )
 }
 
 #[cfg(test)]

@@ -12,6 +12,7 @@ use std::time::{Duration, Instant};
 use serde_json::Value;
 
 pub mod browser;
+mod described;
 pub mod page;
 
 /// The `gonio` binary of the profile the tests were built with, brought up to date on
@@ -133,6 +134,8 @@ pub struct Daemon {
     /// The daemon's stderr (its log).
     pub log: PathBuf,
     stdout_lines: Vec<String>,
+    /// The daemon's OpenAPI description, fetched on first use.
+    spec: OnceLock<Value>,
 }
 
 /// An HTTP answer: status and JSON body (`Value::Null` if the body is not JSON).
@@ -283,6 +286,7 @@ impl Daemon {
             data,
             log: log_path,
             stdout_lines,
+            spec: OnceLock::new(),
         }
     }
 
@@ -339,7 +343,22 @@ impl Daemon {
         self.stop_with(libc::SIGINT, timeout)
     }
 
+    /// Sends a request; panics, naming the method, path and status, when the daemon's
+    /// OpenAPI description does not describe the answer (see `described`).
     fn request(&self, method: &str, path: &str, token: Option<&str>, body: Option<&str>) -> Answer {
+        let answer = self.send(method, path, token, body);
+        let spec = self.spec.get_or_init(|| {
+            let spec = self.send("GET", "/api/openapi.json", None, None);
+            assert_eq!(spec.status, 200, "GET /api/openapi.json");
+            spec.json
+        });
+        if let Err(undescribed) = described::check(spec, method, path, answer.status) {
+            panic!("{undescribed}");
+        }
+        answer
+    }
+
+    fn send(&self, method: &str, path: &str, token: Option<&str>, body: Option<&str>) -> Answer {
         let mut request =
             ureq::request(method, &format!("{}{path}", self.url)).timeout(Duration::from_secs(30));
         if let Some(token) = token {

@@ -10,13 +10,14 @@ use axum::http::StatusCode;
 use axum::response::IntoResponse;
 use axum::Json;
 use gonio_drivers::ArmState;
-use serde::Deserialize;
-use serde_json::{json, Value};
+use serde::{Deserialize, Serialize};
+use utoipa::{IntoParams, ToSchema};
 
-use super::{db, internal, parse_json, ApiError, ApiResult, AppState};
+use super::{db, internal, parse_json, ApiError, ApiResult, AppState, ErrorBody};
 use crate::config::HomingMode;
-use crate::shared::{PositionRequest, Shared, EMERGENCY_STOP};
-use crate::store::ScanState;
+use crate::schemas::ArmPosition;
+use crate::shared::{ArmView, CameraView, PositionRequest, Shared, EMERGENCY_STOP};
+use crate::store::{LogEntry, ScanState};
 use crate::sync::lock;
 use crate::validate;
 
@@ -32,8 +33,22 @@ async fn running_scan(shared: &Arc<Shared>) -> ApiResult<Option<i64>> {
     .await
 }
 
+/// The arm stopped.
+#[derive(Serialize, ToSchema)]
+pub(super) struct Stopped {
+    stopped: bool,
+    /// The scans it paused.
+    paused: Vec<i64>,
+}
+
 /// Stops the arm at once (feed hold, then reset) and pauses the running scan.
-pub(super) async fn stop_arm(State(shared): AppState) -> ApiResult<Json<Value>> {
+#[utoipa::path(post, path = "/api/arm/stop",
+    summary = "Stop the arm at once (feed hold, then reset) and pause the running scan; always allowed",
+    responses(
+        (status = 200, description = "Stopped", body = Stopped),
+        (status = 503, description = "Arm not connected (the running scan is paused all the same), or the disk is full", body = ErrorBody),
+    ))]
+pub(super) async fn stop_arm(State(shared): AppState) -> ApiResult<Json<Stopped>> {
     shared.stops.fetch_add(1, Ordering::AcqRel);
     let estop = lock(&shared.estop).clone();
     let stopped = match estop {
@@ -61,13 +76,23 @@ pub(super) async fn stop_arm(State(shared): AppState) -> ApiResult<Json<Value>> 
     shared.carousel_moved();
     stopped?;
     tracing::warn!("emergency stop; paused scans {paused:?}");
-    Ok(Json(json!({ "stopped": true, "paused": paused })))
+    Ok(Json(Stopped {
+        stopped: true,
+        paused,
+    }))
 }
 
 /// Homes the arm (after a stop, a reset or a failed homing): 202 at once, the hardware
 /// lane clears an alarm (soft reset) and homes the arm before it runs anything else;
 /// 409 with the reason where it cannot (a scan runs, the board was refused, the
 /// controller does not home), 503 without an arm.
+#[utoipa::path(post, path = "/api/arm/home",
+    summary = "Home the arm (after STOP ARM, a reset or a failed homing): answered at once, the arm homes before anything else runs, an alarm first cleared with a soft reset; /api/hardware shows `homing`, then `idle` at its angle; the hardware log says what was done (`home`: `asked by the operator: alarm cleared (soft reset), then $H`). With a carousel, the next capture turns it back to its slot first",
+    responses(
+        (status = 202, description = "Homing", body = Homing),
+        (status = 409, description = "Home cannot run, with the reason: a scan is running (pause or cancel it first), the arm homes already, the board was refused (its settings differ: change them, then POST /api/arm/reconnect), or the controller does not home (homing = \"off\" or $22=0: declare its position, POST /api/arm/position)", body = ErrorBody),
+        (status = 503, description = "Arm not connected", body = ErrorBody),
+    ))]
 pub(super) async fn home_arm(State(shared): AppState) -> ApiResult<impl IntoResponse> {
     if let Some(id) = running_scan(&shared).await? {
         return Err(ApiError::new(
@@ -108,14 +133,37 @@ pub(super) async fn home_arm(State(shared): AppState) -> ApiResult<impl IntoResp
     tracing::info!("homing asked by the operator");
     Ok((
         StatusCode::ACCEPTED,
-        Json(json!({ "homing": true, "clears_alarm": clears_alarm })),
+        Json(Homing {
+            homing: true,
+            clears_alarm,
+        }),
     ))
+}
+
+/// Homing is asked for.
+#[derive(Serialize, ToSchema)]
+pub(super) struct Homing {
+    homing: bool,
+    /// The arm is in alarm: it is cleared with a soft reset before `$H`.
+    clears_alarm: bool,
+}
+
+/// The arm is opened again at the hardware lane's next pass.
+#[derive(Serialize, ToSchema)]
+pub(super) struct Reconnecting {
+    reconnecting: bool,
 }
 
 /// Opens the arm again now: one that is disconnected (instead of waiting for its next
 /// try) or refused for its settings (after they were changed on the board). 409 while
 /// the arm is connected: reopening would reset it.
-pub(super) async fn reconnect_arm(State(shared): AppState) -> ApiResult<Json<Value>> {
+#[utoipa::path(post, path = "/api/arm/reconnect",
+    summary = "Open the arm again now: a disconnected one without waiting for its next try, or one refused for its settings (after they were changed on the board); the board resets as it opens. /api/hardware shows the outcome",
+    responses(
+        (status = 200, description = "The hardware lane opens the arm at its next pass", body = Reconnecting),
+        (status = 409, description = "The arm is connected: nothing to reconnect", body = ErrorBody),
+    ))]
+pub(super) async fn reconnect_arm(State(shared): AppState) -> ApiResult<Json<Reconnecting>> {
     let state = lock(&shared.hardware).arm.state;
     if !matches!(state, ArmState::Disconnected | ArmState::Refused) {
         return Err(ApiError::new(
@@ -126,7 +174,15 @@ pub(super) async fn reconnect_arm(State(shared): AppState) -> ApiResult<Json<Val
     shared.arm_reconnect.store(true, Ordering::Release);
     shared.wake();
     tracing::info!("arm reconnect asked for");
-    Ok(Json(json!({ "reconnecting": true })))
+    Ok(Json(Reconnecting { reconnecting: true }))
+}
+
+/// The position is declared.
+#[derive(Serialize, ToSchema)]
+pub(super) struct Declared {
+    /// θL, degrees.
+    angle: f64,
+    declared: bool,
 }
 
 /// How long a declared position may wait for the hardware lane (busy with a step).
@@ -135,10 +191,20 @@ const DECLARE_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(30);
 /// Declares where the arm is, for controllers without homing (`{"angle": degrees}`);
 /// the hardware lane applies it (`G92`), records it in the hardware log and queues the
 /// waiting scans again.
+#[utoipa::path(post, path = "/api/arm/position",
+    summary = "Declare where the arm is, for controllers without homing ([arm] homing = \"off\" or \"optional\"): the hardware lane sets it with G92, records it in the hardware log, and queues the waiting scans again",
+    request_body = ArmPosition,
+    responses(
+        (status = 200, description = "Declared", body = Declared),
+        (status = 400, description = "The body is not valid JSON; nothing changed", body = ErrorBody),
+        (status = 409, description = "Refused: homing is required, a scan is running, the arm is moving, homing or in hold (a position is declared only while the arm is at rest), or another declaration is under way", body = ErrorBody),
+        (status = 422, description = "Invalid angle (the field is named)", body = ErrorBody),
+        (status = 503, description = "Arm not connected, or the hardware is busy", body = ErrorBody),
+    ))]
 pub(super) async fn declare_arm_position(
     State(shared): AppState,
     body: Bytes,
-) -> ApiResult<Json<Value>> {
+) -> ApiResult<Json<Declared>> {
     let angle = validate::arm_position(&parse_json(&body)?, shared.config.arm.max_travel_deg)?;
     if let Some(id) = running_scan(&shared).await? {
         return Err(ApiError::new(
@@ -180,7 +246,10 @@ pub(super) async fn declare_arm_position(
     match answered {
         Ok(Ok(())) => {
             tracing::info!("arm position declared: {angle}°");
-            Ok(Json(json!({ "angle": angle, "declared": true })))
+            Ok(Json(Declared {
+                angle,
+                declared: true,
+            }))
         }
         Ok(Err(err @ gonio_drivers::DeviceError::OutOfRange { .. })) => Err(ApiError {
             field: Some("angle".into()),
@@ -203,29 +272,52 @@ pub(super) async fn declare_arm_position(
     }
 }
 
-pub(super) async fn hardware(State(shared): AppState) -> Json<Value> {
+/// The devices now.
+#[derive(Serialize, ToSchema)]
+#[schema(as = Hardware)]
+pub(super) struct HardwareView {
+    arm: ArmView,
+    camera: CameraView,
+    /// Whether the devices are the emulators.
+    emulated: bool,
+    /// The daemon's start counter.
+    boot: i64,
+}
+
+#[utoipa::path(get, path = "/api/hardware",
+    summary = "Arm state and angle, camera model and state",
+    responses((status = 200, description = "Hardware status", body = HardwareView)))]
+pub(super) async fn hardware(State(shared): AppState) -> Json<HardwareView> {
     let mut status = lock(&shared.hardware).clone();
     let live = lock(&shared.arm_angle).as_ref().and_then(|a| a.get());
     // As the arm reported it, also while a move is under way.
     status.arm.angle_deg = status.arm.shown_angle(live.or(status.arm.angle_deg));
-    Json(json!({
-        "arm": status.arm,
-        "camera": status.camera,
-        "emulated": shared.emulators.is_some(),
-        "boot": shared.boot,
-    }))
+    Json(HardwareView {
+        arm: status.arm,
+        camera: status.camera,
+        emulated: shared.emulators.is_some(),
+        boot: shared.boot,
+    })
 }
 
-#[derive(Deserialize)]
+/// Which entries of the hardware log.
+#[derive(Deserialize, IntoParams)]
+#[into_params(parameter_in = Query)]
 pub(super) struct LogQuery {
+    /// Only entries with a larger id.
     #[serde(default)]
+    #[param(default = 0)]
     after: i64,
 }
 
+#[utoipa::path(get, path = "/api/hardware/log",
+    summary = "What the hardware lane did (connect, home, move, capture, stop), oldest first",
+    params(LogQuery),
+    responses((status = 200, description = "Log entries", body = Vec<LogEntry>)))]
 pub(super) async fn hardware_log(
     State(shared): AppState,
     Query(query): Query<LogQuery>,
-) -> ApiResult<Json<Value>> {
+) -> ApiResult<Json<Vec<LogEntry>>> {
     let entries = db(&shared, move |_, store| store.hardware_log(query.after)).await?;
-    Ok(Json(json!(entries)))
+    Ok(Json(entries))
 }

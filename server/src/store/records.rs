@@ -54,7 +54,7 @@ pub(super) fn json_err(what: &'static str) -> impl FnOnce(serde_json::Error) -> 
 }
 
 /// Life cycle of a scan.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum ScanState {
     Queued,
@@ -110,7 +110,7 @@ impl ScanState {
 }
 
 /// Progress of a step.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum StepState {
     Pending,
@@ -172,7 +172,8 @@ impl ScanRecord {
 }
 
 /// One step as stored.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
+#[schema(as = Step)]
 pub struct StepRecord {
     /// Position key: increasing in execution order, not contiguous.
     pub index: u32,
@@ -180,11 +181,13 @@ pub struct StepRecord {
     pub state: StepState,
     pub started: Option<String>,
     pub finished: Option<String>,
+    /// What the step produced (a capture's path and exposure, a fit's parameters, …).
+    #[schema(value_type = Option<Object>)]
     pub result: Option<Value>,
 }
 
 /// One entry of the hardware log: what the hardware lane did, in which daemon run.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
 pub struct LogEntry {
     pub id: i64,
     /// Daemon start counter (1 for the first start of this data directory).
