@@ -4,11 +4,13 @@
 use std::path::Path as FsPath;
 use std::sync::Arc;
 
+use axum::body::Bytes;
 use axum::extract::State;
 use axum::http::{header, HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
 use axum::Json;
 use serde::Serialize;
+use serde_json::Value;
 use utoipa::ToSchema;
 
 use super::shared::Shared;
@@ -188,4 +190,14 @@ mod tests {
         );
         assert_eq!(without_absolute_paths("/ and x/y"), "/ and x/y");
     }
+}
+
+/// A request body parsed as JSON; 400 naming what is wrong otherwise.
+pub fn parse_json(body: &Bytes) -> ApiResult<Value> {
+    serde_json::from_slice(body).map_err(|e| {
+        ApiError::new(
+            StatusCode::BAD_REQUEST,
+            format!("body is not valid JSON: {e}"),
+        )
+    })
 }

@@ -20,8 +20,8 @@ use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
 use super::answers::{
-    db, internal, load_scan, without_absolute_paths, without_server_paths, ApiError, ApiResult,
-    AppState, ErrorBody,
+    db, internal, load_scan, parse_json, without_absolute_paths, without_server_paths, ApiError,
+    ApiResult, AppState, ErrorBody,
 };
 use super::calibration;
 use super::devices::InjectedFault;
@@ -33,13 +33,14 @@ use super::scan_report;
 use super::schemas::{ScanRequest, ScanView};
 use super::shared::Shared;
 use super::store::{NewScan, ScanState, StepRecord};
-use super::sync::{lock, Slots};
+use super::sync::Slots;
 use super::thumbnails;
-use super::validate::{self, Bounds};
+use super::validate;
 use super::view::{applies_to, scan_view};
 use super::web;
 
 mod arm;
+mod bounds;
 mod guards;
 mod sweeps;
 
@@ -144,54 +145,6 @@ async fn description() -> impl IntoResponse {
     ([(header::CONTENT_TYPE, "application/json")], openapi_json())
 }
 
-fn parse_json(body: &Bytes) -> ApiResult<Value> {
-    serde_json::from_slice(body).map_err(|e| {
-        ApiError::new(
-            StatusCode::BAD_REQUEST,
-            format!("body is not valid JSON: {e}"),
-        )
-    })
-}
-
-fn bounds(shared: &Shared) -> Bounds {
-    let (camera, travel) = {
-        let status = lock(&shared.hardware);
-        (status.camera.clone(), status.arm.carousel_travel)
-    };
-    let carousel = shared.config.carousel.as_ref();
-    let unreachable = carousel
-        .zip(travel)
-        .map(|(carousel, travel)| carousel.beyond_travel(travel))
-        .unwrap_or_default();
-    Bounds {
-        limits: shared.config.limits,
-        shutter_min_s: camera.shutter_min_s,
-        shutter_max_s: camera.shutter_max_s,
-        max_steps: shared.config.max_steps_per_request,
-        samples: holdable(shared),
-        unreachable,
-    }
-}
-
-/// The samples the instrument can hold: the carousel's, of those the emulator has a
-/// scene for; `None` where any name goes (real hardware without a carousel).
-fn holdable(shared: &Shared) -> Option<Vec<String>> {
-    let slots = shared
-        .config
-        .carousel
-        .as_ref()
-        .map(|c| c.slots.keys().cloned().collect::<Vec<_>>());
-    match (slots, shared.mount.holdable()) {
-        (Some(slots), Some(scenes)) => Some(
-            slots
-                .into_iter()
-                .filter(|name| scenes.contains(name))
-                .collect(),
-        ),
-        (slots, scenes) => slots.or(scenes),
-    }
-}
-
 /// The answer to a queued scan.
 #[derive(Serialize, ToSchema)]
 struct Queued {
@@ -211,7 +164,7 @@ struct Queued {
     ))]
 async fn create_scan(State(shared): AppState, body: Bytes) -> ApiResult<impl IntoResponse> {
     let value = parse_json(&body)?;
-    let plan = validate::scan_request(&value, &bounds(&shared))?;
+    let plan = validate::scan_request(&value, &bounds::bounds(&shared))?;
     let id = db(&shared, move |shared, store| {
         let id = store.insert_scans(&[NewScan {
             plan,

@@ -13,7 +13,7 @@ use gonio_drivers::ArmState;
 use serde::{Deserialize, Serialize};
 use utoipa::{IntoParams, ToSchema};
 
-use super::{db, internal, parse_json, ApiError, ApiResult, AppState, ErrorBody};
+use crate::answers::{db, internal, parse_json, ApiError, ApiResult, AppState, ErrorBody};
 use crate::config::HomingMode;
 use crate::schemas::ArmPosition;
 use crate::shared::{ArmView, CameraView, PositionRequest, Shared, EMERGENCY_STOP};

@@ -10,7 +10,8 @@ use serde::Serialize;
 use serde_json::{json, Value};
 use utoipa::ToSchema;
 
-use super::{bounds, db, parse_json, ApiError, ApiResult, AppState, ErrorBody};
+use super::bounds::bounds;
+use crate::answers::{db, parse_json, ApiError, ApiResult, AppState, ErrorBody};
 use crate::schemas::{SweepRequest, SweepView};
 use crate::shared::Shared;
 use crate::store::{ScanState, Store, StoreError};
