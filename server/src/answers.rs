@@ -163,6 +163,16 @@ pub async fn load_scan(shared: &Arc<Shared>, id: i64) -> ApiResult<ScanRecord> {
         .ok_or_else(|| ApiError::not_found(format!("scan {id}")))
 }
 
+/// A request body parsed as JSON; 400 naming what is wrong otherwise.
+pub fn parse_json(body: &Bytes) -> ApiResult<Value> {
+    serde_json::from_slice(body).map_err(|e| {
+        ApiError::new(
+            StatusCode::BAD_REQUEST,
+            format!("body is not valid JSON: {e}"),
+        )
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -190,14 +200,4 @@ mod tests {
         );
         assert_eq!(without_absolute_paths("/ and x/y"), "/ and x/y");
     }
-}
-
-/// A request body parsed as JSON; 400 naming what is wrong otherwise.
-pub fn parse_json(body: &Bytes) -> ApiResult<Value> {
-    serde_json::from_slice(body).map_err(|e| {
-        ApiError::new(
-            StatusCode::BAD_REQUEST,
-            format!("body is not valid JSON: {e}"),
-        )
-    })
 }
