@@ -19,6 +19,7 @@ pub mod delta_e;
 pub mod geometry;
 pub mod lab;
 pub mod observer;
+pub mod srgb;
 pub mod transform;
 
 use nalgebra::{DMatrix, Matrix3, Vector3};

@@ -32,7 +32,7 @@ use crate::color::geometry::{half_difference, incidence_and_view};
 use crate::color::lab::{chroma, hue_deg, lab_from_xyz};
 use crate::color::observer::Conditions;
 use crate::color::transform::{ColourTransform, TransformError};
-use crate::fit::table::Table;
+use crate::fit::table::{Table, TableError};
 use crate::fit::{FitResult, FittedRoughness};
 use crate::samples::{Sample, THETA_L_TOLERANCE};
 use crate::setup_uncertainty::Source;
@@ -161,6 +161,18 @@ pub struct ColourReport {
 pub struct Measured<'a> {
     pub table: Table,
     pub samples: &'a [Sample],
+}
+
+impl<'a> Measured<'a> {
+    /// `samples` as `fit` reads them: through the fit's own table when it predicts with
+    /// one, else through the samples' table.
+    pub fn of(fit: &FitResult, samples: &'a [Sample]) -> Result<Self, TableError> {
+        let table = match &fit.table {
+            Some(table) => table.clone(),
+            None => Table::new(samples, 0.0)?,
+        };
+        Ok(Measured { table, samples })
+    }
 }
 
 /// The colour of `fit` (and inside the measured range of `measured`) at each aspecular

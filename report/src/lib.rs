@@ -8,6 +8,7 @@
 //! nothing from the network: styles inline, plots as inline SVG.
 #![doc = include_str!("report.md")]
 
+mod colour;
 mod html;
 mod plots;
 mod sections;
@@ -201,6 +202,7 @@ pub fn render(
     body += &sections::model(&scan);
     body += &sections::budget(&scan);
     body += &plots::section(&scan);
+    body += &colour::section(&scan);
     body += &sections::held_out(&scan);
     body += &sections::other_fits(&scan);
     body += &format!(
@@ -228,7 +230,8 @@ th,td{padding:2px 8px;border-bottom:1px solid #eee;text-align:right;font-size:13
 th:first-child,td:first-child{text-align:left}\
 table.facts td,table.facts th{text-align:left}\
 .scroll{overflow-x:auto;max-width:100%}\
-.warn{color:#a40;font-weight:bold}.muted{color:#666;font-size:12px}\
+.warn{color:#a40;font-weight:bold}\
+.swatch{display:inline-block;width:28px;height:14px;border:1px solid #888;vertical-align:middle}.muted{color:#666;font-size:12px}\
 svg{width:100%;height:auto;max-width:900px;display:block}\
 footer{margin-top:32px;color:#666;font-size:12px}\
 @media print{body{max-width:none;padding:0}.scroll{overflow:visible}section{break-inside:avoid}}\

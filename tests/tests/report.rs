@@ -16,6 +16,10 @@ const REPORT_FACTS: &str = r#"(() => ({
     plots: document.querySelectorAll('svg').length,
     budgetRows: document.querySelectorAll('table.budget tbody tr').length,
     budgetHeader: [...document.querySelectorAll('table.budget th')].map((t) => t.textContent),
+    colourRows: [...document.querySelectorAll('table.colour tbody tr')].map((r) =>
+        [...r.cells].map((c) => c.textContent)),
+    swatches: [...document.querySelectorAll('table.colour .swatch')].map((s) =>
+        getComputedStyle(s).backgroundColor),
     pageWidth: document.documentElement.scrollWidth,
     resources: performance.getEntriesByType('resource').map((r) => r.name),
 }))()"#;
@@ -98,10 +102,41 @@ fn a_finished_scans_report_is_whole_self_contained_and_opens_in_a_browser() {
         "Uncertainty budget",
         "Measured and fitted",
         "Held-out errors of the candidates",
+        "Multi-angle colour",
     ] {
         assert!(sections.contains(&wanted), "no {wanted} in {sections:?}");
     }
     assert_eq!(facts["plots"], 2, "{facts}");
+    // CIELAB at the six ASTM E2539 angles, each with its uncertainty and a painted swatch.
+    let rows = facts["colourRows"].as_array().unwrap();
+    let aspecular: Vec<&str> = rows.iter().filter_map(|r| r[0].as_str()).collect();
+    assert_eq!(aspecular, ["-15", "15", "25", "45", "75", "110"], "{facts}");
+    for row in rows {
+        assert!(
+            row[2].as_str().unwrap().contains(" ± "),
+            "L* without U: {row}"
+        );
+    }
+    let swatches = facts["swatches"].as_array().unwrap();
+    assert_eq!(swatches.len(), 6, "{facts}");
+    for colour in swatches {
+        let colour = colour.as_str().unwrap();
+        assert!(
+            colour.starts_with("rgb("),
+            "a swatch is not painted: {colour}"
+        );
+    }
+    // Gold is yellow: at 15° (near the highlight) b* is clearly positive, and its
+    // swatch has more red and green than blue.
+    let b_15: f64 = rows[1][4]
+        .as_str()
+        .unwrap()
+        .split(' ')
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!(b_15 > 10.0, "gold's b* at 15°: {b_15}");
     // Kd, Ks per channel and m: seven quantities at least, each with u_c and U.
     assert!(facts["budgetRows"].as_u64().unwrap() >= 7, "{facts}");
     let header = facts["budgetHeader"].to_string();

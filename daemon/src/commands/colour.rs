@@ -13,7 +13,6 @@ use gonio_processing::color::geometry::parse_geometry;
 use gonio_processing::color::observer::Conditions;
 use gonio_processing::color::transform::ColourTransform;
 use gonio_processing::color::CameraModel;
-use gonio_processing::fit::table::Table;
 use gonio_processing::fit::FitResult;
 use gonio_processing::multi_angle::{colour, ColourReport, Measured, Origin};
 use gonio_processing::samples::{self, Sample};
@@ -118,14 +117,11 @@ pub fn report(input: &Path, options: &Options) -> anyhow::Result<ColourReport> {
     let samples: Option<Vec<Sample>> = samples_path
         .map(|p| samples::read_csv(&p).with_context(|| format!("reading {}", p.display())))
         .transpose()?;
-    let table = match (&fit.table, &samples) {
-        (Some(table), Some(_)) => Some(table.clone()),
-        (None, Some(samples)) => Some(Table::new(samples, 0.0).context("the samples' table")?),
-        _ => None,
-    };
-    let measured = table
-        .zip(samples.as_deref())
-        .map(|(table, samples)| Measured { table, samples });
+    let measured = samples
+        .as_deref()
+        .map(|samples| Measured::of(&fit, samples))
+        .transpose()
+        .context("the samples' table")?;
     let transform = ColourTransform::new(&CameraModel::builtin(), conditions)?;
     Ok(colour(&fit, measured.as_ref(), &transform, &aspecular)?)
 }
