@@ -9,7 +9,9 @@
 use std::time::Duration;
 
 use gonio_tests::browser::Browser;
-use gonio_tests::page::{no_time_left, open_page, select_and_wait, shown_waiting, wait_shown};
+use gonio_tests::page::{
+    fits_the_screen, no_time_left, open_page, select_and_wait, shown_waiting, wait_shown,
+};
 use gonio_tests::{
     emulator_config, emulator_config_scaled, temp_dir, with_small_red_sample, Daemon, TOKEN,
 };
@@ -120,6 +122,7 @@ fn page_tells_the_truth_in_every_state() {
     );
     assert_eq!(shown["frame"], Value::Null, "{shown}");
     assert_eq!(shown["noFrame"], json!(true), "{shown}");
+    fits_the_screen(&mut page, "scheduled");
 
     // Running: a scan from the form, its bracket written as shutters are written.
     page.eval(
@@ -162,6 +165,7 @@ fn page_tells_the_truth_in_every_state() {
     assert_eq!(shown["frame"], Value::Null, "{shown}");
     assert_eq!(shown["noFrame"], json!(true), "{shown}");
     assert_eq!(shown["work"], "", "{shown}");
+    fits_the_screen(&mut page, "queued");
 
     // The running scan: its own frame, its time left the same in the queue and the
     // detail, its bracket as given.
@@ -191,6 +195,7 @@ fn page_tells_the_truth_in_every_state() {
             .contains(&format!("started {local}")),
         "{shown} vs {started}"
     );
+    fits_the_screen(&mut page, "running");
 
     // Paused from the page: no time left, no step under way on the arm.
     page.eval("document.querySelector('#detail button[data-act=pause]').click()");
@@ -206,6 +211,7 @@ fn page_tells_the_truth_in_every_state() {
         "{shown}"
     );
     assert_eq!(shown["frame"], json!(running_id), "{shown}");
+    fits_the_screen(&mut page, "paused");
     page.eval("document.querySelector('#detail button[data-act=resume]').click()");
     wait_shown(
         &mut page,
@@ -226,6 +232,7 @@ fn page_tells_the_truth_in_every_state() {
         Duration::from_secs(60),
     );
     assert!(!shown["why"].as_str().unwrap().is_empty(), "{shown}");
+    fits_the_screen(&mut page, "interrupted");
     let replug = daemon.post("/api/emulator/fault", &json!({"fault": "camera_replug"}));
     assert_eq!(replug.status, 200, "{:?}", replug.json);
     wait_shown(
@@ -251,6 +258,7 @@ fn page_tells_the_truth_in_every_state() {
     assert_eq!(view["processing_step"], Value::Null, "{view}");
     assert_eq!(view["current_step"], Value::Null, "{view}");
     assert_eq!(view["progress"]["eta_s"], Value::Null, "{view}");
+    fits_the_screen(&mut page, "cancelled");
 
     // Done: the queued scan ran with the bracket its metering chose, shown as used.
     let shown = select_and_wait(
@@ -286,6 +294,7 @@ fn page_tells_the_truth_in_every_state() {
         "document.querySelector('#plot svg path') !== null",
         Duration::from_secs(60),
     );
+    fits_the_screen(&mut page, "done");
 
     // Downloads named after what they are, and the whole scan as one archive.
     let base = format!("{}/api/scans/{queued_id}", daemon.url);
@@ -365,6 +374,7 @@ fn page_tells_the_truth_in_every_state() {
         .as_i64()
         .unwrap();
     shown_waiting(&mut page, waiting_id, "camera not available", false);
+    fits_the_screen(&mut page, "waiting for the camera");
     for id in [interrupted_id, waiting_id] {
         let cancelled = daemon.post(&format!("/api/scans/{id}/cancel"), &json!({}));
         assert_eq!(cancelled.status, 200, "{:?}", cancelled.json);
@@ -376,6 +386,7 @@ fn page_tells_the_truth_in_every_state() {
     let red = json!({"sample": "red", "theta_l": [-20], "bracket": {"shutter_s": [0.1]}});
     let red_id = daemon.post("/api/scans", &red).json["id"].as_i64().unwrap();
     shown_waiting(&mut page, red_id, "mount sample red", true);
+    fits_the_screen(&mut page, "waiting for a sample");
     page.eval("document.querySelector('#detail button[data-act=confirm]').click()");
     let shown = wait_shown(
         &mut page,
@@ -386,6 +397,7 @@ fn page_tells_the_truth_in_every_state() {
     );
     assert_eq!(shown["confirmHidden"], json!(true), "{shown}");
     assert!(no_time_left(&shown), "{shown}");
+    fits_the_screen(&mut page, "done after a sample change");
 
     // At 390 px (a phone): nothing wider than the screen, with the plot and the file
     // list on show.
