@@ -212,6 +212,9 @@ fn page_tells_the_truth_in_every_state() {
     );
     assert_eq!(shown["frame"], json!(running_id), "{shown}");
     fits_the_screen(&mut page, "paused");
+    // The camera line from the same poll: not capturing for a paused scan.
+    let camera = page.eval("document.getElementById('camera').textContent");
+    assert!(!camera.as_str().unwrap().contains("capturing"), "{camera}");
     page.eval("document.querySelector('#detail button[data-act=resume]').click()");
     wait_shown(
         &mut page,
@@ -295,6 +298,30 @@ fn page_tells_the_truth_in_every_state() {
         Duration::from_secs(60),
     );
     fits_the_screen(&mut page, "done");
+    // The latest frame's caption and the model the `auto` fit chose, as the view
+    // gives them.
+    let view = daemon.get(&format!("/api/scans/{queued_id}")).json;
+    let caption = page.wait_for(
+        "the frame's caption",
+        "!document.getElementById('framecap').hidden && document.getElementById('framecap').textContent",
+        Duration::from_secs(30),
+    );
+    let theta = view["frame"]["theta_l"].as_f64().unwrap();
+    let caption = caption.as_str().unwrap();
+    assert!(
+        caption.starts_with(&format!("θL {theta}° · exposure ")) && caption.ends_with(" s"),
+        "{caption} vs {view}"
+    );
+    let choice = page.eval("document.getElementById('choice').textContent");
+    let model = view["choice"]["model"].as_str().unwrap();
+    assert!(
+        choice
+            .as_str()
+            .unwrap()
+            .contains(&format!("model chosen: {model}"))
+            && choice.as_str().unwrap().contains("colour shift"),
+        "{choice} vs {view}"
+    );
 
     // Downloads named after what they are, and the whole scan as one archive.
     let base = format!("{}/api/scans/{queued_id}", daemon.url);
@@ -458,6 +485,9 @@ fn page_tells_the_truth_in_every_state() {
         Duration::from_secs(60),
     );
     assert!(arm.as_str().unwrap().starts_with("arm: idle at"), "{arm}");
+    // Nothing says the arm is homing once it is idle.
+    let note = page.eval("document.querySelector('header').textContent");
+    assert!(!note.as_str().unwrap().contains("homing"), "{note}");
     assert_eq!(
         page.eval("document.getElementById('stopmsg').className"),
         "note"
@@ -489,6 +519,7 @@ fn page_shows_a_scan_waiting_for_the_arm_position() {
         .as_i64()
         .unwrap();
     shown_waiting(&mut page, id, "declare where the arm is", false);
+    fits_the_screen(&mut page, "waiting for the arm's position");
     assert_eq!(
         daemon.get("/api/hardware").json["arm"]["angle_deg"],
         Value::Null
