@@ -28,13 +28,22 @@ function niceTicks(lo, hi, target) {
 const plotChoice = { channel: 1, scale: "log" };
 let plotData = null;
 
+// The scan whose plot data is being fetched (the page asks at every poll until drawn).
+let fetching = null;
+
 // Fetches scan `id`'s plot data and draws it, unless another scan was selected meanwhile.
 export async function plot(id) {
-  const res = await get(`/api/scans/${id}/plot`);
-  if (!res.ok || page.selected !== id) return;
-  plotData = await res.json();
-  if (!plotData.samples.length) return;
-  drawPlot();
+  if (fetching === id) return;
+  fetching = id;
+  try {
+    const res = await get(`/api/scans/${id}/plot`);
+    if (!res.ok || page.selected !== id) return;
+    plotData = await res.json();
+    if (!plotData.samples.length) return;
+    drawPlot();
+  } finally {
+    if (fetching === id) fetching = null;
+  }
 }
 
 // Distinct colours: per θL (a categorical palette) when one channel is shown, per

@@ -178,8 +178,10 @@ export function show(s) {
   if (!page.calibrating) $("calibrate").disabled = !(ended && s.results.thumbnail);
   $("livebox").hidden = !(s.live && s.live.length);
   $("live").innerHTML = liveTable(s.live, $("livemodel").value);
+  // A frame is fetched once the journal records the capture that made it (its file may
+  // land a moment before).
   if (!s.results.thumbnail) clearFrame();
-  else if (p.steps.done !== page.lastDone) {
+  else if (s.frame && p.steps.done !== page.lastDone) {
     page.lastDone = p.steps.done;
     const caption = frameCaption(s.frame);
     fetchFile(`${s.results.thumbnail}?t=${Date.now()}`).then(({ url }) => {
