@@ -212,9 +212,16 @@ fn page_tells_the_truth_in_every_state() {
     );
     assert_eq!(shown["frame"], json!(running_id), "{shown}");
     fits_the_screen(&mut page, "paused");
-    // The camera line from the same poll: not capturing for a paused scan.
-    let camera = page.eval("document.getElementById('camera').textContent");
-    assert!(!camera.as_str().unwrap().contains("capturing"), "{camera}");
+    // The camera line from the same poll: capturing only while the queue shows a scan
+    // running (the paused one's exposure under way is told as finishing).
+    let camera = page.eval(
+        "({ line: document.getElementById('camera').textContent, \
+            running: document.querySelectorAll('#scans td.state-running').length })",
+    );
+    assert!(
+        !camera["line"].as_str().unwrap().contains("capturing") || camera["running"] != 0,
+        "{camera}"
+    );
     page.eval("document.querySelector('#detail button[data-act=resume]').click()");
     wait_shown(
         &mut page,
