@@ -131,6 +131,36 @@ pub struct ScanView {
     /// `plot`.
     pub links: std::collections::BTreeMap<String, String>,
     pub results: ScanResults,
+    /// The latest frame's θL and shutter time, from the capture step that took it; null
+    /// before the first capture.
+    pub frame: Option<FrameView>,
+    /// The model the auto fit chose (fit-auto.json); null until that fit is done.
+    pub choice: Option<ChoiceView>,
+}
+
+/// The latest frame of a scan.
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+pub struct FrameView {
+    /// Light angle, degrees.
+    pub theta_l: f64,
+    /// Shutter time, s.
+    pub shutter_s: f64,
+}
+
+/// The model choice of a scan's auto fit.
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+pub struct ChoiceView {
+    /// The model chosen (`cook-torrance`, `ward`, `cook-torrance-fresnel`, `table`).
+    pub model: String,
+    /// Its roughness form (`shared` or `per-channel`), as the fit JSON writes it.
+    #[schema(value_type = Object)]
+    pub roughness: serde_json::Value,
+    /// Whether a colour shift of the highlight is reported.
+    pub colour_shift: Option<bool>,
+    /// Why this model, in words.
+    pub reason: Option<String>,
+    /// URL of fit-auto.json.
+    pub fit: String,
 }
 
 /// The scan's exposures.

@@ -18,10 +18,9 @@ use axum::response::{IntoResponse, Response};
 use tokio::sync::Semaphore;
 
 use super::answers::{db, internal, ApiError, ApiResult, AppState};
-use super::plan::Step;
 use super::preview;
-use super::store::StepState;
 use super::sync::lock;
+use super::view::latest_frame;
 
 /// Thumbnails kept (a few hundred kilobytes each at most).
 const CACHED: usize = 32;
@@ -78,11 +77,8 @@ fn png_answer(png: Bytes) -> Response {
     ))]
 pub async fn thumbnail(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Response> {
     let steps = db(&shared, move |_, store| store.steps(id)).await?;
-    let latest = steps
-        .iter()
-        .rev()
-        .filter(|s| s.state == StepState::Done && matches!(s.step, Step::Capture { .. }))
-        .find_map(|s| s.result.as_ref()?.get("path")?.as_str().map(str::to_owned))
+    let latest = latest_frame(&steps)
+        .map(|(_, path)| path.to_owned())
         .ok_or_else(|| ApiError::not_found(format!("a frame of scan {id}")))?;
     let path = shared.scan_dir(id).join(&latest);
     let meta = tokio::fs::metadata(&path)

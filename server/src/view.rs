@@ -10,7 +10,7 @@ use std::time::Duration;
 use serde_json::{json, Value};
 
 use super::files::{remove_partials, Writers};
-use super::plan::{theta_dir_name, theta_map_path, Step, FIT_MODELS};
+use super::plan::{theta_dir_name, theta_map_path, Step, AUTO_FIT, FIT_MODELS};
 use super::progress::{metered_bracket, progress};
 use super::shared::{ScanEvent, Shared};
 use super::store::{ScanRecord, ScanState, StepRecord, StepState, Store, StoreError};
@@ -145,6 +145,25 @@ pub fn scan_view(
     };
     // Nothing is under way once the scan has ended.
     let ended = scan.state.is_final();
+    // The latest frame's θL and exposure, and the model the `auto` fit chose, as the
+    // journal's steps that made them recorded them.
+    let frame = steps
+        .as_deref()
+        .and_then(latest_frame)
+        .map(|(step, _)| match step.step {
+            Step::Capture {
+                theta_l, shutter_s, ..
+            } => json!({ "theta_l": theta_l, "shutter_s": shutter_s }),
+            _ => Value::Null,
+        });
+    let choice = steps
+        .as_deref()
+        .filter(|_| dir.join(AUTO_FIT.1).is_file())
+        .and_then(model_choice)
+        .map(|mut choice| {
+            choice["fit"] = json!(format!("{base}/files/{}", AUTO_FIT.1));
+            choice
+        });
     Ok(json!({
         "id": scan.id,
         "sample": scan.plan.sample,
@@ -190,6 +209,37 @@ pub fn scan_view(
             "hdr": hdr,
             "thumbnail": has_frame.then(|| format!("{base}/thumbnail.png")),
         },
+        "frame": frame,
+        "choice": choice,
+    }))
+}
+
+/// The latest capture done of a scan's journal (the frame its thumbnail shows) and the
+/// path of its file in the scan directory.
+pub fn latest_frame(steps: &[StepRecord]) -> Option<(&StepRecord, &str)> {
+    steps
+        .iter()
+        .rev()
+        .filter(|s| s.state == StepState::Done && matches!(s.step, Step::Capture { .. }))
+        .find_map(|s| Some((s, s.result.as_ref()?.get("path")?.as_str()?)))
+}
+
+/// The model the `auto` fit chose, from its step's record: the model, its roughness
+/// parameterisation, whether a colour shift is reported and the reason in words.
+fn model_choice(steps: &[StepRecord]) -> Option<Value> {
+    let record = steps
+        .iter()
+        .rev()
+        .filter(|s| s.state == StepState::Done)
+        .find(|s| matches!(&s.step, Step::Fit { model } if model == AUTO_FIT.0))?
+        .result
+        .as_ref()?;
+    let model = record.get("model")?;
+    Some(json!({
+        "model": model,
+        "roughness": record.get("roughness"),
+        "colour_shift": record.get("colour_shift"),
+        "reason": record.get("reason"),
     }))
 }
 

@@ -76,6 +76,18 @@ pub fn wait_shown(
     let start = Instant::now();
     loop {
         let shown = snapshot(page, id);
+        // One poll draws the queue and the detail: they never disagree on the state.
+        if shown["title"]
+            .as_str()
+            .is_some_and(|t| t.starts_with(&format!("Scan {id}:")))
+            && shown["state"] != ""
+            && shown["rowState"].as_str().is_some_and(|r| !r.is_empty())
+        {
+            assert_eq!(
+                shown["state"], shown["rowState"],
+                "the queue row and the detail disagree: {shown}"
+            );
+        }
         if shown["title"]
             .as_str()
             .is_some_and(|t| t.starts_with(&format!("Scan {id}:")))
@@ -116,4 +128,84 @@ pub fn shown_waiting(page: &mut Cdp, id: i64, why: &str, confirm: bool) {
 pub fn no_time_left(shown: &Value) -> bool {
     let lefts = shown["lefts"].as_array().unwrap();
     lefts.len() == 2 && lefts.iter().all(|l| l == "")
+}
+
+/// What the page measures of its own layout at the current width: the document's
+/// width (also with every budget table opened), each budget table's right edge and
+/// that of its box, the rendered size of every text of the plot (its computed font size
+/// times the SVG's scale, px on screen) and the images shown that did not load.
+const LAYOUT_FACTS: &str = r#"(() => {
+    const shown = (e) => e.getClientRects().length > 0 && getComputedStyle(e).visibility !== 'hidden';
+    const broken = [...document.images].filter((i) => shown(i) && !(i.complete && i.naturalWidth > 0))
+        .map((i) => i.id || i.alt || 'img');
+    const closedWidth = document.documentElement.scrollWidth;
+    const closed = [...document.querySelectorAll('details')].filter((d) => !d.open);
+    closed.forEach((d) => { d.open = true; });
+    const openWidth = document.documentElement.scrollWidth;
+    const budgets = [...document.querySelectorAll('.budget table')].map((t) => ({
+        table: t.getBoundingClientRect().right, box: t.parentElement.getBoundingClientRect().right }));
+    closed.forEach((d) => { d.open = false; });
+    const fonts = [...document.querySelectorAll('#plot svg')].flatMap((svg) => {
+        const scale = svg.getBoundingClientRect().width / svg.viewBox.baseVal.width;
+        return [...svg.querySelectorAll('text')].map((t) => parseFloat(getComputedStyle(t).fontSize) * scale);
+    });
+    return { width: window.innerWidth, scrollWidth: Math.max(closedWidth, openWidth), budgets, broken,
+        minFont: fonts.length ? Math.min(...fonts) : null, texts: fonts.length };
+})()"#;
+
+/// Checks that the page fits a 1280 px and a 390 px wide screen as it is now (`what`
+/// names the state for the failure message): nothing wider than the screen (a table
+/// scrolls inside its own box), every text of the plot at least 10 px on screen, at
+/// 1280 px every budget table whole within its box and the screen, and no broken image. Leaves
+/// the browser at its own window size; returns the facts measured at each width.
+pub fn fits_the_screen(page: &mut Cdp, what: &str) -> Vec<Value> {
+    let mut measured = Vec::new();
+    for width in [1280u32, 390] {
+        page.call(
+            "Emulation.setDeviceMetricsOverride",
+            json!({"width": width, "height": 844, "deviceScaleFactor": 1, "mobile": width < 800}),
+        );
+        page.wait_for(
+            &format!("the layout at {width} px"),
+            &format!("window.innerWidth === {width}"),
+            Duration::from_secs(30),
+        );
+        // A frame or two for the plot to be drawn again at the new width.
+        std::thread::sleep(Duration::from_millis(300));
+        let facts = page.eval(LAYOUT_FACTS);
+        let w = f64::from(width);
+        assert!(
+            facts["scrollWidth"].as_f64().unwrap() <= w,
+            "{what}: page wider than {width} px: {facts}"
+        );
+        assert_eq!(facts["broken"], json!([]), "{what}: broken image: {facts}");
+        if let Some(min) = facts["minFont"].as_f64() {
+            assert!(
+                min >= 10.0,
+                "{what}: plot text below 10 px at {width} px: {facts}"
+            );
+        }
+        for b in facts["budgets"].as_array().unwrap() {
+            // At 1280 px the table is whole inside its box; narrower, its box scrolls.
+            let (table, scroller) = (b["table"].as_f64().unwrap(), b["box"].as_f64().unwrap());
+            let edge = if width >= 1280 {
+                table.max(scroller)
+            } else {
+                scroller
+            };
+            assert!(
+                edge <= w + 0.5 && (width < 1280 || table <= scroller + 0.5),
+                "{what}: budget table beyond {width} px: {facts}"
+            );
+        }
+        eprintln!("{what} at {width} px: {facts}");
+        measured.push(facts);
+    }
+    page.call("Emulation.clearDeviceMetricsOverride", json!({}));
+    page.wait_for(
+        "the browser's own window size",
+        "window.innerWidth !== 390",
+        Duration::from_secs(30),
+    );
+    measured
 }

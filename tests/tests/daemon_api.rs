@@ -204,8 +204,25 @@ fn concurrent_scans_run_one_after_the_other_and_controls_work() {
         .count();
     assert_eq!(captures, 2 * 2 * 2);
 
+    // The latest frame is the last capture of the plan (last θL, shortest shutter), and
+    // the model the `auto` fit chose is the one its fit-auto.json names.
+    let view = daemon.get(&format!("/api/scans/{}", first["id"])).json;
+    assert_eq!(
+        view["frame"],
+        json!({"theta_l": -30.0, "shutter_s": 0.05}),
+        "{view}"
+    );
+    let choice = &view["choice"];
+    let fit = daemon.get(choice["fit"].as_str().unwrap()).json;
+    assert_eq!(choice["model"], fit["model"], "{choice}");
+    assert!(
+        !choice["reason"].as_str().unwrap().is_empty() && choice["colour_shift"].is_boolean(),
+        "{choice}"
+    );
     let third_view = daemon.get(&format!("/api/scans/{third}")).json;
     assert_eq!(third_view["state"], "paused");
+    assert_eq!(third_view["frame"], Value::Null, "{third_view}");
+    assert_eq!(third_view["choice"], Value::Null, "{third_view}");
     assert_eq!(third_view["progress"]["done"], 0);
     assert_eq!(
         daemon

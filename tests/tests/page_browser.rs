@@ -11,7 +11,7 @@
 use std::time::Duration;
 
 use gonio_tests::browser::{Browser, Cdp};
-use gonio_tests::page::open_page;
+use gonio_tests::page::{fits_the_screen, open_page};
 use gonio_tests::{emulator_config, temp_dir, Daemon, TOKEN};
 use serde_json::{json, Value};
 
@@ -179,6 +179,42 @@ fn page_drives_a_scan_in_a_real_browser() {
         "ticks off round values: {degrees:?}"
     );
     check_plot(&plot, 2);
+    fits_the_screen(&mut page, "a done scan with its plot");
+    // The latest frame's caption (its θL and exposure) and the model the scan's `auto`
+    // fit chose, with its reason and colour-shift verdict, as the scan's view gives them.
+    let view = daemon.get("/api/scans/1").json;
+    let shown = page.eval(
+        "({ caption: document.getElementById('framecap').hidden ? null : document.getElementById('framecap').textContent, \
+            choice: document.getElementById('choice').textContent })",
+    );
+    let (theta, shutter) = (
+        view["frame"]["theta_l"].as_f64().unwrap(),
+        view["frame"]["shutter_s"].as_f64().unwrap(),
+    );
+    let exposure = if (shutter - 0.5).abs() < 1e-12 {
+        "0.5 s"
+    } else {
+        "1/30 s"
+    };
+    assert_eq!(
+        shown["caption"],
+        json!(format!("θL {theta}° · exposure {exposure}")),
+        "{shown} vs {view}"
+    );
+    let choice = &view["choice"];
+    let text = shown["choice"].as_str().unwrap();
+    assert!(
+        text.contains(&format!(
+            "model chosen: {}",
+            choice["model"].as_str().unwrap()
+        )) && text.contains(choice["reason"].as_str().unwrap())
+            && text.contains(if choice["colour_shift"] == json!(true) {
+                "colour shift reported"
+            } else {
+                "colour shift not reported"
+            }),
+        "{shown} vs {choice}"
+    );
     assert_eq!(
         plot["buttonsDisabled"],
         json!([true, true, true, true]),

@@ -9,7 +9,9 @@
 use std::time::Duration;
 
 use gonio_tests::browser::Browser;
-use gonio_tests::page::{no_time_left, open_page, select_and_wait, shown_waiting, wait_shown};
+use gonio_tests::page::{
+    fits_the_screen, no_time_left, open_page, select_and_wait, shown_waiting, wait_shown,
+};
 use gonio_tests::{
     emulator_config, emulator_config_scaled, temp_dir, with_small_red_sample, Daemon, TOKEN,
 };
@@ -120,6 +122,7 @@ fn page_tells_the_truth_in_every_state() {
     );
     assert_eq!(shown["frame"], Value::Null, "{shown}");
     assert_eq!(shown["noFrame"], json!(true), "{shown}");
+    fits_the_screen(&mut page, "scheduled");
 
     // Running: a scan from the form, its bracket written as shutters are written.
     page.eval(
@@ -162,6 +165,7 @@ fn page_tells_the_truth_in_every_state() {
     assert_eq!(shown["frame"], Value::Null, "{shown}");
     assert_eq!(shown["noFrame"], json!(true), "{shown}");
     assert_eq!(shown["work"], "", "{shown}");
+    fits_the_screen(&mut page, "queued");
 
     // The running scan: its own frame, its time left the same in the queue and the
     // detail, its bracket as given.
@@ -191,6 +195,7 @@ fn page_tells_the_truth_in_every_state() {
             .contains(&format!("started {local}")),
         "{shown} vs {started}"
     );
+    fits_the_screen(&mut page, "running");
 
     // Paused from the page: no time left, no step under way on the arm.
     page.eval("document.querySelector('#detail button[data-act=pause]').click()");
@@ -206,6 +211,17 @@ fn page_tells_the_truth_in_every_state() {
         "{shown}"
     );
     assert_eq!(shown["frame"], json!(running_id), "{shown}");
+    fits_the_screen(&mut page, "paused");
+    // The camera line from the same poll: capturing only while the queue shows a scan
+    // running (the paused one's exposure under way is told as finishing).
+    let camera = page.eval(
+        "({ line: document.getElementById('camera').textContent, \
+            running: document.querySelectorAll('#scans td.state-running').length })",
+    );
+    assert!(
+        !camera["line"].as_str().unwrap().contains("capturing") || camera["running"] != 0,
+        "{camera}"
+    );
     page.eval("document.querySelector('#detail button[data-act=resume]').click()");
     wait_shown(
         &mut page,
@@ -226,6 +242,7 @@ fn page_tells_the_truth_in_every_state() {
         Duration::from_secs(60),
     );
     assert!(!shown["why"].as_str().unwrap().is_empty(), "{shown}");
+    fits_the_screen(&mut page, "interrupted");
     let replug = daemon.post("/api/emulator/fault", &json!({"fault": "camera_replug"}));
     assert_eq!(replug.status, 200, "{:?}", replug.json);
     wait_shown(
@@ -251,6 +268,7 @@ fn page_tells_the_truth_in_every_state() {
     assert_eq!(view["processing_step"], Value::Null, "{view}");
     assert_eq!(view["current_step"], Value::Null, "{view}");
     assert_eq!(view["progress"]["eta_s"], Value::Null, "{view}");
+    fits_the_screen(&mut page, "cancelled");
 
     // Done: the queued scan ran with the bracket its metering chose, shown as used.
     let shown = select_and_wait(
@@ -285,6 +303,31 @@ fn page_tells_the_truth_in_every_state() {
         "the fit plot",
         "document.querySelector('#plot svg path') !== null",
         Duration::from_secs(60),
+    );
+    fits_the_screen(&mut page, "done");
+    // The latest frame's caption and the model the `auto` fit chose, as the view
+    // gives them.
+    let view = daemon.get(&format!("/api/scans/{queued_id}")).json;
+    let caption = page.wait_for(
+        "the frame's caption",
+        "!document.getElementById('framecap').hidden && document.getElementById('framecap').textContent",
+        Duration::from_secs(30),
+    );
+    let theta = view["frame"]["theta_l"].as_f64().unwrap();
+    let caption = caption.as_str().unwrap();
+    assert!(
+        caption.starts_with(&format!("θL {theta}° · exposure ")) && caption.ends_with(" s"),
+        "{caption} vs {view}"
+    );
+    let choice = page.eval("document.getElementById('choice').textContent");
+    let model = view["choice"]["model"].as_str().unwrap();
+    assert!(
+        choice
+            .as_str()
+            .unwrap()
+            .contains(&format!("model chosen: {model}"))
+            && choice.as_str().unwrap().contains("colour shift"),
+        "{choice} vs {view}"
     );
 
     // Downloads named after what they are, and the whole scan as one archive.
@@ -365,6 +408,7 @@ fn page_tells_the_truth_in_every_state() {
         .as_i64()
         .unwrap();
     shown_waiting(&mut page, waiting_id, "camera not available", false);
+    fits_the_screen(&mut page, "waiting for the camera");
     for id in [interrupted_id, waiting_id] {
         let cancelled = daemon.post(&format!("/api/scans/{id}/cancel"), &json!({}));
         assert_eq!(cancelled.status, 200, "{:?}", cancelled.json);
@@ -376,6 +420,7 @@ fn page_tells_the_truth_in_every_state() {
     let red = json!({"sample": "red", "theta_l": [-20], "bracket": {"shutter_s": [0.1]}});
     let red_id = daemon.post("/api/scans", &red).json["id"].as_i64().unwrap();
     shown_waiting(&mut page, red_id, "mount sample red", true);
+    fits_the_screen(&mut page, "waiting for a sample");
     page.eval("document.querySelector('#detail button[data-act=confirm]').click()");
     let shown = wait_shown(
         &mut page,
@@ -386,6 +431,7 @@ fn page_tells_the_truth_in_every_state() {
     );
     assert_eq!(shown["confirmHidden"], json!(true), "{shown}");
     assert!(no_time_left(&shown), "{shown}");
+    fits_the_screen(&mut page, "done after a sample change");
 
     // At 390 px (a phone): nothing wider than the screen, with the plot and the file
     // list on show.
@@ -446,6 +492,9 @@ fn page_tells_the_truth_in_every_state() {
         Duration::from_secs(60),
     );
     assert!(arm.as_str().unwrap().starts_with("arm: idle at"), "{arm}");
+    // Nothing says the arm is homing once it is idle.
+    let note = page.eval("document.querySelector('header').textContent");
+    assert!(!note.as_str().unwrap().contains("homing"), "{note}");
     assert_eq!(
         page.eval("document.getElementById('stopmsg').className"),
         "note"
@@ -477,6 +526,7 @@ fn page_shows_a_scan_waiting_for_the_arm_position() {
         .as_i64()
         .unwrap();
     shown_waiting(&mut page, id, "declare where the arm is", false);
+    fits_the_screen(&mut page, "waiting for the arm's position");
     assert_eq!(
         daemon.get("/api/hardware").json["arm"]["angle_deg"],
         Value::Null

@@ -79,7 +79,8 @@ $("stop").addEventListener("click", async () => {
 $("home").addEventListener("click", async () => {
   try {
     await post("/api/arm/home");
-    say($("stopmsg"), "homing the arm", false);
+    // The arm line (the hardware's state) tells the homing and its end.
+    say($("stopmsg"), "", false);
   } catch (err) { say($("stopmsg"), err.message, true); }
   refresh();
 });
@@ -126,11 +127,25 @@ $("calibrate").addEventListener("click", async () => {
   btn.disabled = false;
 });
 
-// Polls the scans, the sweeps and the hardware; selects the newest scan when none is.
+// Polls the scans, the sweeps, the hardware and the selected scan, and draws the
+// header, the queue and the detail from that one answer; selects the newest scan when
+// none is. A poll asked for while one is under way runs once it has ended.
+let polling = null, again = false;
 async function refresh() {
+  if (polling) { again = true; return; }
+  polling = (async () => { do { again = false; await poll(); } while (again); })();
+  await polling;
+  polling = null;
+}
+
+async function poll() {
   try {
-    const [scans, sweeps, hw] = await overview();
+    const id = page.selected;
+    const { scans, sweeps, hw, detail } = await overview(id);
+    // Another scan selected meanwhile: its own poll draws the page.
+    if (page.selected !== id) return;
     showOverview(scans, sweeps, hw);
+    if (detail) show(detail);
     if (page.selected === null && scans.length) select(scans[scans.length - 1].id);
   } catch (err) {
     // The daemon may be restarting; a 401 means reads need the token.
@@ -151,8 +166,10 @@ function select(id) {
   $("results").innerHTML = "";
   $("dstate").innerHTML = "";
   $("dtimes").textContent = "";
+  $("choice").innerHTML = "";
   clearFrame();
-  watch(id, show);
+  watch(id, refresh);
+  refresh();
 }
 
 // A queue row selects its scan.

@@ -28,13 +28,22 @@ function niceTicks(lo, hi, target) {
 const plotChoice = { channel: 1, scale: "log" };
 let plotData = null;
 
+// The scan whose plot data is being fetched (the page asks at every poll until drawn).
+let fetching = null;
+
 // Fetches scan `id`'s plot data and draws it, unless another scan was selected meanwhile.
 export async function plot(id) {
-  const res = await get(`/api/scans/${id}/plot`);
-  if (!res.ok || page.selected !== id) return;
-  plotData = await res.json();
-  if (!plotData.samples.length) return;
-  drawPlot();
+  if (fetching === id) return;
+  fetching = id;
+  try {
+    const res = await get(`/api/scans/${id}/plot`);
+    if (!res.ok || page.selected !== id) return;
+    plotData = await res.json();
+    if (!plotData.samples.length) return;
+    drawPlot();
+  } finally {
+    if (fetching === id) fetching = null;
+  }
 }
 
 // Distinct colours: per θL (a categorical palette) when one channel is shown, per
@@ -50,6 +59,17 @@ const MODEL_STYLES = {
   "cook-torrance": { dash: "", width: 1.8, name: "Cook–Torrance" },
 };
 
+// The plot's width in CSS pixels: that of its box, between 280 and 640.
+function drawnWidth() {
+  return Math.round(Math.min(640, Math.max(280, $("plot").clientWidth || 600)));
+}
+
+// Drawn again when the window's width changes the plot's.
+window.addEventListener("resize", () => {
+  const svg = $("plot").querySelector("svg");
+  if (plotData && svg && svg.viewBox.baseVal.width !== drawnWidth()) drawPlot();
+});
+
 function drawPlot() {
   const data = plotData, pts = data.samples;
   const order = Object.keys(MODEL_STYLES);
@@ -58,7 +78,9 @@ function drawPlot() {
   const log = plotChoice.scale === "log";
   const thetas = [...new Set(pts.map((p) => p.theta_l))].sort((a, b) => b - a);
   const colour = (theta, c) => channels.length > 1 ? CHANNEL_COLORS[c] : THETA_COLORS[thetas.indexOf(theta) % THETA_COLORS.length];
-  const W = 600, L = 62, R = 10, T = 10, B = 300, H = B + 40;
+  // Drawn at the width it is shown at (at most 640 px), so that its text keeps its
+  // CSS size on a narrow screen instead of being scaled down with the figure.
+  const W = drawnWidth(), L = 62, R = 10, T = 10, B = 300, H = B + 40;
   const xs = pts.map((p) => p.theta_r);
   const xmin = Math.min(...xs), xmax = Math.max(...xs);
   const values = channels.flatMap((c) => [...pts.map((p) => p.rgb[c]), ...fits.flatMap(([, f]) => f.predicted.map((q) => q[c]))]);
@@ -89,7 +111,7 @@ function drawPlot() {
     svg += `<line x1="${L - 3}" y1="${Y(v)}" x2="${L}" y2="${Y(v)}" stroke="#888"/>`;
     svg += `<text x="${L - 5}" y="${Y(v) + 4}" text-anchor="end">${text}</text>`;
   }
-  for (const x of niceTicks(xmin, xmax, 6)) {
+  for (const x of niceTicks(xmin, xmax, Math.max(3, Math.min(6, Math.floor((W - L - R) / 80))))) {
     svg += `<line x1="${X(x)}" y1="${B}" x2="${X(x)}" y2="${B + 3}" stroke="#888"/>`;
     svg += `<text x="${X(x)}" y="${B + 15}" text-anchor="middle">${x}°</text>`;
   }
@@ -181,10 +203,10 @@ function budgetTable(b) {
   const head = `<tr><th></th><th>value</th>${sources.map((s) => `<th>${escapeHtml(s)}</th>`).join("")}<th>u<sub>c</sub></th><th>U (k = ${b.coverage_factor})</th><th>interval</th></tr>`;
   const body = rows.map((x, i) => `<tr><th>${escapeHtml(names[i])}</th><td>${num(x.value)}</td>` +
     x.contributions.map((c) => `<td>${num(c.u)}</td>`).join("") +
-    `<td>${num(x.combined)}</td><td>${num(x.expanded)}</td><td>[${num(x.interval[0])}, ${num(x.interval[1])}]</td></tr>`).join("");
+    `<td>${num(x.combined)}</td><td>${num(x.expanded)}</td><td>[${num(x.interval[0])},<wbr> ${num(x.interval[1])}]</td></tr>`).join("");
   const summary = `uncertainty budget: ` + rows.map((x, i) => `${escapeHtml(names[i])} ± ${num(x.expanded)}`).join(", ") +
     ` (k = ${b.coverage_factor}); largest source of Ks ${CHANNEL_NAMES[1]}: ${escapeHtml(largest(P.ks[1]))}; residuals ${b.residual_to_noise.toFixed(2)}× the noise`;
-  return `<details class="budget"><summary>${summary}</summary><table>${head}${body}</table></details>`;
+  return `<details class="budget"><summary>${summary}</summary><div class="scroll"><table>${head}${body}</table></div></details>`;
 }
 
 const HOVER_HINT = "move over or tap the plot for the values at a point";

@@ -102,7 +102,9 @@ export function showOverview(scans, sweeps, hw) {
   $("armpos").hidden = a.state !== "needs_position";
   $("home").hidden = !["needs_homing", "alarm", "hold"].includes(a.state);
   const c = hw.camera;
-  $("camera").textContent = `camera: ${c.model || "?"} ${c.state}` + (c.error ? ` (${c.error})` : "") + (hw.emulated ? " · emulated" : "");
+  // A capture outlives the scan's pause or end by the exposure under way.
+  const state = c.state === "capturing" && !scans.some((s) => s.state === "running") ? "finishing the exposure under way" : c.state;
+  $("camera").textContent = `camera: ${c.model || "?"} ${state}` + (c.error ? ` (${c.error})` : "") + (hw.emulated ? " · emulated" : "");
   paintTimeLeft();
 }
 
@@ -113,7 +115,22 @@ export function clearFrame() {
   img.removeAttribute("src");
   delete img.dataset.scan;
   img.hidden = true;
+  $("framecap").hidden = true;
   $("noframe").hidden = false;
+}
+
+// The frame's caption: its θL and exposure.
+function frameCaption(f) {
+  return f ? `θL ${f.theta_l}° · exposure ${formatShutter(f.shutter_s)}` : "";
+}
+
+// The model the scan's `auto` fit chose, why, and whether a colour shift is reported.
+function choiceText(c) {
+  if (!c) return "";
+  return `<p id="dchoice"><b>model chosen: ${escapeHtml(c.model)}</b>` +
+    (c.roughness ? ` <span class="muted">(roughness ${escapeHtml(c.roughness)})</span>` : "") +
+    ` · colour shift ${c.colour_shift ? "reported" : "not reported"}` +
+    `<br><span class="muted">${escapeHtml(c.reason)}</span></p>`;
 }
 
 // The bracket as used: the shutter times given, or those the metering chose (per θL
@@ -161,9 +178,12 @@ export function show(s) {
   if (!page.calibrating) $("calibrate").disabled = !(ended && s.results.thumbnail);
   $("livebox").hidden = !(s.live && s.live.length);
   $("live").innerHTML = liveTable(s.live, $("livemodel").value);
+  // A frame is fetched once the journal records the capture that made it (its file may
+  // land a moment before).
   if (!s.results.thumbnail) clearFrame();
-  else if (p.steps.done !== page.lastDone) {
+  else if (s.frame && p.steps.done !== page.lastDone) {
     page.lastDone = p.steps.done;
+    const caption = frameCaption(s.frame);
     fetchFile(`${s.results.thumbnail}?t=${Date.now()}`).then(({ url }) => {
       if (page.selected !== s.id) { URL.revokeObjectURL(url); return; }
       const img = $("thumb");
@@ -171,9 +191,12 @@ export function show(s) {
       img.src = url;
       img.dataset.scan = s.id;
       img.hidden = false;
+      $("framecap").textContent = caption;
+      $("framecap").hidden = !caption;
       $("noframe").hidden = true;
     }, () => { /* no frame yet */ });
   }
+  $("choice").innerHTML = choiceText(s.choice);
   const links = [];
   if (s.results.samples) links.push(`<a href="${s.results.samples}" download>samples.csv</a>`);
   for (const [m, url] of Object.entries(s.results.fits)) links.push(`<a href="${url}" download>fit ${m}</a>`);

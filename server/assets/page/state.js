@@ -44,9 +44,17 @@ export async function post(path, body) {
   }));
 }
 
-// What the page polls: the scans, the sweeps and the hardware.
-export function overview() {
-  return Promise.all([getJson("/api/scans"), getJson("/api/sweeps"), getJson("/api/hardware")]);
+// What the page polls, all at once: the scans, the sweeps, the hardware and the
+// selected scan's own view (with what its journal tells), which also stands for it in
+// the list, so that one answer draws the header, the queue and the detail alike.
+export async function overview(selected) {
+  const [scans, sweeps, hw, detail] = await Promise.all([
+    getJson("/api/scans"), getJson("/api/sweeps"), getJson("/api/hardware"),
+    selected === null ? null : getJson(`/api/scans/${selected}`).catch(() => null),
+  ]);
+  const at = detail ? scans.findIndex((s) => s.id === detail.id) : -1;
+  if (at >= 0) scans[at] = detail;
+  return { scans, sweeps, hw, detail };
 }
 
 // A file fetched with the token, as an object URL, and the name the daemon gives it.
@@ -78,17 +86,18 @@ export function timeLeft(id) {
 
 let events = null;
 
-// Follows scan `id`'s event stream, handing each view to `show`, and stops following
-// the one before.
-export function watch(id, show) {
+// Follows scan `id`'s event stream, calling `changed` whenever the scan changes (the
+// page then polls, so that the whole page shows the new state at once), and stops
+// following the one before.
+export function watch(id, changed) {
   if (events) events.abort();
   events = new AbortController();
-  follow(id, events.signal, show);
+  follow(id, events.signal, changed);
 }
 
 // Reads the scan's event stream with fetch, so that it carries the token (EventSource
 // cannot send headers); reconnects while the scan is not final, as EventSource would.
-async function follow(id, signal, show) {
+async function follow(id, signal, changed) {
   while (!signal.aborted) {
     try {
       const res = await get(`/api/scans/${id}/events`, { signal });
@@ -107,7 +116,7 @@ async function follow(id, signal, show) {
           if (!lines.some((l) => /^event: ?progress$/.test(l)) || !data) continue;
           const s = JSON.parse(data);
           if (signal.aborted || s.id !== page.selected) return;
-          show(s);
+          changed(s);
           if (FINAL.includes(s.state)) return;
         }
       }
