@@ -274,12 +274,7 @@ async fn control(
 #[utoipa::path(post, path = "/api/scans/{id}/pause",
     summary = "Pause at the next step boundary (queued, running or interrupted scans)",
     params(("id" = i64, Path, description = "The scan's id")),
-    responses(
-        (status = 200, description = "Scan", body = ScanView),
-        (status = 404, description = "No such scan", body = ErrorBody),
-        (status = 409, description = "The scan's state does not allow it", body = ErrorBody),
-        (status = 503, description = "The disk is full and the journal cannot be written; nothing changed. Try again once space is freed", body = ErrorBody),
-    ))]
+    responses(super::schemas::ControlAnswers))]
 async fn pause_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
     control(shared, id, applies_to("pause"), ScanState::Paused, "pause").await
 }
@@ -287,12 +282,7 @@ async fn pause_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<J
 #[utoipa::path(post, path = "/api/scans/{id}/resume",
     summary = "Re-queue a paused scan, or retry a failed one from its first step not done",
     params(("id" = i64, Path, description = "The scan's id")),
-    responses(
-        (status = 200, description = "Scan", body = ScanView),
-        (status = 404, description = "No such scan", body = ErrorBody),
-        (status = 409, description = "The scan's state does not allow it", body = ErrorBody),
-        (status = 503, description = "The disk is full and the journal cannot be written; nothing changed. Try again once space is freed", body = ErrorBody),
-    ))]
+    responses(super::schemas::ControlAnswers))]
 async fn resume_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
     control(
         shared,
@@ -307,12 +297,7 @@ async fn resume_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<
 #[utoipa::path(post, path = "/api/scans/{id}/cancel",
     summary = "Cancel at the next step boundary",
     params(("id" = i64, Path, description = "The scan's id")),
-    responses(
-        (status = 200, description = "Scan", body = ScanView),
-        (status = 404, description = "No such scan", body = ErrorBody),
-        (status = 409, description = "The scan's state does not allow it", body = ErrorBody),
-        (status = 503, description = "The disk is full and the journal cannot be written; nothing changed. Try again once space is freed", body = ErrorBody),
-    ))]
+    responses(super::schemas::ControlAnswers))]
 async fn cancel_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
     control(
         shared,

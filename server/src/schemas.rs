@@ -259,3 +259,20 @@ pub struct SweepView {
     pub scans_by_state: std::collections::BTreeMap<String, u32>,
     pub scans: Vec<ScanView>,
 }
+
+/// What a control verb (pause, resume, cancel) answers.
+#[derive(utoipa::IntoResponses)]
+pub enum ControlAnswers {
+    /// Scan
+    #[response(status = 200)]
+    Done(ScanView),
+    /// No such scan
+    #[response(status = 404)]
+    NotFound(crate::answers::ErrorBody),
+    /// The scan's state does not allow it
+    #[response(status = 409)]
+    NotAllowed(crate::answers::ErrorBody),
+    /// The disk is full and the journal cannot be written; nothing changed. Try again once space is freed
+    #[response(status = 503)]
+    DiskFull(crate::answers::ErrorBody),
+}
