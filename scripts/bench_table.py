@@ -147,6 +147,23 @@ def fit_rows(t):
     )
 
 
+def auto_rows(t):
+    """`gonio fit --model auto`'s fit (the model choice, without the budget both share)
+    against one robust Cook–Torrance fit with its uncertainty, on the full-size `gold`
+    scan and on the 1,000 points of four θL (a binned scan's size)."""
+    full = (t.median("fit_samples/auto"), t.median("fit_samples/cook-torrance/robust/shared"))
+    small = (t.median("fit_1000/auto"), t.median("fit_1000/cook-torrance/robust/shared"))
+    t.row(
+        "fit --model auto / one Cook–Torrance fit: full-size `gold` scan; 1,000 points",
+        [
+            f"{ratio(a, ct)} ({duration(a)} / {duration(ct)})" if a and ct else None
+            for a, ct in (full, small)
+        ],
+        "≤ 2",
+        f"{FIT_SAMPLES}; {FIT}",
+    )
+
+
 def peer_fit_rows(t):
     robust = t.median("fit_samples/cook-torrance/robust/shared")
     nm = t.median("fit_samples/cook-torrance/nelder-mead/shared")
@@ -343,7 +360,7 @@ def main():
     args = p.parse_args()
     results = read_results(args.results)
     t = Table(criterion_medians(args.criterion), results)
-    for rows in (fit_rows, peer_fit_rows, budget_rows, study_rows, hdr_rows, scan_rows):
+    for rows in (fit_rows, auto_rows, peer_fit_rows, budget_rows, study_rows, hdr_rows, scan_rows):
         rows(t)
     unsteady = t.unsteady()
     if unsteady:

@@ -1,7 +1,9 @@
 //! Fit speed on 1,000 points: robust and Nelder–Mead, Cook–Torrance and Ward, and the
 //! robust fits with shared m without their uncertainty (target: the uncertainty costs at
-//! most 10 % of a Cook–Torrance fit). A Nelder–Mead fit includes its check against the
-//! robust fit.
+//! most 10 % of a Cook–Torrance fit), and the model choice (`fit_auto` over
+//! `AUTO_CANDIDATES`, the fit of `gonio fit --model auto` without its budget; target: at
+//! most twice the robust Cook–Torrance fit). A Nelder–Mead fit includes its check against
+//! the robust fit.
 //!
 //!     cargo bench -p gonio-processing --bench fit
 //!     GONIO_BENCH_SAMPLES=samples.csv cargo bench -p gonio-processing --bench fit
@@ -11,8 +13,9 @@
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use gonio_processing::brdf::{Model, Params, Roughness};
+use gonio_processing::color::CameraModel;
 use gonio_processing::fit::budget::{budget, monte_carlo, Draw};
-use gonio_processing::fit::{fit, loss_reached, FitMethod, FitOptions};
+use gonio_processing::fit::{fit, fit_auto, loss_reached, FitMethod, FitOptions, AUTO_CANDIDATES};
 use gonio_processing::samples::{read_csv, Sample};
 
 /// 1,000 distant-geometry points over four θL (θi = θL − φ, θr = φ, 250 per θL) with 1 %
@@ -65,11 +68,16 @@ fn bench_fits(c: &mut Criterion) {
             });
         }
     }
+    let camera = CameraModel::builtin();
+    let data = samples(Model::CookTorrance);
+    group.bench_function("auto", |b| {
+        b.iter(|| fit_auto(black_box(&data), &AUTO_CANDIDATES, &camera).expect("fit"))
+    });
     group.finish();
 }
 
 /// With `GONIO_BENCH_SAMPLES=samples.csv`: the robust Cook–Torrance fit of that file (with
-/// its uncertainty) and Nelder–Mead's minimisation alone (`fit::loss_reached`, as scipy's
+/// its uncertainty), the model choice (`fit_auto`) and Nelder–Mead's minimisation alone (`fit::loss_reached`, as scipy's
 /// `minimize` that scripts/bench_peers.py times on the same file); prints the samples'
 /// size and the robust loss as the JSON line scripts/bench.sh keeps.
 fn bench_samples_file(c: &mut Criterion) {
@@ -94,6 +102,10 @@ fn bench_samples_file(c: &mut Criterion) {
     });
     group.bench_function("cook-torrance/nelder-mead/shared", |b| {
         b.iter(|| loss_reached(black_box(&data), &nelder_mead).expect("fit"))
+    });
+    let camera = CameraModel::builtin();
+    group.bench_function("auto", |b| {
+        b.iter(|| fit_auto(black_box(&data), &AUTO_CANDIDATES, &camera).expect("fit"))
     });
     if data.iter().all(|s| s.uncertainty.is_some()) {
         // The uncertainty budget of the robust fits (law of propagation: two refits per

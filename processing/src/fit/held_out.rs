@@ -21,7 +21,7 @@ use super::fold_score::score;
 pub use super::fold_score::{errors, lobe, Errors, Fold, LOBE_FRACTION};
 use super::linear::nnls2;
 use super::table::{Shape, Table, CHROMATICITY_WINDOWS};
-use super::{fit, FitError, FitOptions};
+use super::{fit, fit_fresnel_given, FitError, FitOptions, FitResult};
 use crate::brdf::{Model, Roughness};
 use crate::color::CameraModel;
 use crate::samples::{distinct_theta_l, Sample, THETA_L_TOLERANCE};
@@ -214,16 +214,74 @@ fn split(samples: &[Sample], theta_l: f64, held: bool) -> Vec<Sample> {
         .collect()
 }
 
-/// Fits `variant` without θL `theta_l` and scores it there; the fit's shape beside.
-fn fold(
+/// The variants of one job of [`leave_one_theta_l_out`], fitted in turn to the same
+/// samples: Cook–Torrance–Fresnel after Cook–Torrance of the same roughness when both are
+/// judged, taking its fit as the tied form its colour-shift test falls back to
+/// ([`fit_fresnel_given`]) instead of fitting it again; every other variant alone.
+fn fit_groups(variants: &[Variant]) -> Vec<Vec<usize>> {
+    let tied_of = |v: &Variant| {
+        variants.iter().position(|u| {
+            v.model == Model::CookTorranceFresnel
+                && u.model == Model::CookTorrance
+                && u.roughness == v.roughness
+        })
+    };
+    let mut groups: Vec<Vec<usize>> = Vec::new();
+    for (i, v) in variants.iter().enumerate() {
+        if tied_of(v).is_some() {
+            continue;
+        }
+        let mut group = vec![i];
+        group.extend(
+            variants
+                .iter()
+                .enumerate()
+                .filter(|(_, w)| tied_of(w) == Some(i))
+                .map(|(j, _)| j),
+        );
+        groups.push(group);
+    }
+    groups
+}
+
+/// The variants `group` of `variants` (see [`fit_groups`]) fitted without θL `theta_l`
+/// and scored there, each with its fit's shape.
+fn fold_group(
     samples: &[Sample],
-    variant: Variant,
+    variants: &[Variant],
+    group: &[usize],
     theta_l: f64,
     camera: &CameraModel,
-) -> Result<(Fold, Shape), String> {
-    let mut options = variant.options();
-    options.uncertainty = false;
-    let fitted = fit(&split(samples, theta_l, false), &options).map_err(|e| e.to_string())?;
+) -> Vec<(usize, FoldOutcome)> {
+    let others = split(samples, theta_l, false);
+    let mut tied: Option<FitResult> = None;
+    group
+        .iter()
+        .map(|&v| {
+            let mut options = variants[v].options();
+            options.uncertainty = false;
+            let fitted = match (&tied, options.model) {
+                (Some(t), Model::CookTorranceFresnel) => fit_fresnel_given(&others, &options, t),
+                _ => fit(&others, &options),
+            };
+            if options.model == Model::CookTorrance {
+                tied = fitted.as_ref().ok().cloned();
+            }
+            let outcome = fitted
+                .map_err(|e| e.to_string())
+                .and_then(|f| scored(samples, &f, theta_l, camera));
+            (v, outcome)
+        })
+        .collect()
+}
+
+/// `fitted` (fitted without θL `theta_l`) scored at that θL's samples; its shape beside.
+fn scored(
+    samples: &[Sample],
+    fitted: &FitResult,
+    theta_l: f64,
+    camera: &CameraModel,
+) -> FoldOutcome {
     let held = known(samples, theta_l)?;
     let estimated: Vec<[f64; 3]> = held.iter().map(|s| fitted.predict_sample(s)).collect();
     let mut scored = score(theta_l, &held, &estimated, camera)?;
@@ -427,8 +485,8 @@ fn table_fold(
 /// A fold scored with its fit's shape, or why it failed.
 type FoldOutcome = Result<(Fold, Shape), String>;
 
-/// Every variant judged at every θL of `samples` in turn, fits in parallel. Needs two
-/// θL at least (each fit sees the others).
+/// Every variant judged at every θL of `samples` in turn, fits in parallel (one job per
+/// θL and group of [`fit_groups`]). Needs two θL at least (each fit sees the others).
 pub fn leave_one_theta_l_out(
     samples: &[Sample],
     variants: &[Variant],
@@ -441,12 +499,18 @@ pub fn leave_one_theta_l_out(
             needed: 2,
         });
     }
-    let jobs: Vec<(usize, f64)> = (0..variants.len())
-        .flat_map(|v| theta_l.iter().map(move |&t| (v, t)))
+    let groups = fit_groups(variants);
+    let jobs: Vec<(&[usize], f64)> = theta_l
+        .iter()
+        .flat_map(|&t| groups.iter().map(move |g| (g.as_slice(), t)))
         .collect();
     let outcomes: Vec<(usize, f64, FoldOutcome)> = jobs
         .par_iter()
-        .map(|&(v, t)| (v, t, fold(samples, variants[v], t, camera)))
+        .flat_map_iter(|&(group, t)| {
+            fold_group(samples, variants, group, t, camera)
+                .into_iter()
+                .map(move |(v, outcome)| (v, t, outcome))
+        })
         .collect();
     Ok(variants
         .iter()
