@@ -262,6 +262,8 @@ pub struct SweepView {
 
 /// What a control verb (pause, resume, cancel) answers.
 #[derive(utoipa::IntoResponses)]
+// Only described, never built: the variants' sizes do not matter.
+#[allow(clippy::large_enum_variant)]
 pub enum ControlAnswers {
     /// Scan
     #[response(status = 200)]
