@@ -486,7 +486,7 @@ fn table_fold(
 type FoldOutcome = Result<(Fold, Shape), String>;
 
 /// Every variant judged at every θL of `samples` in turn, fits in parallel (one job per
-/// θL and group of [`fit_groups`]). Needs two θL at least (each fit sees the others).
+/// θL and group of `fit_groups`). Needs two θL at least (each fit sees the others).
 pub fn leave_one_theta_l_out(
     samples: &[Sample],
     variants: &[Variant],
