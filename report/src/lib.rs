@@ -4,7 +4,8 @@
 //! It is made from the scan directory alone (setup.json, plan.json, the captures'
 //! sidecars, samples.csv and the fit JSONs the daemon or the offline commands wrote)
 //! plus what the caller knows of the scan ([`ScanFacts`]): nothing it shows is computed
-//! anew but the fits' predictions at the measured points, for the plots. It loads
+//! anew but the fits' predictions at the measured points, for the plots, and the
+//! multi-angle colour of the scan's model. It loads
 //! nothing from the network: styles inline, plots as inline SVG.
 #![doc = include_str!("report.md")]
 

@@ -3,8 +3,6 @@
 //! another white (D50) is first adapted to D65 by the linear Bradford transform (CIE
 //! 160:2004's chromatic adaptation, as ICC profiles use it).
 
-use super::lab::lab_from_xyz;
-
 /// The D65 white of sRGB, XYZ with Y = 100 (IEC 61966-2-1: x = 0.3127, y = 0.3290).
 pub const SRGB_WHITE: [f64; 3] = [95.047, 100.0, 108.883];
 
@@ -51,7 +49,7 @@ fn apply(m: &[[f64; 3]; 3], v: [f64; 3]) -> [f64; 3] {
 }
 
 /// XYZ of `lab` relative to `white` (Y of the white 100): the inverse of
-/// [`lab_from_xyz`] (CIE 015:2018 §8.2.1).
+/// [`lab_from_xyz`](super::lab::lab_from_xyz) (CIE 015:2018 §8.2.1).
 pub fn xyz_from_lab(lab: [f64; 3], white: [f64; 3]) -> [f64; 3] {
     const D: f64 = 6.0 / 29.0;
     let f_inverse = |f: f64| {
@@ -115,31 +113,32 @@ pub fn swatch(lab: [f64; 3], white: [f64; 3]) -> Swatch {
     Swatch { rgb, in_gamut }
 }
 
-/// The Lab (relative to `white`) of 8-bit sRGB `rgb`: the inverse of [`swatch`] inside
-/// the gamut.
-pub fn lab_of_srgb(rgb: [u8; 3], white: [f64; 3]) -> [f64; 3] {
-    let decode = |c: u8| {
-        let v = f64::from(c) / 255.0;
-        if v <= 0.040_45 {
-            v / 12.92
-        } else {
-            ((v + 0.055) / 1.055).powf(2.4)
-        }
-    };
-    let linear = rgb.map(decode);
-    // Linear sRGB → XYZ (IEC 61966-2-1), Y = 100.
-    const LINEAR_SRGB_TO_XYZ: [[f64; 3]; 3] = [
-        [0.4124, 0.3576, 0.1805],
-        [0.2126, 0.7152, 0.0722],
-        [0.0193, 0.1192, 0.9505],
-    ];
-    let xyz = apply(&LINEAR_SRGB_TO_XYZ, linear).map(|v| v * 100.0);
-    lab_from_xyz(adapt(xyz, SRGB_WHITE, white), white)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::color::lab::lab_from_xyz;
+
+    /// The Lab (relative to `white`) of 8-bit sRGB `rgb`: the inverse of [`swatch`] inside
+    /// the gamut.
+    fn lab_of_srgb(rgb: [u8; 3], white: [f64; 3]) -> [f64; 3] {
+        let decode = |c: u8| {
+            let v = f64::from(c) / 255.0;
+            if v <= 0.040_45 {
+                v / 12.92
+            } else {
+                ((v + 0.055) / 1.055).powf(2.4)
+            }
+        };
+        let linear = rgb.map(decode);
+        // Linear sRGB → XYZ (IEC 61966-2-1), Y = 100.
+        const LINEAR_SRGB_TO_XYZ: [[f64; 3]; 3] = [
+            [0.4124, 0.3576, 0.1805],
+            [0.2126, 0.7152, 0.0722],
+            [0.0193, 0.1192, 0.9505],
+        ];
+        let xyz = apply(&LINEAR_SRGB_TO_XYZ, linear).map(|v| v * 100.0);
+        lab_from_xyz(adapt(xyz, SRGB_WHITE, white), white)
+    }
 
     /// D50 (ICC PCS white), Y = 100.
     const D50: [f64; 3] = [96.422, 100.0, 82.521];
