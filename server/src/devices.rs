@@ -277,6 +277,7 @@ pub fn open(config: &Config) -> anyhow::Result<Devices> {
             };
             let mut camera = EmulatedCamera::new(scene.clone(), world.clone(), capture);
             let facts = SceneFacts::of(&scene)?;
+            let frame = (facts.setup.image_width, facts.setup.image_height);
             let body = scene.camera();
             let mut scenes = samples.clone();
             scenes.insert(sample.clone(), spec.clone());
@@ -300,7 +301,12 @@ pub fn open(config: &Config) -> anyhow::Result<Devices> {
                 truth: Some(facts.truth),
                 sidecar: facts.sidecar,
                 iso: Some(body.iso),
-                timing: Timing { capture, ..timing },
+                timing: Timing {
+                    capture,
+                    rendered: true,
+                    ..timing
+                }
+                .with_frame(frame.0, frame.1),
                 emulators,
                 mount: Arc::new(mount),
             })
@@ -313,7 +319,10 @@ pub fn open(config: &Config) -> anyhow::Result<Devices> {
             truth: None,
             sidecar: SidecarDefaults::default(),
             iso: Some(*iso),
-            timing,
+            timing: match config.setup() {
+                Some(setup) => timing.with_frame(setup.image_width, setup.image_height),
+                None => timing,
+            },
             emulators: None,
             mount: Arc::new(Mount::unknown()),
         }),

@@ -168,6 +168,7 @@ where
         arm_reconnect: AtomicBool::new(false),
         confirming: tokio::sync::Mutex::new(()),
         timing: devices.timing,
+        costs: std::sync::OnceLock::new(),
         emulators: devices.emulators.clone(),
         mount: devices.mount.clone(),
         storage: storage::Probe {

@@ -1,19 +1,20 @@
 //! What a scan's journal says beyond its step counts: the θL captured and processed,
 //! the processing lane's current step, the live fits after each θL, and the time left
-//! (docs/ARCHITECTURE.md, "Daemon").
+//! (docs/ARCHITECTURE.md, "Daemon"; server/src/daemon.md, "Time left").
 //!
-//! Time left: every step not done is given its prior from the [`Timing`] model, scaled
-//! by how long the steps of its kind already done in this scan took against their
-//! priors (a kind this scan has not measured yet, such as the fits at its end, by what
-//! it took in the previous scan that ended done); a metering step not done brings the
-//! bracket the scan last metered (or a typical one). The lanes are then played
-//! forward: hardware steps one after the other, each processing step once the steps
-//! before it and the previous processing step are done, HDR merges beside them (the
-//! processing lane runs them in the background, one at a time). The estimate is when
-//! the last of them finishes.
+//! Time left: every step not done is given its prior from the [`Timing`] model at its
+//! place in the scan (its bracket's frames, its θL's rank, the θL count), scaled by how
+//! long the steps of its kind already done in this scan took against their priors (a
+//! kind this scan has not measured yet, such as the fits at its end, by what it took in
+//! the previous scan that ended done); a metering step not done brings the bracket the
+//! scan last metered (or a typical one). A θL's samples and HDR merge are one kind,
+//! measured by the time the lane was busy with them (they run side by side and share
+//! the cores). The lanes are then played forward: hardware steps one after the other,
+//! each processing step once the hardware steps before it and the processing before
+//! it are done. The estimate is when the last of them finishes, so processing that
+//! runs beside the hardware counts only where it ends later.
 
 use std::collections::HashMap;
-use std::mem::Discriminant;
 
 use serde::Serialize;
 use serde_json::Value;
@@ -21,7 +22,11 @@ use time::OffsetDateTime;
 
 use super::plan::{Lane, Step};
 use super::store::{StepRecord, StepState};
-use super::timing::Timing;
+use super::timing::{Place, Timing};
+
+/// What a step that has run longer than expected is still given, as a share of the
+/// time it has run: it is not about to end just because its prior said so.
+const OVERRUN_SHARE: f64 = 0.25;
 
 /// θL of a scan by how far their bracket got.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
@@ -50,43 +55,89 @@ fn parse_time(text: &str) -> Option<OffsetDateTime> {
     OffsetDateTime::parse(text, &time::format_description::well_known::Rfc3339).ok()
 }
 
-/// Seconds from `started` to `finished` (journal times), if both parse.
-fn seconds_between(started: Option<&str>, finished: Option<&str>) -> Option<f64> {
-    let (started, finished) = (parse_time(started?)?, parse_time(finished?)?);
-    Some((finished - started).as_seconds_f64().max(0.0))
+/// The kinds of step whose measured times scale the priors of the others.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+enum Kind {
+    Home,
+    Move,
+    Meter,
+    Capture,
+    /// A θL's samples and HDR merge.
+    Theta,
+    Extract,
+    Fit,
+}
+
+impl Kind {
+    fn of(step: &Step) -> Kind {
+        match step {
+            Step::Home => Kind::Home,
+            Step::Move { .. } => Kind::Move,
+            Step::Meter { .. } => Kind::Meter,
+            Step::Capture { .. } => Kind::Capture,
+            Step::Samples { .. } | Step::Hdr { .. } => Kind::Theta,
+            Step::Extract => Kind::Extract,
+            Step::Fit { .. } => Kind::Fit,
+        }
+    }
+}
+
+/// Seconds covered by the union of `intervals` (start, end).
+fn covered_s(mut intervals: Vec<(OffsetDateTime, OffsetDateTime)>) -> f64 {
+    intervals.sort_by_key(|i| i.0);
+    let mut total = 0.0;
+    let mut reach: Option<OffsetDateTime> = None;
+    for (start, end) in intervals {
+        let from = reach.map_or(start, |r| r.max(start));
+        if end > from {
+            total += (end - from).as_seconds_f64();
+        }
+        reach = Some(reach.map_or(end, |r| r.max(end)));
+    }
+    total
 }
 
 /// Measured over prior seconds of the done steps of each kind.
 #[derive(Default)]
 struct Calibration {
-    sums: HashMap<Discriminant<Step>, (f64, f64)>,
+    sums: HashMap<Kind, (f64, f64)>,
 }
 
 impl Calibration {
-    /// What the done steps of `steps` (one scan's journal) took against their priors.
+    /// What the done steps of `steps` (one scan's journal) took against their priors;
+    /// a θL's samples and HDR steps by the time any of them ran.
     fn of(steps: &[StepRecord], timing: &Timing) -> Self {
         let mut calibration = Calibration::default();
-        for (record, from) in steps.iter().zip(arm_angles(steps)) {
+        let places = places(steps, timing);
+        let mut theta_runs = Vec::new();
+        for ((record, from), place) in steps.iter().zip(arm_angles(steps)).zip(&places) {
             if record.state != StepState::Done {
                 continue;
             }
-            let measured = seconds_between(record.started.as_deref(), record.finished.as_deref());
-            if let Some(measured) = measured {
-                calibration.add(&record.step, measured, timing.prior_s(&record.step, from));
+            let started = record.started.as_deref().and_then(parse_time);
+            let finished = record.finished.as_deref().and_then(parse_time);
+            let (Some(started), Some(finished)) = (started, finished) else {
+                continue;
+            };
+            let prior = timing.prior_s(&record.step, from, place);
+            let kind = Kind::of(&record.step);
+            let sum = calibration.sums.entry(kind).or_default();
+            sum.1 += prior;
+            if kind == Kind::Theta {
+                theta_runs.push((started, finished.max(started)));
+            } else {
+                sum.0 += (finished - started).as_seconds_f64().max(0.0);
             }
+        }
+        if let Some(sum) = calibration.sums.get_mut(&Kind::Theta) {
+            sum.0 = covered_s(theta_runs);
         }
         calibration
     }
 
-    fn add(&mut self, step: &Step, measured_s: f64, prior_s: f64) {
-        let sum = self.sums.entry(std::mem::discriminant(step)).or_default();
-        sum.0 += measured_s;
-        sum.1 += prior_s;
-    }
-
     /// Measured over prior seconds of `step`'s kind, if measured.
     fn ratio(&self, step: &Step) -> Option<f64> {
-        match self.sums.get(&std::mem::discriminant(step)) {
+        match self.sums.get(&Kind::of(step)) {
             Some(&(measured, prior)) if prior > 0.0 => Some(measured / prior),
             _ => None,
         }
@@ -108,10 +159,68 @@ fn arm_angles(steps: &[StepRecord]) -> Vec<f64> {
     from_deg
 }
 
+/// Each step's place in its scan: the θL count, its θL's rank in acquisition order,
+/// the frames of its bracket (the captures journalled for it, else those of the
+/// bracket the scan last metered, else a typical bracket's).
+fn places(steps: &[StepRecord], timing: &Timing) -> Vec<Place> {
+    let mut thetas: Vec<(f64, usize)> = Vec::new();
+    for record in steps {
+        let Some(theta_l) = record.step.theta_l() else {
+            continue;
+        };
+        let index = match thetas.iter().position(|(t, _)| *t == theta_l) {
+            Some(index) => index,
+            None => {
+                thetas.push((theta_l, 0));
+                thetas.len() - 1
+            }
+        };
+        if matches!(record.step, Step::Capture { .. }) {
+            thetas[index].1 += 1;
+        }
+    }
+    let metered = steps
+        .iter()
+        .rev()
+        .filter(|r| r.state == StepState::Done)
+        .find_map(metered_bracket)
+        .map_or(timing.expected_frames(), |bracket| bracket.len());
+    steps
+        .iter()
+        .map(|record| {
+            let rank = record
+                .step
+                .theta_l()
+                .and_then(|t| thetas.iter().position(|(theta, _)| *theta == t));
+            let frames = rank.map_or(0, |i| thetas[i].1);
+            Place {
+                theta_count: thetas.len(),
+                theta_rank: rank.map_or(thetas.len(), |i| i + 1),
+                frames: if frames > 0 { frames } else { metered },
+            }
+        })
+        .collect()
+}
+
 /// The shutter times a done metering step planned (its result's `shutter_s`).
 pub fn metered_bracket(record: &StepRecord) -> Option<Vec<f64>> {
     let list = record.result.as_ref()?.get("shutter_s")?.as_array()?;
     list.iter().map(Value::as_f64).collect()
+}
+
+/// Seconds still expected of work expected to take `expected_s` that has run for
+/// `elapsed_s`; past its expectation, a share of the time it has run.
+fn left_of(expected_s: f64, elapsed_s: f64) -> f64 {
+    (expected_s - elapsed_s).max(OVERRUN_SHARE * elapsed_s.max(0.0))
+}
+
+/// Seconds since a started step began (0 if its time does not parse).
+fn elapsed_s(record: &StepRecord, now: OffsetDateTime) -> f64 {
+    record
+        .started
+        .as_deref()
+        .and_then(parse_time)
+        .map_or(0.0, |started| (now - started).as_seconds_f64())
 }
 
 /// The progress of a scan from its journal (`steps` in index order) at `now`;
@@ -124,6 +233,7 @@ pub fn progress(
     now: OffsetDateTime,
 ) -> Progress {
     let from_deg = arm_angles(steps);
+    let places = places(steps, timing);
     let (own, before) = (
         Calibration::of(steps, timing),
         Calibration::of(earlier, timing),
@@ -142,34 +252,45 @@ pub fn progress(
         scale(&any_capture, prior_s)
     };
     let mut bracket_s = capture_scale(timing.expected_bracket_s());
-    let (mut hardware_s, mut processing_s, mut hdr_s) = (0.0_f64, 0.0_f64, 0.0_f64);
-    for (record, &from) in steps.iter().zip(&from_deg) {
+    // The processing steps under way run side by side: together they are expected to
+    // take the sum of their expectations, less the time since the first began.
+    let (mut running_s, mut running_since) = (0.0_f64, 0.0_f64);
+    for ((record, &from), place) in steps.iter().zip(&from_deg).zip(&places) {
+        if record.state == StepState::Started && record.step.lane() == Lane::Processing {
+            running_s += scale(&record.step, timing.prior_s(&record.step, from, place));
+            running_since = running_since.max(elapsed_s(record, now));
+        }
+    }
+    let mut processing_s = if running_s > 0.0 || running_since > 0.0 {
+        left_of(running_s, running_since)
+    } else {
+        0.0
+    };
+    let mut hardware_s = 0.0_f64;
+    for ((record, &from), place) in steps.iter().zip(&from_deg).zip(&places) {
         if record.state == StepState::Done {
             if let Some(bracket) = metered_bracket(record) {
                 bracket_s = capture_scale(bracket.iter().map(|&s| timing.capture_s(s)).sum());
             }
             continue;
         }
-        let mut left_s = scale(&record.step, timing.prior_s(&record.step, from));
-        if record.state == StepState::Started {
-            let elapsed = record
-                .started
-                .as_deref()
-                .and_then(parse_time)
-                .map_or(0.0, |started| (now - started).as_seconds_f64());
-            left_s = (left_s - elapsed).max(0.0);
-        }
+        let started = record.state == StepState::Started;
         match record.step.lane() {
+            Lane::Processing if started => {}
+            Lane::Processing => {
+                let left_s = scale(&record.step, timing.prior_s(&record.step, from, place));
+                processing_s = processing_s.max(hardware_s) + left_s;
+            }
             Lane::Hardware => {
+                let mut left_s = scale(&record.step, timing.prior_s(&record.step, from, place));
+                if started {
+                    left_s = left_of(left_s, elapsed_s(record, now));
+                }
                 hardware_s += left_s;
                 if matches!(record.step, Step::Meter { .. }) {
                     hardware_s += bracket_s;
                 }
             }
-            Lane::Processing if matches!(record.step, Step::Hdr { .. }) => {
-                hdr_s = hdr_s.max(hardware_s) + left_s;
-            }
-            Lane::Processing => processing_s = processing_s.max(hardware_s) + left_s,
         }
     }
     Progress {
@@ -178,7 +299,7 @@ pub fn progress(
             .iter()
             .find(|s| s.step.lane() == Lane::Processing && s.state == StepState::Started)
             .map(|s| s.step.describe()),
-        eta_s: hardware_s.max(processing_s).max(hdr_s),
+        eta_s: hardware_s.max(processing_s),
         live: steps
             .iter()
             .filter(|s| s.state == StepState::Done && matches!(s.step, Step::Samples { .. }))
@@ -220,11 +341,11 @@ fn theta_progress(steps: &[StepRecord]) -> ThetaProgress {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plan::{ScanPlan, AUTO_FIT, FINAL_FITS, FIT_MODELS};
+    use crate::plan::{ScanPlan, AUTO_FIT, FIT_MODELS};
     use serde_json::json;
     use time::Duration;
 
-    /// Real-time devices: the hardware lane is the slower one.
+    /// Real-time devices.
     fn timing() -> Timing {
         Timing::real()
     }
@@ -276,6 +397,17 @@ mod tests {
         }
     }
 
+    /// The prior of `step` in a scan of `thetas` θL with 2-frame brackets, at θL rank
+    /// `rank`.
+    fn prior(timing: &Timing, step: &Step, from: f64, thetas: usize, rank: usize) -> f64 {
+        let place = Place {
+            theta_count: thetas,
+            theta_rank: rank,
+            frames: 2,
+        };
+        timing.prior_s(step, from, &place)
+    }
+
     #[test]
     fn time_left_plays_both_lanes_forward_and_learns_from_done_steps() {
         let timing = timing();
@@ -283,35 +415,29 @@ mod tests {
         let fixed = plan(false);
         let fresh = journal(&fixed, 0, now, |_| 0.0);
         let full = progress(&fresh, &[], &timing, now);
-        // Nothing done: every hardware prior, then the last θL's processing and the
-        // extraction and fits after the hardware, its HDR merge beside them.
-        let hardware: f64 = fresh
-            .iter()
-            .scan(0.0, |at, r| {
-                let from = *at;
-                if let Step::Move { theta_l } = r.step {
-                    *at = theta_l;
-                }
-                Some((r.step.lane() == Lane::Hardware).then(|| timing.prior_s(&r.step, from)))
-            })
-            .flatten()
-            .sum();
-        let tail = timing.prior_s(&Step::Samples { theta_l: 0.0 }, 0.0)
-            + timing.prior_s(&Step::Extract, 0.0)
-            + FIT_MODELS
-                .iter()
-                .chain([&AUTO_FIT])
-                .map(|(model, _)| {
-                    timing.prior_s(
-                        &Step::Fit {
-                            model: (*model).into(),
-                        },
-                        0.0,
-                    )
-                })
-                .sum::<f64>();
-        let tail = tail.max(timing.prior_s(&Step::Hdr { theta_l: 0.0 }, 0.0));
-        assert!((full.eta_s - (hardware + tail)).abs() < 1e-9, "{full:?}");
+        // Nothing done: each θL's processing once its bracket is captured and the
+        // processing before it is done, then the extraction and the fits.
+        let (mut hardware, mut processing, mut from) = (0.0_f64, 0.0_f64, 0.0);
+        hardware += prior(&timing, &Step::Home, 0.0, 3, 3);
+        for (rank, &theta_l) in fixed.theta_l.iter().enumerate() {
+            hardware += prior(&timing, &Step::Move { theta_l }, from, 3, rank + 1);
+            from = theta_l;
+            for &shutter_s in &fixed.shutter_s {
+                hardware += timing.capture_s(shutter_s);
+            }
+            processing = processing.max(hardware)
+                + prior(&timing, &Step::Samples { theta_l }, 0.0, 3, rank + 1)
+                + prior(&timing, &Step::Hdr { theta_l }, 0.0, 3, rank + 1);
+        }
+        processing += prior(&timing, &Step::Extract, 0.0, 3, 3);
+        for (model, _) in FIT_MODELS.iter().chain([&AUTO_FIT]) {
+            let fit = Step::Fit {
+                model: (*model).into(),
+            };
+            processing += prior(&timing, &fit, 0.0, 3, 3);
+        }
+        let expected = hardware.max(processing);
+        assert!((full.eta_s - expected).abs() < 1e-9, "{full:?} vs {expected}");
         assert_eq!(
             full.theta_l,
             ThetaProgress {
@@ -320,8 +446,7 @@ mod tests {
                 total: 3
             }
         );
-        // Captures that took twice their prior make the remaining ones count double;
-        // the time left shrinks as steps get done.
+        // Captures that took twice their prior make the remaining ones count double.
         let slow = |step: &Step| match step {
             Step::Capture { shutter_s, .. } => 2.0 * timing.capture_s(*shutter_s),
             _ => 0.01,
@@ -330,11 +455,49 @@ mod tests {
         let later = progress(&first_theta, &[], &timing, now);
         let captures_left = 4.0 * (timing.capture_s(0.5) + timing.capture_s(0.05)) / 2.0;
         assert!(later.eta_s > 2.0 * captures_left, "{later:?}");
-        assert!(later.eta_s < full.eta_s + 2.0 * captures_left);
         assert_eq!(later.theta_l.captured, 1);
         let end = journal(&fixed, fixed.steps().len(), now, |_| 0.1);
         assert_eq!(progress(&end, &[], &timing, now).eta_s, 0.0);
         assert_eq!(progress(&end, &[], &timing, now).theta_l.processed, 3);
+    }
+
+    #[test]
+    fn a_theta_s_processing_is_measured_by_the_time_the_lane_was_busy() {
+        let timing = timing();
+        let now = OffsetDateTime::now_utc();
+        let fixed = plan(false);
+        // θL −20 captured, its samples (4 s) and HDR merge (6 s) run side by side.
+        let mut steps = journal(&fixed, 4, now - Duration::seconds(60), |_| 0.5);
+        let t0 = now - Duration::seconds(20);
+        for (record, took) in steps[4..6].iter_mut().zip([4.0, 6.0]) {
+            record.state = StepState::Done;
+            record.started = at(t0, 0.0);
+            record.finished = at(t0, took);
+        }
+        let own = Calibration::of(&steps, &timing);
+        let priors = prior(&timing, &steps[4].step, 0.0, 3, 1)
+            + prior(&timing, &steps[5].step, 0.0, 3, 1);
+        let ratio = own.ratio(&Step::Hdr { theta_l: -25.0 }).unwrap();
+        assert!((ratio - 6.0 / priors).abs() < 1e-9, "{ratio} vs {}", 6.0 / priors);
+        assert_eq!(covered_s(vec![]), 0.0);
+    }
+
+    #[test]
+    fn a_step_past_its_expectation_is_never_counted_as_ending_now() {
+        let timing = timing();
+        let now = OffsetDateTime::now_utc();
+        let fixed = plan(false);
+        let last = fixed.steps().len() - 1;
+        let mut steps = journal(&fixed, last, now - Duration::seconds(600), |_| 0.1);
+        // The auto fit has run for 100 s, far past its prior.
+        let fit = &mut steps[last];
+        assert!(matches!(&fit.step, Step::Fit { model } if model == AUTO_FIT.0));
+        fit.state = StepState::Started;
+        fit.started = at(now, -100.0);
+        let left = progress(&steps, &[], &timing, now).eta_s;
+        assert!((left - OVERRUN_SHARE * 100.0).abs() < 1e-6, "{left}");
+        // Within its expectation it counts down.
+        assert_eq!(left_of(10.0, 4.0), 6.0);
     }
 
     #[test]
@@ -362,22 +525,23 @@ mod tests {
             }
         }
         let informed = progress(&fresh, &earlier, &timing, now).eta_s;
-        let fits = FINAL_FITS as f64;
-        let prior = |step: Step| timing.prior_s(&step, 0.0);
-        let fit_prior = prior(Step::Fit {
-            model: "ward".into(),
-        });
-        let (samples, extract) = (prior(Step::Samples { theta_l: 0.0 }), prior(Step::Extract));
-        // After the hardware: the last θL's samples, the extraction and the fits, its
-        // HDR merge beside them.
-        let hardware =
-            alone - (samples + extract + fits * fit_prior).max(prior(Step::Hdr { theta_l: 0.0 }));
+        let fits: Vec<Step> = FIT_MODELS
+            .iter()
+            .chain([&AUTO_FIT])
+            .map(|(model, _)| Step::Fit {
+                model: (*model).into(),
+            })
+            .collect();
+        let fit_priors: f64 = fits.iter().map(|f| prior(&timing, f, 0.0, 3, 3)).sum();
+        // The fits end the scan: they count as the earlier scan measured them, at its
+        // ratio of measured to prior seconds.
+        let ratio = fits.len() as f64 * fit_s / fit_priors;
         assert!(
-            (informed - (hardware + samples + extract + fits * fit_s)).abs() < 1e-6,
+            (informed - (alone + fit_priors * (ratio - 1.0))).abs() < 1e-6,
             "{informed} vs {alone}"
         );
         // What this scan measured itself wins over the earlier scan: its last fit is
-        // expected to take the 1 s its other fits took.
+        // expected to take what its other fits took against their priors.
         let own = journal(
             &fixed,
             fixed.steps().len() - 1,
@@ -387,9 +551,10 @@ mod tests {
                 _ => 0.1,
             },
         );
-        assert!(matches!(own.last().unwrap().step, Step::Fit { .. }));
+        let done_priors: f64 = fits[..3].iter().map(|f| prior(&timing, f, 0.0, 3, 3)).sum();
         let left = progress(&own, &earlier, &timing, now).eta_s;
-        assert!((left - 1.0).abs() < 1e-6, "{left}");
+        let expected = prior(&timing, &fits[3], 0.0, 3, 3) * 3.0 / done_priors;
+        assert!((left - expected).abs() < 1e-6, "{left} vs {expected}");
     }
 
     #[test]

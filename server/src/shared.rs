@@ -4,7 +4,7 @@
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64};
-use std::sync::{mpsc, Arc, Mutex};
+use std::sync::{mpsc, Arc, Mutex, OnceLock};
 
 use gonio_drivers::{ArmState, DeviceError, EmergencyStop, LiveAngle};
 use serde::Serialize;
@@ -16,7 +16,7 @@ use super::mount::Mount;
 use super::storage::Probe;
 use super::store::{ScanState, Store};
 use super::sync::Mailbox;
-use super::timing::Timing;
+use super::timing::{Costs, Timing};
 
 /// Why a scan is paused after `POST /api/arm/stop`.
 pub const EMERGENCY_STOP: &str = "emergency stop by the operator";
@@ -135,8 +135,10 @@ pub struct Shared {
     /// Held while a confirmation mounts a sample: concurrent confirmations of a scan
     /// mount it once (the others find it no longer waiting).
     pub confirming: tokio::sync::Mutex<()>,
-    /// What the devices' steps are expected to take.
+    /// What the devices' steps are expected to take, with the stated processing costs.
     pub timing: Timing,
+    /// What processing costs on this machine, once measured (or read from the cache).
+    pub costs: OnceLock<Costs>,
     /// Present when the devices are emulated.
     pub emulators: Option<Arc<Emulators>>,
     /// The sample on the cylinder.
@@ -149,6 +151,12 @@ impl Shared {
     /// Directory of scan `id`.
     pub fn scan_dir(&self, id: i64) -> PathBuf {
         scan_dir(&self.config.data_dir, id)
+    }
+
+    /// The timing model as it stands: this machine's processing costs once measured.
+    pub fn timing_now(&self) -> Timing {
+        let costs = self.costs.get().copied().unwrap_or(self.timing.costs);
+        Timing { costs, ..self.timing }
     }
 
     /// Wakes both lanes (the queue or a scan's state changed).

@@ -1,12 +1,16 @@
 //! The timing model a scan's time left is estimated from (docs/ARCHITECTURE.md,
-//! "Daemon"): arm moves under the controller's trapezoidal motion profile, captures as
-//! shutter time plus download latency, processing steps from fixed priors. Times are
-//! wall-clock seconds.
+//! "Daemon"; server/src/daemon.md, "Time left"): arm moves under the controller's
+//! trapezoidal motion profile, captures as shutter time plus download latency (and an
+//! emulated camera's rendering), processing steps from what processing costs on this
+//! machine per unit of work ([`Costs`]: measured at the daemon's first start, else the
+//! stated defaults) times the scan's frame size, bracket, θL count and models. Times
+//! are wall-clock seconds.
 
 use gonio_mock_hw::camera::CaptureTiming;
 use gonio_mock_hw::grbl::{move_duration_s, GrblConfig};
+use serde::{Deserialize, Serialize};
 
-use super::plan::Step;
+use super::plan::{Step, AUTO_FIT, FIT_MODELS};
 
 /// Metering shutter time, seconds (the allowed one at or below it is used).
 pub const METER_START_S: f64 = 1.0 / 60.0;
@@ -14,12 +18,77 @@ pub const METER_START_S: f64 = 1.0 / 60.0;
 const EXPECTED_BRACKET_S: [f64; 4] = [0.25, 1.0 / 15.0, 1.0 / 60.0, 1.0 / 250.0];
 /// A homing cycle in controller seconds.
 const HOMING_S: f64 = 3.0;
-/// Processing priors, seconds: one θL's samples and live fits, one full-frame HDR map,
-/// gathering the samples, one fit. Replaced by measurement after the first of each.
-const SAMPLES_S: f64 = 0.2;
-const HDR_S: f64 = 1.0;
-const EXTRACT_S: f64 = 0.1;
-const FIT_S: f64 = 0.05;
+/// The frame size assumed when the setup gives none: a full-size 3872×2592 frame.
+const DEFAULT_FRAME: (u32, u32) = (3872, 2592);
+
+/// What processing costs on this machine per unit of work, seconds. Measured by the
+/// timing probe at the daemon's first start (`lanes/timing_probe.rs`, cached in
+/// DATA/processing-costs.json); [`Costs::DEFAULT`] until then.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Costs {
+    /// Rendering and writing one emulated frame, seconds per megapixel.
+    pub frame_s_per_mpx: f64,
+    /// An HDR merge (decoding, merging, writing the map), seconds per megapixel per
+    /// frame of the bracket.
+    pub hdr_s_per_mpx_frame: f64,
+    /// A samples step's extraction, seconds per megapixel per frame of the bracket.
+    pub samples_s_per_mpx_frame: f64,
+    /// A samples step's live fits, seconds per sample point fitted (every θL so far).
+    pub live_fit_s_per_point: f64,
+    /// Sample points one θL yields per pixel column of the frame.
+    pub points_per_column: f64,
+    /// Gathering `samples.csv`, seconds per point.
+    pub extract_s_per_point: f64,
+    /// Each final fit of [`FIT_MODELS`], in that order, seconds per point.
+    pub fit_s_per_point: [f64; 3],
+    /// The [`AUTO_FIT`] (every candidate, each θL held out in turn, the budget),
+    /// seconds per point per θL.
+    pub auto_s_per_point_theta: f64,
+}
+
+impl Costs {
+    /// The stated defaults: a debug build of the daemon on one core of a 2-core
+    /// virtual machine, measured by the timing probe there. Used until this machine's
+    /// own measurement is in.
+    pub const DEFAULT: Costs = Costs {
+        frame_s_per_mpx: 0.12,
+        hdr_s_per_mpx_frame: 0.2,
+        samples_s_per_mpx_frame: 0.1,
+        live_fit_s_per_point: 2.0e-4,
+        points_per_column: 0.36,
+        extract_s_per_point: 2.0e-5,
+        fit_s_per_point: [6.0e-4, 6.0e-4, 7.0e-4],
+        auto_s_per_point_theta: 4.0e-4,
+    };
+
+    /// Whether every cost is a finite number ≥ 0 (a cache that says otherwise is
+    /// measured again).
+    pub fn is_valid(&self) -> bool {
+        [
+            self.frame_s_per_mpx,
+            self.hdr_s_per_mpx_frame,
+            self.samples_s_per_mpx_frame,
+            self.live_fit_s_per_point,
+            self.points_per_column,
+            self.extract_s_per_point,
+            self.auto_s_per_point_theta,
+        ]
+        .iter()
+        .chain(&self.fit_s_per_point)
+        .all(|c| c.is_finite() && *c >= 0.0)
+    }
+}
+
+/// Where a step sits in its scan, for the priors that depend on it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Place {
+    /// θL in the scan.
+    pub theta_count: usize,
+    /// θL up to and including this step's (a samples step fits every one of them).
+    pub theta_rank: usize,
+    /// Frames of this step's bracket (known, or expected before metering).
+    pub frames: usize,
+}
 
 /// What the devices' steps take, before any is measured.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -32,6 +101,12 @@ pub struct Timing {
     pub arm_time_scale: f64,
     /// The camera's capture timing (its own time scale included).
     pub capture: CaptureTiming,
+    /// Whether the camera is emulated: its frames are rendered on this machine.
+    pub rendered: bool,
+    /// Frame width and height, pixels.
+    pub frame: (u32, u32),
+    /// What processing costs on this machine.
+    pub costs: Costs,
 }
 
 impl Timing {
@@ -42,6 +117,9 @@ impl Timing {
             arm_accel_deg_per_s2: grbl.accel_deg_per_s2,
             arm_time_scale: grbl.time_scale,
             capture,
+            rendered: false,
+            frame: DEFAULT_FRAME,
+            costs: Costs::DEFAULT,
         }
     }
 
@@ -57,9 +135,41 @@ impl Timing {
         )
     }
 
-    /// Expected seconds of one capture at `shutter_s`.
+    /// This timing with frames of `width`×`height` pixels (0 keeps the default).
+    pub fn with_frame(self, width: u32, height: u32) -> Self {
+        let frame = if width > 0 && height > 0 {
+            (width, height)
+        } else {
+            DEFAULT_FRAME
+        };
+        Timing { frame, ..self }
+    }
+
+    /// Megapixels of a frame.
+    fn mpx(&self) -> f64 {
+        f64::from(self.frame.0) * f64::from(self.frame.1) / 1e6
+    }
+
+    /// Sample points one θL is expected to yield.
+    fn points_per_theta(&self) -> f64 {
+        self.costs.points_per_column * f64::from(self.frame.0)
+    }
+
+    /// Expected seconds of one capture at `shutter_s`: the exposure and download, or
+    /// an emulated frame's rendering and writing if that takes longer (the emulator
+    /// renders while the exposure runs).
     pub fn capture_s(&self, shutter_s: f64) -> f64 {
-        self.capture.capture_duration_s(shutter_s)
+        let exposure = self.capture.capture_duration_s(shutter_s);
+        if self.rendered {
+            exposure.max(self.costs.frame_s_per_mpx * self.mpx())
+        } else {
+            exposure
+        }
+    }
+
+    /// Frames of the bracket a θL is expected to need before its metering says.
+    pub fn expected_frames(&self) -> usize {
+        EXPECTED_BRACKET_S.len()
     }
 
     /// Expected seconds of the captures of a bracket the scan has not metered yet.
@@ -67,8 +177,9 @@ impl Timing {
         EXPECTED_BRACKET_S.iter().map(|&s| self.capture_s(s)).sum()
     }
 
-    /// Expected seconds of `step` with the arm at `from_deg` before it.
-    pub fn prior_s(&self, step: &Step, from_deg: f64) -> f64 {
+    /// Expected seconds of `step` at `place` in its scan, with the arm at `from_deg`
+    /// before it.
+    pub fn prior_s(&self, step: &Step, from_deg: f64, place: &Place) -> f64 {
         let travel_s = |to_deg: f64| {
             move_duration_s(
                 to_deg - from_deg,
@@ -76,15 +187,33 @@ impl Timing {
                 self.arm_accel_deg_per_s2,
             ) * self.arm_time_scale
         };
+        let costs = &self.costs;
+        let bracket_mpx = self.mpx() * place.frames as f64;
+        let points = self.points_per_theta() * place.theta_count as f64;
         match step {
             Step::Home => travel_s(0.0) + HOMING_S * self.arm_time_scale,
             Step::Move { theta_l } => travel_s(*theta_l),
-            Step::Meter { .. } => self.capture_s(METER_START_S),
+            // A capture, then reading its frame to choose the bracket.
+            Step::Meter { .. } => {
+                self.capture_s(METER_START_S) + costs.samples_s_per_mpx_frame * self.mpx()
+            }
             Step::Capture { shutter_s, .. } => self.capture_s(*shutter_s),
-            Step::Samples { .. } => SAMPLES_S,
-            Step::Hdr { .. } => HDR_S,
-            Step::Extract => EXTRACT_S,
-            Step::Fit { .. } => FIT_S,
+            Step::Samples { .. } => {
+                costs.samples_s_per_mpx_frame * bracket_mpx
+                    + costs.live_fit_s_per_point
+                        * self.points_per_theta()
+                        * place.theta_rank as f64
+            }
+            Step::Hdr { .. } => costs.hdr_s_per_mpx_frame * bracket_mpx,
+            Step::Extract => costs.extract_s_per_point * points,
+            Step::Fit { model } if model == AUTO_FIT.0 => {
+                costs.auto_s_per_point_theta * points * place.theta_count as f64
+            }
+            Step::Fit { model } => {
+                let index = FIT_MODELS.iter().position(|(name, _)| name == model);
+                let per_point = index.map_or(costs.fit_s_per_point[0], |i| costs.fit_s_per_point[i]);
+                per_point * points
+            }
         }
     }
 }
@@ -103,20 +232,71 @@ mod tests {
             time_scale: 0.1,
             ..CaptureTiming::default()
         };
+        let place = Place {
+            theta_count: 6,
+            theta_rank: 1,
+            frames: 2,
+        };
         let fast = Timing::emulated(&grbl, capture);
         let real = Timing::real();
         let move_20 = Step::Move { theta_l: -20.0 };
         let expected = move_duration_s(20.0, 1200.0, 40.0);
-        assert!((real.prior_s(&move_20, 0.0) - expected).abs() < 1e-12);
-        assert!((fast.prior_s(&move_20, 0.0) - 0.1 * expected).abs() < 1e-12);
-        assert_eq!(fast.prior_s(&move_20, -20.0), 0.0);
+        assert!((real.prior_s(&move_20, 0.0, &place) - expected).abs() < 1e-12);
+        assert!((fast.prior_s(&move_20, 0.0, &place) - 0.1 * expected).abs() < 1e-12);
+        assert_eq!(fast.prior_s(&move_20, -20.0, &place), 0.0);
         let capture = Step::Capture {
             theta_l: -20.0,
             index: 0,
             shutter_s: 0.5,
         };
-        assert!((fast.prior_s(&capture, 0.0) - 0.1 * (0.5 + 1.5)).abs() < 1e-12);
+        assert!((fast.prior_s(&capture, 0.0, &place) - 0.1 * (0.5 + 1.5)).abs() < 1e-12);
         assert!(real.expected_bracket_s() > 4.0 * 1.5);
-        assert_eq!(fast.prior_s(&Step::Extract, 0.0), EXTRACT_S);
+        // An emulated camera's frame takes at least its rendering.
+        let rendered = Timing {
+            rendered: true,
+            ..fast
+        };
+        let render_s = Costs::DEFAULT.frame_s_per_mpx * 3872.0 * 2592.0 / 1e6;
+        assert!((rendered.prior_s(&capture, 0.0, &place) - render_s.max(0.2)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn processing_priors_scale_with_frames_points_and_models() {
+        let timing = Timing::real();
+        let place = |theta_count, theta_rank, frames| Place {
+            theta_count,
+            theta_rank,
+            frames,
+        };
+        let hdr = Step::Hdr { theta_l: -20.0 };
+        let two = timing.prior_s(&hdr, 0.0, &place(6, 1, 2));
+        assert!(two > 0.0);
+        assert!((timing.prior_s(&hdr, 0.0, &place(6, 1, 4)) - 2.0 * two).abs() < 1e-9);
+        let small = timing.with_frame(968, 648);
+        assert!((small.prior_s(&hdr, 0.0, &place(6, 1, 2)) - two / 16.0).abs() < 1e-9);
+        // A later θL's live fits cover more points.
+        let samples = Step::Samples { theta_l: -25.0 };
+        assert!(
+            timing.prior_s(&samples, 0.0, &place(6, 2, 2))
+                > timing.prior_s(&samples, 0.0, &place(6, 1, 2))
+        );
+        // The automatic choice grows with the θL it holds out in turn.
+        let auto = Step::Fit {
+            model: AUTO_FIT.0.into(),
+        };
+        let ward = Step::Fit {
+            model: "ward".into(),
+        };
+        let ratio = |count| {
+            timing.prior_s(&auto, 0.0, &place(count, count, 2))
+                / timing.prior_s(&ward, 0.0, &place(count, count, 2))
+        };
+        assert!((ratio(6) - 2.0 * ratio(3)).abs() < 1e-9);
+        assert!(Costs::DEFAULT.is_valid());
+        let broken = Costs {
+            hdr_s_per_mpx_frame: f64::NAN,
+            ..Costs::DEFAULT
+        };
+        assert!(!broken.is_valid());
     }
 }

@@ -131,7 +131,7 @@ pub fn scan_view(
     };
     let journal = steps.as_ref().filter(|_| detail || active).map(|steps| {
         let now = time::OffsetDateTime::now_utc();
-        progress(steps, &earlier, &shared.timing, now)
+        progress(steps, &earlier, &shared.timing_now(), now)
     });
     // Time left only while the scan runs: a queued, paused, waiting or interrupted
     // scan has no end to count down to.

@@ -8,6 +8,7 @@ mod backoff;
 mod hardware;
 mod processing;
 mod step;
+mod timing_probe;
 
 use std::path::Path;
 use std::sync::Arc;
@@ -37,9 +38,11 @@ pub fn start(shared: Arc<Shared>, devices: Devices, db_path: &Path) -> anyhow::R
     arm_watch::spawn(shared.clone(), devices.arm.path().to_path_buf())?;
     let hardware_store = Store::open(db_path)?;
     let hardware = HardwareLane::new(shared.clone(), hardware_store, devices);
+    let probe = shared.clone();
     let processing = ProcessingLane::new(shared, Store::open(db_path)?);
     spawn_watched(Lane::Hardware, move || hardware.run())?;
-    spawn_watched(Lane::Processing, move || processing.run())
+    spawn_watched(Lane::Processing, move || processing.run())?;
+    timing_probe::start(probe)
 }
 
 /// Runs `run` on a thread named for `lane`, marked as that lane's. A lane only ends by

@@ -296,7 +296,7 @@ const NICER_BY: i32 = 10;
 
 /// Lowers the calling thread's scheduling priority by [`NICER_BY`] (on Linux the nice
 /// value is per thread); a failure leaves it as it is.
-fn lower_priority() {
+pub(super) fn lower_priority() {
     #[cfg(unix)]
     // SAFETY: getpriority and setpriority only read and set the calling thread's nice
     // value; errors are reported through the return value, which is ignored (the
