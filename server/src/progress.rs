@@ -110,6 +110,7 @@ impl Calibration {
         let mut calibration = Calibration::default();
         let places = places(steps, timing);
         let mut theta_runs = Vec::new();
+        let mut others = Vec::new();
         for ((record, from), place) in steps.iter().zip(arm_angles(steps)).zip(&places) {
             if record.state != StepState::Done {
                 continue;
@@ -123,11 +124,20 @@ impl Calibration {
             let kind = Kind::of(&record.step);
             let sum = calibration.sums.entry(kind).or_default();
             sum.1 += prior;
-            if kind == Kind::Theta {
-                theta_runs.push((started, finished.max(started)));
-            } else {
-                sum.0 += (finished - started).as_seconds_f64().max(0.0);
+            match (kind, record.step.lane()) {
+                (Kind::Theta, _) => theta_runs.push((started, finished.max(started))),
+                (_, Lane::Processing) => others.push((kind, started, finished.max(started))),
+                _ => sum.0 += (finished - started).as_seconds_f64().max(0.0),
             }
+        }
+        // Another processing step beside a θL's merge had half the cores meanwhile.
+        for (kind, started, finished) in others {
+            let beside: f64 = theta_runs
+                .iter()
+                .map(|&(s, f)| (f.min(finished) - s.max(started)).as_seconds_f64().max(0.0))
+                .sum();
+            let took = (finished - started).as_seconds_f64();
+            calibration.sums.entry(kind).or_default().0 += (took - 0.5 * beside).max(0.0);
         }
         if let Some(sum) = calibration.sums.get_mut(&Kind::Theta) {
             sum.0 = covered_s(theta_runs);

@@ -15,7 +15,9 @@ use super::plan::{Step, AUTO_FIT, FIT_MODELS};
 /// Metering shutter time, seconds (the allowed one at or below it is used).
 pub const METER_START_S: f64 = 1.0 / 60.0;
 /// The bracket a θL is expected to need before its metering says (seconds).
-const EXPECTED_BRACKET_S: [f64; 4] = [0.25, 1.0 / 15.0, 1.0 / 60.0, 1.0 / 250.0];
+/// Three exposures two stops and more apart: the middle of the one to five an
+/// automatic bracket takes.
+const EXPECTED_BRACKET_S: [f64; 3] = [0.25, 1.0 / 30.0, 1.0 / 250.0];
 /// A homing cycle in controller seconds.
 const HOMING_S: f64 = 3.0;
 /// The frame size assumed when the setup gives none: a full-size 3872×2592 frame.
@@ -41,9 +43,10 @@ pub struct Costs {
     pub extract_s_per_point: f64,
     /// Each final fit of [`FIT_MODELS`], in that order, seconds per point.
     pub fit_s_per_point: [f64; 3],
-    /// The [`AUTO_FIT`] (every candidate, each θL held out in turn, the budget),
-    /// seconds per point per θL.
-    pub auto_s_per_point_theta: f64,
+    /// The [`AUTO_FIT`] (every candidate, each θL held out in turn, the budget):
+    /// seconds per point, and seconds whatever the points.
+    pub auto_s_per_point: f64,
+    pub auto_s: f64,
 }
 
 impl Costs {
@@ -51,14 +54,15 @@ impl Costs {
     /// virtual machine, measured by the timing probe there. Used until this machine's
     /// own measurement is in.
     pub const DEFAULT: Costs = Costs {
-        frame_s_per_mpx: 0.12,
-        hdr_s_per_mpx_frame: 0.2,
-        samples_s_per_mpx_frame: 0.1,
-        live_fit_s_per_point: 2.0e-4,
+        frame_s_per_mpx: 0.28,
+        hdr_s_per_mpx_frame: 0.18,
+        samples_s_per_mpx_frame: 0.09,
+        live_fit_s_per_point: 3.0e-4,
         points_per_column: 0.36,
-        extract_s_per_point: 2.0e-5,
-        fit_s_per_point: [6.0e-4, 6.0e-4, 7.0e-4],
-        auto_s_per_point_theta: 4.0e-4,
+        extract_s_per_point: 8.0e-5,
+        fit_s_per_point: [5.8e-4, 5.3e-4, 5.3e-4],
+        auto_s_per_point: 2.0e-3,
+        auto_s: 2.5,
     };
 
     /// Whether every cost is a finite number ≥ 0 (a cache that says otherwise is
@@ -71,7 +75,8 @@ impl Costs {
             self.live_fit_s_per_point,
             self.points_per_column,
             self.extract_s_per_point,
-            self.auto_s_per_point_theta,
+            self.auto_s_per_point,
+            self.auto_s,
         ]
         .iter()
         .chain(&self.fit_s_per_point)
@@ -207,7 +212,7 @@ impl Timing {
             Step::Hdr { .. } => costs.hdr_s_per_mpx_frame * bracket_mpx,
             Step::Extract => costs.extract_s_per_point * points,
             Step::Fit { model } if model == AUTO_FIT.0 => {
-                costs.auto_s_per_point_theta * points * place.theta_count as f64
+                costs.auto_s + costs.auto_s_per_point * points
             }
             Step::Fit { model } => {
                 let index = FIT_MODELS.iter().position(|(name, _)| name == model);
@@ -250,7 +255,7 @@ mod tests {
             shutter_s: 0.5,
         };
         assert!((fast.prior_s(&capture, 0.0, &place) - 0.1 * (0.5 + 1.5)).abs() < 1e-12);
-        assert!(real.expected_bracket_s() > 4.0 * 1.5);
+        assert!(real.expected_bracket_s() > 3.0 * 1.5);
         // An emulated camera's frame takes at least its rendering.
         let rendered = Timing {
             rendered: true,
@@ -280,7 +285,7 @@ mod tests {
             timing.prior_s(&samples, 0.0, &place(6, 2, 2))
                 > timing.prior_s(&samples, 0.0, &place(6, 1, 2))
         );
-        // The automatic choice grows with the θL it holds out in turn.
+        // Every fit grows with the points of every θL.
         let auto = Step::Fit {
             model: AUTO_FIT.0.into(),
         };
@@ -291,7 +296,13 @@ mod tests {
             timing.prior_s(&auto, 0.0, &place(count, count, 2))
                 / timing.prior_s(&ward, 0.0, &place(count, count, 2))
         };
-        assert!((ratio(6) - 2.0 * ratio(3)).abs() < 1e-9);
+        assert!(ratio(6) < ratio(3));
+        assert!(
+            (timing.prior_s(&ward, 0.0, &place(6, 6, 2))
+                - 2.0 * timing.prior_s(&ward, 0.0, &place(3, 3, 2)))
+            .abs()
+                < 1e-9
+        );
         assert!(Costs::DEFAULT.is_valid());
         let broken = Costs {
             hdr_s_per_mpx_frame: f64::NAN,

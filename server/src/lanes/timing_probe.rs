@@ -1,7 +1,8 @@
 //! The timing probe (server/src/daemon.md, "Time left"): what processing costs on this
 //! machine, measured once per data directory by running the processing steps
 //! themselves on a small synthetic scan (the builtin gold scene binned to a sixteenth
-//! of its pixels, three θL, two exposures each), then cached in
+//! of its pixels, three θL, two exposures each; the automatic choice also on half
+//! its points), then cached in
 //! DATA/processing-costs.json. It runs on a thread of its own at the processing lane's
 //! lower priority, beside the lanes, never before them; it gives up past
 //! [`BUDGET`] (the stated defaults stay, and the next start measures again).
@@ -14,6 +15,7 @@ use anyhow::Context;
 use gonio_mock_hw::render::render_frame;
 use gonio_mock_hw::scene::Scene;
 use gonio_processing::capture::Sidecar;
+use gonio_processing::samples::{read_csv, write_csv, Sample};
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
@@ -184,10 +186,16 @@ fn measure(dir: &Path, started: Instant) -> anyhow::Result<Costs> {
         })?
         .0;
     }
-    let auto_s = run(Step::Fit {
+    let auto = Step::Fit {
         model: AUTO_FIT.0.to_owned(),
-    })?
-    .0;
+    };
+    let auto_s = run(auto.clone())?.0;
+    // The automatic choice again on every other point: what it costs per point and
+    // what it costs whatever the points.
+    let all = dir.join("samples.csv");
+    let every_other: Vec<Sample> = read_csv(&all)?.into_iter().step_by(2).collect();
+    write_csv(&all, &every_other)?;
+    let half_s = run(auto)?.0;
     anyhow::ensure!(points > 0.0, "the synthetic scan gave no samples");
     let thetas = THETA_L.len() as f64;
     let bracket_mpx = mpx * BRACKET_S.len() as f64;
@@ -201,6 +209,13 @@ fn measure(dir: &Path, started: Instant) -> anyhow::Result<Costs> {
         .map(|(took, points)| (took - live * points).max(0.0))
         .sum::<f64>()
         / thetas;
+    let half = every_other.len() as f64;
+    let auto_per_point = ((auto_s - half_s) / (points - half)).max(0.0);
+    let auto_per_point = if auto_per_point.is_finite() {
+        auto_per_point
+    } else {
+        auto_s / points
+    };
     let costs = Costs {
         frame_s_per_mpx: frame_s / (thetas * BRACKET_S.len() as f64 * mpx),
         hdr_s_per_mpx_frame: hdr_s / (thetas * bracket_mpx),
@@ -209,7 +224,8 @@ fn measure(dir: &Path, started: Instant) -> anyhow::Result<Costs> {
         points_per_column: points / (thetas * f64::from(width)),
         extract_s_per_point: extract_s / points,
         fit_s_per_point: fit_s.map(|s| s / points),
-        auto_s_per_point_theta: auto_s / (points * thetas),
+        auto_s_per_point: auto_per_point,
+        auto_s: (auto_s - auto_per_point * points).max(0.0),
     };
     anyhow::ensure!(costs.is_valid(), "costs out of range: {costs:?}");
     Ok(costs)
@@ -257,7 +273,6 @@ mod tests {
         let _ = std::fs::remove_dir_all(&data);
         std::fs::create_dir_all(&data).unwrap();
         let costs = measure_and_cache(&data).unwrap();
-        eprintln!("{costs:?}");
         assert!(costs.is_valid(), "{costs:?}");
         assert!(costs.hdr_s_per_mpx_frame > 0.0 && costs.fit_s_per_point[0] > 0.0);
         assert!(costs.points_per_column > 0.0 && costs.points_per_column < 2.0);
