@@ -7,7 +7,8 @@
 //! long the steps of its kind already done in this scan took against their priors (a
 //! kind this scan has not measured yet, such as the fits at its end, by what it took in
 //! the previous scan that ended done); a metering step not done brings the bracket the
-//! scan last metered (or a typical one). A θL's samples and HDR merge are one kind,
+//! scan last metered (or a typical one). The fits of one model each are one kind, the
+//! automatic choice another. A θL's samples and HDR merge are one kind,
 //! measured by the time the lane was busy with them (they run side by side and share
 //! the cores). The lanes are then played forward: hardware steps one after the other,
 //! each processing step once the hardware steps before it and the processing before
@@ -20,7 +21,7 @@ use serde::Serialize;
 use serde_json::Value;
 use time::OffsetDateTime;
 
-use super::plan::{Lane, Step};
+use super::plan::{Lane, Step, AUTO_FIT};
 use super::store::{StepRecord, StepState};
 use super::timing::{Place, Timing};
 
@@ -65,7 +66,10 @@ enum Kind {
     /// A θL's samples and HDR merge.
     Theta,
     Extract,
+    /// The fits of one model each (fitting and the budget).
     Fit,
+    /// The automatic choice among the models.
+    Choice,
 }
 
 impl Kind {
@@ -77,6 +81,7 @@ impl Kind {
             Step::Capture { .. } => Kind::Capture,
             Step::Samples { .. } | Step::Hdr { .. } => Kind::Theta,
             Step::Extract => Kind::Extract,
+            Step::Fit { model } if model == AUTO_FIT.0 => Kind::Choice,
             Step::Fit { .. } => Kind::Fit,
         }
     }
@@ -351,7 +356,7 @@ fn theta_progress(steps: &[StepRecord]) -> ThetaProgress {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plan::{ScanPlan, AUTO_FIT, FIT_MODELS};
+    use crate::plan::{ScanPlan, FIT_MODELS};
     use serde_json::json;
     use time::Duration;
 
@@ -550,20 +555,21 @@ mod tests {
             (informed - (alone + fit_priors * (ratio - 1.0))).abs() < 1e-6,
             "{informed} vs {alone}"
         );
-        // What this scan measured itself wins over the earlier scan: its last fit is
-        // expected to take what its other fits took against their priors.
+        // What this scan measured itself wins over the earlier scan: its third fit is
+        // expected to take what its first two took against their priors; the
+        // automatic choice, a kind of its own, what the earlier scan's took.
         let own = journal(
             &fixed,
-            fixed.steps().len() - 1,
+            fixed.steps().len() - 2,
             now - Duration::seconds(30),
             |s| match s {
                 Step::Fit { .. } => 1.0,
                 _ => 0.1,
             },
         );
-        let done_priors: f64 = fits[..3].iter().map(|f| prior(&timing, f, 0.0, 3, 3)).sum();
+        let done_priors: f64 = fits[..2].iter().map(|f| prior(&timing, f, 0.0, 3, 3)).sum();
         let left = progress(&own, &earlier, &timing, now).eta_s;
-        let expected = prior(&timing, &fits[3], 0.0, 3, 3) * 3.0 / done_priors;
+        let expected = prior(&timing, &fits[2], 0.0, 3, 3) * 2.0 / done_priors + fit_s;
         assert!((left - expected).abs() < 1e-6, "{left} vs {expected}");
     }
 
