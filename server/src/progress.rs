@@ -110,14 +110,24 @@ struct Calibration {
 
 impl Calibration {
     /// What the done steps of `steps` (one scan's journal) took against their priors;
-    /// a θL's samples and HDR steps by the time any of them ran.
+    /// a θL's samples and HDR steps, once both are done, by the time any of them ran.
     fn of(steps: &[StepRecord], timing: &Timing) -> Self {
         let mut calibration = Calibration::default();
         let places = places(steps, timing);
+        let unfinished: Vec<f64> = steps
+            .iter()
+            .filter(|r| Kind::of(&r.step) == Kind::Theta && r.state != StepState::Done)
+            .filter_map(|r| r.step.theta_l())
+            .collect();
         let mut theta_runs = Vec::new();
         let mut others = Vec::new();
         for ((record, from), place) in steps.iter().zip(arm_angles(steps)).zip(&places) {
-            if record.state != StepState::Done {
+            let theta_unfinished = Kind::of(&record.step) == Kind::Theta
+                && record
+                    .step
+                    .theta_l()
+                    .is_some_and(|t| unfinished.contains(&t));
+            if record.state != StepState::Done || theta_unfinished {
                 continue;
             }
             let started = record.started.as_deref().and_then(parse_time);
@@ -276,11 +286,7 @@ pub fn progress(
             running_since = running_since.max(elapsed_s(record, now));
         }
     }
-    let mut processing_s = if running_s > 0.0 || running_since > 0.0 {
-        left_of(running_s, running_since)
-    } else {
-        0.0
-    };
+    let mut processing_s = left_of(running_s, running_since);
     let mut hardware_s = 0.0_f64;
     for ((record, &from), place) in steps.iter().zip(&from_deg).zip(&places) {
         if record.state == StepState::Done {
@@ -452,7 +458,10 @@ mod tests {
             processing += prior(&timing, &fit, 0.0, 3, 3);
         }
         let expected = hardware.max(processing);
-        assert!((full.eta_s - expected).abs() < 1e-9, "{full:?} vs {expected}");
+        assert!(
+            (full.eta_s - expected).abs() < 1e-9,
+            "{full:?} vs {expected}"
+        );
         assert_eq!(
             full.theta_l,
             ThetaProgress {
@@ -490,11 +499,18 @@ mod tests {
             record.finished = at(t0, took);
         }
         let own = Calibration::of(&steps, &timing);
-        let priors = prior(&timing, &steps[4].step, 0.0, 3, 1)
-            + prior(&timing, &steps[5].step, 0.0, 3, 1);
+        let priors =
+            prior(&timing, &steps[4].step, 0.0, 3, 1) + prior(&timing, &steps[5].step, 0.0, 3, 1);
         let ratio = own.ratio(&Step::Hdr { theta_l: -25.0 }).unwrap();
-        assert!((ratio - 6.0 / priors).abs() < 1e-9, "{ratio} vs {}", 6.0 / priors);
+        assert!(
+            (ratio - 6.0 / priors).abs() < 1e-9,
+            "{ratio} vs {}",
+            6.0 / priors
+        );
         assert_eq!(covered_s(vec![]), 0.0);
+        // While its merge still runs, a θL's samples alone say nothing.
+        steps[5].state = StepState::Started;
+        assert_eq!(Calibration::of(&steps, &timing).ratio(&steps[4].step), None);
     }
 
     #[test]

@@ -156,7 +156,10 @@ impl Shared {
     /// The timing model as it stands: this machine's processing costs once measured.
     pub fn timing_now(&self) -> Timing {
         let costs = self.costs.get().copied().unwrap_or(self.timing.costs);
-        Timing { costs, ..self.timing }
+        Timing {
+            costs,
+            ..self.timing
+        }
     }
 
     /// Wakes both lanes (the queue or a scan's state changed).

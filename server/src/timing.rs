@@ -205,9 +205,7 @@ impl Timing {
             Step::Capture { shutter_s, .. } => self.capture_s(*shutter_s),
             Step::Samples { .. } => {
                 costs.samples_s_per_mpx_frame * bracket_mpx
-                    + costs.live_fit_s_per_point
-                        * self.points_per_theta()
-                        * place.theta_rank as f64
+                    + costs.live_fit_s_per_point * self.points_per_theta() * place.theta_rank as f64
             }
             Step::Hdr { .. } => costs.hdr_s_per_mpx_frame * bracket_mpx,
             Step::Extract => costs.extract_s_per_point * points,
@@ -216,7 +214,8 @@ impl Timing {
             }
             Step::Fit { model } => {
                 let index = FIT_MODELS.iter().position(|(name, _)| name == model);
-                let per_point = index.map_or(costs.fit_s_per_point[0], |i| costs.fit_s_per_point[i]);
+                let per_point =
+                    index.map_or(costs.fit_s_per_point[0], |i| costs.fit_s_per_point[i]);
                 per_point * points
             }
         }

@@ -88,14 +88,20 @@ fn time_left_holds_from_the_first_second_of_a_new_data_directory_s_first_scan() 
             }),
             _ => {}
         }
-        assert!(state_is_live(&scan), "the scan ended {}: {scan}", scan["state"]);
+        assert!(
+            state_is_live(&scan),
+            "the scan ended {}: {scan}",
+            scan["state"]
+        );
         assert!(at_s < 900.0, "the scan still runs after 900 s: {scan}");
     };
     let load_after = load_per_core();
 
     // Every estimate against the time the scan actually had left.
     let mut worst = [0.0_f64; 2];
-    eprintln!("scan took {ended:.1} s; load per core {load_before:.2} before, {load_after:.2} after");
+    eprintln!(
+        "scan took {ended:.1} s; load per core {load_before:.2} before, {load_after:.2} after"
+    );
     eprintln!("   t (s)  estimate  actual   error  θL processed");
     for poll in &polls {
         let eta = poll

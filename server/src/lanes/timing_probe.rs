@@ -259,7 +259,10 @@ fn write_frame(
         width: None,
         height: None,
     };
-    write_atomic(&stem.with_extension("json"), &serde_json::to_vec_pretty(&sidecar)?)?;
+    write_atomic(
+        &stem.with_extension("json"),
+        &serde_json::to_vec_pretty(&sidecar)?,
+    )?;
     Ok(())
 }
 
