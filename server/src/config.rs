@@ -54,6 +54,7 @@
 //!
 //! [processing]
 //! max_backlog = 2              # captured brackets not yet processed before the arm waits
+//! timing_probe = true          # measure processing costs at the first start (time left)
 //!
 //! [storage]
 //! reserve_bytes = 67108864     # free space kept for the journal: no step runs below it
@@ -402,11 +403,18 @@ pub struct ProcessingConfig {
     /// Captured brackets waiting for processing before the hardware lane waits to
     /// start the next one (back-pressure).
     pub max_backlog: usize,
+    /// Whether the daemon measures what processing costs on this machine at its first
+    /// start on a data directory, for the time left (else the stated defaults hold
+    /// until scans measure their own steps).
+    pub timing_probe: bool,
 }
 
 impl Default for ProcessingConfig {
     fn default() -> Self {
-        Self { max_backlog: 2 }
+        Self {
+            max_backlog: 2,
+            timing_probe: true,
+        }
     }
 }
 

@@ -468,7 +468,8 @@ pub fn raw_http(addr: &str, request: &str) -> (u16, String) {
 }
 
 /// A daemon configuration on emulators with the small scene, `time_scale` for both
-/// devices, fast retries and fault injection on.
+/// devices, fast retries and fault injection on, and no timing probe (its minute of
+/// processor time at each new daemon's start is for time left alone).
 pub fn emulator_config(time_scale: f64) -> String {
     emulator_config_scaled(time_scale, time_scale)
 }
@@ -492,6 +493,9 @@ backoff_ms = 50
 
 [emulator]
 fault_injection = true
+
+[processing]
+timing_probe = false
 "#
     )
 }

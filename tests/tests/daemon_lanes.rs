@@ -73,7 +73,7 @@ fn processing_runs_beside_the_hardware_and_gathers_what_extract_gives() {
 #[test]
 fn with_a_backlog_of_one_the_arm_waits_for_each_bracket_to_be_processed() {
     let dir = temp_dir("lanes-backlog");
-    let config = format!("{}\n[processing]\nmax_backlog = 1\n", emulator_config(0.05));
+    let config = emulator_config(0.05).replace("[processing]", "[processing]\nmax_backlog = 1");
     let daemon = Daemon::start(&dir, &config);
     let (_, steps) = run_scan(&daemon);
     for pair in THETA_L.windows(2) {

@@ -55,11 +55,15 @@ struct Cache {
 }
 
 /// Sets `shared.costs` from the data directory's cache, or starts the probe that
-/// measures and caches them (the stated defaults hold until it is done).
+/// measures and caches them unless `[processing] timing_probe` is off (the stated
+/// defaults hold until it is done).
 pub fn start(shared: Arc<Shared>) -> anyhow::Result<()> {
     let data = shared.config.data_dir.clone();
     if let Some(costs) = read_cache(&data.join(CACHE_FILE)) {
         let _ = shared.costs.set(costs);
+        return Ok(());
+    }
+    if !shared.config.processing.timing_probe {
         return Ok(());
     }
     std::thread::Builder::new()
