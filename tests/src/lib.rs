@@ -491,11 +491,11 @@ time_scale = {camera_time_scale}
 attempts = 3
 backoff_ms = 50
 
-[emulator]
-fault_injection = true
-
 [processing]
 timing_probe = false
+
+[emulator]
+fault_injection = true
 "#
     )
 }
