@@ -83,12 +83,16 @@ fn routes(guard: &dyn Fn(Access, Routes) -> Routes) -> Routes {
         .routes(routes!(confirm_scan))
         .routes(routes!(calibrate_scan))
         .routes(routes!(forget_calibration))
+        .routes(routes!(sweeps::pause_sweep))
+        .routes(routes!(sweeps::resume_sweep))
+        .routes(routes!(sweeps::cancel_sweep))
         .routes(routes!(arm::stop_arm))
         .routes(routes!(arm::home_arm))
         .routes(routes!(arm::reconnect_arm));
     let json_bodies = Routes::new()
         .routes(routes!(create_scan))
         .routes(routes!(sweeps::create_sweep))
+        .routes(routes!(sweeps::reschedule_sweep))
         .routes(routes!(arm::declare_arm_position))
         .routes(routes!(inject_fault));
     group(Access::Open, open)
@@ -249,22 +253,29 @@ async fn control(
     verb: &'static str,
 ) -> ApiResult<Json<Value>> {
     let scan = load_scan(&shared, id).await?;
-    // The state that refused the control, read in the same call (another control may
-    // have changed it since `scan` was loaded).
-    let refused_in = db(&shared, move |shared, store| {
-        if store.transition(id, from, to, None)? {
+    // The scan as it refused the control, read in the same call (another control may
+    // have changed it since `scan` was loaded). A scan waiting for its sample is only
+    // confirmed or cancelled: resuming it would queue it only to wait again.
+    let refused_by = db(&shared, move |shared, store| {
+        if store.control(id, from, to, verb == "cancel")? {
             shared.changed(id);
             Ok(None)
         } else {
-            Ok(Some(store.scan(id)?.map_or(scan.state, |s| s.state)))
+            Ok(Some(store.scan(id)?.unwrap_or(scan)))
         }
     })
     .await?;
-    if let Some(state) = refused_in {
-        return Err(ApiError::new(
-            StatusCode::CONFLICT,
-            format!("scan {id} is {}: cannot {verb} it", state.as_str()),
-        ));
+    if let Some(scan) = refused_by {
+        let message = if scan.waits_for_sample() {
+            format!(
+                "scan {id} waits for sample {} to be mounted: confirm it once the sample \
+                 is on the cylinder, or cancel it; it is not {verb}d",
+                scan.plan.sample
+            )
+        } else {
+            format!("scan {id} is {}: cannot {verb} it", scan.state.as_str())
+        };
+        return Err(ApiError::new(StatusCode::CONFLICT, message));
     }
     shared.wake();
     tracing::info!("scan {id}: {verb}");

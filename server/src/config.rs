@@ -65,6 +65,10 @@
 //! max_thumbnail_decodes = 2    # thumbnails decoded at once
 //! thumbnail_wait_s = 5         # a thumbnail waits this long for a decode, then 503
 //!
+//! # [notify]                   # run when a scan waits for its sample, fails, or a sweep ends
+//! # command = "echo \"$GONIO_REASON\" | mail -s \"gonio: $GONIO_EVENT\" lab@example.org"
+//! # timeout_s = 30             # killed (with its process group) after this
+//!
 //! [emulator]
 //! fault_injection = false      # test hook: POST /api/emulator/fault
 //! # free_space_file = "free"   # test hook: the data directory's free bytes, read from it
@@ -81,6 +85,7 @@ use gonio_processing::geometry::Setup;
 use serde::Deserialize;
 
 use super::downloads_config::DownloadsConfig;
+use super::notify::NotifyConfig;
 use super::files::is_safe_name;
 
 /// The whole configuration file.
@@ -124,6 +129,8 @@ pub struct Config {
     pub storage: StorageConfig,
     pub downloads: DownloadsConfig,
     pub emulator: EmulatorConfig,
+    /// A command run when a scan starts waiting for its sample, fails, or a sweep ends.
+    pub notify: Option<NotifyConfig>,
     /// Reflectance of the white reference strip of the real setup (1 = perfect
     /// reflecting diffuser) where `[setup]` gives none; emulated scans take the scene's.
     pub white_reflectance: f64,
@@ -158,6 +165,7 @@ impl Default for Config {
             storage: StorageConfig::default(),
             downloads: DownloadsConfig::default(),
             emulator: EmulatorConfig::default(),
+            notify: None,
             white_reflectance: 1.0,
             setup: None,
         }
@@ -504,6 +512,9 @@ impl Config {
         }
         self.arm.check()?;
         self.downloads.check()?;
+        if let Some(notify) = &self.notify {
+            notify.check()?;
+        }
         if let Some(carousel) = &self.carousel {
             carousel.check(&self.arm)?;
         }
