@@ -85,8 +85,8 @@ use gonio_processing::geometry::Setup;
 use serde::Deserialize;
 
 use super::downloads_config::DownloadsConfig;
-use super::notify::NotifyConfig;
 use super::files::is_safe_name;
+use super::notify::NotifyConfig;
 
 /// The whole configuration file.
 #[derive(Debug, Clone, Deserialize)]

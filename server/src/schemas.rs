@@ -251,8 +251,8 @@ pub struct SweepView {
     pub start_at: Option<String>,
     pub request: SweepRequest,
     /// `done` once every scan is done; `finished` once every scan has ended, some not
-    /// done; `running` while one runs; `scheduled` while its start time is ahead and
-    /// no scan has started; `paused` when every scan not ended is paused; else
+    /// done; `running` while one runs; `paused` when every scan not ended is paused;
+    /// `scheduled` while its start time is ahead and no scan has started; else
     /// `waiting` (queued behind other scans, or a scan waits for a device, a sample or
     /// disk space).
     #[schema(pattern = "^(scheduled|waiting|paused|running|done|finished)$")]

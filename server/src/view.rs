@@ -65,7 +65,9 @@ fn actions(scan: &ScanRecord) -> Vec<&'static str> {
     let waits_for_sample = scan.waits_for_sample();
     let mut verbs: Vec<&str> = CONTROLS
         .iter()
-        .filter(|(verb, from)| from.contains(&scan.state) && (!waits_for_sample || *verb == "cancel"))
+        .filter(|(verb, from)| {
+            from.contains(&scan.state) && (!waits_for_sample || *verb == "cancel")
+        })
         .map(|(verb, _)| *verb)
         .collect();
     if waits_for_sample {

@@ -21,7 +21,7 @@ function scheduled(s) {
 }
 
 // The state as the operator reads it: a queued scan with a later start is "scheduled".
-function stateLabel(s) {
+export function stateLabel(s) {
   return scheduled(s) ? "scheduled" : s.state;
 }
 
@@ -39,7 +39,7 @@ function liveTable(live, model) {
     `<th>at new θL</th><th>fit moved</th></tr></thead><tbody>${rows.join("")}</tbody></table>`;
 }
 
-function bar(done, total) {
+export function bar(done, total) {
   const pct = total ? Math.round(100 * done / total) : 0;
   return `<div class="bar" title="${done}/${total}"><div style="width:${pct}%"></div></div>`;
 }
@@ -76,6 +76,9 @@ function rowNote(s) {
   return "";
 }
 
+// The arm's line: its state in words, its angle while known, and its fault without
+// what the state already says (after a stop the fault "controller reset: position
+// unknown, home before moving" adds only "controller reset").
 function armLine(a) {
   const unknown = ["alarm", "homing", "needs_homing", "needs_position", "disconnected"].includes(a.state);
   const state = {
@@ -83,8 +86,9 @@ function armLine(a) {
     needs_homing: "position unknown, home it",
     needs_position: "position unknown, declare it",
   }[a.state] || a.state;
+  const fault = (a.error || "").replace(/:?\s*position unknown(, home before moving)?/i, "").trim();
   return `arm: ${state}` + (a.angle_deg != null && !unknown ? ` at ${a.angle_deg.toFixed(1)}°` : "") +
-    (a.error ? ` (${a.error})` : "");
+    (fault ? ` (${fault})` : "");
 }
 
 // The queue, the sweeps and the header's hardware line from what the page polls.
@@ -95,7 +99,8 @@ export function showOverview(scans, sweeps, hw) {
     `<td class="state-${s.state}">${stateLabel(s)}</td><td>${bar(s.progress.done, s.progress.total)}</td>` +
     `<td class="muted">${escapeHtml(rowNote(s))}<span class="left" data-id="${s.id}"></span></td></tr>`).join("");
   $("sweeps").innerHTML = sweeps.slice().reverse().map((w) =>
-    `<tr><td>${w.id}</td><td>${w.state}</td><td>${bar(w.progress.done, w.progress.total)}</td>` +
+    `<tr data-sweep="${w.id}" class="${w.id === page.sweep ? "sel" : ""}" title="open its scans"><td>${w.id}</td>` +
+    `<td class="state-${w.state}">${w.state}</td><td>${bar(w.progress.done, w.progress.total)}</td>` +
     `<td class="muted">${escapeHtml(w.start_at ? localTime(w.start_at) : "now")}</td></tr>`).join("");
   const a = hw.arm;
   $("arm").textContent = armLine(a);

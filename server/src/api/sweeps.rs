@@ -108,9 +108,9 @@ fn sweep_actions(scans: &[ScanRecord], state: &str) -> Vec<&'static str> {
         .iter()
         .filter(|(verb, _)| {
             let states = verb_states(verb);
-            scans.iter().any(|s| {
-                states.contains(&s.state) && (*verb == "cancel" || !s.waits_for_sample())
-            })
+            scans
+                .iter()
+                .any(|s| states.contains(&s.state) && (*verb == "cancel" || !s.waits_for_sample()))
         })
         .map(|(verb, _)| *verb)
         .collect();
