@@ -189,3 +189,83 @@ fn run(config: &NotifyConfig, notice: &Notice) -> Result<(), String> {
         format!("{status}: {said}")
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn notice() -> Notice {
+        Notice {
+            event: "scan-failed",
+            scan_id: 7,
+            sweep_id: None,
+            sample: "gold".into(),
+            state: "failed".into(),
+            reason: "camera: it's \"gone\"; $HOME".into(),
+        }
+    }
+
+    fn config(command: String, timeout_s: f64) -> NotifyConfig {
+        NotifyConfig { command, timeout_s }
+    }
+
+    #[test]
+    fn the_notice_reaches_the_command_s_environment_as_it_is() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("env");
+        let command = format!("env | grep '^GONIO_' | sort > '{}'", out.display());
+        run(&config(command, 5.0), &notice()).unwrap();
+        let env = std::fs::read_to_string(out).unwrap();
+        assert_eq!(
+            env,
+            "GONIO_EVENT=scan-failed\nGONIO_REASON=camera: it's \"gone\"; $HOME\n\
+             GONIO_SAMPLE=gold\nGONIO_SCAN_ID=7\nGONIO_STATE=failed\nGONIO_SWEEP_ID=\n"
+        );
+    }
+
+    #[test]
+    fn a_failing_command_is_reported_with_its_status_and_standard_error() {
+        let err = run(
+            &config("echo no mail here >&2; exit 3".into(), 5.0),
+            &notice(),
+        )
+        .unwrap_err();
+        assert!(err.contains("3") && err.contains("no mail here"), "{err}");
+    }
+
+    #[test]
+    fn a_command_that_hangs_is_killed_with_what_it_started() {
+        let dir = tempfile::tempdir().unwrap();
+        let pid_file = dir.path().join("pid");
+        let command = format!("sleep 60 & echo $! > '{}'; wait", pid_file.display());
+        let started = Instant::now();
+        let err = run(&config(command, 0.5), &notice()).unwrap_err();
+        assert!(err.contains("killed"), "{err}");
+        assert!(started.elapsed() < Duration::from_secs(5), "{err}");
+        let pid: i32 = std::fs::read_to_string(pid_file)
+            .unwrap()
+            .trim()
+            .parse()
+            .unwrap();
+        // The command's own child is gone too (reaped once orphaned).
+        let deadline = Instant::now() + Duration::from_secs(5);
+        // SAFETY: signal 0 only asks whether the process exists.
+        while unsafe { libc::kill(pid, 0) } == 0 {
+            assert!(Instant::now() < deadline, "sleep {pid} outlived the kill");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
+    #[test]
+    fn bad_settings_are_named() {
+        assert!(config(" ".into(), 5.0)
+            .check()
+            .unwrap_err()
+            .to_string()
+            .contains("notify.command"));
+        for timeout in [0.0, -1.0, f64::NAN, 601.0] {
+            let err = config("true".into(), timeout).check().unwrap_err();
+            assert!(err.to_string().contains("notify.timeout_s"), "{err}");
+        }
+    }
+}
