@@ -567,8 +567,10 @@ fn page_tells_the_truth_in_every_state() {
         arm.contains("position unknown") && !arm.contains('°'),
         "{arm}"
     );
-    // The line says it once.
+    // The line says it once, with the cause.
     assert_eq!(arm.matches("position unknown").count(), 1, "{arm}");
+    assert_eq!(arm.matches("home").count(), 1, "{arm}");
+    assert!(arm.contains("(the controller reset"), "{arm}");
     assert_eq!(
         daemon.get("/api/hardware").json["arm"]["angle_deg"],
         Value::Null

@@ -77,8 +77,8 @@ function rowNote(s) {
 }
 
 // The arm's line: its state in words, its angle while known, and its fault without
-// what the state already says (after a stop the fault "controller reset: position
-// unknown, home before moving" adds only "controller reset").
+// what the state already says (after a stop the fault "arm position unknown: the
+// controller reset or reconnected: home the arm" adds only its cause).
 function armLine(a) {
   const unknown = ["alarm", "homing", "needs_homing", "needs_position", "disconnected"].includes(a.state);
   const state = {
@@ -86,7 +86,8 @@ function armLine(a) {
     needs_homing: "position unknown, home it",
     needs_position: "position unknown, declare it",
   }[a.state] || a.state;
-  const fault = (a.error || "").replace(/:?\s*position unknown(, home before moving)?/i, "").trim();
+  const fault = (a.error || "").replace(/^(arm )?position unknown:\s*/i, "")
+    .replace(/[:,]?\s*(position unknown,?\s*)?home (before moving|the arm)$/i, "").trim();
   return `arm: ${state}` + (a.angle_deg != null && !unknown ? ` at ${a.angle_deg.toFixed(1)}°` : "") +
     (fault ? ` (${fault})` : "");
 }
