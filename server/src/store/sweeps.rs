@@ -129,7 +129,7 @@ impl Store {
                 [id],
                 |r| Ok((r.get(0)?, r.get(1)?)),
             )?;
-            if !current.is_some_and(|t| t > now) || started > 0 || queued == 0 {
+            if current.is_none_or(|t| t <= now) || started > 0 || queued == 0 {
                 return Ok(Rescheduled::NotScheduled);
             }
             tx.execute(
