@@ -7,7 +7,8 @@
 //!   which sample and about when; while a scan waits for its sample only Confirm and
 //!   Cancel are offered, pause and resume are refused (409) and leave it waiting;
 //! - the `[notify]` command runs with the notice in its environment when a scan starts
-//!   waiting for its sample and when a sweep ends.
+//!   waiting for its sample, when a sweep ends and when a scan fails, and for nothing
+//!   else.
 
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -294,6 +295,26 @@ fn a_sample_wait_is_announced_takes_only_confirm_or_cancel_and_calls_a_person() 
     ] {
         assert!(env.contains(&line), "{line} not in {env:?}");
     }
+    // A scan that fails calls a person too, with why.
+    let busy = daemon.post(
+        "/api/emulator/fault",
+        &json!({"fault": "camera_busy", "count": 3}),
+    );
+    assert_eq!(busy.status, 200, "{:?}", busy.json);
+    let failing = daemon.post_gold_scan(&[-20.0], &[0.1]);
+    let failed = daemon.wait_state(failing, &["done", "failed"], Duration::from_secs(60));
+    assert_eq!(failed["state"], "failed", "{failed}");
+    let env = notice(&dir, &format!("scan-failed-{failing}"));
+    for line in [
+        "GONIO_EVENT=scan-failed".to_owned(),
+        format!("GONIO_SCAN_ID={failing}"),
+        "GONIO_SWEEP_ID=".to_owned(),
+        "GONIO_SAMPLE=gold".to_owned(),
+        "GONIO_STATE=failed".to_owned(),
+        format!("GONIO_REASON={}", failed["error"].as_str().unwrap()),
+    ] {
+        assert!(env.contains(&line), "{line} not in {env:?}");
+    }
     // Nothing else called for a person.
     let mut sent: Vec<String> = std::fs::read_dir(dir.join("notices"))
         .unwrap()
@@ -303,6 +324,7 @@ fn a_sample_wait_is_announced_takes_only_confirm_or_cancel_and_calls_a_person() 
     assert_eq!(
         sent,
         [
+            format!("scan-failed-{failing}.env"),
             format!("scan-waiting-{red}.env"),
             format!("sweep-ended-{red}.env")
         ]
