@@ -218,12 +218,8 @@ pub(super) async fn list_sweeps(State(shared): AppState) -> ApiResult<Json<Value
 async fn control_sweep(
     shared: std::sync::Arc<Shared>,
     id: i64,
-    verb: &'static str,
+    (verb, to): (&'static str, ScanState),
 ) -> ApiResult<Json<Value>> {
-    let to = SWEEP_VERBS
-        .iter()
-        .find(|(name, _)| *name == verb)
-        .map_or(ScanState::Cancelled, |(_, to)| *to);
     let outcome = db(&shared, move |shared, store| {
         if store.sweep(id)?.is_none() {
             return Ok(None);
@@ -268,7 +264,7 @@ pub(super) async fn pause_sweep(
     State(shared): AppState,
     Path(id): Path<i64>,
 ) -> ApiResult<Json<Value>> {
-    control_sweep(shared, id, "pause").await
+    control_sweep(shared, id, SWEEP_VERBS[0]).await
 }
 
 #[utoipa::path(post, path = "/api/sweeps/{id}/resume",
@@ -279,7 +275,7 @@ pub(super) async fn resume_sweep(
     State(shared): AppState,
     Path(id): Path<i64>,
 ) -> ApiResult<Json<Value>> {
-    control_sweep(shared, id, "resume").await
+    control_sweep(shared, id, SWEEP_VERBS[1]).await
 }
 
 #[utoipa::path(post, path = "/api/sweeps/{id}/cancel",
@@ -290,7 +286,7 @@ pub(super) async fn cancel_sweep(
     State(shared): AppState,
     Path(id): Path<i64>,
 ) -> ApiResult<Json<Value>> {
-    control_sweep(shared, id, "cancel").await
+    control_sweep(shared, id, SWEEP_VERBS[2]).await
 }
 
 #[utoipa::path(patch, path = "/api/sweeps/{id}",
