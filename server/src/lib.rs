@@ -185,8 +185,9 @@ where
     if let Err(err) = shared.storage.keep_journal_reserve() {
         tracing::warn!("the journal's reserve file could not be made: {err}");
     }
-    step_guard::fail_crash_looping_scans(&shared, &mut lock(&shared.store), fault.as_ref())?;
+    // The publisher first, so that a scan failed for its crashes is noticed.
     view::start_publisher(shared.clone(), &db_path)?;
+    step_guard::fail_crash_looping_scans(&shared, &mut lock(&shared.store), fault.as_ref())?;
     lanes::start(shared.clone(), devices, &db_path)?;
 
     // Stopped on a signal: the steps running are redone at the next start.
