@@ -643,6 +643,26 @@ mod tests {
     }
 
     #[test]
+    fn the_example_s_notify_section_parses_once_uncommented() {
+        let example = include_str!("../assets/gonio.example.toml");
+        let notify: String = example
+            .lines()
+            .skip_while(|l| !l.starts_with("# [notify]"))
+            .take_while(|l| l.starts_with('#'))
+            .filter(|l| !l.starts_with("#   ") && !l.starts_with("#    "))
+            .map(|l| l.trim_start_matches("# "))
+            .collect::<Vec<_>>()
+            .join("\n");
+        let config = Config::from_toml_str(&notify).unwrap();
+        let notify = config.notify.expect("[notify]");
+        assert!(notify.command.contains("mail") && notify.command.contains("$GONIO_REASON"));
+        assert_eq!(notify.timeout_s, 30.0);
+        let err =
+            Config::from_toml_str("[notify]\ncommand = \"true\"\ntimeout_s = 0\n").unwrap_err();
+        assert!(err.to_string().contains("notify.timeout_s"), "{err}");
+    }
+
+    #[test]
     fn example_config_parses_to_the_defaults() {
         let example = Config::from_toml_str(include_str!("../assets/gonio.example.toml")).unwrap();
         let default = Config::default();
