@@ -8,7 +8,7 @@ use axum::http::StatusCode;
 use axum::Json;
 use gonio_processing::color::observer::Observer;
 use gonio_processing::color::srgb::swatch;
-use gonio_processing::multi_angle::compare::{compare as judge, Tolerances};
+use gonio_processing::multi_angle::compare::{compare as judge, Mounting, Tolerances};
 use gonio_processing::multi_angle::ColourReport;
 use gonio_report::ReportError;
 use serde_json::{json, Value};
@@ -73,7 +73,7 @@ pub async fn colour(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<J
 /// Scan `batch` judged against scan `id` as its standard.
 #[utoipa::path(get, path = "/api/scans/{id}/compare/{batch}",
     summary = "A batch scan judged against this scan as its standard, per aspecular angle",
-    description = "As `gonio compare` with its default tolerances: per angle ΔL*, ΔC*, ΔH* and ΔE00 with their expanded uncertainty (the lines both scans share cancel), the tolerance and the verdict (pass, fail, or undecided when the interval straddles the tolerance); the flop index's difference; the overall verdict.",
+    description = "As `gonio compare` with its default tolerances, each scan of its own mounting: per angle ΔL*, ΔC*, ΔH* and ΔE00 with their expanded uncertainty (the white's and the colour transform's errors, which both scans share, cancel; the geometry's are each scan's own), the tolerance and the verdict (pass, fail, or undecided when the interval straddles the tolerance); the flop index's difference; the overall verdict.",
     params(
         ("id" = i64, Path, description = "The standard's scan id"),
         ("batch" = i64, Path, description = "The batch's scan id"),
@@ -91,8 +91,13 @@ pub async fn compare(
 ) -> ApiResult<Json<Value>> {
     let standard = scan_colour(&shared, id).await?;
     let judged = scan_colour(&shared, batch).await?;
-    let comparison = judge(&standard, &judged, &Tolerances::default())
-        .map_err(|e| ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, e.to_string()))?;
+    let comparison = judge(
+        &standard,
+        &judged,
+        &Tolerances::default(),
+        Mounting::Separate,
+    )
+    .map_err(|e| ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, e.to_string()))?;
     let mut value = serde_json::to_value(&comparison).map_err(internal)?;
     value["standard"] = json!(id);
     value["batch"] = json!(batch);
