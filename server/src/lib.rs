@@ -30,6 +30,7 @@ mod preview;
 mod process;
 mod progress;
 mod sample_waits;
+mod scan_colour;
 mod scan_files;
 mod scan_report;
 pub mod schemas;
