@@ -231,7 +231,7 @@ pub fn colour(
         let white = transform.observer().white();
         let lab = lab_from_xyz(xyz, white);
         let jacobian = lab_jacobian(xyz, white);
-        let m = Matrix3::from(transform.matrix()).transpose();
+        let m = Matrix3::from(transform.matrix_at(beta)).transpose();
         let mut lines: Vec<Line> = beta_lines
             .into_iter()
             .map(|((source, shared), d)| {
@@ -243,7 +243,7 @@ pub fn colour(
                 }
             })
             .collect();
-        let covariance = Matrix3::from(transform.xyz_covariance(xyz)).transpose();
+        let covariance = Matrix3::from(transform.xyz_covariance(beta, xyz)).transpose();
         let eigen = SymmetricEigen::new(covariance);
         for k in 0..3 {
             let size = eigen.eigenvalues[k].max(0.0).sqrt();

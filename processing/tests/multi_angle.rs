@@ -8,7 +8,7 @@ use gonio_processing::color::observer::Conditions;
 use gonio_processing::color::transform::ColourTransform;
 use gonio_processing::color::CameraModel;
 use gonio_processing::fit::{FitMethod, FitResult, FittedRoughness, ParameterSet};
-use gonio_processing::multi_angle::compare::{compare, Tolerances, Verdict};
+use gonio_processing::multi_angle::compare::{compare, Mounting, Tolerances, Verdict};
 use gonio_processing::multi_angle::{colour, ColourReport, Origin};
 
 fn fit(kd: [f64; 3], ks: [f64; 3], m: f64) -> FitResult {
@@ -83,9 +83,9 @@ fn a_fit_gives_every_angle_from_its_model_with_a_flop_index() {
 fn compare_fails_gold_against_red_and_passes_a_sample_against_itself() {
     let gold = report(&fit([9.0, 6.5, 2.0], [25.0, 20.0, 7.0], 0.07));
     let red = report(&fit([20.0, 3.0, 2.5], [10.0, 10.0, 10.0], 0.15));
-    let c = compare(&gold, &red, &Tolerances::default()).unwrap();
+    let c = compare(&gold, &red, &Tolerances::default(), Mounting::Same).unwrap();
     assert_eq!(c.overall, Verdict::Fail);
-    let same = compare(&gold, &gold, &Tolerances::default()).unwrap();
+    let same = compare(&gold, &gold, &Tolerances::default(), Mounting::Same).unwrap();
     for a in &same.angles {
         assert_eq!(a.delta_e00.value, 0.0);
         // Shared lines (the transform) cancel in a colour against itself; the
@@ -95,7 +95,7 @@ fn compare_fails_gold_against_red_and_passes_a_sample_against_itself() {
     }
     // A diffuse 1 % lighter: the ΔE00 found is the ΔE00 of the two colours.
     let lighter = report(&fit([9.09, 6.565, 2.02], [25.0, 20.0, 7.0], 0.07));
-    let c = compare(&gold, &lighter, &Tolerances::default()).unwrap();
+    let c = compare(&gold, &lighter, &Tolerances::default(), Mounting::Same).unwrap();
     for (a, (s, b)) in c.angles.iter().zip(gold.angles.iter().zip(&lighter.angles)) {
         assert!((a.delta_e00.value - ciede2000(s.lab(), b.lab())).abs() < 1e-12);
         assert!(a.delta_l.value > 0.0);

@@ -28,6 +28,7 @@ use super::devices::InjectedFault;
 use super::health;
 use super::openapi::{self, Access};
 use super::preview;
+use super::scan_colour;
 use super::scan_files;
 use super::scan_report;
 use super::schemas::{ScanRequest, ScanView};
@@ -71,6 +72,8 @@ fn routes(guard: &dyn Fn(Access, Routes) -> Routes) -> Routes {
         .routes(routes!(thumbnails::thumbnail))
         .routes(routes!(plot))
         .routes(routes!(scan_report::report))
+        .routes(routes!(scan_colour::colour))
+        .routes(routes!(scan_colour::compare))
         .routes(routes!(scan_files::list_files))
         .routes(routes!(scan_files::get_file))
         .routes(routes!(scan_files::scan_archive))
@@ -83,12 +86,16 @@ fn routes(guard: &dyn Fn(Access, Routes) -> Routes) -> Routes {
         .routes(routes!(confirm_scan))
         .routes(routes!(calibrate_scan))
         .routes(routes!(forget_calibration))
+        .routes(routes!(sweeps::pause_sweep))
+        .routes(routes!(sweeps::resume_sweep))
+        .routes(routes!(sweeps::cancel_sweep))
         .routes(routes!(arm::stop_arm))
         .routes(routes!(arm::home_arm))
         .routes(routes!(arm::reconnect_arm));
     let json_bodies = Routes::new()
         .routes(routes!(create_scan))
         .routes(routes!(sweeps::create_sweep))
+        .routes(routes!(sweeps::reschedule_sweep))
         .routes(routes!(arm::declare_arm_position))
         .routes(routes!(inject_fault));
     group(Access::Open, open)
@@ -249,22 +256,29 @@ async fn control(
     verb: &'static str,
 ) -> ApiResult<Json<Value>> {
     let scan = load_scan(&shared, id).await?;
-    // The state that refused the control, read in the same call (another control may
-    // have changed it since `scan` was loaded).
-    let refused_in = db(&shared, move |shared, store| {
-        if store.transition(id, from, to, None)? {
+    // The scan as it refused the control, read in the same call (another control may
+    // have changed it since `scan` was loaded). A scan waiting for its sample is only
+    // confirmed or cancelled: resuming it would queue it only to wait again.
+    let refused_by = db(&shared, move |shared, store| {
+        if store.control(id, from, to, verb == "cancel")? {
             shared.changed(id);
             Ok(None)
         } else {
-            Ok(Some(store.scan(id)?.map_or(scan.state, |s| s.state)))
+            Ok(Some(store.scan(id)?.unwrap_or(scan)))
         }
     })
     .await?;
-    if let Some(state) = refused_in {
-        return Err(ApiError::new(
-            StatusCode::CONFLICT,
-            format!("scan {id} is {}: cannot {verb} it", state.as_str()),
-        ));
+    if let Some(scan) = refused_by {
+        let message = if scan.waits_for_sample() {
+            format!(
+                "scan {id} waits for sample {} to be mounted: confirm it once the sample \
+                 is on the cylinder, or cancel it; it is not {verb}d",
+                scan.plan.sample
+            )
+        } else {
+            format!("scan {id} is {}: cannot {verb} it", scan.state.as_str())
+        };
+        return Err(ApiError::new(StatusCode::CONFLICT, message));
     }
     shared.wake();
     tracing::info!("scan {id}: {verb}");

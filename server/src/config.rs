@@ -66,6 +66,10 @@
 //! max_thumbnail_decodes = 2    # thumbnails decoded at once
 //! thumbnail_wait_s = 5         # a thumbnail waits this long for a decode, then 503
 //!
+//! # [notify]                   # run when a scan waits for its sample, fails, or a sweep ends
+//! # command = "echo \"$GONIO_REASON\" | mail -s \"gonio: $GONIO_EVENT\" lab@example.org"
+//! # timeout_s = 30             # killed (with its process group) after this
+//!
 //! [emulator]
 //! fault_injection = false      # test hook: POST /api/emulator/fault
 //! # free_space_file = "free"   # test hook: the data directory's free bytes, read from it
@@ -83,6 +87,7 @@ use serde::Deserialize;
 
 use super::downloads_config::DownloadsConfig;
 use super::files::is_safe_name;
+use super::notify::NotifyConfig;
 
 /// The whole configuration file.
 #[derive(Debug, Clone, Deserialize)]
@@ -125,6 +130,8 @@ pub struct Config {
     pub storage: StorageConfig,
     pub downloads: DownloadsConfig,
     pub emulator: EmulatorConfig,
+    /// A command run when a scan starts waiting for its sample, fails, or a sweep ends.
+    pub notify: Option<NotifyConfig>,
     /// Reflectance of the white reference strip of the real setup (1 = perfect
     /// reflecting diffuser) where `[setup]` gives none; emulated scans take the scene's.
     pub white_reflectance: f64,
@@ -159,6 +166,7 @@ impl Default for Config {
             storage: StorageConfig::default(),
             downloads: DownloadsConfig::default(),
             emulator: EmulatorConfig::default(),
+            notify: None,
             white_reflectance: 1.0,
             setup: None,
         }
@@ -512,6 +520,9 @@ impl Config {
         }
         self.arm.check()?;
         self.downloads.check()?;
+        if let Some(notify) = &self.notify {
+            notify.check()?;
+        }
         if let Some(carousel) = &self.carousel {
             carousel.check(&self.arm)?;
         }
@@ -637,6 +648,26 @@ mod tests {
             matches!(config.camera, CameraConfig::Emulator { ref scene, .. } if scene == "gold")
         );
         assert_eq!(config.bind.port(), 8080);
+    }
+
+    #[test]
+    fn the_example_s_notify_section_parses_once_uncommented() {
+        let example = include_str!("../assets/gonio.example.toml");
+        let notify: String = example
+            .lines()
+            .skip_while(|l| !l.starts_with("# [notify]"))
+            .take_while(|l| l.starts_with('#'))
+            .filter(|l| !l.starts_with("#   ") && !l.starts_with("#    "))
+            .map(|l| l.trim_start_matches("# "))
+            .collect::<Vec<_>>()
+            .join("\n");
+        let config = Config::from_toml_str(&notify).unwrap();
+        let notify = config.notify.expect("[notify]");
+        assert!(notify.command.contains("mail") && notify.command.contains("$GONIO_REASON"));
+        assert_eq!(notify.timeout_s, 30.0);
+        let err =
+            Config::from_toml_str("[notify]\ncommand = \"true\"\ntimeout_s = 0\n").unwrap_err();
+        assert!(err.to_string().contains("notify.timeout_s"), "{err}");
     }
 
     #[test]

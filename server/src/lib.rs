@@ -22,11 +22,15 @@ mod files;
 mod health;
 mod lanes;
 mod mount;
+mod notices;
+mod notify;
 mod openapi;
 mod plan;
 mod preview;
 mod process;
 mod progress;
+mod sample_waits;
+mod scan_colour;
 mod scan_files;
 mod scan_report;
 pub mod schemas;
@@ -34,6 +38,7 @@ mod shared;
 mod step_guard;
 mod storage;
 mod store;
+mod sweep_state;
 mod sync;
 mod thumbnails;
 mod timing;
@@ -182,8 +187,9 @@ where
     if let Err(err) = shared.storage.keep_journal_reserve() {
         tracing::warn!("the journal's reserve file could not be made: {err}");
     }
-    step_guard::fail_crash_looping_scans(&shared, &mut lock(&shared.store), fault.as_ref())?;
+    // The publisher first, so that a scan failed for its crashes is noticed.
     view::start_publisher(shared.clone(), &db_path)?;
+    step_guard::fail_crash_looping_scans(&shared, &mut lock(&shared.store), fault.as_ref())?;
     lanes::start(shared.clone(), devices, &db_path)?;
 
     // Stopped on a signal: the steps running are redone at the next start.

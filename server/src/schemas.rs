@@ -110,8 +110,8 @@ pub struct ScanView {
     pub bracket: BracketView,
     pub progress: ScanProgress,
     /// The control routes (`POST /api/scans/{id}/<action>`) the scan's state allows:
-    /// `pause`, `resume`, `cancel`; `confirm` while it waits for its sample to be
-    /// mounted.
+    /// `pause`, `resume`, `cancel`; only `cancel` and `confirm` while it waits for its
+    /// sample to be mounted.
     pub actions: Vec<String>,
     /// The hardware step under way or next, else the processing one; null once the
     /// scan has ended.
@@ -251,13 +251,66 @@ pub struct SweepView {
     pub start_at: Option<String>,
     pub request: SweepRequest,
     /// `done` once every scan is done; `finished` once every scan has ended, some not
-    /// done; `running` while one runs; else `waiting`.
-    #[schema(pattern = "^(waiting|running|done|finished)$")]
+    /// done; `running` while one runs; `paused` when every scan not ended is paused;
+    /// `scheduled` while its start time is ahead and no scan has started; else
+    /// `waiting` (queued behind other scans, or a scan waits for a device, a sample or
+    /// disk space).
+    #[schema(pattern = "^(scheduled|waiting|paused|running|done|finished)$")]
     pub state: String,
     pub progress: Progress,
     /// How many of its scans are in each state (every state named).
     pub scans_by_state: std::collections::BTreeMap<String, u32>,
+    /// What the operator can do with the whole sweep now: `pause`, `resume`, `cancel`
+    /// (`POST /api/sweeps/{id}/<action>`), `reschedule` (`PATCH /api/sweeps/{id}`
+    /// while scheduled).
+    pub actions: Vec<String>,
+    /// The sample changes its scans will wait for, with when each wait is expected to
+    /// begin.
+    pub waits: Vec<PlannedWaitView>,
     pub scans: Vec<ScanView>,
+}
+
+/// A wait for the operator to mount a sample, planned from the queue and the time-left
+/// model: the queue played forward from now, each scan lasting its estimated time,
+/// the operator confirming at once.
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+pub struct PlannedWaitView {
+    /// The scan that will wait.
+    pub scan_id: i64,
+    /// The sample to mount.
+    pub sample: String,
+    /// When the wait is expected to begin (UTC, RFC 3339); now for a scan already
+    /// waiting.
+    #[schema(format = DateTime)]
+    pub at: String,
+}
+
+/// `PATCH /api/sweeps/{id}`: the sweep's new start time.
+#[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct SweepSchedule {
+    /// RFC 3339; null: start now.
+    #[schema(format = DateTime)]
+    pub start_at: Option<String>,
+}
+
+/// What a sweep's control verb (pause, resume, cancel) answers.
+#[derive(utoipa::IntoResponses)]
+// Only described, never built: the variants' sizes do not matter.
+#[allow(clippy::large_enum_variant)]
+pub enum SweepControlAnswers {
+    /// The sweep, its scans moved
+    #[response(status = 200)]
+    Done(SweepView),
+    /// No such sweep
+    #[response(status = 404)]
+    NotFound(crate::answers::ErrorBody),
+    /// No scan of the sweep is in a state the verb applies to (a scan waiting for its sample is only confirmed or cancelled)
+    #[response(status = 409)]
+    NotAllowed(crate::answers::ErrorBody),
+    /// The disk is full and the journal cannot be written; nothing changed. Try again once space is freed
+    #[response(status = 503)]
+    DiskFull(crate::answers::ErrorBody),
 }
 
 /// What a control verb (pause, resume, cancel) answers.
@@ -271,7 +324,7 @@ pub enum ControlAnswers {
     /// No such scan
     #[response(status = 404)]
     NotFound(crate::answers::ErrorBody),
-    /// The scan's state does not allow it
+    /// The scan's state does not allow it (a scan waiting for its sample to be mounted is only confirmed or cancelled)
     #[response(status = 409)]
     NotAllowed(crate::answers::ErrorBody),
     /// The disk is full and the journal cannot be written; nothing changed. Try again once space is freed

@@ -59,6 +59,7 @@ pub fn fail_crash_looping_scans(
         let reason = scan.and_then(|s| s.error).unwrap_or_default();
         tracing::error!("scan {id} failed: {reason}");
         store.log(shared.boot, Some(id), "crash-loop", &reason)?;
+        shared.changed(id);
     }
     Ok(())
 }

@@ -28,6 +28,7 @@ pub use records::{
     now_rfc3339, now_unix, LogEntry, NewScan, ScanRecord, ScanState, StepRecord, StepState,
     StoreError, PROCESSABLE,
 };
+pub use sweeps::Rescheduled;
 
 const SCHEMA: &str = "
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value INTEGER NOT NULL);

@@ -223,6 +223,30 @@ fn step_count(theta_l: &[f64], shutter_s: &[f64], auto_bracket: bool) -> usize {
     1 + theta_l.len() * per_theta + 1 + super::plan::FINAL_FITS
 }
 
+/// A sweep's start time (`start_at`: RFC 3339, or absent or null for none), Unix
+/// seconds.
+fn start_at(value: Option<&Value>) -> Result<Option<i64>, FieldError> {
+    let Some(v) = value.filter(|v| !v.is_null()) else {
+        return Ok(None);
+    };
+    let text = v
+        .as_str()
+        .ok_or_else(|| invalid("start_at", "must be an RFC 3339 time string"))?;
+    let time = time::OffsetDateTime::parse(text, &time::format_description::well_known::Rfc3339)
+        .map_err(|e| invalid("start_at", format!("not an RFC 3339 time: {e}")))?;
+    Ok(Some(time.unix_timestamp()))
+}
+
+/// Checks a `PATCH /api/sweeps/{id}` body: `{"start_at": RFC 3339 or null}` (null:
+/// start now); returns the new start time, Unix seconds.
+pub fn sweep_schedule(body: &Value) -> Result<Option<i64>, FieldError> {
+    let map = object(body, &["start_at"])?;
+    if !map.contains_key("start_at") {
+        return Err(invalid("start_at", "required (null to start now)"));
+    }
+    start_at(map.get("start_at"))
+}
+
 /// A checked sweep: its scans in queue order and its start time (Unix seconds).
 #[derive(Debug)]
 pub struct SweepPlan {
@@ -307,18 +331,7 @@ pub fn sweep_request(body: &Value, bounds: &Bounds) -> Result<SweepPlan, FieldEr
     for (i, sample) in samples.iter().enumerate() {
         holdable(&format!("samples[{i}]"), sample, bounds)?;
     }
-    let start_at = match map.get("start_at") {
-        None | Some(Value::Null) => None,
-        Some(v) => {
-            let text = v
-                .as_str()
-                .ok_or_else(|| invalid("start_at", "must be an RFC 3339 time string"))?;
-            let time =
-                time::OffsetDateTime::parse(text, &time::format_description::well_known::Rfc3339)
-                    .map_err(|e| invalid("start_at", format!("not an RFC 3339 time: {e}")))?;
-            Some(time.unix_timestamp())
-        }
-    };
+    let start_at = start_at(map.get("start_at"))?;
     let mut scans = Vec::with_capacity(total);
     for _ in 0..repeats {
         for sample in &samples {

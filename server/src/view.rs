@@ -1,7 +1,8 @@
 //! A scan as the API shows it (docs/ARCHITECTURE.md, "HTTP API"), and the publisher
 //! thread that sends it to event subscribers whenever it changes: the lanes only say
 //! which scan changed, so they never wait for a view to be built. A scan that reached
-//! a final state is cleared of leftover temporary files as it is published.
+//! a final state is cleared of leftover temporary files as it is published, and what
+//! calls for a person is noticed (`notices`).
 
 use std::path::Path;
 use std::sync::Arc;
@@ -10,6 +11,8 @@ use std::time::Duration;
 use serde_json::{json, Value};
 
 use super::files::{remove_partials, Writers};
+use super::notices::Notices;
+use super::notify::Notifier;
 use super::plan::{theta_dir_name, theta_map_path, Step, AUTO_FIT, FIT_MODELS};
 use super::progress::{metered_bracket, progress};
 use super::shared::{ScanEvent, Shared};
@@ -56,15 +59,18 @@ pub const CONTROLS: [(&str, &[ScanState]); 3] = [
     ),
 ];
 
-/// The control routes a scan's state allows, and `confirm` while it waits for its
-/// sample to be mounted.
+/// The control routes a scan's state allows; while it waits for its sample to be
+/// mounted only `cancel` and `confirm` (pausing or resuming would not end the wait).
 fn actions(scan: &ScanRecord) -> Vec<&'static str> {
+    let waits_for_sample = scan.waits_for_sample();
     let mut verbs: Vec<&str> = CONTROLS
         .iter()
-        .filter(|(_, from)| from.contains(&scan.state))
+        .filter(|(verb, from)| {
+            from.contains(&scan.state) && (!waits_for_sample || *verb == "cancel")
+        })
         .map(|(verb, _)| *verb)
         .collect();
-    if scan.waits_for_sample() {
+    if waits_for_sample {
         verbs.push("confirm");
     }
     verbs
@@ -273,13 +279,16 @@ fn auto_bracket_view(steps: &[StepRecord]) -> Value {
 /// Starts the publisher: it builds the view of every scan announced as changed
 /// ([`Shared::changed`]) with its own connection to the database at `db_path`, and
 /// sends it to event subscribers, in the order the changes happened.
+/// Each change is also shown to `Notices`, which runs the `[notify]` command on what
+/// calls for a person.
 pub fn start_publisher(shared: Arc<Shared>, db_path: &Path) -> anyhow::Result<()> {
     let store = Store::open(db_path)?;
+    let mut notices = Notices::new(&store, Notifier::start(shared.config.notify.clone())?)?;
     std::thread::Builder::new()
         .name("publisher".into())
         .spawn(move || loop {
             for id in shared.changed.take(PUBLISHER_POLL) {
-                if let Err(err) = publish(&shared, &store, id) {
+                if let Err(err) = publish(&shared, &store, &mut notices, id) {
                     tracing::error!("publishing scan {id}: {err}");
                 }
             }
@@ -287,10 +296,16 @@ pub fn start_publisher(shared: Arc<Shared>, db_path: &Path) -> anyhow::Result<()
     Ok(())
 }
 
-fn publish(shared: &Shared, store: &Store, id: i64) -> Result<(), StoreError> {
+fn publish(
+    shared: &Shared,
+    store: &Store,
+    notices: &mut Notices,
+    id: i64,
+) -> Result<(), StoreError> {
     let Some(scan) = store.scan(id)? else {
         return Ok(());
     };
+    notices.changed(store, &scan)?;
     if scan.state.is_final() {
         // A scan that ended keeps no temporary of a writer no longer running (a write
         // still in flight, ours included, renames or removes its own).

@@ -18,20 +18,22 @@ pub async fn index() -> Html<&'static str> {
 
 /// Every file under `/page/` besides the markup, by the name it is served under: the
 /// stylesheet and the ES modules.
-const PAGE_FILES: [(&str, &str); 6] = [
+const PAGE_FILES: [(&str, &str); 8] = [
     ("page.css", include_str!("../assets/page/page.css")),
     ("main.js", include_str!("../assets/page/main.js")),
     ("state.js", include_str!("../assets/page/state.js")),
     ("render.js", include_str!("../assets/page/render.js")),
+    ("sweeps.js", include_str!("../assets/page/sweeps.js")),
     ("plot.js", include_str!("../assets/page/plot.js")),
     ("text.js", include_str!("../assets/page/text.js")),
+    ("colour.js", include_str!("../assets/page/colour.js")),
 ];
 
 /// `GET /page/{file}`: the page's stylesheet (`text/css`) or one of its modules
 /// (`text/javascript`); 404 for any other name.
 #[utoipa::path(get, path = "/page/{file}",
     summary = "A file of the operator's page: its stylesheet or one of its ES modules",
-    params(("file" = String, Path, description = "page.css, main.js, state.js, render.js, plot.js or text.js")),
+    params(("file" = String, Path, description = "page.css, main.js, state.js, render.js, sweeps.js, colour.js, plot.js or text.js")),
     responses(
         (status = 200, description = "The file", content_type = "text/javascript", body = String),
         (status = 404, description = "No page file of that name", body = crate::answers::ErrorBody)))]

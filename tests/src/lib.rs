@@ -400,6 +400,11 @@ impl Daemon {
         self.request("POST", path, Some(TOKEN), Some(&body.to_string()))
     }
 
+    /// PATCH with the daemon's token and a JSON body.
+    pub fn patch(&self, path: &str, body: &Value) -> Answer {
+        self.request("PATCH", path, Some(TOKEN), Some(&body.to_string()))
+    }
+
     /// DELETE with the daemon's token.
     pub fn delete(&self, path: &str) -> Answer {
         self.request("DELETE", path, Some(TOKEN), None)

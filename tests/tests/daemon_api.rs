@@ -281,7 +281,7 @@ fn sweep_waits_for_its_start_time_and_shows_one_progress_view() {
     let id = created.json["id"].as_i64().unwrap();
     std::thread::sleep(Duration::from_millis(1500));
     let sweep = daemon.get(&format!("/api/sweeps/{id}")).json;
-    assert_eq!(sweep["state"], "waiting", "{sweep}");
+    assert_eq!(sweep["state"], "scheduled", "{sweep}");
     assert_eq!(sweep["scans_by_state"]["queued"], 8);
     assert_eq!(sweep["progress"]["done"], 0);
     // 2 repeats × (2 scans of 1 θL + 2 scans of 2 θL), each θL move + capture +

@@ -78,29 +78,106 @@ fn page_tells_the_truth_in_every_state() {
     ));
 
     // Scheduled: a sweep entered for 23:30 local time starts at 23:30 local, which is
-    // 18:00 UTC in India; the page says so in local time and counts no time down.
+    // 18:00 UTC in India; the page says so in local time and counts no time down. The
+    // sweep takes its own bracket, not the scan form's; queueing it says when it will
+    // wait for the red sample to be mounted.
     page.eval(
         r##"(() => {
-            document.getElementById("samples").value = "gold";
+            document.getElementById("samples").value = "gold, red";
             document.getElementById("sets").value = "-20";
+            document.getElementById("bracket").value = "1/2";
+            document.getElementById("sweepbracket").value = "1/10, 1/40";
             document.getElementById("startat").value = "2099-12-02T23:30";
             document.querySelector("#sweepform button[type=submit]").click();
         })()"##,
     );
-    page.wait_for(
+    let note = page.wait_for(
         "the sweep to be queued",
-        "document.getElementById('sweepmsg').textContent.includes('queued')",
+        "document.getElementById('sweepmsg').textContent.includes('queued') && document.getElementById('sweepmsg').textContent",
         Duration::from_secs(30),
     );
     let sweeps = daemon.get("/api/sweeps").json;
     assert_eq!(sweeps[0]["start_at"], "2099-12-02T18:00:00Z", "{sweeps}");
+    assert_eq!(
+        sweeps[0]["request"]["bracket"],
+        json!({"shutter_s": [0.1, 0.025]}),
+        "{sweeps}"
+    );
+    let sweep_id = sweeps[0]["id"].as_i64().unwrap();
     let scheduled_id = sweeps[0]["scans"][0]["id"].as_i64().unwrap();
+    let red_wait = &sweeps[0]["waits"][0];
+    assert_eq!(red_wait["sample"], "red", "{sweeps}");
+    let wait_local = local_wall_time(red_wait["at"].as_str().unwrap(), ZONE_OFFSET_MIN);
+    let note = note.as_str().unwrap();
+    assert!(
+        note.contains(&format!(
+            "mount red for scan {} at about {wait_local}",
+            red_wait["scan_id"]
+        )),
+        "{note}"
+    );
     page.wait_for(
         "the sweep's local start time",
         "document.getElementById('sweeps').textContent.includes('2099-12-02 23:30:00')",
         Duration::from_secs(30),
     );
-    let shown = select_and_wait(
+    // Its row says what its scans say, and opens them with the sweep's own controls.
+    page.eval(&format!(
+        "document.querySelector('#sweeps tr[data-sweep=\"{sweep_id}\"]').click()"
+    ));
+    let panel = page.wait_for(
+        "the sweep's panel",
+        &format!(
+            "!document.getElementById('sweepdetail').hidden && document.querySelectorAll('#swscans tr').length === 2 && ({{
+                row: document.querySelector('#sweeps tr[data-sweep=\"{sweep_id}\"]').children[1].textContent,
+                scans: [...document.querySelectorAll('#swscans tr')].map((r) => r.children[2].textContent),
+                enabled: [...document.querySelectorAll('#sweepdetail button[data-sweep-act]')].filter((b) => !b.disabled).map((b) => b.dataset.sweepAct),
+                reschedule: !document.getElementById('swstart').hidden,
+                waits: document.getElementById('swwaits').textContent,
+            }})"
+        ),
+        Duration::from_secs(30),
+    );
+    assert_eq!(panel["row"], "scheduled", "{panel}");
+    assert_eq!(panel["scans"], json!(["scheduled", "scheduled"]), "{panel}");
+    assert_eq!(panel["enabled"], json!(["pause", "cancel"]), "{panel}");
+    assert_eq!(panel["reschedule"], json!(true), "{panel}");
+    assert!(
+        panel["waits"].as_str().unwrap().contains("mount red"),
+        "{panel}"
+    );
+    // A new start time from the panel: 01:00 local the next night.
+    page.eval(
+        r##"(() => {
+            document.getElementById("swstartat").value = "2099-12-03T01:00";
+            document.querySelector("#swstart button[type=submit]").click();
+        })()"##,
+    );
+    page.wait_for(
+        "the new start time",
+        "document.getElementById('sweeps').textContent.includes('2099-12-03 01:00:00')",
+        Duration::from_secs(30),
+    );
+    let sweep = daemon.get(&format!("/api/sweeps/{sweep_id}")).json;
+    assert_eq!(sweep["start_at"], "2099-12-02T19:30:00Z", "{sweep}");
+    // Paused and resumed as a whole from the panel.
+    for (button, state) in [("pause", "paused"), ("resume", "scheduled")] {
+        page.eval(&format!(
+            "document.querySelector('#sweepdetail button[data-sweep-act={button}]').click()"
+        ));
+        page.wait_for(
+            &format!("the sweep {state}"),
+            &format!(
+                "document.querySelector('#sweeps tr[data-sweep=\"{sweep_id}\"]').children[1].textContent === '{state}'"
+            ),
+            Duration::from_secs(30),
+        );
+    }
+    // A scan row of the panel opens that scan.
+    page.eval(&format!(
+        "document.querySelector('#swscans tr[data-id=\"{scheduled_id}\"]').click()"
+    ));
+    let shown = wait_shown(
         &mut page,
         scheduled_id,
         "scheduled",
@@ -108,7 +185,7 @@ fn page_tells_the_truth_in_every_state() {
             s["times"]
                 .as_str()
                 .unwrap()
-                .contains("starts 2099-12-02 23:30:00")
+                .contains("starts 2099-12-03 01:00:00")
         },
         Duration::from_secs(30),
     );
@@ -117,7 +194,7 @@ fn page_tells_the_truth_in_every_state() {
         shown["rowNote"]
             .as_str()
             .unwrap()
-            .contains("starts 2099-12-02 23:30:00"),
+            .contains("starts 2099-12-03 01:00:00"),
         "{shown}"
     );
     assert_eq!(shown["frame"], Value::Null, "{shown}");
@@ -138,7 +215,7 @@ fn page_tells_the_truth_in_every_state() {
         "document.getElementById('scanmsg').textContent.includes('queued') && document.getElementById('scanmsg').textContent",
         Duration::from_secs(30),
     );
-    let running_id = scheduled_id + 1;
+    let running_id = scheduled_id + 2;
     assert!(
         message
             .as_str()
@@ -420,6 +497,15 @@ fn page_tells_the_truth_in_every_state() {
     let red = json!({"sample": "red", "theta_l": [-20], "bracket": {"shutter_s": [0.1]}});
     let red_id = daemon.post("/api/scans", &red).json["id"].as_i64().unwrap();
     shown_waiting(&mut page, red_id, "mount sample red", true);
+    // Waiting for a person: only Confirm and Cancel.
+    let shown = wait_shown(
+        &mut page,
+        red_id,
+        "waiting",
+        |_| true,
+        Duration::from_secs(10),
+    );
+    assert_eq!(shown["enabled"], json!(["cancel", "confirm"]), "{shown}");
     fits_the_screen(&mut page, "waiting for a sample");
     page.eval("document.querySelector('#detail button[data-act=confirm]').click()");
     let shown = wait_shown(
@@ -481,6 +567,10 @@ fn page_tells_the_truth_in_every_state() {
         arm.contains("position unknown") && !arm.contains('°'),
         "{arm}"
     );
+    // The line says it once, with the cause.
+    assert_eq!(arm.matches("position unknown").count(), 1, "{arm}");
+    assert_eq!(arm.matches("home").count(), 1, "{arm}");
+    assert!(arm.contains("(the controller reset"), "{arm}");
     assert_eq!(
         daemon.get("/api/hardware").json["arm"]["angle_deg"],
         Value::Null

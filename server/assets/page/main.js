@@ -1,10 +1,12 @@
-// The page's controls and its start: the scan and sweep forms, STOP ARM, Home, the
-// arm's declared position, a scan's actions and calibration, downloads carrying the
-// token, selecting a scan, and the polling (every 1.5 s) with the time-left countdown.
+// The page's controls and its start: the scan and sweep forms (the sweep's own
+// bracket; the sample changes it will wait for), STOP ARM, Home, the arm's declared
+// position, a scan's actions and calibration, downloads carrying the token, selecting
+// a scan or a sweep, and the polling (every 1.5 s) with the time-left countdown.
 
 import { $, page, hasToken, post, overview, fetchFile, watch } from "./state.js";
 import { escapeHtml, localTime } from "./text.js";
 import { show, showOverview, clearFrame, setupTable, paintTimeLeft } from "./render.js";
+import { showSweep, initSweeps, waitsText } from "./sweeps.js";
 
 // Numbers written comma separated.
 function numbers(text) {
@@ -22,9 +24,10 @@ function shutterTimes(text) {
   });
 }
 
-// The bracket field as the API takes it: "auto" or the shutter times.
-function bracketBody() {
-  const b = $("bracket").value.trim();
+// A bracket field (the scan form's or the sweep form's) as the API takes it: "auto"
+// or the shutter times.
+function bracketBody(field) {
+  const b = $(field).value.trim();
   return b === "auto" || b === "" ? "auto" : { shutter_s: shutterTimes(b) };
 }
 
@@ -34,7 +37,7 @@ const target = (form) => $(form).getAttribute("action");
 $("scanform").addEventListener("submit", async (e) => {
   e.preventDefault();
   try {
-    const body = { sample: $("sample").value.trim(), theta_l: numbers($("theta").value), bracket: bracketBody() };
+    const body = { sample: $("sample").value.trim(), theta_l: numbers($("theta").value), bracket: bracketBody("bracket") };
     const r = await post(target("scanform"), body);
     $("scanmsg").innerHTML = `<span class="ok">scan ${r.id} queued</span>`;
     select(r.id);
@@ -49,13 +52,16 @@ $("sweepform").addEventListener("submit", async (e) => {
       samples: $("samples").value.split(",").map((s) => s.trim()).filter((s) => s),
       theta_l_sets: $("sets").value.split(";").map(numbers),
       repeats: Number($("repeats").value || 1),
-      bracket: bracketBody(),
+      bracket: bracketBody("sweepbracket"),
     };
     // datetime-local gives the local wall time without a zone: Date reads it as local.
     if ($("startat").value) body.start_at = new Date($("startat").value).toISOString();
     const r = await post(target("sweepform"), body);
     const when = body.start_at ? `, starting ${localTime(body.start_at)}` : "";
-    $("sweepmsg").innerHTML = `<span class="ok">sweep ${r.id} queued: ${r.scans.length} scans${escapeHtml(when)}</span>`;
+    const waits = waitsText(r.waits);
+    $("sweepmsg").innerHTML = `<span class="ok">sweep ${r.id} queued: ${r.scans.length} scans${escapeHtml(when)}</span>` +
+      (waits ? `<br><span class="note" id="sweepwaits">${escapeHtml(waits)}</span>` : "");
+    page.sweep = r.id;
     refresh();
   } catch (err) { $("sweepmsg").textContent = err.message; }
 });
@@ -145,6 +151,7 @@ async function poll() {
     // Another scan selected meanwhile: its own poll draws the page.
     if (page.selected !== id) return;
     showOverview(scans, sweeps, hw);
+    showSweep(sweeps);
     if (detail) show(detail);
     if (page.selected === null && scans.length) select(scans[scans.length - 1].id);
   } catch (err) {
@@ -177,6 +184,8 @@ $("scans").addEventListener("click", (e) => {
   const tr = e.target.closest("tr[data-id]");
   if (tr) select(Number(tr.dataset.id));
 });
+
+initSweeps(select, refresh);
 
 // Links to results and files download through fetch when a token is entered, under
 // the name the daemon gives them (Content-Disposition).

@@ -1,11 +1,13 @@
 // Rendering the daemon's views into the page: the queue and sweep tables, the
 // hardware line, the selected scan's detail (state, reason, times, bracket, controls,
-// latest frame, result links, live fit), its file listing and a calibrated setup.
+// latest frame, result links, live fit, multi-angle colour), its file listing and a
+// calibrated setup.
 // Reads the page's state; sends no command (main.js does).
 
 import { $, page, FINAL, get, fetchFile, remember, timeLeft } from "./state.js";
 import { escapeHtml, formatShutter, localTime, duration, percent } from "./text.js";
 import { plot } from "./plot.js";
+import { noteBatches, showColour } from "./colour.js";
 
 // Writes every time-left slot of the page (queue rows and detail) from `timeLeft`.
 export function paintTimeLeft() {
@@ -21,7 +23,7 @@ function scheduled(s) {
 }
 
 // The state as the operator reads it: a queued scan with a later start is "scheduled".
-function stateLabel(s) {
+export function stateLabel(s) {
   return scheduled(s) ? "scheduled" : s.state;
 }
 
@@ -39,7 +41,7 @@ function liveTable(live, model) {
     `<th>at new θL</th><th>fit moved</th></tr></thead><tbody>${rows.join("")}</tbody></table>`;
 }
 
-function bar(done, total) {
+export function bar(done, total) {
   const pct = total ? Math.round(100 * done / total) : 0;
   return `<div class="bar" title="${done}/${total}"><div style="width:${pct}%"></div></div>`;
 }
@@ -76,6 +78,9 @@ function rowNote(s) {
   return "";
 }
 
+// The arm's line: its state in words, its angle while known, and its fault without
+// what the state already says (after a stop the fault "arm position unknown: the
+// controller reset or reconnected: home the arm" adds only its cause).
 function armLine(a) {
   const unknown = ["alarm", "homing", "needs_homing", "needs_position", "disconnected"].includes(a.state);
   const state = {
@@ -83,19 +88,23 @@ function armLine(a) {
     needs_homing: "position unknown, home it",
     needs_position: "position unknown, declare it",
   }[a.state] || a.state;
+  const fault = (a.error || "").replace(/^(arm )?position unknown:\s*/i, "")
+    .replace(/[:,]?\s*(position unknown,?\s*)?home (before moving|the arm)$/i, "").trim();
   return `arm: ${state}` + (a.angle_deg != null && !unknown ? ` at ${a.angle_deg.toFixed(1)}°` : "") +
-    (a.error ? ` (${a.error})` : "");
+    (fault ? ` (${fault})` : "");
 }
 
 // The queue, the sweeps and the header's hardware line from what the page polls.
 export function showOverview(scans, sweeps, hw) {
   scans.forEach(remember);
+  noteBatches(scans);
   $("scans").innerHTML = scans.slice().reverse().map((s) =>
     `<tr data-id="${s.id}" class="${s.id === page.selected ? "sel" : ""}"><td>${s.id}</td><td>${escapeHtml(s.sample)}</td>` +
     `<td class="state-${s.state}">${stateLabel(s)}</td><td>${bar(s.progress.done, s.progress.total)}</td>` +
     `<td class="muted">${escapeHtml(rowNote(s))}<span class="left" data-id="${s.id}"></span></td></tr>`).join("");
   $("sweeps").innerHTML = sweeps.slice().reverse().map((w) =>
-    `<tr><td>${w.id}</td><td>${w.state}</td><td>${bar(w.progress.done, w.progress.total)}</td>` +
+    `<tr data-sweep="${w.id}" class="${w.id === page.sweep ? "sel" : ""}" title="open its scans"><td>${w.id}</td>` +
+    `<td class="state-${w.state}">${w.state}</td><td>${bar(w.progress.done, w.progress.total)}</td>` +
     `<td class="muted">${escapeHtml(w.start_at ? localTime(w.start_at) : "now")}</td></tr>`).join("");
   const a = hw.arm;
   $("arm").textContent = armLine(a);
@@ -197,6 +206,7 @@ export function show(s) {
     }, () => { /* no frame yet */ });
   }
   $("choice").innerHTML = choiceText(s.choice);
+  showColour(s);
   const links = [];
   if (s.results.samples) links.push(`<a href="${s.results.samples}" download>samples.csv</a>`);
   for (const [m, url] of Object.entries(s.results.fits)) links.push(`<a href="${url}" download>fit ${m}</a>`);

@@ -14,8 +14,9 @@ tokenInput.addEventListener("change", () => localStorage.setItem("gonio-token", 
 export const hasToken = () => tokenInput.value.trim() !== "";
 
 // What the page is showing: the scan selected, the steps done when its frame was last
-// fetched, its latest view, and whether a calibration from it is under way.
-export const page = { selected: null, lastDone: -1, lastScan: null, calibrating: false };
+// fetched, its latest view, whether a calibration from it is under way, and the sweep
+// whose panel is open.
+export const page = { selected: null, lastDone: -1, lastScan: null, calibrating: false, sweep: null };
 
 export const FINAL = ["done", "failed", "cancelled"];
 
@@ -36,13 +37,17 @@ export async function getJson(path) {
   return answer(await get(path));
 }
 
-export async function post(path, body) {
+// A JSON body sent with `method` and the token.
+async function send(method, path, body) {
   return answer(await fetch(path, {
-    method: "POST",
+    method,
     headers: { "Content-Type": "application/json", ...auth() },
     body: JSON.stringify(body || {}),
   }));
 }
+
+export const post = (path, body) => send("POST", path, body);
+export const patch = (path, body) => send("PATCH", path, body);
 
 // What the page polls, all at once: the scans, the sweeps, the hardware and the
 // selected scan's own view (with what its journal tells), which also stands for it in

@@ -166,9 +166,14 @@ pub struct ScanRecord {
 impl ScanRecord {
     /// Whether the scan waits for the operator to mount its sample.
     pub fn waits_for_sample(&self) -> bool {
-        self.state == ScanState::Waiting
-            && self.error.as_deref() == Some(mount_reason(&self.plan.sample).as_str())
+        waits_for_sample(self.state, self.error.as_deref(), &self.plan.sample)
     }
+}
+
+/// Whether a scan in `state` with reason `error` waits for the operator to mount its
+/// `sample`.
+pub(super) fn waits_for_sample(state: ScanState, error: Option<&str>, sample: &str) -> bool {
+    state == ScanState::Waiting && error == Some(mount_reason(sample).as_str())
 }
 
 /// One step as stored.

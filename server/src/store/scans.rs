@@ -4,7 +4,8 @@
 use rusqlite::{params, OptionalExtension, Transaction};
 
 use super::records::{
-    json_err, now_rfc3339, NewScan, ScanRecord, ScanState, StoreError, STEP_SPACING,
+    json_err, now_rfc3339, waits_for_sample, NewScan, ScanRecord, ScanState, StoreError,
+    STEP_SPACING,
 };
 use super::Store;
 use crate::plan::Step;
@@ -151,18 +152,27 @@ impl Store {
             if !from.contains(&ScanState::parse(&current)?) {
                 return Ok(false);
             }
-            let now = now_rfc3339();
-            tx.execute(
-                "UPDATE scans SET state = ?2, error = ?3,
-                    started = CASE WHEN ?2 = 'running' AND started IS NULL THEN ?4 ELSE started END,
-                    finished = CASE WHEN ?2 IN ('done', 'failed', 'cancelled') THEN ?4
-                                    WHEN ?2 IN ('queued', 'running') THEN NULL
-                                    ELSE finished END
-                 WHERE id = ?1",
-                params![id, to.as_str(), error, now],
-            )?;
+            set_state_tx(&tx, id, to, error)?;
             tx.commit()?;
             Ok(true)
+        })
+    }
+
+    /// An operator's control: as [`Store::transition`] with the reason cleared, but
+    /// never for a scan that waits for its sample to be mounted unless `sample_waits`
+    /// is set (only confirming or cancelling ends that wait).
+    pub fn control(
+        &mut self,
+        id: i64,
+        from: &[ScanState],
+        to: ScanState,
+        sample_waits: bool,
+    ) -> Result<bool, StoreError> {
+        self.writing(|store| {
+            let tx = store.write_transaction()?;
+            let moved = control_tx(&tx, "id = ?1", id, from, to, sample_waits)?;
+            tx.commit()?;
+            Ok(!moved.is_empty())
         })
     }
 
@@ -191,6 +201,59 @@ impl Store {
             Ok(ids)
         })
     }
+}
+
+/// Moves the scans `filter` selects (an SQL condition on `arg`, `?1`) that are in one
+/// of the states `from` to `to`, clearing their reason, except those waiting for their
+/// sample to be mounted unless `sample_waits` is set; returns their ids.
+pub(super) fn control_tx(
+    tx: &Transaction<'_>,
+    filter: &str,
+    arg: i64,
+    from: &[ScanState],
+    to: ScanState,
+    sample_waits: bool,
+) -> Result<Vec<i64>, StoreError> {
+    let scans: Vec<(i64, String, Option<String>, String)> = {
+        let mut stmt = tx.prepare(&format!(
+            "SELECT id, state, error, json_extract(plan, '$.sample') FROM scans
+             WHERE {filter} ORDER BY id"
+        ))?;
+        let rows = stmt
+            .query_map([arg], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?, r.get(3)?)))?
+            .collect::<Result<_, _>>()?;
+        rows
+    };
+    let mut moved = Vec::new();
+    for (id, state, error, sample) in scans {
+        let state = ScanState::parse(&state)?;
+        let waiting = waits_for_sample(state, error.as_deref(), &sample);
+        if from.contains(&state) && (sample_waits || !waiting) {
+            set_state_tx(tx, id, to, None)?;
+            moved.push(id);
+        }
+    }
+    Ok(moved)
+}
+
+/// Sets the state of scan `id` to `to` with reason `error`, stamping when it started
+/// running and when it ended.
+pub(super) fn set_state_tx(
+    tx: &Transaction<'_>,
+    id: i64,
+    to: ScanState,
+    error: Option<&str>,
+) -> Result<(), StoreError> {
+    tx.execute(
+        "UPDATE scans SET state = ?2, error = ?3,
+            started = CASE WHEN ?2 = 'running' AND started IS NULL THEN ?4 ELSE started END,
+            finished = CASE WHEN ?2 IN ('done', 'failed', 'cancelled') THEN ?4
+                            WHEN ?2 IN ('queued', 'running') THEN NULL
+                            ELSE finished END
+         WHERE id = ?1",
+        params![id, to.as_str(), error, now_rfc3339()],
+    )?;
+    Ok(())
 }
 
 pub(super) fn insert_scans_tx(
