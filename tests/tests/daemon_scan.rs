@@ -217,20 +217,17 @@ fn six_angle_scan_completes_and_its_fit_recovers_the_scene() {
         let fit = step("fit", Some(model));
         assert!(at(auto, "started") <= at(fit, "started"), "{auto} {fit}");
     }
-    // Its budget is that of the per-model fit of the same model and roughness, when
-    // the fits are the same.
+    // It chooses shared-roughness Cook–Torrance on this scene, the same fit as
+    // fit-cook-torrance.json, and carries the same budget.
     let chosen = daemon
         .get(&format!("/api/scans/{id}/files/fit-auto.json"))
         .json;
-    let same = daemon.get(&format!(
-        "/api/scans/{id}/files/fit-{}.json",
-        chosen["model"].as_str().unwrap()
-    ));
-    let parametric = ["model", "roughness", "kd", "ks", "ks_90", "m", "stderr"];
-    if same.status == 200 && parametric.iter().all(|f| chosen[f] == same.json[f]) {
-        assert!(chosen["budget"].is_object(), "{}", chosen["budget"]);
-        assert_eq!(chosen["budget"], same.json["budget"]);
+    let same = daemon.get(&format!("/api/scans/{id}/files/fit-cook-torrance.json"));
+    for field in ["model", "roughness", "kd", "ks", "m", "stderr"] {
+        assert_eq!(chosen[field], same.json[field], "{field}");
     }
+    assert!(chosen["budget"].is_object(), "{}", chosen["budget"]);
+    assert_eq!(chosen["budget"], same.json["budget"]);
 
     // The page's views of the scan.
     let thumbnail = daemon.get(&format!("/api/scans/{id}/thumbnail.png"));
