@@ -31,6 +31,21 @@ fn done(store: &mut Store, id: i64, step: &StepRecord, followers: &[Step]) {
         .unwrap();
 }
 
+/// A scan of [`plan`], running.
+fn started_scan(store: &mut Store) -> i64 {
+    let id = store
+        .insert_scans(&[NewScan {
+            plan: plan(),
+            sweep_id: None,
+            not_before: None,
+        }])
+        .unwrap()[0];
+    store
+        .transition(id, &[ScanState::Queued], ScanState::Running, None)
+        .unwrap();
+    id
+}
+
 fn next(store: &Store, id: i64, lane: Lane) -> Option<Step> {
     store.next_step(id, lane).unwrap().map(|s| s.step)
 }
@@ -233,16 +248,7 @@ fn frames_awaiting_hdr_are_the_captures_of_brackets_not_merged() {
 #[test]
 fn processing_goes_on_while_a_device_is_away_but_not_when_paused() {
     let (dir, mut store) = temp_store("processable");
-    let id = store
-        .insert_scans(&[NewScan {
-            plan: plan(),
-            sweep_id: None,
-            not_before: None,
-        }])
-        .unwrap()[0];
-    store
-        .transition(id, &[ScanState::Queued], ScanState::Running, None)
-        .unwrap();
+    let id = started_scan(&mut store);
     for step in &store.steps(id).unwrap()[..4] {
         done(&mut store, id, step, &[]);
     }
@@ -397,16 +403,7 @@ fn start_time_and_transitions_gate_the_queue() {
 #[test]
 fn the_auto_fit_runs_beside_the_model_fits_once_the_samples_are_gathered() {
     let (dir, mut store) = temp_store("beside");
-    let id = store
-        .insert_scans(&[NewScan {
-            plan: plan(),
-            sweep_id: None,
-            not_before: None,
-        }])
-        .unwrap()[0];
-    store
-        .transition(id, &[ScanState::Queued], ScanState::Running, None)
-        .unwrap();
+    let id = started_scan(&mut store);
     let steps = store.steps(id).unwrap();
     let record = |wanted: &Step| steps.iter().find(|s| s.step == *wanted).unwrap().clone();
     let index = |wanted: &Step| record(wanted).index;
