@@ -116,7 +116,9 @@ impl ProcessingLane {
             if !self.fits(id, &step)? {
                 return self.wait_for_space();
             }
-            self.start_background(id, &step)?;
+            if !self.start_background(id, &step)? {
+                break;
+            }
         }
         match self.store.next_for_processing(&self.background)? {
             // One step of a kind beside the others at a time: the next waits for the
@@ -192,11 +194,11 @@ impl ProcessingLane {
         Ok(self.prefetched.advance(&wanted))
     }
 
-    /// Starts step `record` of scan `id` in the background; an HDR step takes the
-    /// frames decoded ahead with it.
-    fn start_background(&mut self, id: i64, record: &StepRecord) -> Result<(), StoreError> {
+    /// Starts step `record` of scan `id` in the background, an HDR step with the frames
+    /// decoded ahead; returns whether it started (not if the scan is gone).
+    fn start_background(&mut self, id: i64, record: &StepRecord) -> Result<bool, StoreError> {
         let Some(scan) = self.store.scan(id)? else {
-            return Ok(());
+            return Ok(false);
         };
         step::begin(&self.shared, &mut self.store, id, record.index)?;
         let dir = self.shared.scan_dir(id);
@@ -217,7 +219,7 @@ impl ProcessingLane {
             let _ = sender.send((id, index, outcome, takes_frames.then_some(prefetched)));
         });
         self.background.push((id, index));
-        Ok(())
+        Ok(true)
     }
 
     /// Records the outcomes of the background steps that have one (waiting for one at
