@@ -19,6 +19,7 @@ pub mod decode_workers;
 mod devices;
 mod downloads_config;
 mod files;
+mod fit_cache;
 mod health;
 mod lanes;
 mod mount;

@@ -125,6 +125,32 @@ impl Step {
         }
     }
 
+    /// Whether the processing lane runs this step beside its others, as soon as the
+    /// steps before it that it [`needs`](Step::needs) are done: a θL's HDR map (an
+    /// input of no other step) and the [`AUTO_FIT`] (it reads `samples.csv` alone, not
+    /// the fits of the [`FIT_MODELS`] before it, whose budgets it may share).
+    pub fn runs_beside(&self) -> bool {
+        match self {
+            Step::Hdr { .. } => true,
+            Step::Fit { model } => model == AUTO_FIT.0,
+            _ => false,
+        }
+    }
+
+    /// Whether this step waits for `before`, a step before it in the journal: an HDR
+    /// map needs only its captures (and the hardware steps before them), the
+    /// [`AUTO_FIT`] every step but the other fits and the maps (it reads `samples.csv`);
+    /// every other step waits for all.
+    pub fn needs(&self, before: &Step) -> bool {
+        match self {
+            Step::Hdr { .. } => before.lane() == Lane::Hardware,
+            Step::Fit { model } if model == AUTO_FIT.0 => {
+                !matches!(before, Step::Fit { .. } | Step::Hdr { .. })
+            }
+            _ => true,
+        }
+    }
+
     /// The θL whose bracket this step captures or processes, if it is one θL's.
     pub fn theta_l(&self) -> Option<f64> {
         match self {
@@ -275,6 +301,35 @@ mod tests {
             ]
         );
         assert_eq!(steps.len(), 1 + 2 * 4 + 5);
+    }
+
+    #[test]
+    fn maps_and_the_auto_fit_run_beside_and_wait_only_for_their_inputs() {
+        let auto = Step::Fit {
+            model: AUTO_FIT.0.into(),
+        };
+        let ward = Step::Fit {
+            model: "ward".into(),
+        };
+        let (samples, hdr) = (
+            Step::Samples { theta_l: -45.0 },
+            Step::Hdr { theta_l: -45.0 },
+        );
+        let capture = Step::Capture {
+            theta_l: -45.0,
+            index: 0,
+            shutter_s: 0.1,
+        };
+        assert!(auto.runs_beside() && hdr.runs_beside());
+        assert!(![&ward, &samples, &Step::Extract, &capture]
+            .iter()
+            .any(|s| s.runs_beside()));
+        assert!(!auto.needs(&ward) && !auto.needs(&hdr));
+        assert!(auto.needs(&Step::Extract) && auto.needs(&samples) && auto.needs(&capture));
+        assert!(hdr.needs(&capture) && !hdr.needs(&samples) && !hdr.needs(&Step::Extract));
+        assert!(ward.needs(&Step::Fit {
+            model: "cook-torrance".into()
+        }));
     }
 
     #[test]

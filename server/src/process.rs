@@ -13,7 +13,6 @@ use gonio_processing::brdf::Model;
 use gonio_processing::capture::{is_capture_path, sidecar_path, CaptureError, Frame};
 use gonio_processing::color::CameraModel;
 use gonio_processing::extract::{extract_scan, ExtractOptions};
-use gonio_processing::fit::budget::budget_if_possible;
 use gonio_processing::fit::{fit, fit_auto, FitOptions, FitResult, AUTO_CANDIDATES};
 use gonio_processing::hdr::{merge, MergeOptions};
 use gonio_processing::metrics::err_p;
@@ -22,6 +21,8 @@ use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
 
 use super::files::{write_atomic, write_atomic_with};
+use super::fit_cache::fingerprint;
+pub use super::fit_cache::Budgets;
 use super::plan::{
     theta_dir_name, theta_fits_path, theta_map_path, theta_map_record_path, theta_samples_path,
     ScanPlan, Step, AUTO_FIT, FIT_MODELS,
@@ -84,18 +85,20 @@ impl Prefetched {
 
 /// Runs one processing step of the scan `plan` in scan directory `dir` (extraction
 /// with setup.json's white reflectance); the HDR step takes the frames decoded ahead
-/// from `prefetched`. Returns the step's result record.
+/// from `prefetched`, a fit step its budget from `budgets` when the same fit has one.
+/// Returns the step's result record.
 pub fn run(
     step: &Step,
     dir: &Path,
     plan: &ScanPlan,
     prefetched: &mut Prefetched,
+    budgets: &Budgets,
 ) -> anyhow::Result<Value> {
     match step {
         Step::Samples { theta_l } => samples(dir, plan, *theta_l),
         Step::Hdr { theta_l } => hdr(dir, *theta_l, prefetched),
         Step::Extract => gather(dir, plan),
-        Step::Fit { model } => fit_model(dir, plan, model),
+        Step::Fit { model } => fit_model(dir, plan, model, budgets),
         Step::Home | Step::Move { .. } | Step::Meter { .. } | Step::Capture { .. } => {
             anyhow::bail!("{} is not a processing step", step.describe())
         }
@@ -218,15 +221,6 @@ impl SavedFits {
             .then(|| self.fits.get(model))
             .flatten()
     }
-}
-
-/// A fingerprint of samples in their order: every field, as serialised exactly (to
-/// JSON, which cannot fail for samples).
-fn fingerprint(samples: &[Sample]) -> String {
-    use std::hash::{DefaultHasher, Hasher};
-    let mut hasher = DefaultHasher::new();
-    hasher.write(&serde_json::to_vec(samples).unwrap_or_default());
-    format!("{}:{:016x}", samples.len(), hasher.finish())
 }
 
 fn predictions(fit: &FitResult, samples: &[Sample]) -> Vec<[f64; 3]> {
@@ -383,8 +377,10 @@ fn gather(dir: &Path, plan: &ScanPlan) -> anyhow::Result<Value> {
 
 /// Fits `model` to `samples.csv`; the last θL's live fit is taken as it is when it
 /// was made on exactly those samples (as it is once every θL is processed). The
-/// [`AUTO_FIT`] chooses among the models by the θL each fit did not see.
-fn fit_model(dir: &Path, plan: &ScanPlan, model: &str) -> anyhow::Result<Value> {
+/// [`AUTO_FIT`] chooses among the models by the θL each fit did not see. The budget is
+/// taken from `budgets` when the same fit of the same samples has one (the auto fit
+/// choosing a model as its own fit has it, whichever of the two is made first).
+fn fit_model(dir: &Path, plan: &ScanPlan, model: &str, budgets: &Budgets) -> anyhow::Result<Value> {
     let name = FIT_MODELS
         .iter()
         .chain([&AUTO_FIT])
@@ -406,7 +402,7 @@ fn fit_model(dir: &Path, plan: &ScanPlan, model: &str) -> anyhow::Result<Value> 
         }
     };
     let result = FitResult {
-        budget: budget_if_possible(&samples, &result)?,
+        budget: budgets.of(&samples, &result)?,
         ..result
     };
     write_atomic(&dir.join(name), &serde_json::to_vec_pretty(&result)?)
@@ -569,7 +565,7 @@ mod tests {
             FIT_MODELS
                 .iter()
                 .map(|(model, name)| {
-                    fit_model(dir, &plan, model).unwrap();
+                    fit_model(dir, &plan, model, &Budgets::default()).unwrap();
                     serde_json::from_slice(&std::fs::read(dir.join(name)).unwrap()).unwrap()
                 })
                 .collect()
@@ -603,7 +599,7 @@ mod tests {
         std::fs::write(&path, b"{").unwrap();
         assert!(same(&scan_fits(dir), &fresh));
         // The last fit chooses among the models, and says why, in its file and record.
-        let record = fit_model(dir, &plan, AUTO_FIT.0).unwrap();
+        let record = fit_model(dir, &plan, AUTO_FIT.0, &Budgets::default()).unwrap();
         let auto: FitResult =
             serde_json::from_slice(&std::fs::read(dir.join(AUTO_FIT.1)).unwrap()).unwrap();
         let selection = auto.selection.expect("an auto fit records its choice");

@@ -197,6 +197,38 @@ fn six_angle_scan_completes_and_its_fit_recovers_the_scene() {
         );
     }
 
+    // The fit that chooses the model runs beside the per-model fits: it starts once
+    // samples.csv is gathered, before the first of them.
+    let step = |kind: &str, model: Option<&str>| {
+        steps
+            .iter()
+            .find(|s| s["step"]["kind"] == kind && model.is_none_or(|m| s["step"]["model"] == m))
+            .unwrap_or_else(|| panic!("no {kind} step {model:?}"))
+    };
+    let at = |s: &Value, field: &str| {
+        let text = s[field]
+            .as_str()
+            .unwrap_or_else(|| panic!("{field} of {s}"));
+        time::OffsetDateTime::parse(text, &time::format_description::well_known::Rfc3339).unwrap()
+    };
+    let auto = step("fit", Some("auto"));
+    assert!(at(auto, "started") >= at(step("extract", None), "finished"));
+    for model in ["cook-torrance", "ward", "cook-torrance-fresnel"] {
+        let fit = step("fit", Some(model));
+        assert!(at(auto, "started") <= at(fit, "started"), "{auto} {fit}");
+    }
+    // It chooses shared-roughness Cook–Torrance on this scene, the same fit as
+    // fit-cook-torrance.json, and carries the same budget.
+    let chosen = daemon
+        .get(&format!("/api/scans/{id}/files/fit-auto.json"))
+        .json;
+    let same = daemon.get(&format!("/api/scans/{id}/files/fit-cook-torrance.json"));
+    for field in ["model", "roughness", "kd", "ks", "m", "stderr"] {
+        assert_eq!(chosen[field], same.json[field], "{field}");
+    }
+    assert!(chosen["budget"].is_object(), "{}", chosen["budget"]);
+    assert_eq!(chosen["budget"], same.json["budget"]);
+
     // The page's views of the scan.
     let thumbnail = daemon.get(&format!("/api/scans/{id}/thumbnail.png"));
     assert_eq!(thumbnail.status, 200);

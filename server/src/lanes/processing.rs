@@ -1,8 +1,11 @@
 //! The processing lane: one thread that runs the processing steps of every scan as
 //! soon as their inputs exist (docs/ARCHITECTURE.md, "Daemon"), in journal order,
-//! while the hardware lane goes on capturing. An HDR step runs in the background as
-//! soon as its bracket is captured, beside the other steps (a θL's map is an input of
-//! no other step), one at a time.
+//! while the hardware lane goes on capturing. Two kinds of step run in the background,
+//! beside the others, one of each kind at a time ([`Step::runs_beside`]): an HDR step as
+//! soon as its bracket is captured (a θL's map is an input of no other step), and the
+//! fit that chooses the model as soon as `samples.csv` is gathered, beside the fits of
+//! the other models (it needs none of them; it shares their budget when it chooses
+//! one of them as they are fitted, see [`process::Budgets`]).
 //! A step that was running when the daemon stopped is run again. With nothing to run,
 //! it decodes the frames of the bracket being captured ahead of their HDR step.
 //!
@@ -26,20 +29,24 @@ use crate::store::{ScanState, StepRecord, Store, StoreError, PROCESSABLE};
 /// How often the lane looks for ready steps when nothing wakes it.
 const IDLE_POLL: Duration = Duration::from_millis(500);
 
-/// An HDR step running on the lane's pool, with the frames decoded ahead, which it
-/// hands back with its outcome.
-struct Background {
-    id: i64,
-    index: u32,
-    outcome: mpsc::Receiver<(Outcome, Prefetched)>,
-}
+/// A step running on the lane's pool beside the others: scan id and step index.
+type Background = (i64, u32);
+
+/// What a background step hands back: its scan id and step index, its outcome, and
+/// the frames decoded ahead if it took them (an HDR step).
+type Finished = (i64, u32, Outcome, Option<Prefetched>);
 
 /// The processing lane's state.
 pub struct ProcessingLane {
     shared: Arc<Shared>,
     store: Store,
     prefetched: Prefetched,
-    background: Option<Background>,
+    /// The steps running beside the others, and where they send their outcome.
+    background: Vec<Background>,
+    finished: (mpsc::Sender<Finished>, mpsc::Receiver<Finished>),
+    /// The budgets of the scans' fits, shared between the fits in the foreground and
+    /// the one in the background.
+    budgets: Arc<process::Budgets>,
     /// When to look at the free space again after a step did not fit.
     disk_retry: Backoff,
 }
@@ -50,7 +57,9 @@ impl ProcessingLane {
             shared,
             store,
             prefetched: Prefetched::default(),
-            background: None,
+            background: Vec::new(),
+            finished: mpsc::channel(),
+            budgets: Arc::default(),
             disk_retry: Backoff::now(),
         }
     }
@@ -89,9 +98,10 @@ impl ProcessingLane {
     }
 
     /// One turn of the lane: makes the journal's reserve again if the store used it and
-    /// there is room, records a finished background step, starts the next
-    /// captured bracket's map in the background (the longest step, so first), then runs
-    /// the next other step, or waits for the background one, or decodes ahead.
+    /// there is room, records the finished background steps, starts the next steps that
+    /// run beside the others in the background (a captured bracket's map, the longest
+    /// step, and the auto fit: so first), then runs the next other step, or waits for a
+    /// background one, or decodes ahead.
     fn turn(&mut self) -> Result<(), StoreError> {
         if self
             .shared
@@ -102,22 +112,24 @@ impl ProcessingLane {
             tracing::info!("space held for the journal again");
         }
         self.collect(false)?;
-        if self.background.is_none() {
-            if let Some((id, step)) = self.store.next_hdr()? {
-                if !self.fits(id, &step)? {
-                    return self.wait_for_space();
-                }
-                self.start_background(id, &step)?;
+        while let Some((id, step)) = self.store.next_beside(&self.background)? {
+            if !self.fits(id, &step)? {
+                return self.wait_for_space();
+            }
+            if !self.start_background(id, &step)? {
+                break;
             }
         }
-        let running = self.background.as_ref().map(|b| (b.id, b.index));
-        match self.store.next_for_processing(running)? {
-            // One HDR step at a time: the next waits for the running one.
-            Some((_, record)) if matches!(record.step, Step::Hdr { .. }) => self.collect(true),
+        match self.store.next_for_processing(&self.background)? {
+            // One step of a kind beside the others at a time: the next waits for the
+            // running one.
+            Some((_, record)) if record.step.runs_beside() && !self.background.is_empty() => {
+                self.collect(true)
+            }
             Some((id, record)) if !self.fits(id, &record)? => self.wait_for_space(),
             Some((id, record)) => self.run_step(id, &record),
-            // Nothing else to do: wait for the background step.
-            None if self.background.is_some() => self.collect(true),
+            // Nothing else to do: wait for a background step.
+            None if !self.background.is_empty() => self.collect(true),
             None => {
                 if !self.prefetch()? {
                     // A timeout and a wake-up both mean: look again.
@@ -164,7 +176,7 @@ impl ProcessingLane {
         }
     }
 
-    /// Waits while no step fits on the disk (the background step, if any, goes on).
+    /// Waits while no step fits on the disk (the background steps, if any, go on).
     fn wait_for_space(&mut self) -> Result<(), StoreError> {
         self.collect(false)?;
         self.shared.processing_wake.take(IDLE_POLL);
@@ -182,50 +194,53 @@ impl ProcessingLane {
         Ok(self.prefetched.advance(&wanted))
     }
 
-    /// Starts the HDR step `record` of scan `id` in the background, with the frames
-    /// decoded ahead.
-    fn start_background(&mut self, id: i64, record: &StepRecord) -> Result<(), StoreError> {
+    /// Starts step `record` of scan `id` in the background, an HDR step with the frames
+    /// decoded ahead; returns whether it started (not if the scan is gone).
+    fn start_background(&mut self, id: i64, record: &StepRecord) -> Result<bool, StoreError> {
         let Some(scan) = self.store.scan(id)? else {
-            return Ok(());
+            return Ok(false);
         };
         step::begin(&self.shared, &mut self.store, id, record.index)?;
         let dir = self.shared.scan_dir(id);
-        let mut prefetched = std::mem::take(&mut self.prefetched);
+        let takes_frames = matches!(record.step, Step::Hdr { .. });
+        let mut prefetched = if takes_frames {
+            std::mem::take(&mut self.prefetched)
+        } else {
+            Prefetched::default()
+        };
         let step = record.step.clone();
         let storage = self.shared.storage.clone();
-        let (sender, outcome) = mpsc::channel();
+        let budgets = Arc::clone(&self.budgets);
+        let sender = self.finished.0.clone();
+        let index = record.index;
         rayon::spawn(move || {
-            let outcome = run(&step, &dir, &scan.plan, &mut prefetched, &storage);
-            // The lane only drops the receiver when it stops.
-            let _ = sender.send((outcome, prefetched));
+            let outcome = run(&step, &dir, &scan.plan, &mut prefetched, &budgets, &storage);
+            // The lane holds the receiver as long as it runs.
+            let _ = sender.send((id, index, outcome, takes_frames.then_some(prefetched)));
         });
-        self.background = Some(Background {
-            id,
-            index: record.index,
-            outcome,
-        });
-        Ok(())
+        self.background.push((id, index));
+        Ok(true)
     }
 
-    /// Records the background step's outcome once it has one (waiting for it if
-    /// `wait`), and takes back the frames decoded ahead.
+    /// Records the outcomes of the background steps that have one (waiting for one at
+    /// least if `wait` and one runs), and takes back the frames decoded ahead.
     fn collect(&mut self, wait: bool) -> Result<(), StoreError> {
-        let Some(background) = &self.background else {
-            return Ok(());
-        };
-        let (outcome, prefetched) = match background.outcome.try_recv() {
-            Ok(received) => received,
-            Err(mpsc::TryRecvError::Empty) if !wait => return Ok(()),
-            Err(mpsc::TryRecvError::Empty) => match background.outcome.recv() {
-                Ok(received) => received,
-                Err(mpsc::RecvError) => lost(),
-            },
-            Err(mpsc::TryRecvError::Disconnected) => lost(),
-        };
-        let (id, index) = (background.id, background.index);
-        self.background = None;
-        self.prefetched = prefetched;
-        self.finish(id, index, outcome)
+        let mut received = Vec::new();
+        while let Ok(finished) = self.finished.1.try_recv() {
+            received.push(finished);
+        }
+        if received.is_empty() && wait && !self.background.is_empty() {
+            // The lane holds a sender itself: the channel never disconnects.
+            received.extend(self.finished.1.recv().ok());
+        }
+        for (id, index, outcome, prefetched) in received {
+            self.background.retain(|b| *b != (id, index));
+            if let Some(prefetched) = prefetched {
+                self.prefetched = prefetched;
+            }
+            self.finish(id, index, outcome)?;
+        }
+        Ok(())
     }
 
     fn run_step(&mut self, id: i64, record: &StepRecord) -> Result<(), StoreError> {
@@ -239,6 +254,7 @@ impl ProcessingLane {
             &dir,
             &scan.plan,
             &mut self.prefetched,
+            &self.budgets,
             &self.shared.storage,
         );
         self.finish(id, record.index, outcome)
@@ -267,10 +283,11 @@ fn run(
     dir: &Path,
     plan: &ScanPlan,
     prefetched: &mut Prefetched,
+    budgets: &process::Budgets,
     storage: &Probe,
 ) -> Outcome {
     step_guard::run_processing(&step.describe(), || {
-        process::run(step, dir, plan, prefetched)
+        process::run(step, dir, plan, prefetched, budgets)
     })
     .map(|result| (result, Vec::new()))
     .map_err(|message| {
@@ -283,12 +300,6 @@ fn run(
             StepError::Failed(message)
         }
     })
-}
-
-/// The outcome of a background step whose worker ended without one.
-fn lost() -> (Outcome, Prefetched) {
-    let reason = "the background worker stopped without an outcome".to_owned();
-    (Err(StepError::Failed(reason)), Prefetched::default())
 }
 
 /// How much less urgent the processing threads are than the others (nice levels).

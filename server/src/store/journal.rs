@@ -17,6 +17,29 @@ pub fn ready_step(steps: &[StepRecord], lane: Lane) -> Option<&StepRecord> {
     }
 }
 
+/// The steps of a scan's journal (`steps` in index order) that the processing lane may
+/// start beside its others ([`Step::runs_beside`]), in journal order: not done, not in
+/// `running` (indices of steps it runs), and every step before it not done yet a
+/// processing step it does not [`need`](Step::needs).
+pub fn beside_steps<'a>(
+    steps: &'a [StepRecord],
+    running: &'a [u32],
+) -> impl Iterator<Item = &'a StepRecord> + 'a {
+    let pending: Vec<&StepRecord> = steps
+        .iter()
+        .filter(|s| s.state != StepState::Done)
+        .collect();
+    (0..pending.len()).filter_map(move |i| {
+        let step = pending[i];
+        let ready = step.step.runs_beside()
+            && !running.contains(&step.index)
+            && pending[..i]
+                .iter()
+                .all(|b| b.step.lane() == Lane::Processing && !step.step.needs(&b.step));
+        ready.then_some(step)
+    })
+}
+
 /// θL whose bracket is captured (every hardware step before its processing is done)
 /// but not processed yet, in a scan's journal.
 pub fn unprocessed_brackets(steps: &[StepRecord]) -> usize {

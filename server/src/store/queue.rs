@@ -2,8 +2,8 @@
 //! step a lane runs next in a scan, the processing steps ready in the scans being
 //! processed, and the brackets and frames still waiting for processing.
 
-use super::journal::{frames_awaiting_hdr, ready_step, unprocessed_brackets};
-use super::records::{ScanRecord, ScanState, StepRecord, StepState, StoreError, PROCESSABLE};
+use super::journal::{beside_steps, frames_awaiting_hdr, ready_step, unprocessed_brackets};
+use super::records::{ScanRecord, ScanState, StepRecord, StoreError, PROCESSABLE};
 use super::Store;
 use crate::plan::{Lane, Step};
 
@@ -51,14 +51,14 @@ impl Store {
 
     /// The processing step to run next: the first one ready ([`ready_step`]) in the
     /// oldest scan that has one, with that scan's id. `running` (scan id, step index),
-    /// a step the lane runs in the background, counts as done here.
+    /// the steps the lane runs beside the others, count as done here.
     pub fn next_for_processing(
         &self,
-        running: Option<(i64, u32)>,
+        running: &[(i64, u32)],
     ) -> Result<Option<(i64, StepRecord)>, StoreError> {
         for id in self.processable_ids()? {
             let mut steps = self.steps(id)?;
-            steps.retain(|s| running != Some((id, s.index)));
+            steps.retain(|s| !running.contains(&(id, s.index)));
             if let Some(step) = ready_step(&steps, Lane::Processing) {
                 return Ok(Some((id, step.clone())));
             }
@@ -66,19 +66,39 @@ impl Store {
         Ok(None)
     }
 
-    /// The first HDR step whose bracket is captured (no hardware step pending before it)
-    /// in the oldest scan being processed that has one, with that scan's id: the step
-    /// the processing lane starts in the background ahead of the steps before it.
-    pub fn next_hdr(&self) -> Result<Option<(i64, StepRecord)>, StoreError> {
-        for id in self.processable_ids()? {
-            let hdr = self
-                .steps(id)?
-                .into_iter()
-                .filter(|s| s.state != StepState::Done)
-                .take_while(|s| s.step.lane() == Lane::Processing)
-                .find(|s| matches!(s.step, Step::Hdr { .. }));
-            if let Some(step) = hdr {
-                return Ok(Some((id, step)));
+    /// The step the processing lane starts next beside the others ([`beside_steps`]), in
+    /// the oldest scan being processed that has one, with that scan's id: one of each
+    /// kind at a time, so none of a kind among `running` (scan id, step index), the
+    /// steps it runs beside the others now. An HDR step is ready once its bracket is
+    /// captured, the auto fit once `samples.csv` is gathered.
+    pub fn next_beside(
+        &self,
+        running: &[(i64, u32)],
+    ) -> Result<Option<(i64, StepRecord)>, StoreError> {
+        let ids = self.processable_ids()?;
+        let mut journals = Vec::with_capacity(ids.len());
+        for id in ids {
+            journals.push((id, self.steps(id)?));
+        }
+        let busy: Vec<std::mem::Discriminant<Step>> = journals
+            .iter()
+            .flat_map(|(id, steps)| {
+                steps
+                    .iter()
+                    .filter(|s| running.contains(&(*id, s.index)))
+                    .map(|s| std::mem::discriminant(&s.step))
+            })
+            .collect();
+        for (id, steps) in &journals {
+            let own: Vec<u32> = running
+                .iter()
+                .filter(|(scan, _)| scan == id)
+                .map(|(_, index)| *index)
+                .collect();
+            let next = beside_steps(steps, &own)
+                .find(|s| !busy.contains(&std::mem::discriminant(&s.step)));
+            if let Some(step) = next {
+                return Ok(Some((*id, step.clone())));
             }
         }
         Ok(None)

@@ -5,7 +5,7 @@ use serde_json::Value;
 
 use super::journal::frames_awaiting_hdr;
 use super::*;
-use crate::plan::{Lane, ScanPlan, Step};
+use crate::plan::{Lane, ScanPlan, Step, AUTO_FIT, FIT_MODELS};
 
 fn plan() -> ScanPlan {
     ScanPlan {
@@ -29,6 +29,21 @@ fn done(store: &mut Store, id: i64, step: &StepRecord, followers: &[Step]) {
     store
         .step_done(id, step.index, &Value::Null, followers)
         .unwrap();
+}
+
+/// A scan of [`plan`], running.
+fn started_scan(store: &mut Store) -> i64 {
+    let id = store
+        .insert_scans(&[NewScan {
+            plan: plan(),
+            sweep_id: None,
+            not_before: None,
+        }])
+        .unwrap()[0];
+    store
+        .transition(id, &[ScanState::Queued], ScanState::Running, None)
+        .unwrap();
+    id
 }
 
 fn next(store: &Store, id: i64, lane: Lane) -> Option<Step> {
@@ -142,22 +157,22 @@ fn lanes_take_their_own_steps_and_the_scan_is_done_when_both_are() {
         next(&store, id, Lane::Hardware),
         Some(Step::Move { theta_l: -25.0 })
     );
-    let (processing_scan, samples) = store.next_for_processing(None).unwrap().unwrap();
+    let (processing_scan, samples) = store.next_for_processing(&[]).unwrap().unwrap();
     assert_eq!(processing_scan, id);
     // With the samples step running in the background, the HDR step is next; it is
     // also the HDR step ready to start ahead of the samples.
     let (_, beside) = store
-        .next_for_processing(Some((id, samples.index)))
+        .next_for_processing(&[(id, samples.index)])
         .unwrap()
         .unwrap();
     assert_eq!(beside.step, Step::Hdr { theta_l: -20.0 });
-    let (_, ahead) = store.next_hdr().unwrap().unwrap();
+    let (_, ahead) = store.next_beside(&[]).unwrap().unwrap();
     assert_eq!(ahead.index, beside.index);
     store.step_started(id, samples.index).unwrap();
     drop(store);
     // Reopened after a crash: the processing step that was running runs again.
     let mut store = Store::open(&dir.join("gonio.sqlite")).unwrap();
-    let (_, again) = store.next_for_processing(None).unwrap().unwrap();
+    let (_, again) = store.next_for_processing(&[]).unwrap().unwrap();
     assert_eq!(
         (again.index, again.state),
         (samples.index, StepState::Started)
@@ -175,7 +190,7 @@ fn lanes_take_their_own_steps_and_the_scan_is_done_when_both_are() {
     }
     assert!(store.next_for_hardware(now_unix()).unwrap().is_none());
     assert_eq!(store.unprocessed_brackets().unwrap(), 2);
-    while let Some((_, step)) = store.next_for_processing(None).unwrap() {
+    while let Some((_, step)) = store.next_for_processing(&[]).unwrap() {
         assert_eq!(store.scan(id).unwrap().unwrap().state, ScanState::Running);
         done(&mut store, id, &step, &[]);
     }
@@ -233,29 +248,20 @@ fn frames_awaiting_hdr_are_the_captures_of_brackets_not_merged() {
 #[test]
 fn processing_goes_on_while_a_device_is_away_but_not_when_paused() {
     let (dir, mut store) = temp_store("processable");
-    let id = store
-        .insert_scans(&[NewScan {
-            plan: plan(),
-            sweep_id: None,
-            not_before: None,
-        }])
-        .unwrap()[0];
-    store
-        .transition(id, &[ScanState::Queued], ScanState::Running, None)
-        .unwrap();
+    let id = started_scan(&mut store);
     for step in &store.steps(id).unwrap()[..4] {
         done(&mut store, id, step, &[]);
     }
-    assert!(store.next_for_processing(None).unwrap().is_some());
+    assert!(store.next_for_processing(&[]).unwrap().is_some());
     store
         .transition(id, &[ScanState::Running], ScanState::Interrupted, None)
         .unwrap();
-    assert!(store.next_for_processing(None).unwrap().is_some());
+    assert!(store.next_for_processing(&[]).unwrap().is_some());
     assert!(store.next_for_hardware(now_unix()).unwrap().is_none());
     store
         .transition(id, &[ScanState::Interrupted], ScanState::Paused, None)
         .unwrap();
-    assert!(store.next_for_processing(None).unwrap().is_none());
+    assert!(store.next_for_processing(&[]).unwrap().is_none());
     assert_eq!(store.unprocessed_brackets().unwrap(), 0);
     std::fs::remove_dir_all(dir).unwrap();
 }
@@ -388,5 +394,58 @@ fn start_time_and_transitions_gate_the_queue() {
     assert_eq!(store.next_for_hardware(later).unwrap().unwrap().id, ids[1]);
     assert_eq!(store.begin_boot().unwrap(), 1);
     assert_eq!(store.begin_boot().unwrap(), 2);
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+/// Beside the other processing steps the lane starts a captured bracket's HDR map and,
+/// once `samples.csv` is gathered, the auto fit, ahead of the per-model fits before it;
+/// one of each kind at a time.
+#[test]
+fn the_auto_fit_runs_beside_the_model_fits_once_the_samples_are_gathered() {
+    let (dir, mut store) = temp_store("beside");
+    let id = started_scan(&mut store);
+    let steps = store.steps(id).unwrap();
+    let record = |wanted: &Step| steps.iter().find(|s| s.step == *wanted).unwrap().clone();
+    let index = |wanted: &Step| record(wanted).index;
+    let auto = Step::Fit {
+        model: AUTO_FIT.0.into(),
+    };
+    let (hdr, extract) = (index(&Step::Hdr { theta_l: -20.0 }), index(&Step::Extract));
+    let beside = |store: &Store, running: &[(i64, u32)]| {
+        store.next_beside(running).unwrap().map(|(_, s)| s.step)
+    };
+    // Nothing beside before the bracket is captured.
+    assert_eq!(beside(&store, &[]), None);
+    for step in steps.iter().filter(|s| s.step.lane() == Lane::Hardware) {
+        done(&mut store, id, step, &[]);
+    }
+    assert_eq!(beside(&store, &[]), Some(Step::Hdr { theta_l: -20.0 }));
+    // The auto fit needs the samples gathered; the map being made does not hold it.
+    let running = [(id, hdr)];
+    assert_eq!(beside(&store, &running), None);
+    done(
+        &mut store,
+        id,
+        &record(&Step::Samples { theta_l: -20.0 }),
+        &[],
+    );
+    assert_eq!(beside(&store, &running), None);
+    store.step_started(id, extract).unwrap();
+    assert_eq!(beside(&store, &running), None);
+    done(&mut store, id, &record(&Step::Extract), &[]);
+    assert_eq!(beside(&store, &running), Some(auto.clone()));
+    let running = [(id, hdr), (id, index(&auto))];
+    assert_eq!(beside(&store, &running), None);
+    // The per-model fits run meanwhile, in the foreground.
+    let (_, first) = store.next_for_processing(&running).unwrap().unwrap();
+    assert!(matches!(&first.step, Step::Fit { model } if model == FIT_MODELS[0].0));
+    // Without the map made, the foreground would take the auto fit only after them.
+    for (model, _) in FIT_MODELS {
+        let (_, next) = store.next_for_processing(&[(id, hdr)]).unwrap().unwrap();
+        assert!(matches!(&next.step, Step::Fit { model: m } if m == model));
+        done(&mut store, id, &next, &[]);
+    }
+    let (_, last) = store.next_for_processing(&[(id, hdr)]).unwrap().unwrap();
+    assert_eq!(last.step, auto);
     std::fs::remove_dir_all(dir).unwrap();
 }
