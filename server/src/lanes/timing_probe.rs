@@ -22,6 +22,7 @@ use serde_json::Value;
 use super::processing::lower_priority;
 use crate::devices::SceneFacts;
 use crate::files::write_atomic;
+use crate::fit_cache::Budgets;
 use crate::plan::{exposure_stem, theta_dir_name, ScanPlan, Step, AUTO_FIT, FIT_MODELS};
 use crate::process::{self, Prefetched};
 use crate::shared::Shared;
@@ -169,9 +170,11 @@ fn measure(dir: &Path, started: Instant) -> anyhow::Result<Costs> {
         auto_bracket: false,
     };
     let mut prefetched = Prefetched::default();
+    // The fits share their budgets as the lane's do.
+    let budgets = Budgets::default();
     let mut run = |step: Step| {
         timed(started, &step.describe(), || {
-            process::run(&step, dir, &plan, &mut prefetched)
+            process::run(&step, dir, &plan, &mut prefetched, &budgets)
         })
     };
     // Per θL: the samples step's seconds and the points fitted so far, the merges.
