@@ -9,10 +9,11 @@
 //! squares over a family of reflectance spectra ([`smooth_spectra`], seed
 //! [`TRAINING_SEED`]) plus a perfect white weighted as the whole family (its row × N), so that the white
 //! maps to the white point. Its error is then measured on another draw of the same family
-//! ([`TEST_SEED`]): the relative residuals r = (M·β − XYZ)/Y give the covariance
-//! C = mean(r rᵀ) (bias included), and a colour of luminance Y gets the transform's
-//! covariance Y²·C in XYZ; the ΔE00 between the transformed and the true colours
-//! summarises it ([`TransformError`]).
+//! ([`TEST_SEED`]): the relative residuals r = (M·β − XYZ)/Y; a colour gets the
+//! covariance C of those of the [`NEIGHBOURS`] test spectra nearest to it in camera
+//! chromaticity (tricube-weighted mean of r rᵀ, bias included), and with luminance Y the
+//! transform's covariance Y²·C in XYZ; the ΔE00 between the transformed and the true
+//! colours over the whole test draw summarises it ([`TransformError`]).
 
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
