@@ -231,7 +231,7 @@ pub fn colour(
         let white = transform.observer().white();
         let lab = lab_from_xyz(xyz, white);
         let jacobian = lab_jacobian(xyz, white);
-        let m = Matrix3::from(transform.matrix_at(beta)).transpose();
+        let m = Matrix3::from(transform.matrix()).transpose();
         let mut lines: Vec<Line> = beta_lines
             .into_iter()
             .map(|((source, shared), d)| {

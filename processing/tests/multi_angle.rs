@@ -120,3 +120,33 @@ fn tolerances_name_angles_and_refuse_nonsense() {
     assert_eq!(Verdict::judge(0.9, 0.3, 1.0), Verdict::Undecided);
     assert_eq!(Verdict::judge(1.5, 0.3, 1.0), Verdict::Fail);
 }
+
+#[test]
+fn the_geometry_s_errors_cancel_only_within_one_mounting_the_white_s_always() {
+    let standard = report(&fit([9.0, 6.5, 2.0], [25.0, 20.0, 7.0], 0.07));
+    let bare = compare(&standard, &standard, &Tolerances::default(), Mounting::Same).unwrap();
+    // Both scans moved alike by a camera offset (1 in L*) and a white (0.5 in L*).
+    let mut moved = standard.clone();
+    for a in &mut moved.angles {
+        for (source, l) in [("camera_offset:ks_g", 1.0), ("white_reflectance:kd_g", 0.5)] {
+            a.lines.push(gonio_processing::multi_angle::Line {
+                source: source.into(),
+                shared: true,
+                lab: [l, 0.0, 0.0],
+            });
+        }
+    }
+    let u = |c: &gonio_processing::multi_angle::compare::Comparison, k: usize| {
+        c.angles[k].delta_l.expanded
+    };
+    let same = compare(&moved, &moved, &Tolerances::default(), Mounting::Same).unwrap();
+    let separate = compare(&moved, &moved, &Tolerances::default(), Mounting::Separate).unwrap();
+    for k in 0..moved.angles.len() {
+        // One mounting: both lines cancel exactly.
+        assert!((u(&same, k) - u(&bare, k)).abs() < 1e-9, "{k}");
+        // Each its own: the offset's line is each scan's own (u² grows by 1 + 1, U = 2u);
+        // the white's still cancels.
+        let grown = u(&separate, k).powi(2) - u(&bare, k).powi(2);
+        assert!((grown - 8.0).abs() < 1e-6, "{k}: {grown}");
+    }
+}

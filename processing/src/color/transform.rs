@@ -9,10 +9,11 @@
 //! squares over a family of reflectance spectra ([`smooth_spectra`], seed
 //! [`TRAINING_SEED`]) plus a perfect white weighted as the whole family (its row × N), so that the white
 //! maps to the white point. Its error is then measured on another draw of the same family
-//! ([`TEST_SEED`]): the relative residuals r = (M·β − XYZ)/Y give the covariance
-//! C = mean(r rᵀ) (bias included), and a colour of luminance Y gets the transform's
-//! covariance Y²·C in XYZ; the ΔE00 between the transformed and the true colours
-//! summarises it ([`TransformError`]).
+//! ([`TEST_SEED`]): the relative residuals r = (M·β − XYZ)/Y; a colour gets the
+//! covariance C of those of the [`NEIGHBOURS`] test spectra nearest to it in camera
+//! chromaticity (tricube-weighted mean of r rᵀ, bias included), and with luminance Y the
+//! transform's covariance Y²·C in XYZ; the ΔE00 between the transformed and the true
+//! colours over the whole test draw summarises it ([`TransformError`]).
 
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
@@ -101,7 +102,7 @@ pub struct TransformError {
     /// the error is on average. A colour gets the covariance of its own neighbourhood
     /// ([`ColourTransform::xyz_covariance`]).
     pub relative_covariance: [[f64; 3]; 3],
-    /// Spectra in the neighbourhood of a colour, for its matrix and its covariance.
+    /// Test spectra in the neighbourhood of a colour, for its error's covariance.
     #[serde(default)]
     pub neighbours: usize,
 }
@@ -115,10 +116,8 @@ struct Spectrum {
     xyz: [f64; 3],
 }
 
-/// Spectra in the neighbourhood of a colour (training and test alike).
+/// Test spectra in the neighbourhood of a colour.
 pub const NEIGHBOURS: usize = 150;
-/// The perfect white's weight in a neighbourhood that holds it, against one spectrum's.
-const WHITE_WEIGHT: f64 = 20.0 * NEIGHBOURS as f64;
 
 /// Camera chromaticity of `rgb`; `None` when its sum is not positive.
 fn chroma(rgb: [f64; 3]) -> Option<[f64; 2]> {
@@ -154,8 +153,8 @@ fn nearest<'a, T>(
         .collect()
 }
 
-/// Weighted least squares XYZ ≈ M·rgb over `rows` (rgb, xyz, weight); `None` when the
-/// normal equations are singular.
+/// Weighted least squares XYZ ≈ M·rgb over `rows` (rgb, xyz, weight in the normal
+/// equations); `None` when they are singular.
 fn fit_matrix(rows: &[([f64; 3], [f64; 3], f64)]) -> Option<Matrix3<f64>> {
     let mut ata = Matrix3::zeros();
     let mut atb = Matrix3::zeros();
@@ -178,11 +177,7 @@ fn fit_matrix(rows: &[([f64; 3], [f64; 3], f64)]) -> Option<Matrix3<f64>> {
 #[derive(Debug, Clone, PartialEq)]
 pub struct ColourTransform {
     observer: Observer,
-    /// The one matrix over the whole family: the transform of a colour with no
-    /// chromaticity (black) and where a neighbourhood's fit is singular.
     matrix: Matrix3<f64>,
-    white: Spectrum,
-    training: Vec<Spectrum>,
     /// The test spectra's chromaticities and relative residuals (estimate − XYZ)/Y.
     residuals: Vec<([f64; 2], [f64; 3])>,
     error: TransformError,
@@ -205,17 +200,16 @@ impl ColourTransform {
             .map(spectrum)
             .collect::<Result<Vec<_>, _>>()?;
         let white = spectrum(&[1.0; BANDS])?;
-        // The global matrix: every spectrum by its relative error, the white as many.
-        let mut rows: Vec<_> = training.iter().map(|s| relative_row(s, 1.0)).collect();
-        rows.push(relative_row(&white, SPECTRA as f64));
+        // Least squares over the family, the white's row counting as the whole family
+        // (its row × N, so its weight in the normal equations N²).
+        let mut rows: Vec<_> = training.iter().map(|s| (s.rgb, s.xyz, 1.0)).collect();
+        rows.push((white.rgb, white.xyz, (SPECTRA * SPECTRA) as f64));
         let matrix = fit_matrix(&rows).ok_or_else(|| ColorError::Degenerate {
             what: "camera RGB → XYZ least squares".into(),
         })?;
         let mut transform = Self {
             observer: observer.clone(),
             matrix,
-            white,
-            training,
             residuals: Vec::with_capacity(SPECTRA),
             error: TransformError {
                 spectra: String::new(),
@@ -249,7 +243,7 @@ impl ColourTransform {
         transform.error = TransformError {
             spectra: format!(
                 "{SPECTRA_FAMILY}; fitted on seed {TRAINING_SEED}, judged on seed {TEST_SEED}, \
-                 {SPECTRA} spectra each; a matrix per colour from its {NEIGHBOURS} nearest \
+                 {SPECTRA} spectra each; a colour's error from its {NEIGHBOURS} nearest \
                  spectra in camera chromaticity"
             ),
             delta_e00_median: at(0.5),
@@ -266,31 +260,9 @@ impl ColourTransform {
         &self.observer
     }
 
-    /// The matrix of camera RGB `rgb`'s neighbourhood: weighted least squares over the
-    /// [`NEIGHBOURS`] training spectra nearest in camera chromaticity (tricube weights,
-    /// each by its relative error), the perfect white among them when it is that near.
-    fn local_matrix(&self, rgb: [f64; 3]) -> Matrix3<f64> {
-        let Some(at) = chroma(rgb) else {
-            return self.matrix;
-        };
-        let near = nearest(&self.training, at, NEIGHBOURS, |s| s.chroma);
-        let reach = near
-            .iter()
-            .map(|(s, _)| dist(s.chroma, at))
-            .fold(0.0, f64::max);
-        let mut rows: Vec<_> = near.iter().map(|(s, w)| relative_row(s, *w)).collect();
-        let d_white = dist(self.white.chroma, at);
-        if d_white < reach {
-            let w = (1.0 - (d_white / (reach * 1.0001)).powi(3)).powi(3);
-            rows.push(relative_row(&self.white, WHITE_WEIGHT * w));
-        }
-        fit_matrix(&rows).unwrap_or(self.matrix)
-    }
-
-    /// XYZ of camera RGB β (white at β_G = 100 → Y ≈ 100), by the matrix of its
-    /// neighbourhood.
+    /// XYZ of camera RGB β (white at β_G = 100 → Y ≈ 100).
     pub fn xyz(&self, rgb: [f64; 3]) -> [f64; 3] {
-        let v = self.local_matrix(rgb) * Vector3::from(rgb);
+        let v = self.matrix * Vector3::from(rgb);
         [v[0], v[1], v[2]]
     }
 
@@ -299,10 +271,9 @@ impl ColourTransform {
         lab_from_xyz(self.xyz(rgb), self.observer.white())
     }
 
-    /// The matrix M that maps camera RGB near `rgb` (XYZ = M·β), row-major.
-    pub fn matrix_at(&self, rgb: [f64; 3]) -> [[f64; 3]; 3] {
-        let m = self.local_matrix(rgb);
-        std::array::from_fn(|r| std::array::from_fn(|c| m[(r, c)]))
+    /// The matrix M, row-major (XYZ = M·β).
+    pub fn matrix(&self) -> [[f64; 3]; 3] {
+        std::array::from_fn(|r| std::array::from_fn(|c| self.matrix[(r, c)]))
     }
 
     /// The transform's error over the test spectra.
@@ -337,18 +308,6 @@ impl ColourTransform {
         }
         c.map(|row| row.map(|v| v * y2))
     }
-}
-
-/// Distance between two chromaticities.
-fn dist(a: [f64; 2], b: [f64; 2]) -> f64 {
-    (a[0] - b[0]).hypot(a[1] - b[1])
-}
-
-/// A least-squares row of spectrum `s` with weight `w` on its relative error: both
-/// sides divided by its Y, the weight as given.
-fn relative_row(s: &Spectrum, w: f64) -> ([f64; 3], [f64; 3], f64) {
-    let y = s.xyz[1].abs().max(1e-9);
-    (s.rgb.map(|v| v / y), s.xyz.map(|v| v / y), w)
 }
 
 /// Camera RGB of a spectrum on 390–730 nm: the camera model sums 400–700 nm.
