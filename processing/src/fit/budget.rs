@@ -28,11 +28,12 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::data::Data;
+use super::robust::Precision;
 use super::{
     departure, parameter_count, robust, uncertainty, FitError, FitMethod, FitOptions, FitResult,
     ParameterSet,
 };
-use crate::brdf::{Roughness, M_MAX, M_MIN};
+use crate::brdf::{Params, Roughness, M_MAX, M_MIN};
 use crate::samples::{distinct_theta_l, Sample, SampleUncertainty, THETA_L_TOLERANCE};
 use crate::setup_uncertainty::Source;
 
@@ -56,6 +57,23 @@ const LINEAR_TOLERANCE: f64 = 0.1;
 
 /// Points of the refits' grid over log m (the fit's own search uses 24 over a wider range).
 const REFIT_GRID_POINTS: usize = 6;
+
+/// A refit warm-started from a nearby fit searches ln m within ± this of that fit's (a
+/// factor 1.105 in m), and the whole refit range when the minimum lies at its end.
+const WARM_SPAN: f64 = 0.1;
+
+/// The Monte Carlo's refits: each solve to 1e-6 of the loss and m to 0.1 % of itself (the
+/// law of propagation's to about 1e-6), far inside the spread of the draws (the
+/// roughness's is several per cent where the budget is worth stating).
+const MONTE_CARLO_PRECISION: Precision = Precision {
+    solve: 1e-6,
+    ln_m_relative: 0.0,
+    ln_m_absolute: 1e-3,
+};
+
+/// The Monte Carlo states its intervals' convergence at halvings of its draws down to
+/// this many (fewer put the 2.5 % end at fewer than 2 draws from the edge).
+const CONVERGENCE_MIN_DRAWS: usize = 100;
 
 /// One line of a parameter's budget: a source and its contribution (a standard
 /// uncertainty in the parameter's unit).
@@ -206,13 +224,27 @@ struct Refit<'a> {
     options: FitOptions,
     fresnel: bool,
     samples: &'a [Sample],
+    /// A fit near the refits' (its parameters and specular colour at 90°), which they
+    /// start from ([`robust::fit_near`]); `None`: each searches the whole refit range.
+    near: Option<(Params, [f64; 3])>,
+    /// How finely a refit started from `near` converges.
+    precision: Precision,
 }
 
 impl Refit<'_> {
     /// θ of the fit to the measured values `moved` (one per sample).
     fn fit(&self, moved: &[[f64; 3]]) -> Result<Vec<f64>, FitError> {
         let data = self.data.with_measured(moved.to_vec());
-        let (found, ks_90) = robust::fit(&data, &self.options)?;
+        let warm = match &self.near {
+            Some((start, kg)) => {
+                robust::fit_near(&data, &self.options, start, *kg, WARM_SPAN, self.precision)?
+            }
+            None => None,
+        };
+        let (found, ks_90) = match warm {
+            Some(found) => found,
+            None => robust::fit(&data, &self.options)?,
+        };
         let m = &found.params.m[..self.options.roughness.count()];
         let ks_90 = self.fresnel.then_some(ks_90);
         Ok(vector(found.params.kd, found.params.ks, ks_90, m))
@@ -359,6 +391,8 @@ fn refitter<'a>(samples: &'a [Sample], result: &FitResult) -> Result<Refit<'a>, 
         options,
         fresnel,
         samples,
+        near: None,
+        precision: Precision::FINE,
     })
 }
 
@@ -403,7 +437,11 @@ pub fn budget(samples: &[Sample], result: &FitResult) -> Result<Budget, FitError
     // there too, and the larger of each is kept (where a parameter does not follow a
     // source linearly its sensitivity depends on where it is taken, and the world may
     // be at either).
-    let measured = (!departures.is_empty()).then(|| refit.clone());
+    // Each refit starts from the unmoved fit of its values.
+    let measured = (!departures.is_empty()).then(|| Refit {
+        near: Some((result.params(), result.specular_90())),
+        ..refit.clone()
+    });
     refit.data = refit.data.with_measured(departure.corrected);
     let (found, ks_90) = robust::fit(&refit.data, &refit.options)?;
     let base = vector(
@@ -412,6 +450,7 @@ pub fn budget(samples: &[Sample], result: &FitResult) -> Result<Budget, FitError
         refit.fresnel.then_some(ks_90),
         &found.params.m[..m.len()],
     );
+    refit.near = Some((found.params, ks_90));
     let spread = uncertainty::estimate(&refit.data, &refit.options, &found.params, &ks_90);
     // The HC1 standard uncertainties in the same layout (stderr.m is m·σ(ln m)); the
     // fit's own where the corrected values' are not defined.
@@ -603,6 +642,25 @@ pub struct Distribution {
     pub std: f64,
     /// The probabilistically symmetric 95 % coverage interval (2.5 and 97.5 percentiles).
     pub interval: [f64; 2],
+    /// How the interval settles with the number of draws: the same interval from the
+    /// first N/8, N/4, N/2 and all N draws (halvings of at least 100 draws), fewest first.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub convergence: Vec<Convergence>,
+}
+
+/// A Monte Carlo interval from the first `draws` draws.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Convergence {
+    pub draws: usize,
+    pub interval: [f64; 2],
+}
+
+/// The probabilistically symmetric 95 % coverage interval of `values` (sorted in place).
+fn coverage_interval(values: &mut [f64]) -> [f64; 2] {
+    values.sort_by(f64::total_cmp);
+    let last = values.len() - 1;
+    let at = |q: f64| values[((q * last as f64).round() as usize).min(last)];
+    [at(0.025), at(0.975)]
 }
 
 /// A normal deviate stream (splitmix64, Box–Muller), reproducible from its seed.
@@ -666,7 +724,10 @@ pub fn monte_carlo(
             "a Monte Carlo needs 2 draws or more, got {draws}"
         )));
     }
-    let refit = refitter(samples, result)?;
+    let mut refit = refitter(samples, result)?;
+    // Each draw's fit starts from the fit of the values drawn around.
+    refit.near = Some((result.params(), result.specular_90()));
+    refit.precision = MONTE_CARLO_PRECISION;
     let theta_l = distinct_theta_l(samples);
     let scale = match what {
         Draw::Sources => 0.0,
@@ -733,12 +794,21 @@ pub fn monte_carlo(
         let n = values.len() as f64;
         let mean = values.iter().sum::<f64>() / n;
         let std = (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
-        values.sort_by(f64::total_cmp);
-        let at = |q: f64| values[((q * (n - 1.0)).round() as usize).min(values.len() - 1)];
+        let mut convergence: Vec<Convergence> =
+            std::iter::successors(Some(values.len()), |&d| Some(d / 2))
+                .take_while(|&d| d >= CONVERGENCE_MIN_DRAWS)
+                .take(4)
+                .map(|d| Convergence {
+                    draws: d,
+                    interval: coverage_interval(&mut values[..d].to_vec()),
+                })
+                .collect();
+        convergence.reverse();
         Distribution {
             mean,
             std,
-            interval: [at(0.025), at(0.975)],
+            interval: coverage_interval(&mut values),
+            convergence,
         }
     };
     let n_colour = if fresnel { 9 } else { 6 };
