@@ -279,8 +279,17 @@ impl Refit<'_> {
         at: impl Fn(&Sample) -> bool + Copy,
     ) -> Result<Vec<Secant>, FitError> {
         let h = SECANT_SPAN;
-        let plus = self.fit(&self.moved(h, change, at))?;
-        let minus = self.fit(&self.moved(-h, change, at))?;
+        // Values the source does not move refit to `base` itself.
+        let refit = |scale: f64| {
+            let moved = self.moved(scale, change, at);
+            if moved == self.data.y {
+                Ok(base.to_vec())
+            } else {
+                self.fit(&moved)
+            }
+        };
+        let plus = refit(h)?;
+        let minus = refit(-h)?;
         Ok(plus
             .iter()
             .zip(&minus)
