@@ -2,7 +2,9 @@
 # Runs gonio's benchmarks and, when they can be installed, their peers on the same inputs
 # (scipy's Nelder–Mead and least_squares on the same samples and model, OpenCV's Debevec
 # merge on the same frames), then writes README.md's "What accuracy costs in time" table
-# from what it measured (scripts/bench_table.py): no number in it is written by hand.
+# from what it measured (scripts/bench_table.py), each row against its floor (what this
+# machine allows: its memory bandwidth, one point of a fit's loss): no number in it is
+# written by hand.
 # The peers go into a virtual environment of their own, .venv-bench/ (numpy, scipy,
 # opencv-python-headless from PyPI); --no-peers skips them.
 # The machine must be idle: with a load average above 0.5 it refuses to start, and the
@@ -62,9 +64,10 @@ inputs() {
 
 criterion_benches() {
     GONIO_BENCH_SAMPLES="$work/gold/samples.csv" cargo bench --locked -p gonio-processing --bench fit | keep
-    cargo bench --locked -p gonio-processing --bench study
+    cargo bench --locked -p gonio-processing --bench study | keep
     cargo bench --locked -p gonio-processing --bench hdr
-    GONIO_BENCH_SCAN="$work/gold" cargo bench --locked -p gonio-processing --bench extract
+    GONIO_BENCH_SCAN="$work/gold" cargo bench --locked -p gonio-processing --bench extract | keep
+    cargo bench --locked -p gonio-processing --bench floors | keep
     cargo bench --locked -p gonio-mock-hw --bench render
 }
 

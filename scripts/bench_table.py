@@ -4,6 +4,10 @@
 measured: criterion's medians under target/criterion and the JSON lines the other
 benchmarks and the peers appended to the results file. Every row names the command that
 measures it; a row whose measurement is missing says so instead of keeping an old number.
+Each row stands against its floor, what this machine allows (`--bench floors`): a fit's
+loss evaluations × its points × the measured cost of one point, over every core; a
+merge's, decode's or render's bytes at the measured memory bandwidth; a scan's hardware
+time. A row whose work is not counted says so in its floor column.
 It refuses to write the table (exit status 1, the README left as it was) when a
 measurement it uses was too unsteady to stand for the code: a criterion median whose 95 %
 confidence interval is wider than MAX_CI_WIDTH of it, or a whole-process benchmark whose
@@ -27,6 +31,13 @@ HDR = "`cargo bench -p gonio-processing --bench hdr`"
 PEERS_FIT = "`python3 scripts/bench_peers.py fit samples.csv`"
 PEERS_HDR = "`python3 scripts/bench_peers.py hdr --gonio target/release/gonio FRAME...`"
 
+
+# The floor column of a peer's row: its work is its own.
+PEER_FLOOR = "the row above's"
+# Full-size frames: 3872×2592 RGB; a count is 2 bytes, a merged map 3 × 4 bytes and a mask byte.
+FRAME_PIXELS = 3872 * 2592
+COUNT_BYTES = 3 * 2
+MAP_BYTES = 3 * 4 + 1
 
 # Widest 95 % confidence interval of a criterion median, relative to the median.
 MAX_CI_WIDTH = 0.10
@@ -103,47 +114,95 @@ class Table:
         ]
         return lines
 
-    def row(self, what, values, target, command):
-        """A row; `values` None or holding None means not measured in this run."""
+    def row(self, what, values, target, command, floors=None):
+        """A row; `values` None or holding None means not measured in this run.
+        `floors`: (measured seconds, floor seconds) per value, for the floor and ratio
+        columns; a str says why the row has no floor."""
         if values is None or (isinstance(values, (list, tuple)) and None in values):
             values = "not measured in this run"
         elif isinstance(values, (list, tuple)):
             values = " / ".join(values)
-        self.rows.append([what, values, target, command])
+        if isinstance(floors, str):
+            floor, times = floors, "—"
+        elif not floors or any(m is None or f is None for m, f in floors):
+            floor, times = "not measured in this run", "—"
+        else:
+            floor = " / ".join(duration(f) for _, f in floors)
+            times = " / ".join(f"{m / f:.3g}" for m, f in floors)
+        self.rows.append([what, values, floor, times, target, command])
 
     def markdown(self):
-        lines = ["| what | median | target | command |", "|---|---|---|---|"]
+        lines = [
+            "| what | median | floor | ÷ floor | target | command |",
+            "|---|---|---|---|---|---|",
+        ]
         lines += ["| " + " | ".join(r) + " |" for r in self.rows]
         return "\n".join(lines)
+
+    # What this machine allows (`cargo bench -p gonio-processing --bench floors`).
+
+    def floors(self):
+        return self.results.get("floors")
+
+    def fit_floor(self, full_id):
+        """A fit's floor: its loss evaluations × its points × one point of its model's
+        loss, shared over every core."""
+        f = self.floors()
+        work = {
+            **self.results.get("fit_1000_work", {}).get("fits", {}),
+            **self.results.get("fit_samples", {}).get("fits", {}),
+        }.get(full_id)
+        if not f or not work or work["model"] not in f["point_s"]:
+            return None
+        return work["evaluations"] * work["points"] * f["point_s"][work["model"]] / f["cores"]
+
+    def fit_floors(self, *full_ids):
+        return [(self.median(i), self.fit_floor(i)) for i in full_ids]
+
+    def bytes_floor(self, moved):
+        """Moving `moved` bytes (read plus written) at the measured copy bandwidth."""
+        f = self.floors()
+        return moved / f["copy_bytes_per_s"] if f and moved is not None else None
 
 
 def fit_rows(t):
     ct = t.median("fit_1000/cook-torrance/robust/shared")
     bare = t.median("fit_1000/cook-torrance/robust/shared/no-uncertainty")
-    t.row("robust Cook–Torrance fit, 1,000 points, shared m", [duration(ct)], "≤ 5 ms", FIT)
+    t.row(
+        "robust Cook–Torrance fit, 1,000 points, shared m",
+        [duration(ct)],
+        "≤ 5 ms",
+        FIT,
+        t.fit_floors("fit_1000/cook-torrance/robust/shared"),
+    )
     t.row(
         "same without its uncertainty; the fit with it / without it",
         [f"{duration(bare)}; {ratio(ct, bare, 3)}" if bare and ct else None],
         "≤ 1.1",
         "same",
+        t.fit_floors("fit_1000/cook-torrance/robust/shared/no-uncertainty"),
     )
     t.row(
         "robust Ward fit, 1,000 points, shared m",
         [duration(t.median("fit_1000/ward/robust/shared"))],
         "",
         "same",
+        t.fit_floors("fit_1000/ward/robust/shared"),
     )
+    models = ("cook-torrance", "ward")
     t.row(
         "robust CT / Ward fit, per-channel m",
-        [duration(t.median(f"fit_1000/{m}/robust/per-channel")) for m in ("cook-torrance", "ward")],
+        [duration(t.median(f"fit_1000/{m}/robust/per-channel")) for m in models],
         "",
         "same",
+        t.fit_floors(*(f"fit_1000/{m}/robust/per-channel" for m in models)),
     )
     t.row(
         "Nelder–Mead CT / Ward fit (the paper's method), with its check against the robust fit",
-        [duration(t.median(f"fit_1000/{m}/nelder-mead/shared")) for m in ("cook-torrance", "ward")],
+        [duration(t.median(f"fit_1000/{m}/nelder-mead/shared")) for m in models],
         "",
         "same",
+        t.fit_floors(*(f"fit_1000/{m}/nelder-mead/shared" for m in models)),
     )
 
 
@@ -161,6 +220,7 @@ def auto_rows(t):
         ],
         "≤ 2",
         f"{FIT_SAMPLES}; {FIT}",
+        t.fit_floors("fit_samples/auto", "fit_1000/auto"),
     )
 
 
@@ -175,10 +235,13 @@ def peer_fit_rows(t):
         [duration(robust), duration(nm)],
         "",
         FIT_SAMPLES,
+        t.fit_floors(
+            "fit_samples/cook-torrance/robust/shared", "fit_samples/cook-torrance/nelder-mead/shared"
+        ),
     )
     peer = t.results.get("peers_fit")
     if peer is None:
-        t.row("scipy on the same samples and model", None, "", PEERS_FIT + " (not run: `--no-peers`, or scipy not installable)")
+        t.row("scipy on the same samples and model", None, "", PEERS_FIT + " (not run: `--no-peers`, or scipy not installable)", PEER_FLOOR)
         return
     ls, sp = peer["least_squares"], peer["nelder_mead"]
     above = lambda loss: f"{100 * (loss / global_loss - 1):.1f} %" if global_loss else "?"
@@ -190,6 +253,7 @@ def peer_fit_rows(t):
         ],
         "",
         PEERS_FIT,
+        PEER_FLOOR,
     )
     t.row(
         f"scipy {peer['scipy']} Nelder–Mead (gonio's settings and start) / gonio Nelder–Mead",
@@ -200,18 +264,30 @@ def peer_fit_rows(t):
         ],
         "",
         "same",
+        PEER_FLOOR,
     )
+
+
+def study_floor(t, name):
+    """A study's floor: Σ over its fits of loss evaluations × points, at the mean cost of
+    one point of its three models' losses, shared over every core."""
+    f, work = t.floors(), t.results.get("study_work", {}).get("studies", {}).get(name)
+    if not f or work is None:
+        return None
+    point = sum(f["point_s"].values()) / len(f["point_s"])
+    return work * point / f["cores"]
 
 
 def study_rows(t):
-    name = "study/3_samples_x_63_combinations_x_3_models_robust_stride_{}"
-    t.row(
-        "study: 3 samples × 63 θL combinations × 3 models, robust, every column (~1,370 per θL)",
-        [duration(t.median(name.format(1)))],
-        "",
-        STUDY,
-    )
-    t.row("same, every 4th column", [duration(t.median(name.format(4)))], "", "same")
+    name = "3_samples_x_63_combinations_x_3_models_robust_stride_{}"
+    for stride, what in ((1, "study: 3 samples × 63 θL combinations × 3 models, robust, every column (~1,370 per θL)"), (4, "same, every 4th column")):
+        t.row(
+            what,
+            [duration(t.median("study/" + name.format(stride)))],
+            "",
+            STUDY if stride == 1 else "same",
+            [(t.median("study/" + name.format(stride)), study_floor(t, name.format(stride)))],
+        )
     s = t.results.get("study_command")
     t.row(
         "`gonio study` of the full-size `gold` scan (3 models, Nelder–Mead compared): "
@@ -219,11 +295,14 @@ def study_rows(t):
         [f"{duration(s['wall_s'])} / {duration(s['cpu_s'])}" if s else None],
         "≤ 4 s wall",
         "`cargo bench -p gonio-daemon --bench study_command`",
+        "not modelled: `gonio study` does not write its fits' evaluations",
     )
 
 
 def hdr_rows(t):
     linear = t.median("hdr_merge_7x3872x2592/linear")
+    # Reading 7 frames' counts and writing the map and its mask.
+    merge_floor = t.bytes_floor(FRAME_PIXELS * (7 * COUNT_BYTES + MAP_BYTES))
     memory = t.results.get("hdr_memory")
     t.row(
         "HDR merge, 7 frames of 3872×2592, linear (noise-weighted): time, peak memory",
@@ -232,16 +311,19 @@ def hdr_rows(t):
         else None,
         "≤ 0.5 s, ≤ 1.5 GB",
         HDR + "; memory: `/usr/bin/time -v` on its binary, `--bench linear`",
+        [(linear, merge_floor)],
     )
+    dm = t.median("hdr_merge_7x3872x2592/debevec_malik")
     t.row(
         "HDR merge, same frames, Debevec–Malik",
-        [duration(t.median("hdr_merge_7x3872x2592/debevec_malik"))],
+        [duration(dm)],
         "",
         "same",
+        [(dm, merge_floor)],
     )
     peer = t.results.get("peers_hdr")
     if peer is None:
-        t.row("OpenCV's Debevec merge on the same frames", None, "", PEERS_HDR + " (not run: `--no-peers`, or OpenCV not installable)")
+        t.row("OpenCV's Debevec merge on the same frames", None, "", PEERS_HDR + " (not run: `--no-peers`, or OpenCV not installable)", PEER_FLOOR)
     else:
         g, o = peer["gonio"], peer["opencv"]
         t.row(
@@ -254,6 +336,7 @@ def hdr_rows(t):
             ],
             "",
             PEERS_HDR,
+            "not modelled: 8-bit frames of another size",
         )
     cmd = t.results.get("hdr_command")
     t.row(
@@ -263,6 +346,15 @@ def hdr_rows(t):
         else None,
         "≤ 1.5",
         "`cargo bench -p gonio-daemon --bench hdr_command`",
+        # The files read, the counts decoded, the map written.
+        [
+            (
+                cmd["whole_s"],
+                t.bytes_floor(cmd["file_bytes"] + cmd["decoded_bytes"] + cmd["map_pixels"] * MAP_BYTES),
+            )
+        ]
+        if cmd and "file_bytes" in cmd
+        else None,
     )
 
 
@@ -292,6 +384,7 @@ def budget_rows(t):
             ],
             "≤ 2 s",
             EXTRACT + "; " + FIT_SAMPLES,
+            "not modelled: the refits' evaluations are not counted",
         )
     mc = t.results.get("budget_monte_carlo")
     t.row(
@@ -314,10 +407,13 @@ def budget_rows(t):
         else None,
         "1,000 draws ≤ 5 s",
         FIT_SAMPLES,
+        "not modelled: the draws' refits are not counted",
     )
 
 
 def scan_rows(t):
+    f, files = t.floors(), t.results.get("extract_input")
+    read_floor = files["file_bytes"] / f["read_bytes_per_s"] if f and files else None
     t.row(
         "6-θL full-size `gold` scan (24 TIFFs) → samples.csv, with / without the samples' "
         "uncertainty",
@@ -327,6 +423,8 @@ def scan_rows(t):
         ],
         "",
         EXTRACT,
+        # Reading the capture files at the read bandwidth.
+        [(t.median(f"extract/six_theta_l_scan_to_csv{suffix}"), read_floor) for suffix in ("", "/no-uncertainty")],
     )
     labels = ["none", "default effects (noise, vignetting)", "spectral (thin film)", "all (thin film + every effect)"]
     t.row(
@@ -334,6 +432,8 @@ def scan_rows(t):
         [duration(t.median(f"render 3872x2592/{label}")) for label in labels],
         "≤ 0.3 s",
         "`cargo bench -p gonio-mock-hw --bench render`",
+        # Writing the frame's counts.
+        [(t.median(f"render 3872x2592/{label}"), t.bytes_floor(FRAME_PIXELS * COUNT_BYTES)) for label in labels],
     )
     scan = t.results.get("scan")
     t.row(
@@ -342,6 +442,8 @@ def scan_rows(t):
         [f"{scan['ratio']:.3f} ({scan['wall_s']:.2f} s / {scan['hardware_s']:.2f} s)"] if scan else None,
         "≤ 1.05",
         "`cargo bench -p gonio-daemon --bench scan -- --runs 5`",
+        # The hardware's own time.
+        [(scan["wall_s"], scan["hardware_s"])] if scan else None,
     )
 
 
@@ -354,7 +456,23 @@ def conditions(results):
     return (
         f"Measured by `bash scripts/bench.sh` on {c['date']}: {c['cpu']}, {c['cores']} cores, "
         f"load average {c['load']} when it started{took}; criterion medians, and medians of "
-        "the other benchmarks' own runs."
+        "the other benchmarks' own runs. "
+        + floors_note(results)
+    )
+
+
+def floors_note(results):
+    f = results.get("floors")
+    if not f:
+        return "Floors: not measured in this run."
+    points = ", ".join(f"{m} {s * 1e9:.1f} ns" for m, s in f["point_s"].items())
+    return (
+        "Floor: what this machine allows (`cargo bench -p gonio-processing --bench floors`): "
+        f"a fit's loss evaluations × its points × one point of the loss ({points} on one "
+        f"core) over {f['cores']} cores; a merge's, decode's or render's bytes at "
+        f"{f['copy_bytes_per_s'] / 1e9:.1f} GB/s (copy: read plus written; reading alone "
+        f"{f['read_bytes_per_s'] / 1e9:.1f} GB/s); a scan's hardware time. ÷ floor: the "
+        "median over its floor."
     )
 
 

@@ -15,30 +15,57 @@
 # The verdicts of `--model auto` (colour shift reported or not, auto's held-out brightness
 # and colour against Cook–Torrance's) over a randomized family of emulated scans and, with
 # GONIO_RGL_DIR, the RGL files with several noise seeds (tests/tests/choice_family.rs).
+# The multi-angle colour (CIELAB at ASTM E2539's six aspecular angles, D65/10°, each value
+# with its expanded uncertainty) of every example scene and RGL file, from its
+# `--model auto` fit and its samples (`gonio colour`).
 # One function per section; a new section adds its function and its call in main.
 # Usage: bash scripts/results.sh [SCENE...]   (default: gold red blue-green opal)
 #        bash scripts/results.sh --real-materials-only   (that section and the tables)
 #        bash scripts/results.sh --coverage-only         (that section and the tables)
 #        bash scripts/results.sh --verdicts-only         (that section and the tables)
+#        bash scripts/results.sh --colour-only           (that section and the tables)
+# GONIO_BIN=PATH runs that gonio binary instead of building the release one.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-gonio=${CARGO_TARGET_DIR:-target}/release/gonio
+gonio=${GONIO_BIN:-${CARGO_TARGET_DIR:-target}/release/gonio}
 
 # Simulates SCENE's full scan into $scans/SCENE and extracts its samples there; keeps
 # the scene's truth, setup and the extraction's summary in docs/results/SCENE.
 scan_section() {
-    local scene=$1 scan="$scans/$1" out="docs/results/$1"
+    local scene=$1 out="docs/results/$1"
     rm -rf "$out"
     mkdir -p "$out"
-    echo "== $scene: simulate"
-    "$gonio" simulate --scene "$scene" --out "$scan"
-    cp "$scan/truth.json" "$scan/setup.json" "$out/"
+    scan_of "$scene" | sed "s|$scans/|<scans>/|g" | tee "$out/extract.txt"
+    cp "$scans/$scene/truth.json" "$scans/$scene/setup.json" "$out/"
+}
+
+# Simulates SCENE's full scan into $scans/SCENE and extracts its samples there with the
+# scene's true white reflectance; prints the extraction's summary.
+scan_of() {
+    local scene=$1 scan="$scans/$1"
+    echo "== $scene: simulate" >&2
+    "$gonio" simulate --scene "$scene" --out "$scan" >&2
     local white
     white=$(grep -o '"white_reflectance": *[0-9.eE+-]*' "$scan/truth.json" | sed 's/.*: *//')
-    echo "== $scene: extract (white reflectance $white)"
-    "$gonio" extract "$scan" --out "$scan/samples.csv" --white-reflectance "$white" \
-        | sed "s|$scans/|<scans>/|g" | tee "$out/extract.txt"
+    echo "== $scene: extract (white reflectance $white)" >&2
+    "$gonio" extract "$scan" --out "$scan/samples.csv" --white-reflectance "$white"
+}
+
+# The multi-angle colour of the scan in $1 (samples.csv there) into $2/colour.json and
+# $2/colour.txt, from its `--model auto` fit (kept in the scan, with its budget).
+colour_of() {
+    local scan=$1 out=$2
+    "$gonio" fit "$scan/samples.csv" --model auto --out "$scan/fit-auto.json" > /dev/null
+    "$gonio" colour "$scan/fit-auto.json" --samples "$scan/samples.csv" \
+        --geometry astm-e2539 --out "$out/colour.json" | tee "$out/colour.txt"
+}
+
+# SCENE's multi-angle colour, from its scan.
+colour_section() {
+    local scene=$1
+    echo "== $scene: multi-angle colour"
+    colour_of "$scans/$scene" "docs/results/$scene"
 }
 
 # The θL-combination study of SCENE's samples against its reference.
@@ -84,10 +111,15 @@ rgl_scene() {
 # binned 8×8), extracted, and judged by leave-one-θL-out: every model and roughness form,
 # the table in (θh, θd), and what `--model auto` chooses (`gonio study --held-out`).
 real_section() {
-    local out=docs/results/real-materials
-    rm -rf "$out"
+    local out=docs/results/real-materials colour_only=${1:-0}
+    if [ "$colour_only" = 0 ]; then
+        rm -rf "$out"
+    fi
     mkdir -p "$out"
-    if [ -z "${GONIO_RGL_DIR:-}" ]; then
+    if [ -z "${GONIO_RGL_DIR:-}" ] && [ "$colour_only" = 1 ]; then
+        echo "real materials skipped: GONIO_RGL_DIR was not set"
+        return
+    elif [ -z "${GONIO_RGL_DIR:-}" ]; then
         echo "skipped: GONIO_RGL_DIR was not set (GONIO_RGL_DIR=DIR bash scripts/results.sh renders the RGL-EPFL *.bsdf files of DIR)" \
             | tee "$out/skipped.txt"
         return
@@ -104,9 +136,13 @@ real_section() {
         "$gonio" simulate --scene "$scans/$name.toml" --binning 8 --out "$scan" > /dev/null
         "$gonio" extract "$scan" --out "$scan/samples.csv" \
             | sed "s|$scans/|<scans>/|g" > "$out/$name/extract.txt"
-        echo "== real material $name: held out"
-        "$gonio" study "$scan/samples.csv" --held-out --roughness both --out "$out/$name" \
-            | sed "s|$scans/|<scans>/|g" | tee "$out/$name/held_out.txt"
+        if [ "$colour_only" = 0 ]; then
+            echo "== real material $name: held out"
+            "$gonio" study "$scan/samples.csv" --held-out --roughness both --out "$out/$name" \
+                | sed "s|$scans/|<scans>/|g" | tee "$out/$name/held_out.txt"
+        fi
+        echo "== real material $name: multi-angle colour"
+        colour_of "$scan" "$out/$name"
     done
 }
 
@@ -158,9 +194,21 @@ main() {
         docs_section
         return
     fi
-    cargo build --release --locked -p gonio-daemon
+    if [ -z "${GONIO_BIN:-}" ]; then
+        cargo build --release --locked -p gonio-daemon
+    fi
     scans=$(mktemp -d)
     trap 'rm -rf "$scans"' EXIT
+    if [ "${1:-}" = --colour-only ]; then
+        # The scans again (the same seeds, so the same scans), nothing else rewritten.
+        for scene in gold red blue-green opal; do
+            scan_of "$scene" > /dev/null
+            colour_section "$scene"
+        done
+        real_section 1
+        docs_section
+        return
+    fi
     local scenes=("$@")
     if [ "${1:-}" = --real-materials-only ]; then
         scenes=()
@@ -171,6 +219,7 @@ main() {
         scan_section "$scene"
         study_section "$scene"
         tradeoff_section "$scene"
+        colour_section "$scene"
     done
     if [ "${1:-}" != --real-materials-only ]; then
         coverage_section

@@ -521,6 +521,47 @@ def verdicts_table():
 
 
 # Block name → (document, function).
+def colour_block(report, title):
+    """One scan's multi-angle colour: L*, a*, b*, C*, h per aspecular angle, each ± its
+    expanded uncertainty, where each comes from (data or model), and the flop index."""
+    def pm(q, digits=1):
+        return f"{q['value']:.{digits}f} ± {q['expanded']:.{digits}f}"
+
+    rows = [
+        [f"{a['aspecular']:g}", a["origin"], *(pm(a[k]) for k in ("L", "a", "b", "C", "h"))]
+        for a in report["angles"]
+    ]
+    flop = report.get("flop_index")
+    flop = f"; flop index {pm(flop, 2)}" if flop else ""
+    notes = "".join(f" {n}" for n in report.get("notes", []))
+    return (
+        f"**{title}** ({MODEL_NAMES.get(report['model'], report['model'])}, "
+        f"{report['conditions']}{flop}).{notes}\n\n"
+        + table(["aspecular °", "from", "L*", "a*", "b*", "C*", "h °"], rows)
+    )
+
+
+def colour_table():
+    """The multi-angle colour of every example scene and RGL file (`gonio colour` of its
+    `--model auto` fit), values ± U (k = 2)."""
+    found = [(s, RESULTS / s / "colour.json") for s in ORDER]
+    real = RESULTS / "real-materials"
+    if real.is_dir():
+        found += [(d.name, d / "colour.json") for d in sorted(real.iterdir())]
+    found = [(name, path) for name, path in found if path.is_file()]
+    if not found:
+        return "*Not run*: `bash scripts/results.sh --colour-only` writes these tables."
+    transform = read_json(found[0][1])["transform"]
+    head = (
+        f"Camera RGB → XYZ: over its test spectra ({transform['spectra']}), the transform's "
+        f"ΔE00 median {transform['delta_e00_median']:.2f}, 95th percentile "
+        f"{transform['delta_e00_p95']:.2f}, largest {transform['delta_e00_max']:.2f}; it "
+        "enters each value's uncertainty."
+    )
+    blocks = [colour_block(read_json(path), name) for name, path in found]
+    return head + "\n\n" + "\n\n".join(blocks)
+
+
 SECTIONS = {
     "study": ("results", study_table),
     "study-time": ("results", study_time_table),
@@ -529,6 +570,7 @@ SECTIONS = {
     "coverage": ("results", coverage_table),
     "coverage-defaults": ("results", lambda: coverage_table("coverage-defaults.json")),
     "verdicts": ("results", verdicts_table),
+    "colour": ("results", colour_table),
     "summary": ("readme", summary_table),
 }
 

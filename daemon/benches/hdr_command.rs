@@ -67,6 +67,15 @@ fn main() {
         drop(decoded);
         write.push(timed(|| map.write_exr(&out).expect("writing")).1);
     }
+    // What the process must move at least: the files read, the frames decoded, the map.
+    let file_bytes: u64 = frames
+        .iter()
+        .map(|p| std::fs::metadata(p).map_or(0, |m| m.len()))
+        .sum();
+    let decoded = Frame::read_all(&frames).expect("decoding");
+    let decoded_bytes: usize = decoded.iter().map(|f| 2 * f.data.len()).sum();
+    let (width, height) = (decoded[0].width, decoded[0].height);
+    drop(decoded);
     let (whole_spread, merge_spread) = (stats::spread(&whole), stats::spread(&merged));
     let (whole, merge_s) = (stats::median(&whole), stats::median(&merged));
     println!(
@@ -86,6 +95,9 @@ fn main() {
             "whole_s": whole,
             "merge_s": merge_s,
             "spread": whole_spread.max(merge_spread),
+            "file_bytes": file_bytes,
+            "decoded_bytes": decoded_bytes,
+            "map_pixels": width * height,
         })
     );
 }

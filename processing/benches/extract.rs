@@ -63,6 +63,23 @@ fn write_synthetic_scan(dir: &Path) {
     }
 }
 
+/// The captures of a scan folder: every capture file one level down.
+fn walk_captures(dir: &Path) -> Vec<PathBuf> {
+    std::fs::read_dir(dir)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .flat_map(|theta| {
+            std::fs::read_dir(theta.path())
+                .into_iter()
+                .flatten()
+                .flatten()
+        })
+        .map(|entry| entry.path())
+        .filter(|path| capture::is_capture_path(path))
+        .collect()
+}
+
 fn extract_six_theta_scan(c: &mut Criterion) {
     let temporary;
     let dir: PathBuf = match std::env::var_os("GONIO_BENCH_SCAN") {
@@ -74,6 +91,15 @@ fn extract_six_theta_scan(c: &mut Criterion) {
         }
     };
     let out = dir.join("bench-samples.csv");
+    // What extraction must read at least, for the floor column of README's cost table.
+    let file_bytes: u64 = walk_captures(&dir)
+        .iter()
+        .map(|p| std::fs::metadata(p).map_or(0, |m| m.len()))
+        .sum();
+    println!(
+        "{}",
+        serde_json::json!({ "bench": "extract_input", "file_bytes": file_bytes })
+    );
     let mut group = c.benchmark_group("extract");
     group.sample_size(10);
     // With each sample's uncertainty (the default: its noise, and ten more extractions of

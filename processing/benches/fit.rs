@@ -15,7 +15,9 @@ use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use gonio_processing::brdf::{Model, Params, Roughness};
 use gonio_processing::color::CameraModel;
 use gonio_processing::fit::budget::{budget, monte_carlo, Draw};
-use gonio_processing::fit::{fit, fit_auto, loss_reached, FitMethod, FitOptions, AUTO_CANDIDATES};
+use gonio_processing::fit::{
+    fit, fit_auto, loss_reached, FitMethod, FitOptions, FitResult, AUTO_CANDIDATES,
+};
 use gonio_processing::samples::{read_csv, Sample};
 
 /// 1,000 distant-geometry points over four θL (θi = θL − φ, θr = φ, 250 per θL) with 1 %
@@ -49,6 +51,7 @@ fn samples(model: Model) -> Vec<Sample> {
 
 fn bench_fits(c: &mut Criterion) {
     let mut group = c.benchmark_group("fit_1000");
+    let mut fits = serde_json::Map::new();
     for model in [Model::CookTorrance, Model::Ward] {
         let data = samples(model);
         for (method, roughness, uncertainty) in [
@@ -63,6 +66,8 @@ fn bench_fits(c: &mut Criterion) {
             options.uncertainty = uncertainty;
             let suffix = if uncertainty { "" } else { "/no-uncertainty" };
             let name = format!("{model}/{method}/{roughness}{suffix}");
+            let result = fit(&data, &options).expect("fit");
+            fits.insert(format!("fit_1000/{name}"), work(&result, data.len()));
             group.bench_function(name, |b| {
                 b.iter(|| fit(black_box(&data), &options).expect("fit"))
             });
@@ -70,10 +75,26 @@ fn bench_fits(c: &mut Criterion) {
     }
     let camera = CameraModel::builtin();
     let data = samples(Model::CookTorrance);
+    let auto = fit_auto(&data, &AUTO_CANDIDATES, &camera).expect("fit");
+    fits.insert("fit_1000/auto".into(), work(&auto, data.len()));
     group.bench_function("auto", |b| {
         b.iter(|| fit_auto(black_box(&data), &AUTO_CANDIDATES, &camera).expect("fit"))
     });
     group.finish();
+    println!(
+        "{}",
+        serde_json::json!({ "bench": "fit_1000_work", "fits": fits })
+    );
+}
+
+/// One fit's work for the floor column of README's cost table: its loss evaluations
+/// (each one pass of the model over every point), its points and its model.
+fn work(result: &FitResult, points: usize) -> serde_json::Value {
+    serde_json::json!({
+        "evaluations": result.evaluations,
+        "points": points,
+        "model": result.model.to_string(),
+    })
 }
 
 /// With `GONIO_BENCH_SAMPLES=samples.csv`: the robust Cook–Torrance fit of that file (with
@@ -90,10 +111,22 @@ fn bench_samples_file(c: &mut Criterion) {
         method: FitMethod::NelderMead,
         ..robust.clone()
     };
-    let loss = fit(&data, &robust).expect("robust fit").loss;
+    let robust_fit = fit(&data, &robust).expect("robust fit");
+    let nelder_mead_fit = fit(&data, &nelder_mead).expect("Nelder–Mead fit");
+    let camera = CameraModel::builtin();
+    let auto = fit_auto(&data, &AUTO_CANDIDATES, &camera).expect("fit");
     println!(
         "{}",
-        serde_json::json!({ "bench": "fit_samples", "samples": data.len(), "robust_loss": loss })
+        serde_json::json!({
+            "bench": "fit_samples",
+            "samples": data.len(),
+            "robust_loss": robust_fit.loss,
+            "fits": {
+                "fit_samples/cook-torrance/robust/shared": work(&robust_fit, data.len()),
+                "fit_samples/cook-torrance/nelder-mead/shared": work(&nelder_mead_fit, data.len()),
+                "fit_samples/auto": work(&auto, data.len()),
+            },
+        })
     );
     let mut group = c.benchmark_group("fit_samples");
     group.sample_size(10);
@@ -103,7 +136,6 @@ fn bench_samples_file(c: &mut Criterion) {
     group.bench_function("cook-torrance/nelder-mead/shared", |b| {
         b.iter(|| loss_reached(black_box(&data), &nelder_mead).expect("fit"))
     });
-    let camera = CameraModel::builtin();
     group.bench_function("auto", |b| {
         b.iter(|| fit_auto(black_box(&data), &AUTO_CANDIDATES, &camera).expect("fit"))
     });

@@ -68,6 +68,38 @@ fn reference(params: &Params, camera: &CameraModel) -> Reference {
     Reference::from_reader(csv.as_bytes(), "bench", camera).expect("valid reference")
 }
 
+/// The fits' work of one run of the studies, for the floor column of README's cost
+/// table: Σ over every fit of its loss evaluations × its points (each θL's points taken
+/// every `stride`th).
+fn study_work(
+    inputs: &[(Vec<Sample>, Reference)],
+    camera: &CameraModel,
+    options: &StudyOptions,
+) -> f64 {
+    let mut point_evaluations = 0.0;
+    for (samples, reference) in inputs {
+        let report = run_study(samples, reference, camera, options).expect("study runs");
+        for combination in &report.results {
+            let Ok(scores) = &combination.outcome else {
+                continue;
+            };
+            let points: usize = combination
+                .theta_l
+                .iter()
+                .map(|t| {
+                    samples
+                        .iter()
+                        .filter(|s| s.theta_l == *t)
+                        .count()
+                        .div_ceil(options.stride)
+                })
+                .sum();
+            point_evaluations += scores.fit.evaluations as f64 * points as f64;
+        }
+    }
+    point_evaluations
+}
+
 fn study(c: &mut Criterion) {
     let camera = CameraModel::builtin();
     let materials = [
@@ -86,6 +118,7 @@ fn study(c: &mut Criterion) {
         .iter()
         .map(|p| (samples(p), reference(p, &camera)))
         .collect();
+    let mut work = serde_json::Map::new();
     let mut group = c.benchmark_group("study");
     group.sample_size(10);
     // Every column (stride 1), and every 4th column of each θL (stride 4, ~340 per θL).
@@ -99,6 +132,7 @@ fn study(c: &mut Criterion) {
             "3_samples_x_63_combinations_x_{}_models_robust_stride_{stride}",
             options.variants.len()
         );
+        work.insert(name.clone(), study_work(&inputs, &camera, &options).into());
         group.bench_function(name, |b| {
             b.iter(|| {
                 for (samples, reference) in &inputs {
@@ -108,6 +142,10 @@ fn study(c: &mut Criterion) {
         });
     }
     group.finish();
+    println!(
+        "{}",
+        serde_json::json!({ "bench": "study_work", "studies": work })
+    );
     c.bench_function("combinations_of_6", |b| b.iter(|| combinations(&THETA_L)));
 }
 

@@ -243,7 +243,7 @@ pub fn colour(
                 }
             })
             .collect();
-        let covariance = Matrix3::from(transform.xyz_covariance(xyz)).transpose();
+        let covariance = Matrix3::from(transform.xyz_covariance(beta, xyz)).transpose();
         let eigen = SymmetricEigen::new(covariance);
         for k in 0..3 {
             let size = eigen.eigenvalues[k].max(0.0).sqrt();

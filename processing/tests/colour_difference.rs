@@ -108,7 +108,7 @@ fn the_transform_maps_white_to_white_and_states_its_error() {
             let truth = observer.xyz(f).unwrap();
             let rgb = gonio_processing::color::transform::camera_rgb(&camera, f).unwrap();
             let got = transform.xyz(rgb);
-            let cov = transform.xyz_covariance(truth);
+            let cov = transform.xyz_covariance(rgb, truth);
             let y = (got[1] - truth[1]).abs();
             inside += usize::from(y <= 2.0 * cov[1][1].sqrt());
         }

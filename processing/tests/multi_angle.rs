@@ -8,7 +8,7 @@ use gonio_processing::color::observer::Conditions;
 use gonio_processing::color::transform::ColourTransform;
 use gonio_processing::color::CameraModel;
 use gonio_processing::fit::{FitMethod, FitResult, FittedRoughness, ParameterSet};
-use gonio_processing::multi_angle::compare::{compare, Tolerances, Verdict};
+use gonio_processing::multi_angle::compare::{compare, Mounting, Tolerances, Verdict};
 use gonio_processing::multi_angle::{colour, ColourReport, Origin};
 
 fn fit(kd: [f64; 3], ks: [f64; 3], m: f64) -> FitResult {
@@ -83,9 +83,9 @@ fn a_fit_gives_every_angle_from_its_model_with_a_flop_index() {
 fn compare_fails_gold_against_red_and_passes_a_sample_against_itself() {
     let gold = report(&fit([9.0, 6.5, 2.0], [25.0, 20.0, 7.0], 0.07));
     let red = report(&fit([20.0, 3.0, 2.5], [10.0, 10.0, 10.0], 0.15));
-    let c = compare(&gold, &red, &Tolerances::default()).unwrap();
+    let c = compare(&gold, &red, &Tolerances::default(), Mounting::Same).unwrap();
     assert_eq!(c.overall, Verdict::Fail);
-    let same = compare(&gold, &gold, &Tolerances::default()).unwrap();
+    let same = compare(&gold, &gold, &Tolerances::default(), Mounting::Same).unwrap();
     for a in &same.angles {
         assert_eq!(a.delta_e00.value, 0.0);
         // Shared lines (the transform) cancel in a colour against itself; the
@@ -95,7 +95,7 @@ fn compare_fails_gold_against_red_and_passes_a_sample_against_itself() {
     }
     // A diffuse 1 % lighter: the ΔE00 found is the ΔE00 of the two colours.
     let lighter = report(&fit([9.09, 6.565, 2.02], [25.0, 20.0, 7.0], 0.07));
-    let c = compare(&gold, &lighter, &Tolerances::default()).unwrap();
+    let c = compare(&gold, &lighter, &Tolerances::default(), Mounting::Same).unwrap();
     for (a, (s, b)) in c.angles.iter().zip(gold.angles.iter().zip(&lighter.angles)) {
         assert!((a.delta_e00.value - ciede2000(s.lab(), b.lab())).abs() < 1e-12);
         assert!(a.delta_l.value > 0.0);
@@ -119,4 +119,34 @@ fn tolerances_name_angles_and_refuse_nonsense() {
     assert_eq!(Verdict::judge(0.5, 0.3, 1.0), Verdict::Pass);
     assert_eq!(Verdict::judge(0.9, 0.3, 1.0), Verdict::Undecided);
     assert_eq!(Verdict::judge(1.5, 0.3, 1.0), Verdict::Fail);
+}
+
+#[test]
+fn the_geometry_s_errors_cancel_only_within_one_mounting_the_white_s_always() {
+    let standard = report(&fit([9.0, 6.5, 2.0], [25.0, 20.0, 7.0], 0.07));
+    let bare = compare(&standard, &standard, &Tolerances::default(), Mounting::Same).unwrap();
+    // Both scans moved alike by a camera offset (1 in L*) and a white (0.5 in L*).
+    let mut moved = standard.clone();
+    for a in &mut moved.angles {
+        for (source, l) in [("camera_offset:ks_g", 1.0), ("white_reflectance:kd_g", 0.5)] {
+            a.lines.push(gonio_processing::multi_angle::Line {
+                source: source.into(),
+                shared: true,
+                lab: [l, 0.0, 0.0],
+            });
+        }
+    }
+    let u = |c: &gonio_processing::multi_angle::compare::Comparison, k: usize| {
+        c.angles[k].delta_l.expanded
+    };
+    let same = compare(&moved, &moved, &Tolerances::default(), Mounting::Same).unwrap();
+    let separate = compare(&moved, &moved, &Tolerances::default(), Mounting::Separate).unwrap();
+    for k in 0..moved.angles.len() {
+        // One mounting: both lines cancel exactly.
+        assert!((u(&same, k) - u(&bare, k)).abs() < 1e-9, "{k}");
+        // Each its own: the offset's line is each scan's own (u² grows by 1 + 1, U = 2u);
+        // the white's still cancels.
+        let grown = u(&separate, k).powi(2) - u(&bare, k).powi(2);
+        assert!((grown - 8.0).abs() < 1e-6, "{k}: {grown}");
+    }
 }

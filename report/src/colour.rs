@@ -17,7 +17,7 @@ use crate::Scan;
 const CONDITIONS: Conditions = Conditions::D65Ten;
 
 /// The scan's multi-angle colour, or why there is none.
-fn scan_colour(scan: &Scan) -> Result<ColourReport, String> {
+pub(crate) fn scan_colour(scan: &Scan) -> Result<ColourReport, String> {
     let chosen = scan.chosen().ok_or("no fit")?;
     let measured = if scan.samples.is_empty() {
         None

@@ -18,6 +18,7 @@ use std::path::{Path, PathBuf};
 
 use gonio_files::input::{read_input_to_string, MAX_SMALL_FILE_BYTES};
 use gonio_processing::fit::FitResult;
+use gonio_processing::multi_angle::ColourReport;
 use gonio_processing::samples::{self, Sample};
 use serde_json::Value;
 use thiserror::Error;
@@ -52,6 +53,8 @@ pub enum ReportError {
         "{dir}: no samples.csv and no fit: nothing to report (extract and fit the scan first)"
     )]
     Empty { dir: PathBuf },
+    #[error("{dir}: no fit: no colour to state (fit the scan first)")]
+    NoFit { dir: PathBuf },
 }
 
 /// The fit files a scan directory may hold, in the order the report prefers them as the
@@ -218,6 +221,22 @@ pub fn render(
          <title>gonio report: {}</title><style>{STYLE}</style></head><body>{body}</body></html>\n",
         escape(&sample)
     ))
+}
+
+/// The multi-angle colour of the scan in `dir` as its report states it: CIELAB at ASTM
+/// E2539's aspecular angles (D65, 10° observer) from the scan's model and its measured
+/// table, each value with its expanded uncertainty.
+pub fn multi_angle_colour(dir: &Path) -> Result<ColourReport, ReportError> {
+    let scan = Scan::read(dir)?;
+    if scan.chosen().is_none() {
+        return Err(ReportError::NoFit {
+            dir: dir.to_path_buf(),
+        });
+    }
+    colour::scan_colour(&scan).map_err(|reason| ReportError::Invalid {
+        path: dir.to_path_buf(),
+        reason,
+    })
 }
 
 /// The report's styles: readable on a screen of any width (tables scroll in their box,

@@ -28,6 +28,7 @@ use super::devices::InjectedFault;
 use super::health;
 use super::openapi::{self, Access};
 use super::preview;
+use super::scan_colour;
 use super::scan_files;
 use super::scan_report;
 use super::schemas::{ScanRequest, ScanView};
@@ -71,6 +72,8 @@ fn routes(guard: &dyn Fn(Access, Routes) -> Routes) -> Routes {
         .routes(routes!(thumbnails::thumbnail))
         .routes(routes!(plot))
         .routes(routes!(scan_report::report))
+        .routes(routes!(scan_colour::colour))
+        .routes(routes!(scan_colour::compare))
         .routes(routes!(scan_files::list_files))
         .routes(routes!(scan_files::get_file))
         .routes(routes!(scan_files::scan_archive))

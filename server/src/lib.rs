@@ -27,6 +27,7 @@ mod plan;
 mod preview;
 mod process;
 mod progress;
+mod scan_colour;
 mod scan_files;
 mod scan_report;
 pub mod schemas;

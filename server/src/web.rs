@@ -18,13 +18,14 @@ pub async fn index() -> Html<&'static str> {
 
 /// Every file under `/page/` besides the markup, by the name it is served under: the
 /// stylesheet and the ES modules.
-const PAGE_FILES: [(&str, &str); 6] = [
+const PAGE_FILES: [(&str, &str); 7] = [
     ("page.css", include_str!("../assets/page/page.css")),
     ("main.js", include_str!("../assets/page/main.js")),
     ("state.js", include_str!("../assets/page/state.js")),
     ("render.js", include_str!("../assets/page/render.js")),
     ("plot.js", include_str!("../assets/page/plot.js")),
     ("text.js", include_str!("../assets/page/text.js")),
+    ("colour.js", include_str!("../assets/page/colour.js")),
 ];
 
 /// `GET /page/{file}`: the page's stylesheet (`text/css`) or one of its modules

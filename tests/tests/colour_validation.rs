@@ -29,7 +29,7 @@ use gonio_processing::color::transform::{ColourTransform, SplitMix64};
 use gonio_processing::color::CameraModel;
 use gonio_processing::fit::table::Table;
 use gonio_processing::fit::FitResult;
-use gonio_processing::multi_angle::compare::{compare, Tolerances, Verdict};
+use gonio_processing::multi_angle::compare::{compare, Mounting, Tolerances, Verdict};
 use gonio_processing::multi_angle::{colour, ColourReport, Measured};
 use gonio_processing::samples::read_csv;
 use gonio_tests::{gonio, temp_dir};
@@ -278,7 +278,13 @@ fn colour_per_geometry_against_the_spectral_truth_repeats_and_discriminates() {
             &scene_text(GOLD, None, seed),
             &transform,
         );
-        let c = compare(&gold.report, &again.report, &Tolerances::default()).unwrap();
+        let c = compare(
+            &gold.report,
+            &again.report,
+            &Tolerances::default(),
+            Mounting::Separate,
+        )
+        .unwrap();
         for a in &c.angles {
             within += usize::from(a.delta_e00.value <= a.delta_e00.expanded);
             pairs += 1;
@@ -293,11 +299,24 @@ fn colour_per_geometry_against_the_spectral_truth_repeats_and_discriminates() {
     // Discrimination: gold against red fails; gold with Kd 1 % higher differs by the
     // ΔE00 the spectral truth says.
     let red = red.unwrap();
-    let c = compare(&gold.report, &red.report, &Tolerances::default()).unwrap();
+    let c = compare(
+        &gold.report,
+        &red.report,
+        &Tolerances::default(),
+        Mounting::Separate,
+    )
+    .unwrap();
     eprintln!("gold against red: {}", c.overall.name());
     let lighter = GOLD.replace("kd = [9.0, 6.5, 2.0]", "kd = [9.09, 6.565, 2.02]");
     let moved = scan(&dir, "gold-kd", &scene_text(&lighter, None, 11), &transform);
-    let c_kd = compare(&gold.report, &moved.report, &Tolerances::default()).unwrap();
+    // One mounting: the same setup errors (seed 11) for both.
+    let c_kd = compare(
+        &gold.report,
+        &moved.report,
+        &Tolerances::default(),
+        Mounting::Same,
+    )
+    .unwrap();
     let (truth_a, truth_b) = (truth(&gold, &observer), truth(&moved, &observer));
     let mut kd_within = 0;
     for ((a, ta), tb) in c_kd.angles.iter().zip(&truth_a).zip(&truth_b) {

@@ -9,7 +9,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use gonio_files::input::{read_input_to_string, MAX_SMALL_FILE_BYTES};
 use gonio_files::output::write_atomically;
-use gonio_processing::multi_angle::compare::{compare, Comparison, Tolerances};
+use gonio_processing::multi_angle::compare::{compare, Comparison, Mounting, Tolerances};
 
 use super::colour::{report, Options};
 
@@ -28,6 +28,10 @@ pub struct Args {
     /// Also write the comparison as JSON here.
     #[arg(long)]
     out: Option<PathBuf>,
+    /// Both scans are of one mounting, not moved between them: the errors of the setup's
+    /// geometry cancel too (without it, only the white's and the colour transform's do).
+    #[arg(long)]
+    same_mount: bool,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -51,7 +55,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .with_context(|| format!("standard {}", args.standard.display()))?;
     let batch = report(&args.batch, &args.options)
         .with_context(|| format!("batch {}", args.batch.display()))?;
-    let comparison = compare(&standard, &batch, &tolerances)?;
+    let mounting = if args.same_mount {
+        Mounting::Same
+    } else {
+        Mounting::Separate
+    };
+    let comparison = compare(&standard, &batch, &tolerances, mounting)?;
     if let Some(path) = &args.out {
         let text = serde_json::to_string_pretty(&comparison)? + "\n";
         write_atomically(path, text.as_bytes())

@@ -9,12 +9,13 @@
 //! squares over a family of reflectance spectra ([`smooth_spectra`], seed
 //! [`TRAINING_SEED`]) plus a perfect white weighted as the whole family (its row × N), so that the white
 //! maps to the white point. Its error is then measured on another draw of the same family
-//! ([`TEST_SEED`]): the relative residuals r = (M·β − XYZ)/Y give the covariance
-//! C = mean(r rᵀ) (bias included), and a colour of luminance Y gets the transform's
-//! covariance Y²·C in XYZ; the ΔE00 between the transformed and the true colours
-//! summarises it ([`TransformError`]).
+//! ([`TEST_SEED`]): the relative residuals r = (M·β − XYZ)/Y; a colour gets the
+//! covariance C of those of the [`NEIGHBOURS`] test spectra nearest to it in camera
+//! chromaticity (tricube-weighted mean of r rᵀ, bias included), and with luminance Y the
+//! transform's covariance Y²·C in XYZ; the ΔE00 between the transformed and the true
+//! colours over the whole test draw summarises it ([`TransformError`]).
 
-use nalgebra::{DMatrix, Matrix3, Vector3};
+use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use super::delta_e::ciede2000;
@@ -97,8 +98,79 @@ pub struct TransformError {
     pub delta_e00_median: f64,
     pub delta_e00_p95: f64,
     pub delta_e00_max: f64,
-    /// C: the covariance of (M·β − XYZ)/Y, row-major.
+    /// The mean over the test spectra of r rᵀ, r = (estimate − XYZ)/Y, row-major: what
+    /// the error is on average. A colour gets the covariance of its own neighbourhood
+    /// ([`ColourTransform::xyz_covariance`]).
     pub relative_covariance: [[f64; 3]; 3],
+    /// Test spectra in the neighbourhood of a colour, for its error's covariance.
+    #[serde(default)]
+    pub neighbours: usize,
+}
+
+/// One spectrum of the family: where its camera RGB lies (chromaticity r/(r+g+b),
+/// g/(r+g+b)), its camera RGB and its XYZ.
+#[derive(Debug, Clone, PartialEq)]
+struct Spectrum {
+    chroma: [f64; 2],
+    rgb: [f64; 3],
+    xyz: [f64; 3],
+}
+
+/// Test spectra in the neighbourhood of a colour.
+pub const NEIGHBOURS: usize = 150;
+
+/// Camera chromaticity of `rgb`; `None` when its sum is not positive.
+fn chroma(rgb: [f64; 3]) -> Option<[f64; 2]> {
+    let sum = rgb[0] + rgb[1] + rgb[2];
+    (sum > 1e-12 && sum.is_finite()).then(|| [rgb[0] / sum, rgb[1] / sum])
+}
+
+/// The `k` items of `points` nearest to `at` in chromaticity, each with its tricube
+/// weight (1 − (d/d_k)³)³ against the distance d_k just beyond the k-th.
+fn nearest<'a, T>(
+    points: &'a [T],
+    at: [f64; 2],
+    k: usize,
+    chroma_of: impl Fn(&T) -> [f64; 2],
+) -> Vec<(&'a T, f64)> {
+    let mut by_distance: Vec<(f64, &T)> = points
+        .iter()
+        .map(|p| {
+            let c = chroma_of(p);
+            ((c[0] - at[0]).hypot(c[1] - at[1]), p)
+        })
+        .collect();
+    let k = k.min(by_distance.len());
+    if k == 0 {
+        return Vec::new();
+    }
+    by_distance.select_nth_unstable_by(k - 1, |a, b| a.0.total_cmp(&b.0));
+    by_distance.truncate(k);
+    let reach = by_distance.iter().map(|d| d.0).fold(0.0, f64::max) * 1.0001 + 1e-12;
+    by_distance
+        .into_iter()
+        .map(|(d, p)| (p, (1.0 - (d / reach).powi(3)).powi(3)))
+        .collect()
+}
+
+/// Weighted least squares XYZ ≈ M·rgb over `rows` (rgb, xyz, weight in the normal
+/// equations); `None` when they are singular.
+fn fit_matrix(rows: &[([f64; 3], [f64; 3], f64)]) -> Option<Matrix3<f64>> {
+    let mut ata = Matrix3::zeros();
+    let mut atb = Matrix3::zeros();
+    for (rgb, xyz, w) in rows {
+        let a = Vector3::from(*rgb);
+        let b = Vector3::from(*xyz);
+        ata += *w * a * a.transpose();
+        atb += *w * a * b.transpose();
+    }
+    let scale = ata.trace().abs();
+    if !(scale > 0.0) || ata.determinant().abs() <= 1e-12 * scale.powi(3) {
+        return None;
+    }
+    let solution = ata.try_inverse()? * atb;
+    let matrix = solution.transpose();
+    matrix.iter().all(|v| v.is_finite()).then_some(matrix)
 }
 
 /// Camera RGB → XYZ under stated conditions, with its error.
@@ -106,6 +178,8 @@ pub struct TransformError {
 pub struct ColourTransform {
     observer: Observer,
     matrix: Matrix3<f64>,
+    /// The test spectra's chromaticities and relative residuals (estimate − XYZ)/Y.
+    residuals: Vec<([f64; 2], [f64; 3])>,
     error: TransformError,
 }
 
@@ -113,63 +187,72 @@ impl ColourTransform {
     /// The transform of `camera` (its sensitivities under its lamp) to `conditions`.
     pub fn new(camera: &CameraModel, conditions: Conditions) -> Result<Self, ColorError> {
         let observer = Observer::new(conditions);
-        let pair = |f: &[f64; BANDS]| -> Result<([f64; 3], [f64; 3]), ColorError> {
-            Ok((camera_rgb(camera, f)?, observer.xyz(f)?))
+        let spectrum = |f: &[f64; BANDS]| -> Result<Spectrum, ColorError> {
+            let rgb = camera_rgb(camera, f)?;
+            Ok(Spectrum {
+                chroma: chroma(rgb).unwrap_or([1.0 / 3.0; 2]),
+                rgb,
+                xyz: observer.xyz(f)?,
+            })
         };
-        let training = smooth_spectra(TRAINING_SEED, SPECTRA);
-        let mut rows: Vec<([f64; 3], [f64; 3], f64)> = Vec::with_capacity(SPECTRA + 1);
-        for f in &training {
-            let (rgb, xyz) = pair(f)?;
-            rows.push((rgb, xyz, 1.0));
-        }
-        let (white_rgb, white_xyz) = pair(&[1.0; BANDS])?;
-        rows.push((white_rgb, white_xyz, SPECTRA as f64));
-        let n = rows.len();
-        let a = DMatrix::from_fn(n, 3, |i, c| rows[i].2 * rows[i].0[c]);
-        let b = DMatrix::from_fn(n, 3, |i, c| rows[i].2 * rows[i].1[c]);
-        let solution =
-            a.svd(true, true)
-                .solve(&b, 1e-12)
-                .map_err(|reason| ColorError::Degenerate {
-                    what: format!("camera RGB → XYZ least squares ({reason})"),
-                })?;
-        let matrix = Matrix3::from_fn(|r, c| solution[(c, r)]);
-        if !matrix.iter().all(|v| v.is_finite()) {
-            return Err(ColorError::Degenerate {
-                what: "camera RGB → XYZ matrix".into(),
-            });
-        }
-        let white = observer.white();
+        let training = smooth_spectra(TRAINING_SEED, SPECTRA)
+            .iter()
+            .map(spectrum)
+            .collect::<Result<Vec<_>, _>>()?;
+        let white = spectrum(&[1.0; BANDS])?;
+        // Least squares over the family, the white's row counting as the whole family
+        // (its row × N, so its weight in the normal equations N²).
+        let mut rows: Vec<_> = training.iter().map(|s| (s.rgb, s.xyz, 1.0)).collect();
+        rows.push((white.rgb, white.xyz, (SPECTRA * SPECTRA) as f64));
+        let matrix = fit_matrix(&rows).ok_or_else(|| ColorError::Degenerate {
+            what: "camera RGB → XYZ least squares".into(),
+        })?;
+        let mut transform = Self {
+            observer: observer.clone(),
+            matrix,
+            residuals: Vec::with_capacity(SPECTRA),
+            error: TransformError {
+                spectra: String::new(),
+                delta_e00_median: 0.0,
+                delta_e00_p95: 0.0,
+                delta_e00_max: 0.0,
+                relative_covariance: [[0.0; 3]; 3],
+                neighbours: NEIGHBOURS,
+            },
+        };
+        let white_point = transform.observer.white();
         let mut covariance = [[0.0; 3]; 3];
         let mut delta_e = Vec::with_capacity(SPECTRA);
         for f in &smooth_spectra(TEST_SEED, SPECTRA) {
-            let (rgb, xyz) = pair(f)?;
-            let estimate = matrix * Vector3::from(rgb);
-            let r: [f64; 3] = std::array::from_fn(|c| (estimate[c] - xyz[c]) / xyz[1]);
+            let s = spectrum(f)?;
+            let estimate = transform.xyz(s.rgb);
+            let r: [f64; 3] = std::array::from_fn(|c| (estimate[c] - s.xyz[c]) / s.xyz[1]);
             for (i, row) in covariance.iter_mut().enumerate() {
                 for (j, v) in row.iter_mut().enumerate() {
                     *v += r[i] * r[j] / SPECTRA as f64;
                 }
             }
+            transform.residuals.push((s.chroma, r));
             delta_e.push(ciede2000(
-                lab_from_xyz(xyz, white),
-                lab_from_xyz([estimate[0], estimate[1], estimate[2]], white),
+                lab_from_xyz(s.xyz, white_point),
+                lab_from_xyz(estimate, white_point),
             ));
         }
         delta_e.sort_by(f64::total_cmp);
         let at = |q: f64| delta_e[((q * (SPECTRA - 1) as f64).round() as usize).min(SPECTRA - 1)];
-        let error = TransformError {
-            spectra: format!("{SPECTRA_FAMILY}; fitted on seed {TRAINING_SEED}, judged on seed {TEST_SEED}, {SPECTRA} spectra each"),
+        transform.error = TransformError {
+            spectra: format!(
+                "{SPECTRA_FAMILY}; fitted on seed {TRAINING_SEED}, judged on seed {TEST_SEED}, \
+                 {SPECTRA} spectra each; a colour's error from its {NEIGHBOURS} nearest \
+                 spectra in camera chromaticity"
+            ),
             delta_e00_median: at(0.5),
             delta_e00_p95: at(0.95),
             delta_e00_max: delta_e[SPECTRA - 1],
             relative_covariance: covariance,
+            neighbours: NEIGHBOURS,
         };
-        Ok(Self {
-            observer,
-            matrix,
-            error,
-        })
+        Ok(transform)
     }
 
     /// The observer and illuminant colours are stated under.
@@ -198,13 +281,32 @@ impl ColourTransform {
         &self.error
     }
 
-    /// The covariance of the transform's error in XYZ at a colour of XYZ `xyz`: Y²·C
-    /// (|Y|, so a noisy black keeps a positive covariance).
-    pub fn xyz_covariance(&self, xyz: [f64; 3]) -> [[f64; 3]; 3] {
+    /// The covariance of the transform's error in XYZ at a colour of camera RGB `rgb`
+    /// and XYZ `xyz`: Y²·C with C the tricube-weighted mean of r rᵀ over the
+    /// [`NEIGHBOURS`] test spectra nearest in camera chromaticity (bias included); the
+    /// whole family's mean for a colour with no chromaticity. |Y|, so a noisy black keeps
+    /// a positive covariance.
+    pub fn xyz_covariance(&self, rgb: [f64; 3], xyz: [f64; 3]) -> [[f64; 3]; 3] {
         let y2 = xyz[1] * xyz[1];
-        self.error
-            .relative_covariance
-            .map(|row| row.map(|v| v * y2))
+        let Some(at) = chroma(rgb) else {
+            return self
+                .error
+                .relative_covariance
+                .map(|row| row.map(|v| v * y2));
+        };
+        let near = nearest(&self.residuals, at, NEIGHBOURS, |r| r.0);
+        let total: f64 = near.iter().map(|(_, w)| w).sum();
+        let mut c = [[0.0; 3]; 3];
+        if total > 0.0 {
+            for ((_, r), w) in &near {
+                for (i, row) in c.iter_mut().enumerate() {
+                    for (j, v) in row.iter_mut().enumerate() {
+                        *v += w * r[i] * r[j] / total;
+                    }
+                }
+            }
+        }
+        c.map(|row| row.map(|v| v * y2))
     }
 }
 

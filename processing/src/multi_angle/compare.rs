@@ -2,11 +2,15 @@
 //! "Multi-angle colour", compare): ΔL*, ΔC*, ΔH*, ΔE00 and the flop index's difference,
 //! each with its uncertainty, and a verdict against tolerances per angle.
 //!
-//! The two scans' lines are matched by name: a shared systematic of the setup (the same
-//! white, geometry and transform for both scans) moves both colours at once, so its line
-//! of a difference is the difference's change with both moved; it cancels where the two
-//! colours are alike. Independent lines (noise, misfit, the arm's repeatability) of each
-//! scan are lines of their own. A difference's standard uncertainty is the root sum of
+//! The two scans' lines are matched by name: a systematic both scans share moves both
+//! colours at once, so its line of a difference is the difference's change with both
+//! moved; it cancels where the two colours are alike. Which systematics both share
+//! depends on the mounting ([`Mounting`]): the white reference and the camera's colour
+//! transform are the instrument's and always shared; the errors of the setup's geometry
+//! (camera offset and distance, light distance, cylinder tilt, arm zero) are the
+//! mounting's, shared only when both scans are of one mounting, and otherwise each
+//! scan's own. Independent lines (noise, misfit, the arm's repeatability) of each scan
+//! are lines of their own. A difference's standard uncertainty is the root sum of
 //! squares of its lines: ΔL*, ΔC*, ΔH* and ΔFI by central differences, ΔE00 (not
 //! differentiable where it is 0) by the larger one-sided change.
 //! Verdict with U = k·u: pass when ΔE00 + U ≤ T, fail when ΔE00 − U > T, otherwise
@@ -185,6 +189,29 @@ pub struct Comparison {
     pub overall: Verdict,
 }
 
+/// Whether the two scans share the sample's mounting on the cylinder.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Mounting {
+    /// Each scan mounted on its own (two samples, or one sample mounted again): the
+    /// errors of the setup's geometry are each scan's own; only the instrument's white
+    /// and colour transform cancel.
+    #[default]
+    Separate,
+    /// One mounting, not moved between the scans: every systematic of the setup cancels
+    /// where the colours are alike.
+    Same,
+}
+
+/// Sources whose error is the instrument's, the same for every scan whatever its
+/// mounting (a line's source is `<source>:<what it moved>`).
+const INSTRUMENT_SOURCES: [&str; 2] = ["white_reflectance", "transform"];
+
+/// Whether a shared line of `source` is shared by two scans of `mounting`.
+fn shared_between(source: &str, mounting: Mounting) -> bool {
+    let name = source.split(':').next().unwrap_or(source);
+    mounting == Mounting::Same || INSTRUMENT_SOURCES.contains(&name)
+}
+
 /// Changes of L*a*b* at each angle compared.
 type Changes = Vec<[f64; 3]>;
 
@@ -192,37 +219,47 @@ type Changes = Vec<[f64; 3]>;
 type PairLine = (bool, Changes, Changes);
 
 /// The lines of the difference between `standard` and `batch` at the angles given, each
-/// the change of every angle's L*a*b* of each scan: shared lines matched by name.
-fn pair_lines(standard: &[&AngleColour], batch: &[&AngleColour]) -> Vec<PairLine> {
+/// the change of every angle's L*a*b* of each scan: a systematic both scans share (by
+/// `mounting`) is one line moving both, matched by name; a systematic of one scan only
+/// is one line moving that scan's angles; an independent line moves its one angle.
+/// The flag says whether both scans share the line.
+fn pair_lines(
+    standard: &[&AngleColour],
+    batch: &[&AngleColour],
+    mounting: Mounting,
+) -> Vec<PairLine> {
     let n = standard.len();
-    let mut shared: BTreeMap<String, (Changes, Changes)> = BTreeMap::new();
+    // By source, and by the scan it belongs to when only one scan has it.
+    let mut systematic: BTreeMap<(String, Option<usize>), (Changes, Changes)> = BTreeMap::new();
     let mut out: Vec<PairLine> = Vec::new();
     for (side, angles) in [standard, batch].into_iter().enumerate() {
         for (k, angle) in angles.iter().enumerate() {
             for line in &angle.lines {
-                if line.shared {
-                    let entry = shared
-                        .entry(line.source.clone())
-                        .or_insert_with(|| (vec![[0.0; 3]; n], vec![[0.0; 3]; n]));
-                    let target = if side == 0 {
-                        &mut entry.0
-                    } else {
-                        &mut entry.1
-                    };
-                    target[k] = line.lab;
+                let mut d = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
+                let changes = if line.shared {
+                    let owner = (!shared_between(&line.source, mounting)).then_some(side);
+                    systematic
+                        .entry((line.source.clone(), owner))
+                        .or_insert_with(|| d.clone())
                 } else {
-                    let mut d = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
-                    if side == 0 {
-                        d.0[k] = line.lab
-                    } else {
-                        d.1[k] = line.lab
-                    };
+                    &mut d
+                };
+                if side == 0 {
+                    changes.0[k] = line.lab;
+                } else {
+                    changes.1[k] = line.lab;
+                }
+                if !line.shared {
                     out.push((false, d.0, d.1));
                 }
             }
         }
     }
-    out.extend(shared.into_values().map(|(s, b)| (true, s, b)));
+    out.extend(
+        systematic
+            .into_iter()
+            .map(|((_, owner), (s, b))| (owner.is_none(), s, b)),
+    );
     out
 }
 
@@ -269,6 +306,7 @@ pub fn compare(
     standard: &ColourReport,
     batch: &ColourReport,
     tolerances: &Tolerances,
+    mounting: Mounting,
 ) -> Result<Comparison, CompareError> {
     tolerances.check()?;
     if standard.conditions != batch.conditions {
@@ -286,7 +324,7 @@ pub fn compare(
         else {
             continue;
         };
-        let lines = pair_lines(&[s], &[b]);
+        let lines = pair_lines(&[s], &[b], mounting);
         let (ls, lb) = ([s.lab()], [b.lab()]);
         let component = |i: usize| {
             difference(&lines, &ls, &lb, false, |x, y| {
@@ -312,7 +350,7 @@ pub fn compare(
     if angles.is_empty() {
         return Err(CompareError::NoCommonAngle);
     }
-    let flop = flop_difference(standard, batch, tolerances);
+    let flop = flop_difference(standard, batch, tolerances, mounting);
     let overall = Verdict::overall(
         angles
             .iter()
@@ -333,6 +371,7 @@ fn flop_difference(
     standard: &ColourReport,
     batch: &ColourReport,
     tolerances: &Tolerances,
+    mounting: Mounting,
 ) -> Option<FlopDifference> {
     let pick = |r: &'_ ColourReport| -> Option<Vec<AngleColour>> {
         [15.0, 45.0, 110.0]
@@ -347,7 +386,7 @@ fn flop_difference(
     };
     let (s, b) = (pick(standard)?, pick(batch)?);
     let (sr, br): (Vec<&AngleColour>, Vec<&AngleColour>) = (s.iter().collect(), b.iter().collect());
-    let lines = pair_lines(&sr, &br);
+    let lines = pair_lines(&sr, &br, mounting);
     let fi = |x: &[[f64; 3]]| flop_index(x[0][0], x[1][0], x[2][0]);
     let (ls, lb): (Vec<[f64; 3]>, Vec<[f64; 3]>) = (
         s.iter().map(|c| c.lab()).collect(),

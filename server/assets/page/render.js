@@ -1,11 +1,13 @@
 // Rendering the daemon's views into the page: the queue and sweep tables, the
 // hardware line, the selected scan's detail (state, reason, times, bracket, controls,
-// latest frame, result links, live fit), its file listing and a calibrated setup.
+// latest frame, result links, live fit, multi-angle colour), its file listing and a
+// calibrated setup.
 // Reads the page's state; sends no command (main.js does).
 
 import { $, page, FINAL, get, fetchFile, remember, timeLeft } from "./state.js";
 import { escapeHtml, formatShutter, localTime, duration, percent } from "./text.js";
 import { plot } from "./plot.js";
+import { noteBatches, showColour } from "./colour.js";
 
 // Writes every time-left slot of the page (queue rows and detail) from `timeLeft`.
 export function paintTimeLeft() {
@@ -90,6 +92,7 @@ function armLine(a) {
 // The queue, the sweeps and the header's hardware line from what the page polls.
 export function showOverview(scans, sweeps, hw) {
   scans.forEach(remember);
+  noteBatches(scans);
   $("scans").innerHTML = scans.slice().reverse().map((s) =>
     `<tr data-id="${s.id}" class="${s.id === page.selected ? "sel" : ""}"><td>${s.id}</td><td>${escapeHtml(s.sample)}</td>` +
     `<td class="state-${s.state}">${stateLabel(s)}</td><td>${bar(s.progress.done, s.progress.total)}</td>` +
@@ -197,6 +200,7 @@ export function show(s) {
     }, () => { /* no frame yet */ });
   }
   $("choice").innerHTML = choiceText(s.choice);
+  showColour(s);
   const links = [];
   if (s.results.samples) links.push(`<a href="${s.results.samples}" download>samples.csv</a>`);
   for (const [m, url] of Object.entries(s.results.fits)) links.push(`<a href="${url}" download>fit ${m}</a>`);

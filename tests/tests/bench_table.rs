@@ -1,0 +1,141 @@
+//! README's cost table as `scripts/bench_table.py` writes it from a run's results: each
+//! row against its floor (what this machine allows), and no table from an unsteady run.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use gonio_tests::temp_dir;
+
+const README: &str = "# gonio\n\n<!-- bench: costs -->\nold table\n<!-- /bench: costs -->\n";
+
+/// The floors and the whole-process results of a run, one JSON object a line.
+fn results(scan_spread: f64) -> String {
+    [
+        r#"{"bench": "conditions", "date": "2026-12-04", "cpu": "test", "cores": 2, "load": "0.1"}"#,
+        r#"{"bench": "floors", "cores": 2, "read_bytes_per_s": 4e9, "copy_bytes_per_s": 5e9,
+            "point_s": {"cook-torrance": 5e-9, "ward": 4e-9, "cook-torrance-fresnel": 6e-9}}"#,
+        r#"{"bench": "fit_1000_work", "fits": {"fit_1000/cook-torrance/robust/shared":
+            {"evaluations": 200, "points": 1000, "model": "cook-torrance"}}}"#,
+        &format!(
+            r#"{{"bench": "scan", "ratio": 1.2, "wall_s": 12.0, "hardware_s": 10.0, "spread": {scan_spread}}}"#
+        ),
+        r#"{"bench": "hdr_command", "whole_s": 1.0, "merge_s": 0.5, "spread": 0.1,
+            "file_bytes": 1000000000, "decoded_bytes": 2000000000, "map_pixels": 100000000}"#,
+    ]
+    .map(|line| line.replace('\n', " "))
+    .join("\n")
+}
+
+/// A criterion result directory holding one benchmark's median and its interval.
+fn criterion(dir: &Path, full_id: &str, median_ns: f64, width: f64) {
+    let new = dir.join(full_id.replace('/', "_")).join("new");
+    std::fs::create_dir_all(&new).unwrap();
+    std::fs::write(
+        new.join("benchmark.json"),
+        serde_json::json!({ "full_id": full_id }).to_string(),
+    )
+    .unwrap();
+    let half = median_ns * width / 2.0;
+    let estimates = serde_json::json!({"median": {
+        "point_estimate": median_ns,
+        "confidence_interval": {"lower_bound": median_ns - half, "upper_bound": median_ns + half},
+    }});
+    std::fs::write(new.join("estimates.json"), estimates.to_string()).unwrap();
+}
+
+/// Writes the table from `results(spread)` into a README of its own in `dir`: the
+/// script's output and the README after it.
+fn run(dir: &Path, spread: f64) -> (Output, String) {
+    let (results_file, readme) = (dir.join("results.jsonl"), dir.join("README.md"));
+    std::fs::write(&results_file, results(spread)).unwrap();
+    std::fs::write(&readme, README).unwrap();
+    let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scripts/bench_table.py");
+    let output = Command::new("python3")
+        .arg(script)
+        .arg(&results_file)
+        .arg("--criterion")
+        .arg(dir.join("criterion"))
+        .arg("--readme")
+        .arg(&readme)
+        .output()
+        .expect("python3 runs");
+    (output, std::fs::read_to_string(&readme).unwrap())
+}
+
+/// The cells of the row whose first cell starts with `what`.
+fn row<'a>(table: &'a str, what: &str) -> Vec<&'a str> {
+    let line = table
+        .lines()
+        .find(|l| l.starts_with(&format!("| {what}")))
+        .unwrap_or_else(|| panic!("no row `{what}` in\n{table}"));
+    line.trim_matches('|').split(" | ").map(str::trim).collect()
+}
+
+#[test]
+fn every_row_stands_against_its_floor() {
+    let dir = temp_dir("bench-table-floors");
+    // 2 ms for 200 evaluations × 1,000 points × 5 ns over 2 cores = 0.5 ms: 4× its floor.
+    criterion(
+        &dir.join("criterion"),
+        "fit_1000/cook-torrance/robust/shared",
+        2e6,
+        0.02,
+    );
+    let (output, readme) = run(&dir, 0.05);
+    assert!(output.status.success(), "{output:?}");
+    assert!(
+        readme.contains("| what | median | floor | ÷ floor | target | command |"),
+        "{readme}"
+    );
+    let fit = row(&readme, "robust Cook–Torrance fit, 1,000 points");
+    assert_eq!(fit[1..4], ["2 ms", "500 µs", "4"], "{fit:?}");
+    // The scan's floor is its hardware time.
+    let scan = row(&readme, "6-θL `gold` scan through `gonio serve`");
+    assert_eq!(scan[2..4], ["10.00 s", "1.2"], "{scan:?}");
+    // `gonio hdr`: 1 GB read + 2 GB decoded + 1.3 GB of map at 5 GB/s = 0.86 s.
+    let hdr = row(&readme, "`gonio hdr`, 4 Deflate TIFFs");
+    assert_eq!(hdr[2..4], ["860 ms", "1.16"], "{hdr:?}");
+    // A row this run did not measure says so rather than keeping an old number.
+    let ward = row(&readme, "robust Ward fit");
+    assert_eq!(
+        ward[1..4],
+        ["not measured in this run", "not measured in this run", "—"]
+    );
+    assert!(
+        readme.contains("Floor: what this machine allows"),
+        "{readme}"
+    );
+}
+
+#[test]
+fn an_unsteady_run_writes_no_table() {
+    let dir = temp_dir("bench-table-unsteady");
+    criterion(
+        &dir.join("criterion"),
+        "fit_1000/cook-torrance/robust/shared",
+        2e6,
+        0.02,
+    );
+    let (output, readme) = run(&dir, 0.4);
+    assert!(!output.status.success(), "{output:?}");
+    assert_eq!(readme, README);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.contains("`scan`: runs spread 40%"), "{stderr}");
+
+    // A criterion median whose interval is too wide for the table it is used in.
+    let dir = temp_dir("bench-table-wide");
+    criterion(
+        &dir.join("criterion"),
+        "fit_1000/cook-torrance/robust/shared",
+        2e6,
+        0.3,
+    );
+    let (output, readme) = run(&dir, 0.05);
+    assert!(!output.status.success(), "{output:?}");
+    assert_eq!(readme, README);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stderr.contains("95 % interval 30% of its median"),
+        "{stderr}"
+    );
+}
