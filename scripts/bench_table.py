@@ -389,17 +389,23 @@ def budget_rows(t):
     mc = t.results.get("budget_monte_carlo")
     t.row(
         "Monte Carlo of the Cook–Torrance budget (JCGM 101), 250 / 500 / 1,000 draws: time; "
-        "its standard deviation of Ks_G and m over the law of propagation's u_c",
+        "its standard deviation of Ks_G and m over the law of propagation's u_c; m's 95 % "
+        "interval (its convergence with the draws)",
         [
             "; ".join(
                 f"{r['draws']}: {duration(r['seconds'])}, "
                 f"{r['ks_g_std'] / mc['ks_g_combined']:.3f} / {r['m_std'] / mc['m_combined']:.3f}"
+                + (
+                    f", m [{r['m_interval'][0]:.4g}, {r['m_interval'][1]:.4g}]"
+                    if "m_interval" in r
+                    else ""
+                )
                 for r in mc["runs"]
             )
         ]
         if mc
         else None,
-        "",
+        "1,000 draws ≤ 5 s",
         FIT_SAMPLES,
         "not modelled: the draws' refits are not counted",
     )

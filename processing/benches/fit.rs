@@ -155,7 +155,7 @@ fn bench_samples_file(c: &mut Criterion) {
 
 /// The Monte Carlo (JCGM 101) of the Cook–Torrance fit's budget with 250, 500 and 1,000
 /// draws: its time, and how its standard deviation of Ks_G and m settles against the law of
-/// propagation's combined uncertainty; one JSON line for scripts/bench.sh.
+/// propagation's combined uncertainty, and m's interval; one JSON line for scripts/bench.sh.
 fn monte_carlo_convergence(data: &[Sample]) {
     if data.iter().any(|s| s.uncertainty.is_none()) {
         return;
@@ -171,6 +171,7 @@ fn monte_carlo_convergence(data: &[Sample]) {
             "seconds": start.elapsed().as_secs_f64(),
             "ks_g_std": mc.ks[1].std,
             "m_std": mc.m[0].std,
+            "m_interval": mc.m[0].interval,
         }));
     }
     println!(

@@ -32,6 +32,7 @@ mod choice;
 pub mod colour_change;
 mod data;
 mod departure;
+mod draws;
 mod error;
 pub mod fold_score;
 pub mod held_out;

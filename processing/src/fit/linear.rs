@@ -141,6 +141,18 @@ pub(crate) struct Workspace {
     last: Option<LinearFit>,
 }
 
+impl Workspace {
+    /// Makes (kd, ks, kg) the start of the next warm solve: a known fit near the one sought.
+    pub(crate) fn start_from(&mut self, kd: [f64; 3], ks: [f64; 3], kg: [f64; 3]) {
+        self.last = Some(LinearFit {
+            kd,
+            ks,
+            kg,
+            loss: f64::INFINITY,
+        });
+    }
+}
+
 /// Eq. 10 loss of (kd, ks, kg), writing each point's residual norm to `residuals`.
 fn loss_of(
     data: &Data,

@@ -27,6 +27,24 @@ const ROUND_SIGNAL_TOLERANCE: f64 = 1e-9;
 const BRENT_EPS: f64 = 1.5e-8;
 const BRENT_ABS: f64 = 1e-6;
 
+/// How finely a search along ln m converges: each solve's relative loss tolerance (see
+/// `linear::solve`) and Brent's relative and absolute tolerances on ln m.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Precision {
+    pub solve: f64,
+    pub ln_m_relative: f64,
+    pub ln_m_absolute: f64,
+}
+
+impl Precision {
+    /// The fit's own: m to about 1e-6 of itself.
+    pub(crate) const FINE: Precision = Precision {
+        solve: linear::FINE_TOLERANCE,
+        ln_m_relative: BRENT_EPS,
+        ln_m_absolute: BRENT_ABS,
+    };
+}
+
 /// Which roughness a one-dimensional search moves.
 #[derive(Clone, Copy)]
 enum Target {
@@ -129,6 +147,7 @@ struct LineProfile<'p, 'a> {
     base: [f64; 3],
     target: Target,
     warm: Cell<bool>,
+    tolerance: f64,
 }
 
 impl CostFunction for LineProfile<'_, '_> {
@@ -141,7 +160,7 @@ impl CostFunction for LineProfile<'_, '_> {
         Ok(self
             .profile
             .borrow_mut()
-            .eval(m, shared, linear::FINE_TOLERANCE, warm))
+            .eval(m, shared, self.tolerance, warm))
     }
 }
 
@@ -153,13 +172,27 @@ fn brent(
     lo: f64,
     hi: f64,
 ) -> Result<(), FitError> {
+    brent_from(profile, base, target, (lo, hi), false, Precision::FINE)
+}
+
+/// [`brent`], its first solve warm from the profile's last one when `warm`.
+fn brent_from(
+    profile: &RefCell<Profile<'_>>,
+    base: [f64; 3],
+    target: Target,
+    (lo, hi): (f64, f64),
+    warm: bool,
+    precision: Precision,
+) -> Result<(), FitError> {
     let line = LineProfile {
         profile,
         base,
         target,
-        warm: Cell::new(false),
+        warm: Cell::new(warm),
+        tolerance: precision.solve,
     };
-    let solver = BrentOpt::new(lo, hi).set_tolerance(BRENT_EPS, BRENT_ABS);
+    let solver =
+        BrentOpt::new(lo, hi).set_tolerance(precision.ln_m_relative, precision.ln_m_absolute);
     Executor::new(line, solver)
         .configure(|state| state.max_iters(200))
         .run()
@@ -232,6 +265,77 @@ fn validate(options: &FitOptions) -> Result<(f64, f64), FitError> {
         )));
     }
     Ok((o.m_min.ln(), o.m_max.ln()))
+}
+
+/// The robust fit of data near those of a known fit `start` (its parameters and specular
+/// colour at 90°): Brent over ln m within ±`span` of `start`'s roughness (each channel's in
+/// turn for per-channel roughness, in rounds as [`fit`]'s), the first solve warm from
+/// `start`'s coefficients, no grid and no polish, converged to `precision`. `None` when a roughness found lies at an
+/// end of its bracket that is not an end of the search range: the fit may lie beyond, and
+/// the caller searches the whole range with [`fit`].
+pub(crate) fn fit_near(
+    data: &Data,
+    options: &FitOptions,
+    start: &Params,
+    start_kg: [f64; 3],
+    span: f64,
+    precision: Precision,
+) -> Result<Option<(Found, [f64; 3])>, FitError> {
+    let ln_range = validate(options)?;
+    let profile = RefCell::new(Profile::new(data));
+    profile
+        .borrow_mut()
+        .workspace
+        .start_from(start.kd, start.ks, start_kg);
+    let bracket = |x: f64| ((x - span).max(ln_range.0), (x + span).min(ln_range.1));
+    // Whether ln m = `x` found in `bracket` lies at one of its inner ends: within a
+    // hundredth of the span and four times Brent's tolerance, where Brent stops when the
+    // minimum lies beyond the end.
+    let at_inner_end = |x: f64, (lo, hi): (f64, f64)| {
+        let margin =
+            0.01 * span + 4.0 * (precision.ln_m_absolute + precision.ln_m_relative * x.abs());
+        (x - lo < margin && lo > ln_range.0) || (hi - x < margin && hi < ln_range.1)
+    };
+    let m0 = start.m;
+    match options.roughness {
+        Roughness::Shared => {
+            let range = bracket(m0[0].ln());
+            brent_from(&profile, m0, Target::Shared, range, true, precision)?;
+            if at_inner_end(profile.borrow().best_m()[0].ln(), range) {
+                return Ok(None);
+            }
+        }
+        Roughness::PerChannel => {
+            for _ in 0..MAX_ROUNDS {
+                let before = profile.borrow().best_loss();
+                for c in 0..3 {
+                    let base = profile.borrow().best.as_ref().map_or(m0, |(p, _, _)| p.m);
+                    let range = bracket(base[c].ln());
+                    brent_from(&profile, base, Target::Channel(c), range, true, precision)?;
+                    if at_inner_end(profile.borrow().best_m()[c].ln(), range) {
+                        return Ok(None);
+                    }
+                }
+                let after = profile.borrow().best_loss();
+                if before - after
+                    <= ROUND_TOLERANCE * before + ROUND_SIGNAL_TOLERANCE * data.zero_loss
+                {
+                    break;
+                }
+            }
+        }
+    }
+    let profile = profile.into_inner();
+    let (params, ks_90, _) = profile
+        .best
+        .ok_or_else(|| FitError::Optimizer("no roughness was evaluated".into()))?;
+    Ok(Some((
+        Found {
+            params,
+            evaluations: profile.evaluations,
+        },
+        ks_90,
+    )))
 }
 
 /// The robust fit: the parameters found and the specular colour at 90°.
