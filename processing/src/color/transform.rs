@@ -127,12 +127,12 @@ fn chroma(rgb: [f64; 3]) -> Option<[f64; 2]> {
 
 /// The `k` items of `points` nearest to `at` in chromaticity, each with its tricube
 /// weight (1 − (d/d_k)³)³ against the distance d_k just beyond the k-th.
-fn nearest<'a, T>(
-    points: &'a [T],
+fn nearest<T>(
+    points: &[T],
     at: [f64; 2],
     k: usize,
     chroma_of: impl Fn(&T) -> [f64; 2],
-) -> Vec<(&'a T, f64)> {
+) -> Vec<(&T, f64)> {
     let mut by_distance: Vec<(f64, &T)> = points
         .iter()
         .map(|p| {
@@ -165,7 +165,7 @@ fn fit_matrix(rows: &[([f64; 3], [f64; 3], f64)]) -> Option<Matrix3<f64>> {
         atb += *w * a * b.transpose();
     }
     let scale = ata.trace().abs();
-    if !(scale > 0.0) || ata.determinant().abs() <= 1e-12 * scale.powi(3) {
+    if scale.is_nan() || scale <= 0.0 || ata.determinant().abs() <= 1e-12 * scale.powi(3) {
         return None;
     }
     let solution = ata.try_inverse()? * atb;
