@@ -46,9 +46,12 @@ fn copy_inputs(from: &Path, to: &Path) {
     let mut all: Vec<PathBuf> = files.iter().map(PathBuf::from).collect();
     for entry in std::fs::read_dir(from.join("docs/results")).expect("docs/results") {
         let scene = entry.expect("entry").path();
+        let name = Path::new("docs/results").join(scene.file_name().expect("name"));
         if scene.join("study/study.json").is_file() {
-            let name = Path::new("docs/results").join(scene.file_name().expect("name"));
             all.extend(per_scene.iter().map(|f| name.join(f)));
+        }
+        if scene.join("colour.json").is_file() {
+            all.push(name.join("colour.json"));
         }
     }
     let real = from.join("docs/results/real-materials");
@@ -59,7 +62,11 @@ fn copy_inputs(from: &Path, to: &Path) {
                 Path::new("docs/results/real-materials").join(path.file_name().expect("name"));
             if path.join("held_out.json").is_file() {
                 all.push(name.join("held_out.json"));
-            } else if path.is_file() {
+            }
+            if path.join("colour.json").is_file() {
+                all.push(name.join("colour.json"));
+            }
+            if path.is_file() {
                 all.push(name);
             }
         }
