@@ -3,6 +3,8 @@
 //! D65/10°, values ± U), and a batch judged against it as `gonio compare` judges it with
 //! its default tolerances (docs/ARCHITECTURE.md, "Multi-angle colour").
 
+use std::sync::Arc;
+
 use axum::extract::{Path, State};
 use axum::http::StatusCode;
 use axum::Json;
@@ -17,7 +19,6 @@ use super::answers::{
     internal, load_scan, without_server_paths, ApiError, ApiResult, AppState, ErrorBody,
 };
 use super::shared::Shared;
-use std::sync::Arc;
 
 /// The colour of scan `id`, or the answer why it has none.
 async fn scan_colour(shared: &Arc<Shared>, id: i64) -> ApiResult<ColourReport> {

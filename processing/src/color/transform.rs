@@ -107,40 +107,25 @@ pub struct TransformError {
     pub neighbours: usize,
 }
 
-/// One spectrum of the family: where its camera RGB lies (chromaticity r/(r+g+b),
-/// g/(r+g+b)), its camera RGB and its XYZ.
-#[derive(Debug, Clone, PartialEq)]
-struct Spectrum {
-    chroma: [f64; 2],
-    rgb: [f64; 3],
-    xyz: [f64; 3],
-}
-
 /// Test spectra in the neighbourhood of a colour.
 pub const NEIGHBOURS: usize = 150;
 
-/// Camera chromaticity of `rgb`; `None` when its sum is not positive.
+/// Camera chromaticity of `rgb` (r/(r+g+b), g/(r+g+b)); `None` when its sum is not
+/// positive.
 fn chroma(rgb: [f64; 3]) -> Option<[f64; 2]> {
     let sum = rgb[0] + rgb[1] + rgb[2];
     (sum > 1e-12 && sum.is_finite()).then(|| [rgb[0] / sum, rgb[1] / sum])
 }
 
-/// The `k` items of `points` nearest to `at` in chromaticity, each with its tricube
-/// weight (1 − (d/d_k)³)³ against the distance d_k just beyond the k-th.
-fn nearest<T>(
-    points: &[T],
-    at: [f64; 2],
-    k: usize,
-    chroma_of: impl Fn(&T) -> [f64; 2],
-) -> Vec<(&T, f64)> {
-    let mut by_distance: Vec<(f64, &T)> = points
+/// The relative residuals of the [`NEIGHBOURS`] test spectra nearest to `at` in
+/// chromaticity, each with its tricube weight (1 − (d/d_k)³)³ against the distance d_k
+/// just beyond the farthest of them.
+fn nearest(residuals: &[([f64; 2], [f64; 3])], at: [f64; 2]) -> Vec<([f64; 3], f64)> {
+    let mut by_distance: Vec<(f64, [f64; 3])> = residuals
         .iter()
-        .map(|p| {
-            let c = chroma_of(p);
-            ((c[0] - at[0]).hypot(c[1] - at[1]), p)
-        })
+        .map(|(c, r)| ((c[0] - at[0]).hypot(c[1] - at[1]), *r))
         .collect();
-    let k = k.min(by_distance.len());
+    let k = NEIGHBOURS.min(by_distance.len());
     if k == 0 {
         return Vec::new();
     }
@@ -149,8 +134,17 @@ fn nearest<T>(
     let reach = by_distance.iter().map(|d| d.0).fold(0.0, f64::max) * 1.0001 + 1e-12;
     by_distance
         .into_iter()
-        .map(|(d, p)| (p, (1.0 - (d / reach).powi(3)).powi(3)))
+        .map(|(d, r)| (r, (1.0 - (d / reach).powi(3)).powi(3)))
         .collect()
+}
+
+/// Adds w·r rᵀ / total to `c`.
+fn add_outer(c: &mut [[f64; 3]; 3], r: &[f64; 3], w: f64, total: f64) {
+    for (i, row) in c.iter_mut().enumerate() {
+        for (j, v) in row.iter_mut().enumerate() {
+            *v += w * r[i] * r[j] / total;
+        }
+    }
 }
 
 /// Weighted least squares XYZ ≈ M·rgb over `rows` (rgb, xyz, weight in the normal
@@ -187,23 +181,18 @@ impl ColourTransform {
     /// The transform of `camera` (its sensitivities under its lamp) to `conditions`.
     pub fn new(camera: &CameraModel, conditions: Conditions) -> Result<Self, ColorError> {
         let observer = Observer::new(conditions);
-        let spectrum = |f: &[f64; BANDS]| -> Result<Spectrum, ColorError> {
-            let rgb = camera_rgb(camera, f)?;
-            Ok(Spectrum {
-                chroma: chroma(rgb).unwrap_or([1.0 / 3.0; 2]),
-                rgb,
-                xyz: observer.xyz(f)?,
-            })
+        let pair = |f: &[f64; BANDS]| -> Result<([f64; 3], [f64; 3]), ColorError> {
+            Ok((camera_rgb(camera, f)?, observer.xyz(f)?))
         };
-        let training = smooth_spectra(TRAINING_SEED, SPECTRA)
-            .iter()
-            .map(spectrum)
-            .collect::<Result<Vec<_>, _>>()?;
-        let white = spectrum(&[1.0; BANDS])?;
         // Least squares over the family, the white's row counting as the whole family
         // (its row × N, so its weight in the normal equations N²).
-        let mut rows: Vec<_> = training.iter().map(|s| (s.rgb, s.xyz, 1.0)).collect();
-        rows.push((white.rgb, white.xyz, (SPECTRA * SPECTRA) as f64));
+        let mut rows = Vec::with_capacity(SPECTRA + 1);
+        for f in &smooth_spectra(TRAINING_SEED, SPECTRA) {
+            let (rgb, xyz) = pair(f)?;
+            rows.push((rgb, xyz, 1.0));
+        }
+        let (white_rgb, white_xyz) = pair(&[1.0; BANDS])?;
+        rows.push((white_rgb, white_xyz, (SPECTRA * SPECTRA) as f64));
         let matrix = fit_matrix(&rows).ok_or_else(|| ColorError::Degenerate {
             what: "camera RGB → XYZ least squares".into(),
         })?;
@@ -224,17 +213,15 @@ impl ColourTransform {
         let mut covariance = [[0.0; 3]; 3];
         let mut delta_e = Vec::with_capacity(SPECTRA);
         for f in &smooth_spectra(TEST_SEED, SPECTRA) {
-            let s = spectrum(f)?;
-            let estimate = transform.xyz(s.rgb);
-            let r: [f64; 3] = std::array::from_fn(|c| (estimate[c] - s.xyz[c]) / s.xyz[1]);
-            for (i, row) in covariance.iter_mut().enumerate() {
-                for (j, v) in row.iter_mut().enumerate() {
-                    *v += r[i] * r[j] / SPECTRA as f64;
-                }
-            }
-            transform.residuals.push((s.chroma, r));
+            let (rgb, xyz) = pair(f)?;
+            let estimate = transform.xyz(rgb);
+            let r: [f64; 3] = std::array::from_fn(|c| (estimate[c] - xyz[c]) / xyz[1]);
+            add_outer(&mut covariance, &r, 1.0, SPECTRA as f64);
+            transform
+                .residuals
+                .push((chroma(rgb).unwrap_or([1.0 / 3.0; 2]), r));
             delta_e.push(ciede2000(
-                lab_from_xyz(s.xyz, white_point),
+                lab_from_xyz(xyz, white_point),
                 lab_from_xyz(estimate, white_point),
             ));
         }
@@ -294,16 +281,12 @@ impl ColourTransform {
                 .relative_covariance
                 .map(|row| row.map(|v| v * y2));
         };
-        let near = nearest(&self.residuals, at, NEIGHBOURS, |r| r.0);
+        let near = nearest(&self.residuals, at);
         let total: f64 = near.iter().map(|(_, w)| w).sum();
         let mut c = [[0.0; 3]; 3];
         if total > 0.0 {
-            for ((_, r), w) in &near {
-                for (i, row) in c.iter_mut().enumerate() {
-                    for (j, v) in row.iter_mut().enumerate() {
-                        *v += w * r[i] * r[j] / total;
-                    }
-                }
+            for (r, w) in &near {
+                add_outer(&mut c, r, *w, total);
             }
         }
         c.map(|row| row.map(|v| v * y2))
