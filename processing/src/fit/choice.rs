@@ -13,10 +13,11 @@
 //!
 //! Candidates are listed simplest first; a later one wins only with a score lower by
 //! more than [`TIE`] (relative), so equal scores keep the simpler model, and, judged on
-//! held-out θL, only with a median held-out ΔE_u′v′ (all points) no higher than the
-//! best's so far: a larger model that predicts the unseen values better but their
-//! colours worse (one roughness per channel bending the lobe's colour) does not replace
-//! a simpler one.
+//! held-out θL, only with a median held-out ΔE_u′v′ and a median held-out ΔErr_p (all
+//! points, the mean over R, G, B) no higher than the best's so far: a larger model that
+//! lowers the loss but predicts the unseen colours or brightness worse (one roughness
+//! per channel bending the lobe's colour; a table whose lower loss comes from the few
+//! bright points of the peak) does not replace a simpler one.
 //!
 //! A colour shift is reported only when the choice was made on held-out θL, the chosen
 //! fit keeps one (Cook–Torrance–Fresnel, Wald test) **and** it predicts the chromaticity
@@ -170,25 +171,43 @@ fn bic(result: &FitResult, points: usize) -> f64 {
         + fitted_parameters(result) as f64 * n.ln()
 }
 
+/// A candidate's held-out medians over all points of the θL left out: ΔE_u′v′, and
+/// ΔErr_p averaged over R, G, B.
+#[derive(Debug, Clone, Copy)]
+struct Judged {
+    colour: Option<f64>,
+    brightness: Option<f64>,
+}
+
+impl Judged {
+    fn of(c: &Candidate) -> Self {
+        Self {
+            colour: c.held_out_delta_e_uv,
+            brightness: c.held_out_err_p.map(|e| (e[0] + e[1] + e[2]) / 3.0),
+        }
+    }
+}
+
 /// The index of the lowest score, a later candidate winning only by more than [`TIE`]
-/// and, where `colours` gives both its and the best's held-out ΔE_u′v′, only with one no
-/// higher: a larger model that predicts the unseen θL's values better but their colours
-/// worse does not replace a simpler one.
-fn best(scores: &[Option<f64>], colours: &[Option<f64>]) -> Option<usize> {
+/// and, where `judged` gives both its and the best's held-out medians, only with a
+/// ΔE_u′v′ and a brightness error ΔErr_p no higher: a larger model that lowers the loss
+/// but predicts the unseen θL's colours or brightness worse does not replace a simpler
+/// one.
+fn best(scores: &[Option<f64>], judged: &[Judged]) -> Option<usize> {
     let mut chosen: Option<usize> = None;
     for (i, s) in scores.iter().enumerate() {
         let Some(s) = *s else { continue };
         match chosen {
             Some(c) => {
                 let b = scores[c].unwrap_or(f64::INFINITY);
-                let colour_kept = match (
-                    colours.get(i).copied().flatten(),
-                    colours.get(c).copied().flatten(),
+                let no_worse = |of: fn(&Judged) -> Option<f64>| match (
+                    judged.get(i).and_then(of),
+                    judged.get(c).and_then(of),
                 ) {
                     (Some(own), Some(best)) => own <= best,
                     _ => true,
                 };
-                if s < b - TIE * b.abs() && colour_kept {
+                if s < b - TIE * b.abs() && no_worse(|j| j.colour) && no_worse(|j| j.brightness) {
                     chosen = Some(i);
                 }
             }
@@ -206,8 +225,8 @@ pub fn best_parametric(held: &[HeldOut]) -> Option<&HeldOut> {
         .iter()
         .map(|c| c.score.filter(|_| c.form.variant().is_some()))
         .collect();
-    let colours: Vec<Option<f64>> = candidates.iter().map(|c| c.held_out_delta_e_uv).collect();
-    best(&scores, &colours).map(|i| &held[i])
+    let judged: Vec<Judged> = candidates.iter().map(Judged::of).collect();
+    best(&scores, &judged).map(|i| &held[i])
 }
 
 /// The scores of `h`; `table_values`: the stored values of the table of every θL.
@@ -354,9 +373,9 @@ fn choose(
         .iter()
         .map(|c| c.score.filter(|_| c.form.variant().is_some()))
         .collect();
-    let colours: Vec<Option<f64>> = candidates.iter().map(|c| c.held_out_delta_e_uv).collect();
+    let judged: Vec<Judged> = candidates.iter().map(Judged::of).collect();
     let (Some(chosen), Some(parametric)) =
-        (best(&scores, &colours), best(&parametric_scores, &colours))
+        (best(&scores, &judged), best(&parametric_scores, &judged))
     else {
         let why = candidates
             .iter()
@@ -569,4 +588,46 @@ fn reason(
         text.push_str("; one roughness per channel");
     }
     text
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{best, Judged};
+
+    fn judged(colour: f64, brightness: f64) -> Judged {
+        Judged {
+            colour: Some(colour),
+            brightness: Some(brightness),
+        }
+    }
+
+    #[test]
+    fn a_lower_loss_wins_only_with_colour_and_brightness_no_worse() {
+        let scores = [Some(1.0), Some(0.5)];
+        assert_eq!(
+            best(&scores, &[judged(0.01, 0.2), judged(0.01, 0.2)]),
+            Some(1)
+        );
+        // Lower loss, colours no worse, most points' brightness worse: the first stays.
+        assert_eq!(
+            best(&scores, &[judged(0.01, 0.2), judged(0.005, 0.25)]),
+            Some(0)
+        );
+        // Lower loss, brightness no worse, colours worse: the first stays.
+        assert_eq!(
+            best(&scores, &[judged(0.01, 0.2), judged(0.02, 0.1)]),
+            Some(0)
+        );
+        // Not judged on held-out θL (BIC): the score alone.
+        let unjudged = Judged {
+            colour: None,
+            brightness: None,
+        };
+        assert_eq!(best(&scores, &[unjudged, unjudged]), Some(1));
+        // A tie keeps the simpler.
+        assert_eq!(
+            best(&[Some(1.0), Some(1.0)], &[judged(0.0, 0.0); 2]),
+            Some(0)
+        );
+    }
 }
