@@ -483,9 +483,30 @@ def verdicts_table():
     if not rgl:
         return text + "*RGL part skipped*: `GONIO_RGL_DIR` was not set."
     rows = []
+    truth_known = [r for r in rgl if "noise_free" in r]
+    one_colour = [r for r in truth_known if not r["noise_free"]["colour_shift"]]
+    films = [r for r in rgl if r["material"].startswith("cc_")]
+    summary = [
+        [
+            "fits reporting a shift where the noise-free scan reports none (target ≤ 5 %)",
+            wilson(sum(1 for r in one_colour if r["colour_shift"]), len(one_colour)),
+        ],
+        [
+            "fits of the colour-changing films (`cc_*`) reporting a shift (target ≥ 95 %)",
+            wilson(sum(1 for r in films if r["colour_shift"]), len(films)),
+        ],
+    ]
     for name in sorted({r["material"] for r in rgl}):
         runs = [r for r in rgl if r["material"] == name]
         k = sum(1 for r in runs if r["colour_shift"])
+        truth = runs[0].get("noise_free")
+        if truth is None:
+            without_noise = "–"
+        else:
+            size = (truth.get("lobe_colour_change") or {}).get("size_uv")
+            without_noise = ("shift" if truth["colour_shift"] else "none") + (
+                "" if size is None else f" ({size:.4f})"
+            )
         sizes = [r["lobe_colour_change"]["size_uv"] for r in runs if r["lobe_colour_change"]]
         bright = [x for x in (ratio(r, "err_p") for r in runs) if x is not None]
         colour = [x for x in (ratio(r, "delta_e_uv") for r in runs) if x is not None]
@@ -498,6 +519,7 @@ def verdicts_table():
         rows.append(
             [
                 name,
+                without_noise,
                 f"{k}/{len(runs)}",
                 ", ".join(f"{x:.4f}" for x in sizes) or "–",
                 "–" if worst is None else f"{worst:.3f}",
@@ -506,10 +528,14 @@ def verdicts_table():
                 target,
             ]
         )
-    return text + "**RGL-EPFL files**, each with several noise seeds:\n\n" + table(
+    text += "**RGL-EPFL files**, each without noise and with several noise seeds:\n\n"
+    if truth_known:
+        text += table(["", "value"], summary) + "\n\n"
+    return text + table(
         [
             "material",
-            "colour shift reported",
+            "without noise: verdict (lobe Δu′v′)",
+            "colour shift reported with noise",
             "lobe's largest Δu′v′ across θL",
             "auto / Cook–Torrance brightness error (largest)",
             "auto / Cook–Torrance ΔE_u′v′ (largest)",
