@@ -8,7 +8,11 @@
 //! off the lobe), and per bin of [`BIN_DEG`] degrees of signed θh the **specular colour**
 //! S = Σ_bin∩lobe (β − D), whose u′v′ is the lobe's chromaticity there (bins fainter than
 //! [`BRIGHT_BIN`] of the θL's brightest are left out: their chromaticity is too noisy for
-//! a linear propagation of its variance). A lobe's colour may change along θh (a
+//! a linear propagation of its variance; so are bins whose specular is less than
+//! [`SPECULAR_OVER_DIFFUSE`] times the diffuse beneath it, where D's own error moves S's
+//! chromaticity towards the body colour: a real diffuse is not flat in θh, and paper,
+//! felt, fabric and paint scatter their body colour more towards some geometries). A
+//! lobe's colour may change along θh (a
 //! film's highlight is one colour at its centre and another on its flanks) as well as
 //! with θd; the bins compare like with like: the same θh at every θL. A specular of one
 //! colour over any diffuse gives every bin of every θL the same u′v′ (what the lobe's
@@ -92,6 +96,14 @@ pub const BIN_DEG: f64 = 2.0;
 /// θL's brightest bin's.
 pub const BRIGHT_BIN: f64 = 0.2;
 
+/// A bin is compared only when its specular R + G + B is at least this many times the
+/// diffuse's beneath it (n·(D_R + D_G + D_B), n its points). The diffuse beneath a lobe is
+/// the median off it only as far as the diffuse is flat in θh; one that differs there by
+/// a fraction r moves the bin's u′v′ by about r·(D/S)·|u′v′(D) − u′v′(S)| towards the
+/// body colour. With S ≥ 4·D, a diffuse 10 % off under a lobe 0.04 from its body colour
+/// in u′v′ moves it by 0.001, a quarter of [`MIN_UV_CHANGE`].
+pub const SPECULAR_OVER_DIFFUSE: f64 = 4.0;
+
 /// One θL's specular colour per bin of θh, and its variance per channel, from its points
 /// (signed θh, β, noise σ), sorted by θh.
 fn specular_bins(points: &[(f64, [f64; 3], [f64; 3])]) -> Vec<(i64, [f64; 3], [f64; 3])> {
@@ -135,8 +147,13 @@ fn specular_bins(points: &[(f64, [f64; 3], [f64; 3])]) -> Vec<(i64, [f64; 3], [f
         .iter()
         .map(|b| b.1.iter().sum::<f64>())
         .fold(0.0, f64::max);
+    let diffuse_sum: f64 = diffuse.iter().sum();
     bins.into_iter()
-        .filter(|b| b.1.iter().sum::<f64>() >= BRIGHT_BIN * brightest)
+        .filter(|b| {
+            let specular: f64 = b.1.iter().sum();
+            specular >= BRIGHT_BIN * brightest
+                && specular >= SPECULAR_OVER_DIFFUSE * b.3 * diffuse_sum
+        })
         .map(|(bin, s, var, n)| {
             (
                 bin,
