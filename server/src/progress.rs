@@ -13,11 +13,12 @@
 //! that draw on the cores at once (the processing steps, and an emulated camera's
 //! rendering) share them, each moment counted over their number. The lanes are then
 //! played forward: hardware steps one after the other; the processing steps under way
-//! each the rest of its expectation after the time since it began; each processing
-//! step not begun once the hardware steps before it and the processing before it are
-//! done, at half speed while an emulated camera renders. The estimate is when the last
-//! of them finishes, so processing that runs beside the hardware counts only where it
-//! ends later.
+//! each the rest of its expectation after the time since it began, the lane's own step
+//! before the steps not begun, a step in the background (an HDR merge, the automatic
+//! choice) beside them; each processing step not begun once the hardware steps before
+//! it and the processing before it are done, at half speed while an emulated camera
+//! renders. The estimate is when the last of them finishes, so processing that runs
+//! beside the hardware counts only where it ends later.
 
 use std::collections::HashMap;
 
@@ -356,16 +357,23 @@ pub fn progress(
     }
     // The processing steps under way: each the rest of its expectation after the time
     // since it began (what share of the cores it has had is not known before it ends:
-    // a step that does not use every core loses little beside others).
-    let mut running_s = 0.0;
+    // a step that does not use every core loses little beside others). The lane's own
+    // step comes before the steps not begun; a step in the background (an HDR merge,
+    // the automatic choice) goes on beside them.
+    let (mut running_s, mut beside_s) = (0.0, 0.0_f64);
     for ((record, &from), place) in steps.iter().zip(&from_deg).zip(&places) {
         if record.state == StepState::Started && record.step.lane() == Lane::Processing {
             let expected = scale(&record.step, timing.prior_s(&record.step, from, place));
-            running_s += left_of(expected, elapsed_s(record, now));
+            let left_s = left_of(expected, elapsed_s(record, now));
+            if record.step.runs_beside() {
+                beside_s = beside_s.max(left_s);
+            } else {
+                running_s += left_s;
+            }
         }
     }
-    // Then each processing step not started, once the hardware steps before it and
-    // the processing before it are done; the lane shares the cores with the rendering.
+    // Then each processing step not begun, once the hardware steps before it and the
+    // processing before it are done; the lane shares the cores with the rendering.
     let mut processing_s = share_cores(0.0, running_s, &rendering);
     let mut parts: Vec<(Kind, f64)> = Vec::new();
     for (((record, &from), place), &after) in steps
@@ -389,6 +397,7 @@ pub fn progress(
     tracing::debug!(
         hardware_s,
         running_s,
+        beside_s,
         processing_s,
         "time left: processing not started {parts:.2?}; measured/prior this scan {:.2?}, \
          the scan before {:.2?}",
@@ -401,7 +410,7 @@ pub fn progress(
             .iter()
             .find(|s| s.step.lane() == Lane::Processing && s.state == StepState::Started)
             .map(|s| s.step.describe()),
-        eta_s: hardware_s.max(processing_s),
+        eta_s: hardware_s.max(processing_s).max(beside_s),
         live: steps
             .iter()
             .filter(|s| s.state == StepState::Done && matches!(s.step, Step::Samples { .. }))
@@ -643,6 +652,33 @@ mod tests {
         assert_eq!(share_cores(0.0, 0.5, &[(1.0, 3.0)]), 0.5);
         assert_eq!(share_cores(2.0, 0.5, &[(1.0, 3.0)]), 3.0);
         assert_eq!(share_cores(5.0, 1.0, &[(1.0, 3.0)]), 6.0);
+    }
+
+    #[test]
+    fn a_step_in_the_background_goes_on_beside_the_lane_s_steps() {
+        let timing = timing();
+        let now = OffsetDateTime::now_utc();
+        let fixed = plan(false);
+        let all = fixed.steps();
+        let last_hdr = all
+            .iter()
+            .rposition(|s| matches!(s, Step::Hdr { .. }))
+            .unwrap();
+        // Every step before the last θL's merge done; the merge began a second ago,
+        // the gathering and the fits wait.
+        let mut steps = journal(&fixed, last_hdr, now - Duration::seconds(60), |_| 0.1);
+        steps[last_hdr].state = StepState::Started;
+        steps[last_hdr].started = at(now, -1.0);
+        let hdr_left = prior(&timing, &steps[last_hdr].step, 0.0, 3, 3) - 1.0;
+        let chain: f64 = steps[last_hdr + 1..]
+            .iter()
+            .map(|r| prior(&timing, &r.step, 0.0, 3, 3))
+            .sum();
+        let left = progress(&steps, &[], &timing, now).eta_s;
+        assert!(
+            (left - hdr_left.max(chain)).abs() < 1e-6,
+            "{left} vs {hdr_left} and {chain}"
+        );
     }
 
     #[test]
