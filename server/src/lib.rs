@@ -30,6 +30,7 @@ mod plan;
 mod preview;
 mod process;
 mod progress;
+mod queued_times;
 mod sample_waits;
 mod scan_colour;
 mod scan_files;
@@ -175,6 +176,7 @@ where
         confirming: tokio::sync::Mutex::new(()),
         timing: devices.timing,
         costs: std::sync::OnceLock::new(),
+        queued_times: Default::default(),
         emulators: devices.emulators.clone(),
         mount: devices.mount.clone(),
         storage: storage::Probe {

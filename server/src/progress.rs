@@ -8,12 +8,17 @@
 //! kind this scan has not measured yet, such as the fits at its end, by what it took in
 //! the previous scan that ended done); a metering step not done brings the bracket the
 //! scan last metered (or a typical one). The fits of one model each are one kind, the
-//! automatic choice another. A θL's samples and HDR merge are one kind,
-//! measured by the time the lane was busy with them (they run side by side and share
-//! the cores). The lanes are then played forward: hardware steps one after the other,
-//! each processing step once the hardware steps before it and the processing before
-//! it are done. The estimate is when the last of them finishes, so processing that
-//! runs beside the hardware counts only where it ends later.
+//! automatic choice another, a θL's samples and HDR merge a third. A processing step
+//! is measured by the time it would have taken with the cores to itself: the steps
+//! that draw on the cores at once (the processing steps, and an emulated camera's
+//! rendering) share them, each moment counted over their number. The lanes are then
+//! played forward: hardware steps one after the other; the processing steps under way
+//! each the rest of its expectation after the time since it began, the lane's own step
+//! before the steps not begun, a step in the background (an HDR merge, the automatic
+//! choice) beside them; each processing step not begun once the hardware steps before
+//! it and the processing before it are done, at half speed while an emulated camera
+//! renders. The estimate is when the last of them finishes, so processing that runs
+//! beside the hardware counts only where it ends later.
 
 use std::collections::HashMap;
 
@@ -87,19 +92,52 @@ impl Kind {
     }
 }
 
-/// Seconds covered by the union of `intervals` (start, end).
-fn covered_s(mut intervals: Vec<(OffsetDateTime, OffsetDateTime)>) -> f64 {
-    intervals.sort_by_key(|i| i.0);
-    let mut total = 0.0;
-    let mut reach: Option<OffsetDateTime> = None;
-    for (start, end) in intervals {
-        let from = reach.map_or(start, |r| r.max(start));
-        if end > from {
-            total += (end - from).as_seconds_f64();
-        }
-        reach = Some(reach.map_or(end, |r| r.max(end)));
-    }
-    total
+/// A step's run: when it began and ended (now for a step still under way).
+type Run = (OffsetDateTime, OffsetDateTime);
+
+/// The runs of the steps of `steps` that draw on this machine's cores: every
+/// processing step started, and with an emulated camera (`rendered`) the captures and
+/// metering steps, whose frames are rendered here.
+fn core_runs(steps: &[StepRecord], rendered: bool, now: OffsetDateTime) -> Vec<Run> {
+    steps
+        .iter()
+        .filter(|r| {
+            r.step.lane() == Lane::Processing
+                || (rendered && matches!(r.step, Step::Capture { .. } | Step::Meter { .. }))
+        })
+        .filter_map(|r| {
+            let started = r.started.as_deref().and_then(parse_time)?;
+            let finished = match r.state {
+                StepState::Done => r.finished.as_deref().and_then(parse_time)?,
+                StepState::Started => now,
+                StepState::Pending => return None,
+            };
+            Some((started, finished.max(started)))
+        })
+        .collect()
+}
+
+/// The seconds of `run` the step would have taken with the cores to itself: each
+/// moment counted over the number of `runs` (itself among them) under way then, as
+/// the steps running at once share the cores.
+fn alone_s(run: Run, runs: &[Run]) -> f64 {
+    let mut cuts: Vec<OffsetDateTime> = runs
+        .iter()
+        .flat_map(|&(s, f)| [s, f])
+        .filter(|t| (run.0..=run.1).contains(t))
+        .chain([run.0, run.1])
+        .collect();
+    cuts.sort();
+    cuts.dedup();
+    cuts.windows(2)
+        .map(|w| {
+            let sharing = runs
+                .iter()
+                .filter(|&&(s, f)| s <= w[0] && f >= w[1])
+                .count();
+            (w[1] - w[0]).as_seconds_f64() / sharing.max(1) as f64
+        })
+        .sum()
 }
 
 /// Measured over prior seconds of the done steps of each kind.
@@ -109,18 +147,20 @@ struct Calibration {
 }
 
 impl Calibration {
-    /// What the done steps of `steps` (one scan's journal) took against their priors;
-    /// a θL's samples and HDR steps, once both are done, by the time any of them ran.
-    fn of(steps: &[StepRecord], timing: &Timing) -> Self {
+    /// What the done steps of `steps` (one scan's journal, at `now`) took against
+    /// their priors: a hardware step its wall time, a processing step the time it
+    /// would have taken with the cores to itself ([`alone_s`]: beside other
+    /// processing, or beside an emulated camera rendering, it had a share of them); a
+    /// θL's samples and HDR steps only once both are done.
+    fn of(steps: &[StepRecord], timing: &Timing, now: OffsetDateTime) -> Self {
         let mut calibration = Calibration::default();
         let places = places(steps, timing);
+        let runs = core_runs(steps, timing.rendered, now);
         let unfinished: Vec<f64> = steps
             .iter()
             .filter(|r| Kind::of(&r.step) == Kind::Theta && r.state != StepState::Done)
             .filter_map(|r| r.step.theta_l())
             .collect();
-        let mut theta_runs = Vec::new();
-        let mut others = Vec::new();
         for ((record, from), place) in steps.iter().zip(arm_angles(steps)).zip(&places) {
             let theta_unfinished = Kind::of(&record.step) == Kind::Theta
                 && record
@@ -135,27 +175,14 @@ impl Calibration {
             let (Some(started), Some(finished)) = (started, finished) else {
                 continue;
             };
-            let prior = timing.prior_s(&record.step, from, place);
-            let kind = Kind::of(&record.step);
-            let sum = calibration.sums.entry(kind).or_default();
-            sum.1 += prior;
-            match (kind, record.step.lane()) {
-                (Kind::Theta, _) => theta_runs.push((started, finished.max(started))),
-                (_, Lane::Processing) => others.push((kind, started, finished.max(started))),
-                _ => sum.0 += (finished - started).as_seconds_f64().max(0.0),
-            }
-        }
-        // Another processing step beside a θL's merge had half the cores meanwhile.
-        for (kind, started, finished) in others {
-            let beside: f64 = theta_runs
-                .iter()
-                .map(|&(s, f)| (f.min(finished) - s.max(started)).as_seconds_f64().max(0.0))
-                .sum();
-            let took = (finished - started).as_seconds_f64();
-            calibration.sums.entry(kind).or_default().0 += (took - 0.5 * beside).max(0.0);
-        }
-        if let Some(sum) = calibration.sums.get_mut(&Kind::Theta) {
-            sum.0 = covered_s(theta_runs);
+            let run = (started, finished.max(started));
+            let measured = match record.step.lane() {
+                Lane::Processing => alone_s(run, &runs),
+                Lane::Hardware => (run.1 - run.0).as_seconds_f64(),
+            };
+            let sum = calibration.sums.entry(Kind::of(&record.step)).or_default();
+            sum.0 += measured;
+            sum.1 += timing.prior_s(&record.step, from, place);
         }
         calibration
     }
@@ -233,6 +260,28 @@ pub fn metered_bracket(record: &StepRecord) -> Option<Vec<f64>> {
     list.iter().map(Value::as_f64).collect()
 }
 
+/// When work of `work_s` seconds (with the cores to itself) begun at `start_s` ends,
+/// played forward beside the `rendering` (ascending, disjoint intervals of an emulated
+/// camera rendering, seconds from now): it has half the cores while a frame renders.
+fn share_cores(start_s: f64, work_s: f64, rendering: &[(f64, f64)]) -> f64 {
+    let (mut at, mut left) = (start_s, work_s);
+    for &(from, to) in rendering.iter().filter(|(_, to)| *to > start_s) {
+        let alone = (from - at).max(0.0);
+        if left <= alone {
+            return at + left;
+        }
+        left -= alone;
+        at = at.max(from);
+        let shared = 0.5 * (to - at);
+        if left <= shared {
+            return at + 2.0 * left;
+        }
+        left -= shared;
+        at = to;
+    }
+    at + left
+}
+
 /// Seconds still expected of work expected to take `expected_s` that has run for
 /// `elapsed_s`; past its expectation, a share of the time it has run.
 fn left_of(expected_s: f64, elapsed_s: f64) -> f64 {
@@ -260,8 +309,8 @@ pub fn progress(
     let from_deg = arm_angles(steps);
     let places = places(steps, timing);
     let (own, before) = (
-        Calibration::of(steps, timing),
-        Calibration::of(earlier, timing),
+        Calibration::of(steps, timing, now),
+        Calibration::of(earlier, timing, now),
     );
     let scale = |step: &Step, prior_s: f64| {
         own.ratio(step)
@@ -277,50 +326,91 @@ pub fn progress(
         scale(&any_capture, prior_s)
     };
     let mut bracket_s = capture_scale(timing.expected_bracket_s());
-    // The processing steps under way run side by side: together they are expected to
-    // take the sum of their expectations, less the time since the first began.
-    let (mut running_s, mut running_since) = (0.0_f64, 0.0_f64);
-    for ((record, &from), place) in steps.iter().zip(&from_deg).zip(&places) {
-        if record.state == StepState::Started && record.step.lane() == Lane::Processing {
-            running_s += scale(&record.step, timing.prior_s(&record.step, from, place));
-            running_since = running_since.max(elapsed_s(record, now));
-        }
-    }
-    let mut processing_s = left_of(running_s, running_since);
+    // The hardware lane played forward: when each step would begin (counted from now),
+    // and when an emulated camera would be rendering on the cores.
     let mut hardware_s = 0.0_f64;
+    let mut hardware_before = Vec::with_capacity(steps.len());
+    let mut rendering: Vec<(f64, f64)> = Vec::new();
     for ((record, &from), place) in steps.iter().zip(&from_deg).zip(&places) {
+        hardware_before.push(hardware_s);
         if record.state == StepState::Done {
             if let Some(bracket) = metered_bracket(record) {
                 bracket_s = capture_scale(bracket.iter().map(|&s| timing.capture_s(s)).sum());
             }
             continue;
         }
-        let started = record.state == StepState::Started;
-        match record.step.lane() {
-            Lane::Processing if started => {}
-            Lane::Processing => {
-                let left_s = scale(&record.step, timing.prior_s(&record.step, from, place));
-                processing_s = processing_s.max(hardware_s) + left_s;
-            }
-            Lane::Hardware => {
-                let mut left_s = scale(&record.step, timing.prior_s(&record.step, from, place));
-                if started {
-                    left_s = left_of(left_s, elapsed_s(record, now));
-                }
-                hardware_s += left_s;
-                if matches!(record.step, Step::Meter { .. }) {
-                    hardware_s += bracket_s;
-                }
+        if record.step.lane() != Lane::Hardware {
+            continue;
+        }
+        let mut left_s = scale(&record.step, timing.prior_s(&record.step, from, place));
+        if record.state == StepState::Started {
+            left_s = left_of(left_s, elapsed_s(record, now));
+        }
+        if matches!(record.step, Step::Meter { .. }) {
+            left_s += bracket_s;
+        }
+        let renders = matches!(record.step, Step::Capture { .. } | Step::Meter { .. });
+        if timing.rendered && renders {
+            rendering.push((hardware_s, hardware_s + left_s));
+        }
+        hardware_s += left_s;
+    }
+    // The processing steps under way: each the rest of its expectation after the time
+    // since it began (what share of the cores it has had is not known before it ends:
+    // a step that does not use every core loses little beside others). The lane's own
+    // step comes before the steps not begun; a step in the background (an HDR merge,
+    // the automatic choice) goes on beside them.
+    let (mut running_s, mut beside_s) = (0.0, 0.0_f64);
+    for ((record, &from), place) in steps.iter().zip(&from_deg).zip(&places) {
+        if record.state == StepState::Started && record.step.lane() == Lane::Processing {
+            let expected = scale(&record.step, timing.prior_s(&record.step, from, place));
+            let left_s = left_of(expected, elapsed_s(record, now));
+            if record.step.runs_beside() {
+                beside_s = beside_s.max(left_s);
+            } else {
+                running_s += left_s;
             }
         }
     }
+    // Then each processing step not begun, once the hardware steps before it and the
+    // processing before it are done; the lane shares the cores with the rendering.
+    let mut processing_s = share_cores(0.0, running_s, &rendering);
+    let mut parts: Vec<(Kind, f64)> = Vec::new();
+    for (((record, &from), place), &after) in steps
+        .iter()
+        .zip(&from_deg)
+        .zip(&places)
+        .zip(&hardware_before)
+    {
+        if record.state == StepState::Pending && record.step.lane() == Lane::Processing {
+            let left_s = scale(&record.step, timing.prior_s(&record.step, from, place));
+            processing_s = share_cores(processing_s.max(after), left_s, &rendering);
+            match parts
+                .iter_mut()
+                .find(|(kind, _)| *kind == Kind::of(&record.step))
+            {
+                Some(part) => part.1 += left_s,
+                None => parts.push((Kind::of(&record.step), left_s)),
+            }
+        }
+    }
+    tracing::debug!(
+        hardware_s,
+        running_s,
+        beside_s,
+        processing_s,
+        "time left: processing not started {parts:.2?}; measured/prior this scan {:.2?}, \
+         the scan before {:.2?}",
+        own.sums,
+        before.sums
+    );
     Progress {
         theta_l: theta_progress(steps),
         processing_step: steps
             .iter()
             .find(|s| s.step.lane() == Lane::Processing && s.state == StepState::Started)
             .map(|s| s.step.describe()),
-        eta_s: hardware_s.max(processing_s),
+        eta_s: hardware_s.max(processing_s).max(beside_s),
         live: steps
             .iter()
             .filter(|s| s.state == StepState::Done && matches!(s.step, Step::Samples { .. }))
@@ -498,7 +588,7 @@ mod tests {
             record.started = at(t0, 0.0);
             record.finished = at(t0, took);
         }
-        let own = Calibration::of(&steps, &timing);
+        let own = Calibration::of(&steps, &timing, now);
         let priors =
             prior(&timing, &steps[4].step, 0.0, 3, 1) + prior(&timing, &steps[5].step, 0.0, 3, 1);
         let ratio = own.ratio(&Step::Hdr { theta_l: -25.0 }).unwrap();
@@ -507,10 +597,88 @@ mod tests {
             "{ratio} vs {}",
             6.0 / priors
         );
-        assert_eq!(covered_s(vec![]), 0.0);
         // While its merge still runs, a θL's samples alone say nothing.
         steps[5].state = StepState::Started;
-        assert_eq!(Calibration::of(&steps, &timing).ratio(&steps[4].step), None);
+        assert_eq!(
+            Calibration::of(&steps, &timing, now).ratio(&steps[4].step),
+            None
+        );
+    }
+
+    #[test]
+    fn processing_shares_the_cores_with_an_emulated_camera_s_rendering() {
+        let now = OffsetDateTime::now_utc();
+        let fixed = plan(false);
+        // θL −20 captured; its samples step ran 4 s, the first 2 s beside the capture
+        // of θL −25's first frame, which an emulated camera renders on the cores.
+        let mut steps = journal(&fixed, 4, now - Duration::seconds(60), |_| 0.5);
+        let t0 = now - Duration::seconds(20);
+        let timed = |record: &mut StepRecord, from: f64, to: f64| {
+            record.state = StepState::Done;
+            record.started = at(t0, from);
+            record.finished = at(t0, to);
+        };
+        timed(&mut steps[4], 0.0, 4.0);
+        timed(&mut steps[5], 4.0, 5.0);
+        let capture = steps
+            .iter()
+            .position(|r| matches!(r.step, Step::Capture { theta_l, .. } if theta_l == -25.0))
+            .unwrap();
+        timed(&mut steps[capture], 0.0, 2.0);
+        let rendered = Timing {
+            rendered: true,
+            ..timing()
+        };
+        let runs = core_runs(&steps, true, now);
+        let samples = (
+            parse_time(&at(t0, 0.0).unwrap()).unwrap(),
+            parse_time(&at(t0, 4.0).unwrap()).unwrap(),
+        );
+        assert!((alone_s(samples, &runs) - 3.0).abs() < 1e-6);
+        // A real camera renders nothing here: the step had the cores to itself.
+        assert!((alone_s(samples, &core_runs(&steps, false, now)) - 4.0).abs() < 1e-6);
+        let priors = prior(&rendered, &steps[4].step, 0.0, 3, 1)
+            + prior(&rendered, &steps[5].step, 0.0, 3, 1);
+        let ratio = Calibration::of(&steps, &rendered, now)
+            .ratio(&Step::Samples { theta_l: -30.0 })
+            .unwrap();
+        assert!(
+            (ratio - 4.0 / priors).abs() < 1e-9,
+            "{ratio} vs {}",
+            4.0 / priors
+        );
+        // Played forward, work has half the cores while a frame renders.
+        assert_eq!(share_cores(0.0, 3.0, &[(1.0, 3.0)]), 4.0);
+        assert_eq!(share_cores(0.0, 0.5, &[(1.0, 3.0)]), 0.5);
+        assert_eq!(share_cores(2.0, 0.5, &[(1.0, 3.0)]), 3.0);
+        assert_eq!(share_cores(5.0, 1.0, &[(1.0, 3.0)]), 6.0);
+    }
+
+    #[test]
+    fn a_step_in_the_background_goes_on_beside_the_lane_s_steps() {
+        let timing = timing();
+        let now = OffsetDateTime::now_utc();
+        let fixed = plan(false);
+        let all = fixed.steps();
+        let last_hdr = all
+            .iter()
+            .rposition(|s| matches!(s, Step::Hdr { .. }))
+            .unwrap();
+        // Every step before the last θL's merge done; the merge began a second ago,
+        // the gathering and the fits wait.
+        let mut steps = journal(&fixed, last_hdr, now - Duration::seconds(60), |_| 0.1);
+        steps[last_hdr].state = StepState::Started;
+        steps[last_hdr].started = at(now, -1.0);
+        let hdr_left = prior(&timing, &steps[last_hdr].step, 0.0, 3, 3) - 1.0;
+        let chain: f64 = steps[last_hdr + 1..]
+            .iter()
+            .map(|r| prior(&timing, &r.step, 0.0, 3, 3))
+            .sum();
+        let left = progress(&steps, &[], &timing, now).eta_s;
+        assert!(
+            (left - hdr_left.max(chain)).abs() < 1e-6,
+            "{left} vs {hdr_left} and {chain}"
+        );
     }
 
     #[test]

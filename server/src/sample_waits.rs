@@ -8,12 +8,18 @@
 //! scan that ended done. A scan whose sample differs from the one mounted before it
 //! (without a carousel) waits; the times after a wait assume the operator confirms at
 //! once.
+//!
+//! The waits are planned again at every look (every poll of the sweeps); the time left
+//! of a queued scan that has not begun is kept between looks ([`QueuedTimes`]), so a
+//! poll reads one journal per scan under way, not one per queued scan.
 
 use time::OffsetDateTime;
 
 use crate::progress::progress;
+use crate::queued_times::QueuedTimes;
 use crate::shared::Shared;
-use crate::store::{ScanState, Store, StoreError};
+use crate::store::{ScanRecord, ScanState, Store, StoreError};
+use crate::timing::Timing;
 
 /// A wait for a sample change, as planned.
 #[derive(Debug, Clone, PartialEq)]
@@ -36,23 +42,41 @@ pub fn planned_waits(
     if shared.config.carousel.is_some() {
         return Ok(Vec::new());
     }
-    let earlier = match store.last_done_before(i64::MAX)? {
+    let mounted = |sample: &str| shared.mount.is_mounted(sample);
+    let times = &shared.queued_times;
+    waits(store, &shared.timing_now(), &mounted, times, now)
+}
+
+/// [`planned_waits`] without a carousel, the sample on the cylinder told by `mounted`
+/// and the queued scans' times kept in `times`.
+fn waits(
+    store: &Store,
+    timing: &Timing,
+    mounted: &dyn Fn(&str) -> bool,
+    times: &QueuedTimes,
+    now: OffsetDateTime,
+) -> Result<Vec<PlannedWait>, StoreError> {
+    let last_done = store.last_done_before(i64::MAX)?;
+    let earlier = match &last_done {
         Some(done) => store.steps(done.id)?,
         None => Vec::new(),
     };
-    let took = |id: i64| -> Result<f64, StoreError> {
-        let left = progress(&store.steps(id)?, &earlier, &shared.timing, now).eta_s;
-        Ok(if left.is_finite() { left.max(0.0) } else { 0.0 })
+    let took = |scan: &ScanRecord| {
+        times.took(scan, last_done.as_ref().map(|s| s.id), timing, || {
+            let left = progress(&store.steps(scan.id)?, &earlier, timing, now).eta_s;
+            Ok(if left.is_finite() { left.max(0.0) } else { 0.0 })
+        })
     };
     let mut scans = store.scans()?;
     scans.retain(|s| !s.state.is_final() && s.state != ScanState::Paused);
+    times.retain(&scans.iter().map(|s| s.id).collect::<Vec<_>>());
     // The scans past their sample check (running, interrupted) or stopped at it come
     // first, as the hardware lane finishes them before starting another.
     let (first, mut rest): (Vec<_>, Vec<_>) = scans.into_iter().partition(|s| {
         matches!(s.state, ScanState::Running | ScanState::Interrupted) || s.waits_for_sample()
     });
     let mut at = now.unix_timestamp() as f64;
-    let mut mounted: Option<String> = None;
+    let mut on_cylinder: Option<String> = None;
     let mut waits = Vec::new();
     for scan in &first {
         if scan.waits_for_sample() {
@@ -63,8 +87,8 @@ pub fn planned_waits(
                 at: now.unix_timestamp(),
             });
         }
-        mounted = Some(scan.plan.sample.clone());
-        at += took(scan.id)?;
+        on_cylinder = Some(scan.plan.sample.clone());
+        at += took(scan)?;
     }
     while !rest.is_empty() {
         let ready = rest
@@ -80,11 +104,11 @@ pub fn planned_waits(
             }
         };
         let sample = &next.plan.sample;
-        let on_cylinder = match &mounted {
-            Some(mounted) => mounted == sample,
-            None => shared.mount.is_mounted(sample),
+        let mounted = match &on_cylinder {
+            Some(before) => before == sample,
+            None => mounted(sample),
         };
-        if !on_cylinder {
+        if !mounted {
             waits.push(PlannedWait {
                 scan_id: next.id,
                 sweep_id: next.sweep_id,
@@ -92,8 +116,99 @@ pub fn planned_waits(
                 at: at.round() as i64,
             });
         }
-        mounted = Some(sample.clone());
-        at += took(next.id)?;
+        on_cylinder = Some(sample.clone());
+        at += took(&next)?;
     }
     Ok(waits)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::plan::ScanPlan;
+    use crate::store::{now_rfc3339, NewScan};
+
+    fn scan(sample: &str) -> NewScan {
+        NewScan {
+            plan: ScanPlan {
+                sample: sample.into(),
+                theta_l: vec![-20.0, -30.0, -40.0],
+                shutter_s: vec![0.5, 0.05],
+                auto_bracket: false,
+            },
+            sweep_id: None,
+            not_before: None,
+        }
+    }
+
+    /// The waits as planned with the queued scans' times kept in `times`, and planned
+    /// afresh: the same.
+    fn kept_and_fresh(store: &Store, times: &QueuedTimes) -> Vec<PlannedWait> {
+        let timing = Timing::real();
+        let now = OffsetDateTime::now_utc();
+        let nothing_mounted = |_: &str| false;
+        let kept = waits(store, &timing, &nothing_mounted, times, now).unwrap();
+        let fresh = waits(
+            store,
+            &timing,
+            &nothing_mounted,
+            &QueuedTimes::default(),
+            now,
+        );
+        assert_eq!(kept, fresh.unwrap());
+        kept
+    }
+
+    #[test]
+    fn kept_times_of_queued_scans_give_the_waits_planned_afresh() {
+        let dir = std::env::temp_dir().join(format!("gonio-waits-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut store = Store::open(&dir.join("gonio.sqlite")).unwrap();
+        let ids = store
+            .insert_scans(&[scan("red"), scan("blue"), scan("red")])
+            .unwrap();
+        let times = QueuedTimes::default();
+        let first = kept_and_fresh(&store, &times);
+        let samples: Vec<&str> = first.iter().map(|w| w.sample.as_str()).collect();
+        assert_eq!(samples, ["red", "blue", "red"]);
+        // Kept: a second plan of the waits is the first.
+        assert_eq!(times.len(), 3);
+        assert_eq!(kept_and_fresh(&store, &times), first);
+        // The first scan runs its first steps: its time is estimated again from its
+        // journal, the others' are kept.
+        store
+            .transition(ids[0], &[ScanState::Queued], ScanState::Running, None)
+            .unwrap();
+        for step in store.steps(ids[0]).unwrap().iter().take(3) {
+            store.step_started(ids[0], step.index).unwrap();
+            store
+                .step_done(
+                    ids[0],
+                    step.index,
+                    &serde_json::Value::Null,
+                    &[],
+                    &now_rfc3339(),
+                )
+                .unwrap();
+        }
+        kept_and_fresh(&store, &times);
+        assert_eq!(times.len(), 2);
+        // The first scan ends done: the others are estimated again with its journal.
+        for step in store.steps(ids[0]).unwrap().iter().skip(3) {
+            store.step_started(ids[0], step.index).unwrap();
+            store
+                .step_done(
+                    ids[0],
+                    step.index,
+                    &serde_json::Value::Null,
+                    &[],
+                    &now_rfc3339(),
+                )
+                .unwrap();
+        }
+        let after = kept_and_fresh(&store, &times);
+        assert_eq!(after.len(), 2, "{after:?}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }

@@ -13,6 +13,7 @@ use tokio::sync::broadcast;
 use super::config::Config;
 use super::devices::Emulators;
 use super::mount::Mount;
+use super::queued_times::QueuedTimes;
 use super::storage::Probe;
 use super::store::{ScanState, Store};
 use super::sync::Mailbox;
@@ -139,6 +140,8 @@ pub struct Shared {
     pub timing: Timing,
     /// What processing costs on this machine, once measured (or read from the cache).
     pub costs: OnceLock<Costs>,
+    /// The time left of the queued scans not begun, kept between plans of the waits.
+    pub queued_times: QueuedTimes,
     /// Present when the devices are emulated.
     pub emulators: Option<Arc<Emulators>>,
     /// The sample on the cylinder.

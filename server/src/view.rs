@@ -120,12 +120,10 @@ pub fn scan_view(
         })
     });
     let active = !(scan.state == ScanState::Queued || scan.state.is_final());
-    // An automatic bracket is known from the journal's metering steps.
-    let steps = if detail || active || scan.plan.auto_bracket {
-        Some(store.steps(scan.id)?)
-    } else {
-        None
-    };
+    // The journal: an automatic bracket as its metering steps chose it, the latest
+    // frame and the model chosen (in the list as in the scan's own view, ended or
+    // not), and what a scan under way is doing.
+    let steps = store.steps(scan.id)?;
     // The time left of a running scan also learns from the previous scan that ended
     // done (the kinds of step this one has not measured yet).
     let earlier = match scan.state {
@@ -135,9 +133,9 @@ pub fn scan_view(
         },
         _ => Vec::new(),
     };
-    let journal = steps.as_ref().filter(|_| detail || active).map(|steps| {
+    let journal = (detail || active).then(|| {
         let now = time::OffsetDateTime::now_utc();
-        progress(steps, &earlier, &shared.timing_now(), now)
+        progress(&steps, &earlier, &shared.timing_now(), now)
     });
     // Time left only while the scan runs: a queued, paused, waiting or interrupted
     // scan has no end to count down to.
@@ -145,25 +143,22 @@ pub fn scan_view(
         .as_ref()
         .filter(|_| scan.state == ScanState::Running)
         .map(|p| (p.eta_s * 10.0).round() / 10.0);
-    let bracket = match steps.as_deref().filter(|_| scan.plan.auto_bracket) {
-        Some(steps) => auto_bracket_view(steps),
-        None => json!({ "shutter_s": scan.plan.shutter_s, "auto": false }),
+    let bracket = if scan.plan.auto_bracket {
+        auto_bracket_view(&steps)
+    } else {
+        json!({ "shutter_s": scan.plan.shutter_s, "auto": false })
     };
     // Nothing is under way once the scan has ended.
     let ended = scan.state.is_final();
     // The latest frame's θL and exposure, and the model the `auto` fit chose, as the
     // journal's steps that made them recorded them.
-    let frame = steps
-        .as_deref()
-        .and_then(latest_frame)
-        .map(|(step, _)| match step.step {
-            Step::Capture {
-                theta_l, shutter_s, ..
-            } => json!({ "theta_l": theta_l, "shutter_s": shutter_s }),
-            _ => Value::Null,
-        });
-    let choice = steps
-        .as_deref()
+    let frame = latest_frame(&steps).map(|(step, _)| match step.step {
+        Step::Capture {
+            theta_l, shutter_s, ..
+        } => json!({ "theta_l": theta_l, "shutter_s": shutter_s }),
+        _ => Value::Null,
+    });
+    let choice = Some(steps.as_slice())
         .filter(|_| dir.join(AUTO_FIT.1).is_file())
         .and_then(model_choice)
         .map(|mut choice| {

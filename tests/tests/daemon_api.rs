@@ -219,6 +219,16 @@ fn concurrent_scans_run_one_after_the_other_and_controls_work() {
         !choice["reason"].as_str().unwrap().is_empty() && choice["colour_shift"].is_boolean(),
         "{choice}"
     );
+    // The list shows an ended fixed-bracket scan's frame and choice as its view does.
+    let list = daemon.get("/api/scans").json;
+    let listed = list
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|s| s["id"] == first["id"])
+        .unwrap();
+    assert_eq!(listed["frame"], view["frame"], "{listed}");
+    assert_eq!(listed["choice"], view["choice"], "{listed}");
     let third_view = daemon.get(&format!("/api/scans/{third}")).json;
     assert_eq!(third_view["state"], "paused");
     assert_eq!(third_view["frame"], Value::Null, "{third_view}");

@@ -12,12 +12,15 @@
 //! once the first θL is processed. The error at a poll is |estimate − actual| over the
 //! actual time left, counted no smaller than [`FLOOR_S`]: in the last seconds a
 //! relative error says nothing. How long the steps take depends on what else the
-//! machine runs, which no estimate made at the first second can know, so the targets
-//! are measured and printed with the load, not asserted (a timed bound on a shared
-//! machine fails for the machine, not the code). Asserted is what holds whatever the
-//! load: an estimate at every poll, never "finishing" with seconds of work left, and no
-//! estimate more than [`RATIO`] times off either way (the model it replaced said 6.6 s
-//! at the first second of a 92 s scan: 14×).
+//! machine runs, which no estimate made at the first second can know: the targets are
+//! asserted only when the machine was quiet, i.e. the processes other than the daemon
+//! (and the children it starts) used at most [`QUIET_SHARE`] of the cores' time from
+//! the timing probe's end to the scan's (read from /proc: a timed bound on a machine
+//! others share fails for the machine, not the code); otherwise they are measured and
+//! printed with that share and the load, and the test says it did not assert them.
+//! Asserted whatever the load: an estimate at every poll, never "finishing" with
+//! seconds of work left, and no estimate more than [`RATIO`] times off either way (the
+//! model it replaced said 6.6 s at the first second of a 92 s scan: 14×).
 
 use std::time::{Duration, Instant};
 
@@ -32,6 +35,10 @@ const AFTER_FIRST_THETA: f64 = 0.15;
 /// The largest ratio, either way, of an estimate to the time actually left (both
 /// counted no smaller than [`FLOOR_S`]) on any machine.
 const RATIO: f64 = 3.0;
+
+/// The most of the cores' time other processes may use for the machine to count as
+/// quiet (the targets asserted).
+const QUIET_SHARE: f64 = 0.2;
 
 /// One poll: seconds since the scan was posted, its estimate, θL processed.
 struct Poll {
@@ -52,6 +59,70 @@ fn load_per_core() -> f64 {
     load / cores as f64
 }
 
+/// Clock ticks of CPU time: the whole machine's busy and total (every core, from
+/// /proc/stat), and those of process `pid` and its children, living and reaped.
+#[derive(Clone, Copy)]
+struct CpuTicks {
+    busy: u64,
+    total: u64,
+    daemon: u64,
+}
+
+/// The fields of a /proc/PID/stat line after the command's closing parenthesis.
+fn stat_fields(path: &std::path::Path) -> Option<Vec<u64>> {
+    let text = std::fs::read_to_string(path).ok()?;
+    let rest = &text[text.rfind(')')? + 1..];
+    // State is the first field after the command; numbers from the parent's pid on.
+    Some(
+        rest.split_whitespace()
+            .skip(1)
+            .map(|f| f.parse().unwrap_or(0))
+            .collect(),
+    )
+}
+
+fn cpu_ticks(pid: u32) -> CpuTicks {
+    let stat = std::fs::read_to_string("/proc/stat").unwrap_or_default();
+    let cpu: Vec<u64> = stat
+        .lines()
+        .next()
+        .unwrap_or_default()
+        .split_whitespace()
+        .skip(1)
+        .map(|f| f.parse().unwrap_or(0))
+        .collect();
+    // user nice system idle iowait irq softirq steal
+    let total: u64 = cpu.iter().take(8).sum();
+    let idle = cpu.get(3).copied().unwrap_or(0) + cpu.get(4).copied().unwrap_or(0);
+    // After the state: ppid is index 0, utime 10, stime 11, cutime 12, cstime 13.
+    let own = stat_fields(
+        &std::path::Path::new("/proc")
+            .join(pid.to_string())
+            .join("stat"),
+    )
+    .map_or(0, |f| f[10..14].iter().sum::<u64>());
+    let children: u64 = std::fs::read_dir("/proc")
+        .into_iter()
+        .flatten()
+        .flatten()
+        .filter_map(|e| stat_fields(&e.path().join("stat")))
+        .filter(|f| f.first() == Some(&u64::from(pid)))
+        .map(|f| f[10] + f[11])
+        .sum();
+    CpuTicks {
+        busy: total - idle,
+        total,
+        daemon: own + children,
+    }
+}
+
+/// The share of the cores' time processes other than the daemon used between `from`
+/// and `to`.
+fn others_share(from: CpuTicks, to: CpuTicks) -> f64 {
+    let others = (to.busy - from.busy).saturating_sub(to.daemon.saturating_sub(from.daemon));
+    others as f64 / (to.total - from.total).max(1) as f64
+}
+
 #[test]
 fn time_left_holds_from_the_first_second_of_a_new_data_directory_s_first_scan() {
     let dir = temp_dir("time-left");
@@ -68,6 +139,7 @@ fn time_left_holds_from_the_first_second_of_a_new_data_directory_s_first_scan() 
         std::thread::sleep(Duration::from_millis(200));
     }
     let load_before = load_per_core();
+    let ticks_before = cpu_ticks(daemon.pid());
 
     let posted = Instant::now();
     let created = daemon.post(
@@ -100,11 +172,14 @@ fn time_left_holds_from_the_first_second_of_a_new_data_directory_s_first_scan() 
         assert!(at_s < 900.0, "the scan still runs after 900 s: {scan}");
     };
     let load_after = load_per_core();
+    let others = others_share(ticks_before, cpu_ticks(daemon.pid()));
 
     // Every estimate against the time the scan actually had left.
     let mut worst = [0.0_f64; 2];
     eprintln!(
-        "scan took {ended:.1} s; load per core {load_before:.2} before, {load_after:.2} after"
+        "scan took {ended:.1} s; load per core {load_before:.2} before, {load_after:.2} \
+         after; other processes used {:.0} % of the cores meanwhile",
+        100.0 * others
     );
     eprintln!("   t (s)  estimate  actual   error  θL processed");
     for poll in &polls {
@@ -147,12 +222,29 @@ fn time_left_holds_from_the_first_second_of_a_new_data_directory_s_first_scan() 
     );
     let met = |error: f64, target: f64| if error <= target { "met" } else { "not met" };
     eprintln!(
-        "targets at load {:.2} per core: from the first second {} (≤ {:.0} %), after the \
-         first θL {} (≤ {:.0} %)",
-        load_before.max(load_after),
+        "targets with other processes at {:.0} % of the cores: from the first second {} \
+         (≤ {:.0} %), after the first θL {} (≤ {:.0} %)",
+        100.0 * others,
         met(worst[0].max(worst[1]), FROM_FIRST_SECOND),
         100.0 * FROM_FIRST_SECOND,
         met(worst[1], AFTER_FIRST_THETA),
+        100.0 * AFTER_FIRST_THETA
+    );
+    if others > QUIET_SHARE {
+        eprintln!(
+            "targets not asserted: other processes used {:.0} % of the cores (quiet: ≤ {:.0} %)",
+            100.0 * others,
+            100.0 * QUIET_SHARE
+        );
+        return;
+    }
+    assert!(
+        worst[0].max(worst[1]) <= FROM_FIRST_SECOND && worst[1] <= AFTER_FIRST_THETA,
+        "on a quiet machine: worst error {:.0} % before the first θL is processed, {:.0} % \
+         after (targets {:.0} % from the first second, {:.0} % after the first θL)",
+        100.0 * worst[0],
+        100.0 * worst[1],
+        100.0 * FROM_FIRST_SECOND,
         100.0 * AFTER_FIRST_THETA
     );
 }

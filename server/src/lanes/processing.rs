@@ -24,7 +24,7 @@ use crate::process::{self, Prefetched};
 use crate::shared::Shared;
 use crate::step_guard;
 use crate::storage::{self, Probe};
-use crate::store::{ScanState, StepRecord, Store, StoreError, PROCESSABLE};
+use crate::store::{now_rfc3339, ScanState, StepRecord, Store, StoreError, PROCESSABLE};
 
 /// How often the lane looks for ready steps when nothing wakes it.
 const IDLE_POLL: Duration = Duration::from_millis(500);
@@ -34,7 +34,7 @@ type Background = (i64, u32);
 
 /// What a background step hands back: its scan id and step index, its outcome, and
 /// the frames decoded ahead if it took them (an HDR step).
-type Finished = (i64, u32, Outcome, Option<Prefetched>);
+type Finished = (i64, u32, Outcome, Option<Prefetched>, String);
 
 /// The processing lane's state.
 pub struct ProcessingLane {
@@ -215,8 +215,10 @@ impl ProcessingLane {
         let index = record.index;
         rayon::spawn(move || {
             let outcome = run(&step, &dir, &scan.plan, &mut prefetched, &budgets, &storage);
-            // The lane holds the receiver as long as it runs.
-            let _ = sender.send((id, index, outcome, takes_frames.then_some(prefetched)));
+            // The lane holds the receiver as long as it runs; it records the step when
+            // its own step is done, with the time it ended here.
+            let prefetched = takes_frames.then_some(prefetched);
+            let _ = sender.send((id, index, outcome, prefetched, now_rfc3339()));
         });
         self.background.push((id, index));
         Ok(true)
@@ -233,12 +235,12 @@ impl ProcessingLane {
             // The lane holds a sender itself: the channel never disconnects.
             received.extend(self.finished.1.recv().ok());
         }
-        for (id, index, outcome, prefetched) in received {
+        for (id, index, outcome, prefetched, finished) in received {
             self.background.retain(|b| *b != (id, index));
             if let Some(prefetched) = prefetched {
                 self.prefetched = prefetched;
             }
-            self.finish(id, index, outcome)?;
+            self.finish(id, index, outcome, &finished)?;
         }
         Ok(())
     }
@@ -257,18 +259,26 @@ impl ProcessingLane {
             &self.budgets,
             &self.shared.storage,
         );
-        self.finish(id, record.index, outcome)
+        self.finish(id, record.index, outcome, &now_rfc3339())
     }
 
     /// Records the outcome of step `index` of scan `id`.
-    fn finish(&mut self, id: i64, index: u32, outcome: Outcome) -> Result<(), StoreError> {
-        step::finish(
+    /// Records the outcome of a step that ended at `finished` (RFC 3339).
+    fn finish(
+        &mut self,
+        id: i64,
+        index: u32,
+        outcome: Outcome,
+        finished: &str,
+    ) -> Result<(), StoreError> {
+        step::finish_at(
             &self.shared,
             &mut self.store,
             id,
             index,
             &PROCESSABLE,
             outcome,
+            finished,
         )?;
         // The hardware lane may be waiting for a bracket to be processed.
         self.shared.hardware_wake.post(|wake| *wake = true);

@@ -7,7 +7,7 @@ use serde_json::Value;
 
 use crate::plan::Step;
 use crate::shared::Shared;
-use crate::store::{ScanState, Store, StoreError};
+use crate::store::{now_rfc3339, ScanState, Store, StoreError};
 
 /// Why a step did not complete.
 pub enum StepError {
@@ -46,9 +46,9 @@ pub fn begin(shared: &Shared, store: &mut Store, id: i64, index: u32) -> Result<
     Ok(())
 }
 
-/// Records the outcome of step `index` of scan `id`. A failure or an interruption
-/// moves the scan out of `from` (a scan the operator changed meanwhile stays as they
-/// set it).
+/// Records the outcome of step `index` of scan `id`, which ended now. A failure or an
+/// interruption moves the scan out of `from` (a scan the operator changed meanwhile
+/// stays as they set it).
 pub fn finish(
     shared: &Shared,
     store: &mut Store,
@@ -57,9 +57,22 @@ pub fn finish(
     from: &[ScanState],
     outcome: Outcome,
 ) -> Result<Flow, StoreError> {
+    finish_at(shared, store, id, index, from, outcome, &now_rfc3339())
+}
+
+/// [`finish`] for a step that ended at `finished` (RFC 3339), before it is recorded.
+pub fn finish_at(
+    shared: &Shared,
+    store: &mut Store,
+    id: i64,
+    index: u32,
+    from: &[ScanState],
+    outcome: Outcome,
+    finished: &str,
+) -> Result<Flow, StoreError> {
     match outcome {
         Ok((result, followers)) => {
-            if store.step_done(id, index, &result, &followers)? {
+            if store.step_done(id, index, &result, &followers, finished)? {
                 tracing::info!("scan {id}: done");
             }
             shared.changed(id);

@@ -65,16 +65,18 @@ impl Store {
         })
     }
 
-    /// Records a step as done with its result and inserts the steps it planned
-    /// (`followers`, right after it), in one transaction; when it was the last step of
-    /// a still running scan, the scan becomes done in the same transaction. Returns
-    /// whether it did.
+    /// Records a step as done at `finished` (RFC 3339: a step run in the background is
+    /// recorded when the lane next looks, after it ended) with its result and inserts
+    /// the steps it planned (`followers`, right after it), in one transaction; when it
+    /// was the last step of a still running scan, the scan becomes done in the same
+    /// transaction (finished now). Returns whether it did.
     pub fn step_done(
         &mut self,
         scan_id: i64,
         index: u32,
         result: &Value,
         followers: &[Step],
+        finished: &str,
     ) -> Result<bool, StoreError> {
         self.writing(|store| {
             if followers.len() >= STEP_SPACING as usize {
@@ -96,7 +98,7 @@ impl Store {
                     scan_id,
                     index,
                     StepState::Done.as_str(),
-                    now,
+                    finished,
                     result.to_string()
                 ],
             )?;

@@ -27,7 +27,7 @@ fn temp_store(name: &str) -> (std::path::PathBuf, Store) {
 fn done(store: &mut Store, id: i64, step: &StepRecord, followers: &[Step]) {
     store.step_started(id, step.index).unwrap();
     store
-        .step_done(id, step.index, &Value::Null, followers)
+        .step_done(id, step.index, &Value::Null, followers, &now_rfc3339())
         .unwrap();
 }
 
@@ -448,4 +448,21 @@ fn the_auto_fit_runs_beside_the_model_fits_once_the_samples_are_gathered() {
     let (_, last) = store.next_for_processing(&[(id, hdr)]).unwrap().unwrap();
     assert_eq!(last.step, auto);
     std::fs::remove_dir_all(dir).unwrap();
+}
+
+/// A step run in the background is recorded after it ended, with the time it ended.
+#[test]
+fn a_step_is_recorded_with_the_time_it_ended() {
+    let (dir, mut store) = temp_store("ended");
+    let id = started_scan(&mut store);
+    let step = store.steps(id).unwrap()[0].clone();
+    store.step_started(id, step.index).unwrap();
+    let ended = "2026-01-01T00:00:00Z";
+    store
+        .step_done(id, step.index, &Value::Null, &[], ended)
+        .unwrap();
+    let recorded = &store.steps(id).unwrap()[0];
+    assert_eq!(recorded.finished.as_deref(), Some(ended));
+    assert_eq!(recorded.state, StepState::Done);
+    let _ = std::fs::remove_dir_all(&dir);
 }
