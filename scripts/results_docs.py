@@ -592,6 +592,7 @@ def colour_validation_table():
         *[[f"… {k}* only", "", rate(by[k]), ""] for k in ("L", "a", "b")],
         ["… from the data", "", rate(origin["data"]), ""],
         ["… from the model", "", rate(origin["model"]), ""],
+        *[[f"… {k['kind']}", "", rate(k["count"]), ""] for k in f["coverage_by_kind"]],
         ["ΔE00 to the spectral truth", "reported", spread(f["delta_e00"]), ""],
         ["… from the model", "reported", spread(f["delta_e00_model"]), ""],
         [

@@ -12,7 +12,9 @@
 //! smooth reflectance spectra with a Cook–Torrance lobe (rendered from their spectral
 //! table), half goniochromatic lobes (a thin film or a Bragg band over a drawn diffuse
 //! colour). Every scan's world departs from its stated setup by errors drawn from the
-//! standard uncertainties its setup.json states, and has its own noise seed.
+//! standard uncertainties its setup.json states, and has its own noise seed; the white's
+//! reflectance error, the instrument's, is drawn once per material (its repeats are
+//! scans made with the same white, as compare takes them).
 //!
 //! Figures: the share of L*, a*, b* coordinates inside their expanded interval (with its
 //! 95 % Wilson interval, by coordinate and by origin), the ΔE00 to the truth; the share
@@ -71,8 +73,10 @@ fn with_sample(base: &str, sample: &str) -> String {
 }
 
 /// `text` with its noise seed `seed`, and the world's departures from the stated setup
-/// drawn from `seed`.
-fn scene_text(text: &str, seed: u64) -> String {
+/// drawn from `seed`, but for the white's reflectance: drawn from `instrument`, as the
+/// white is the instrument's and the same in every scan made with it.
+fn scene_text(text: &str, seed: u64, instrument: u64) -> String {
+    let white = normal(&mut SplitMix64::new(0xC010_0000 + instrument));
     let mut rng = SplitMix64::new(0xC010_0000 + seed);
     let text = text.replace("[effects]\nseed = 1", &format!("[effects]\nseed = {seed}"));
     let u = |key: &str| STATED.iter().find(|(k, _)| *k == key).unwrap().1;
@@ -83,7 +87,10 @@ fn scene_text(text: &str, seed: u64) -> String {
         "[effects.misalignment]\nwhite_reflectance_error = {}\ncamera_offset_mm = {}\n\
          camera_distance_error_mm = {}\nlight_distance_error_mm = {}\ncylinder_tilt_deg = {}\n\
          arm_zero_offset_deg = {}\narm_angle_errors_deg = [{}]\n",
-        normal(&mut rng) * u("white_reflectance"),
+        {
+            normal(&mut rng);
+            white * u("white_reflectance")
+        },
         normal(&mut rng) * u("camera_offset_mm"),
         normal(&mut rng) * u("camera_distance_mm"),
         normal(&mut rng) * u("light_distance_mm"),
@@ -284,12 +291,14 @@ struct Accuracy {
     by_coordinate: [Count; 3],
     /// By origin: data, model.
     by_origin: [Count; 2],
+    /// By kind of material ([`KINDS`]).
+    by_kind: [Count; 3],
     delta_e: Vec<f64>,
     delta_e_model: Vec<f64>,
 }
 
 impl Accuracy {
-    fn add(&mut self, scan: &Scan, observer: &Observer, label: &str) {
+    fn add(&mut self, scan: &Scan, observer: &Observer, label: &str, kind: usize) {
         for (a, t) in scan.report.angles.iter().zip(truth(scan, observer)) {
             let de = ciede2000(a.lab(), t);
             self.delta_e.push(de);
@@ -303,6 +312,7 @@ impl Accuracy {
                 self.all.add(hit);
                 self.by_coordinate[k].add(hit);
                 self.by_origin[origin].add(hit);
+                self.by_kind[kind].add(hit);
                 line += &format!(
                     " {:.2}±{:.2} (truth {truth:.2}{})",
                     c.value,
@@ -345,6 +355,20 @@ struct Plan {
     repeats: u64,
 }
 
+/// Kinds of material: the example scenes (gold and red camera-RGB models, blue-green a
+/// film, opal flakes; their diffuse spectra three-Gaussian), smooth spectra with a lobe
+/// (the transform's family), films and flakes over a three-Gaussian diffuse spectrum.
+const KINDS: [&str; 3] = ["examples", "smooth spectra with a lobe", "films and flakes"];
+
+/// The kind of material `k` (examples first, then the random family).
+fn kind(k: usize) -> usize {
+    match k.checked_sub(EXAMPLES.len()) {
+        None => 0,
+        Some(r) if r % 2 == 0 => 1,
+        Some(_) => 2,
+    }
+}
+
 /// The example scenes.
 const EXAMPLES: [(&str, &str); 4] = [
     ("gold", GOLD),
@@ -379,8 +403,13 @@ fn validate(plan: &Plan, strict: bool) {
     }
     let mut first = Vec::new();
     for (k, (name, base)) in materials.iter().enumerate() {
-        let s = scan(&dir, name, &scene_text(base, 11 + k as u64), &transform);
-        accuracy.add(&s, &observer, name);
+        let s = scan(
+            &dir,
+            name,
+            &scene_text(base, 11 + k as u64, 11 + k as u64),
+            &transform,
+        );
+        accuracy.add(&s, &observer, name, kind(k));
         first.push(s);
     }
 
@@ -401,8 +430,13 @@ fn validate(plan: &Plan, strict: bool) {
         for r in 1..=plan.repeats {
             let label = format!("{name}-again-{r}");
             let seed = 1000 + 100 * k as u64 + r;
-            let s = scan(&dir, &label, &scene_text(base, seed), &transform);
-            accuracy.add(&s, &observer, &label);
+            let s = scan(
+                &dir,
+                &label,
+                &scene_text(base, seed, 11 + k as u64),
+                &transform,
+            );
+            accuracy.add(&s, &observer, &label, kind(k));
             again.push(s);
         }
         let scans: Vec<&Scan> = std::iter::once(&first[k]).chain(&again).collect();
@@ -440,7 +474,7 @@ fn validate(plan: &Plan, strict: bool) {
     )
     .unwrap();
     let lighter = GOLD.replace("kd = [9.0, 6.5, 2.0]", "kd = [9.09, 6.565, 2.02]");
-    let moved = scan(&dir, "gold-kd", &scene_text(&lighter, 11), &transform);
+    let moved = scan(&dir, "gold-kd", &scene_text(&lighter, 11, 11), &transform);
     let c_kd = compare(
         &gold.report,
         &moved.report,
@@ -493,6 +527,7 @@ fn validate(plan: &Plan, strict: bool) {
             "coverage": accuracy.all.json(),
             "coverage_by_coordinate": {"L": l.json(), "a": a.json(), "b": b.json()},
             "coverage_by_origin": {"data": accuracy.by_origin[0].json(), "model": accuracy.by_origin[1].json()},
+            "coverage_by_kind": KINDS.iter().zip(&accuracy.by_kind).map(|(k, c)| json!({"kind": k, "count": c.json()})).collect::<Vec<_>>(),
             "delta_e00": distribution(&accuracy.delta_e),
             "delta_e00_model": distribution(&accuracy.delta_e_model),
             "repeatability": {
