@@ -188,7 +188,7 @@ colour_validation_section() {
     mkdir -p "$out"
     local scans=${GONIO_COLOUR_SCANS:-20}
     echo "== multi-angle colour validation: 4 example scenes and $scans random materials"
-    echo "GONIO_COLOUR_SCANS=$scans GONIO_BIN=$gonio cargo test -p gonio-tests --test colour_validation full -- --ignored --nocapture" \
+    echo "GONIO_COLOUR_SCANS=$scans GONIO_BIN=${gonio#"$PWD"/} cargo test -p gonio-tests --test colour_validation full -- --ignored --nocapture" \
         > "$out/command.txt"
     rm -f "$out/figures.json"
     # The figures are written before the targets are asserted: a missed target is
