@@ -586,6 +586,60 @@ def colour_table():
     return head + "\n\n" + "\n\n".join(blocks)
 
 
+def colour_validation_table():
+    """The multi-angle colour against the emulator's spectral truth
+    (tests/tests/colour_validation.rs): coverage of the expanded intervals, the ΔE00 to
+    the truth, repeatability within compare's U, discrimination; each target beside it."""
+    out = RESULTS / "colour-validation"
+    path = out / "figures.json"
+    if not path.is_file():
+        return "*Not run*: `bash scripts/results.sh --colour-validation` writes this table."
+    f = read_json(path)
+    command = (out / "command.txt").read_text(encoding="utf-8").strip()
+
+    def rate(c):
+        return wilson(c["within"], c["of"])
+
+    def met(c, lo, hi):
+        return "yes" if lo <= c["share"] <= hi else "no"
+
+    def spread(d):
+        return (
+            f"median {d['median']:.2f}, 75th percentile {d['p75']:.2f}, 95th {d['p95']:.2f}, "
+            f"largest {d['max']:.2f} ({d['geometries']} geometries)"
+        )
+
+    cov, by, origin = f["coverage"], f["coverage_by_coordinate"], f["coverage_by_origin"]
+    rep, kd = f["repeatability"], f["kd_plus_1_percent"]
+    rows = [
+        ["L*, a*, b* inside U (k = 2), all", "92–98 %", rate(cov), met(cov, 0.92, 0.98)],
+        *[[f"… {k}* only", "", rate(by[k]), ""] for k in ("L", "a", "b")],
+        ["… from the data", "", rate(origin["data"]), ""],
+        ["… from the model", "", rate(origin["model"]), ""],
+        *[[f"… {k['kind']}", "", rate(k["count"]), ""] for k in f["coverage_by_kind"]],
+        ["ΔE00 to the spectral truth", "reported", spread(f["delta_e00"]), ""],
+        ["… from the model", "reported", spread(f["delta_e00_model"]), ""],
+        [
+            f"repeats within compare's U ({rep['materials']} materials)",
+            "≥ 95 %",
+            rate(rep["all"]),
+            met(rep["all"], 0.95, 1.0),
+        ],
+        *[
+            [f"… at {a['aspecular']:g}°", "≥ 95 %", rate(a["count"]), met(a["count"], 0.95, 1.0)]
+            for a in rep["by_angle"]
+        ],
+        ["gold against red", "fail", f["gold_against_red"], "yes" if f["gold_against_red"] == "fail" else "no"],
+        ["Kd + 1 %: ΔE00 within U of the truth's", "≥ 95 %", rate(kd), met(kd, 0.95, 1.0)],
+    ]
+    return (
+        f"{f['scans']} emulated scans of {f['materials']} materials (the four example scenes "
+        f"and {f['random_materials']} random ones), ASTM E2539's six angles each. Command: "
+        f"`{command}`.\n\n"
+        + table(["figure", "target", "measured", "met"], rows)
+    )
+
+
 SECTIONS = {
     "study": ("results", study_table),
     "study-time": ("results", study_time_table),
@@ -595,6 +649,7 @@ SECTIONS = {
     "coverage-defaults": ("results", lambda: coverage_table("coverage-defaults.json")),
     "verdicts": ("results", verdicts_table),
     "colour": ("results", colour_table),
+    "colour-validation": ("results", colour_validation_table),
     "summary": ("readme", summary_table),
 }
 

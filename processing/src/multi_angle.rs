@@ -22,6 +22,7 @@
 #![doc = include_str!("multi_angle.md")]
 
 pub mod compare;
+mod extrapolation;
 
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use serde::{Deserialize, Serialize};
@@ -43,6 +44,11 @@ pub const COVERAGE_FACTOR: f64 = 2.0;
 /// How far (degrees of θd) beyond the measured columns' mean θd a geometry still counts
 /// as measured: a column's θd varies by about this much along it (parallax).
 pub const THETA_D_MARGIN_DEG: f64 = 0.5;
+
+/// Source name of the model's misfit carried to a geometry from the measured columns
+/// (`multi_angle::extrapolation`): the sample's and the model's, alike for alike samples
+/// whatever their mounting.
+pub const EXTRAPOLATION: &str = "extrapolation";
 
 /// Why colour could not be computed.
 #[derive(Debug, Error)]
@@ -217,13 +223,20 @@ pub fn colour(
             Some((beta, lines)) => (Origin::Data, beta, lines),
             None => {
                 let beta = parametric.predict(theta_i, theta_r);
-                let lines = model_lines
+                let mut lines: Vec<BetaLine> = model_lines
                     .iter()
                     .map(|(source, moved)| {
                         let b = moved.predict(theta_i, theta_r);
                         (source.clone(), std::array::from_fn(|c| b[c] - beta[c]))
                     })
                     .collect();
+                let misfit = measured
+                    .and_then(|m| extrapolation::drift_lines(&m.table, beta, theta_h, theta_d));
+                for (c, change) in misfit.into_iter().flatten().enumerate() {
+                    let mut d = [0.0; 3];
+                    d[c] = change;
+                    lines.push(((format!("{EXTRAPOLATION}:{c}"), true), d));
+                }
                 (Origin::Model, beta, lines)
             }
         };
@@ -243,17 +256,7 @@ pub fn colour(
                 }
             })
             .collect();
-        let covariance = Matrix3::from(transform.xyz_covariance(beta, xyz)).transpose();
-        let eigen = SymmetricEigen::new(covariance);
-        for k in 0..3 {
-            let size = eigen.eigenvalues[k].max(0.0).sqrt();
-            let axis = eigen.eigenvectors.column(k) * size;
-            lines.push(Line {
-                source: format!("transform:{k}"),
-                shared: true,
-                lab: apply(&jacobian, [axis[0], axis[1], axis[2]]),
-            });
-        }
+        lines.extend(transform_lines(transform, beta, xyz));
         let c_value = chroma(lab);
         let hue_row = |d: &[f64; 3]| {
             if c_value > 1e-9 {
@@ -307,6 +310,25 @@ pub fn colour(
         flop_index: flop,
         notes,
     })
+}
+
+/// The colour transform's own error at camera RGB `beta` (XYZ `xyz`) as lines of
+/// L*a*b*: one per principal axis of its covariance, √λ·e in XYZ.
+pub fn transform_lines(transform: &ColourTransform, beta: [f64; 3], xyz: [f64; 3]) -> Vec<Line> {
+    let jacobian = lab_jacobian(xyz, transform.observer().white());
+    let covariance = Matrix3::from(transform.xyz_covariance(beta, xyz)).transpose();
+    let eigen = SymmetricEigen::new(covariance);
+    (0..3)
+        .map(|k| {
+            let size = eigen.eigenvalues[k].max(0.0).sqrt();
+            let axis = eigen.eigenvectors.column(k) * size;
+            Line {
+                source: format!("transform:{k}"),
+                shared: true,
+                lab: apply(&jacobian, [axis[0], axis[1], axis[2]]),
+            }
+        })
+        .collect()
 }
 
 /// The flop index of `angles` with its uncertainty (lines matched by name across the

@@ -9,7 +9,8 @@ use gonio_processing::color::transform::ColourTransform;
 use gonio_processing::color::CameraModel;
 use gonio_processing::fit::{FitMethod, FitResult, FittedRoughness, ParameterSet};
 use gonio_processing::multi_angle::compare::{compare, Mounting, Tolerances, Verdict};
-use gonio_processing::multi_angle::{colour, ColourReport, Origin};
+use gonio_processing::multi_angle::{colour, ColourReport, Measured, Origin, EXTRAPOLATION};
+use gonio_processing::samples::Sample;
 
 fn fit(kd: [f64; 3], ks: [f64; 3], m: f64) -> FitResult {
     FitResult {
@@ -77,6 +78,93 @@ fn a_fit_gives_every_angle_from_its_model_with_a_flop_index() {
     assert!(l(15.0) > l(45.0) && l(45.0) >= l(110.0));
     let fi = gold.flop_index.unwrap();
     assert!(fi.value > 0.0 && fi.expanded > 0.0);
+}
+
+/// Samples of `f` on six columns θL = 20°…45° (θd = θL/2), θh from −30° to 30°, each
+/// channel scaled by `drift(sin²θd)`.
+fn measured_samples(f: &FitResult, drift: impl Fn(f64) -> [f64; 3]) -> Vec<Sample> {
+    let mut out = Vec::new();
+    for k in 0..6 {
+        let theta_l = 20.0 + 5.0 * f64::from(k);
+        let d = theta_l / 2.0;
+        let scale = drift(d.to_radians().sin().powi(2));
+        for h in -30..=30 {
+            let (ti, tr) = (d + f64::from(h), d - f64::from(h));
+            let beta = f.predict(ti, tr);
+            out.push(Sample::in_plane(
+                theta_l,
+                ti,
+                tr,
+                std::array::from_fn(|c| beta[c] * scale[c]),
+            ));
+        }
+    }
+    out
+}
+
+/// The L* standard uncertainty of an angle's extrapolation lines.
+fn extrapolation_l(report: &ColourReport, aspecular: f64) -> f64 {
+    let angle = report
+        .angles
+        .iter()
+        .find(|a| a.aspecular == aspecular)
+        .unwrap();
+    angle
+        .lines
+        .iter()
+        .filter(|l| l.source.starts_with(EXTRAPOLATION))
+        .map(|l| l.lab[0].powi(2))
+        .sum::<f64>()
+        .sqrt()
+}
+
+#[test]
+fn a_model_value_beyond_the_data_carries_the_colour_drift_the_data_show() {
+    let transform = ColourTransform::new(&CameraModel::builtin(), Conditions::D65Ten).unwrap();
+    let gold = fit([9.0, 6.5, 2.0], [25.0, 20.0, 7.0], 0.07);
+    let report_of = |samples: &[Sample]| {
+        let measured = Measured::of(&gold, samples).unwrap();
+        colour(&gold, Some(&measured), &transform, &ASTM_E2539).unwrap()
+    };
+    // The model's own colour: what drifts is the mix of its diffuse and lobe colours
+    // along θd at a fixed θh, a small term however far the geometry.
+    let steady = report_of(&measured_samples(&gold, |_| [1.0; 3]));
+    // Red giving way to green over the measured columns, as a film's or flakes' lobe.
+    let drifting = report_of(&measured_samples(&gold, |s| {
+        [1.0 - 2.0 * s, 1.0 + 2.0 * s, 1.0]
+    }));
+    for report in [&steady, &drifting] {
+        let origin = |a: f64| {
+            report
+                .angles
+                .iter()
+                .find(|c| c.aspecular == a)
+                .unwrap()
+                .origin
+        };
+        assert_eq!(origin(45.0), Origin::Data);
+        assert_eq!(origin(-15.0), Origin::Model);
+        // A value from the data has no such line.
+        assert_eq!(extrapolation_l(report, 45.0), 0.0);
+    }
+    let (still, moving) = (
+        extrapolation_l(&steady, -15.0),
+        extrapolation_l(&drifting, -15.0),
+    );
+    eprintln!("extrapolation's L* u at −15°: steady {still:.4}, drifting {moving:.4}");
+    assert!(still < 0.5, "steady {still}");
+    assert!(moving > 2.0, "drifting {moving}");
+    // Farther from the data, more of it: 15° lies nearer the measured θd than −15°.
+    assert!(extrapolation_l(&drifting, 15.0) < moving);
+    let at = |r: &ColourReport| {
+        r.angles
+            .iter()
+            .find(|a| a.aspecular == -15.0)
+            .unwrap()
+            .l
+            .expanded
+    };
+    assert!(at(&drifting) > at(&steady) + 4.0);
 }
 
 #[test]

@@ -76,6 +76,8 @@ fn copy_inputs(from: &Path, to: &Path) {
         "docs/results/uncertainty/coverage-defaults.json",
         "docs/results/verdicts/verdicts.json",
         "docs/results/verdicts/command.txt",
+        "docs/results/colour-validation/figures.json",
+        "docs/results/colour-validation/command.txt",
     ] {
         if from.join(output).is_file() {
             all.push(PathBuf::from(output));

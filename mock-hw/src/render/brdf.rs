@@ -64,7 +64,7 @@ fn masking(g: &Geom) -> f64 {
 }
 
 /// The Cook–Torrance specular factor D·G/(π (n·l)(n·v)) with F = 1.
-fn cook_torrance_lobe(g: &Geom, m: f64) -> f64 {
+pub fn cook_torrance_lobe(g: &Geom, m: f64) -> f64 {
     beckmann(g.n_h, m) * masking(g)
         / (std::f64::consts::PI * g.cos_i.max(MIN_COS) * g.cos_r.max(MIN_COS))
 }

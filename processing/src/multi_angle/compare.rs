@@ -202,9 +202,10 @@ pub enum Mounting {
     Same,
 }
 
-/// Sources whose error is the instrument's, the same for every scan whatever its
-/// mounting (a line's source is `<source>:<what it moved>`).
-const INSTRUMENT_SOURCES: [&str; 2] = ["white_reflectance", "transform"];
+/// Sources whose error is the same for every scan whatever its mounting (a line's
+/// source is `<source>:<what it moved>`): the instrument's white and colour transform,
+/// and the model's misfit carried beyond the measured range, which alike samples share.
+const INSTRUMENT_SOURCES: [&str; 3] = ["white_reflectance", "transform", super::EXTRAPOLATION];
 
 /// Whether a shared line of `source` is shared by two scans of `mounting`.
 fn shared_between(source: &str, mounting: Mounting) -> bool {
