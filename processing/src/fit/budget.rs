@@ -226,7 +226,8 @@ struct Refit<'a> {
     fresnel: bool,
     samples: &'a [Sample],
     /// A fit near the refits' (its parameters and specular colour at 90°), which they
-    /// start from ([`robust::fit_near`]); `None`: each searches the whole refit range.
+    /// start from ([`robust::fit_near`]); `None`: each searches the whole refit range
+    /// ([`robust::fit`]).
     near: Option<(Params, [f64; 3])>,
     /// How finely a refit started from `near` converges.
     precision: Precision,
