@@ -60,9 +60,10 @@ const LINEAR_TOLERANCE: f64 = 0.1;
 /// Points of the refits' grid over log m (the fit's own search uses 24 over a wider range).
 const REFIT_GRID_POINTS: usize = 6;
 
-/// A refit warm-started from a nearby fit searches ln m within ± this of that fit's (a
-/// factor 1.105 in m), and the whole refit range when the minimum lies at its end.
-const WARM_SPAN: f64 = 0.1;
+/// A refit warm-started from a nearby fit brackets its minimum from that fit's ln m in
+/// steps of this (a factor 1.02 in m), doubling downhill, within the refit range
+/// ([`robust::fit_near`]).
+const WARM_STEP: f64 = 0.02;
 
 /// The Monte Carlo's refits: each solve to 1e-6 of the loss and m to 0.1 % of itself (the
 /// law of propagation's to about 1e-6), inside the spread of the draws: on gold, red
@@ -225,7 +226,8 @@ struct Refit<'a> {
     fresnel: bool,
     samples: &'a [Sample],
     /// A fit near the refits' (its parameters and specular colour at 90°), which they
-    /// start from ([`robust::fit_near`]); `None`: each searches the whole refit range.
+    /// start from ([`robust::fit_near`]); `None`: each searches the whole refit range
+    /// ([`robust::fit`]).
     near: Option<(Params, [f64; 3])>,
     /// How finely a refit started from `near` converges.
     precision: Precision,
@@ -235,14 +237,10 @@ impl Refit<'_> {
     /// θ of the fit to the measured values `moved` (one per sample).
     fn fit(&self, moved: &[[f64; 3]]) -> Result<Vec<f64>, FitError> {
         let data = self.data.with_measured(moved.to_vec());
-        let warm = match &self.near {
+        let (found, ks_90) = match &self.near {
             Some((start, kg)) => {
-                robust::fit_near(&data, &self.options, start, *kg, WARM_SPAN, self.precision)?
+                robust::fit_near(&data, &self.options, start, *kg, WARM_STEP, self.precision)?
             }
-            None => None,
-        };
-        let (found, ks_90) = match warm {
-            Some(found) => found,
             None => robust::fit(&data, &self.options)?,
         };
         let m = &found.params.m[..self.options.roughness.count()];

@@ -132,7 +132,6 @@ fn solve_block(g: &[[f64; 3]; 3], r: &[f64; 3], index: &[usize]) -> Option<[f64;
 /// Scratch buffers of [`solve`], reused across calls.
 #[derive(Debug, Default)]
 pub(crate) struct Workspace {
-    weights: Vec<f64>,
     /// Residual norms of the current iterate, of the pass's candidate and of a trial.
     current: Vec<f64>,
     candidate: Vec<f64>,
@@ -226,13 +225,35 @@ fn fresnel_loss_of(
     loss
 }
 
+/// The weights of a reweighted pass, computed as the pass reads them (no pass of their
+/// own): all 1 (the first pass of a cold solve), or 1/max(‖r_p‖, cap) of the residual
+/// norms `norms` of the current iterate.
+#[derive(Clone, Copy)]
+enum Weights<'a> {
+    Unit,
+    Capped { norms: &'a [f64], cap: f64 },
+}
+
 /// One reweighted pass: the weighted NNLS solution of each channel, as (kd, ks, kg).
-fn weighted_nnls(data: &Data, spec: [&[f64]; 3], weights: &[f64]) -> [[f64; 3]; 3] {
+fn weighted_nnls(data: &Data, spec: [&[f64]; 3], weights: Weights) -> [[f64; 3]; 3] {
+    let n = data.y.len();
+    match weights {
+        Weights::Unit => weighted_nnls_with(data, spec, |_| 1.0),
+        Weights::Capped { norms, cap } => {
+            let norms = &norms[..n];
+            weighted_nnls_with(data, spec, |p| 1.0 / norms[p].max(cap))
+        }
+    }
+}
+
+/// [`weighted_nnls`] with point p's weight `w(p)`.
+#[inline(always)]
+fn weighted_nnls_with(data: &Data, spec: [&[f64]; 3], w: impl Fn(usize) -> f64) -> [[f64; 3]; 3] {
     if let Some(x) = &data.shift_weight {
-        return fresnel_weighted_nnls(data, spec, x, weights);
+        return fresnel_weighted_nnls(data, spec, x, w);
     }
     let n = data.y.len();
-    let (y, a, w) = (&data.y[..n], &data.diffuse[..n], &weights[..n]);
+    let (y, a) = (&data.y[..n], &data.diffuse[..n]);
     let s = [&spec[0][..n], &spec[1][..n], &spec[2][..n]];
     let mut saa = [0.0; 3];
     let (mut sas, mut sss, mut say, mut ssy) = ([0.0; 3], [0.0; 3], [0.0; 3], [0.0; 3]);
@@ -240,22 +261,24 @@ fn weighted_nnls(data: &Data, spec: [&[f64]; 3], weights: &[f64]) -> [[f64; 3]; 
         // Each channel's sums over its measured values only (y is 0 where dropped).
         let keep = &keep[..n];
         for p in 0..n {
+            let wp = w(p);
             for c in 0..3 {
-                let wk = w[p] * keep[p][c];
+                let wk = wp * keep[p][c];
                 let sc = s[c][p];
                 saa[c] += wk * a[p] * a[p];
                 sas[c] += wk * a[p] * sc;
                 sss[c] += wk * sc * sc;
-                say[c] += w[p] * a[p] * y[p][c];
-                ssy[c] += w[p] * sc * y[p][c];
+                say[c] += wp * a[p] * y[p][c];
+                ssy[c] += wp * sc * y[p][c];
             }
         }
     } else if std::ptr::eq(s[0], s[1]) && std::ptr::eq(s[0], s[2]) {
         // One specular basis for all channels: its sums are shared too.
         let s = s[0];
         for p in 0..n {
-            let wa = w[p] * a[p];
-            let ws = w[p] * s[p];
+            let wp = w(p);
+            let wa = wp * a[p];
+            let ws = wp * s[p];
             saa[0] += wa * a[p];
             sas[0] += wa * s[p];
             sss[0] += ws * s[p];
@@ -269,11 +292,12 @@ fn weighted_nnls(data: &Data, spec: [&[f64]; 3], weights: &[f64]) -> [[f64; 3]; 
         sss = [sss[0]; 3];
     } else {
         for p in 0..n {
-            let wa = w[p] * a[p];
+            let wp = w(p);
+            let wa = wp * a[p];
             saa[0] += wa * a[p];
             for c in 0..3 {
                 let sc = s[c][p];
-                let ws = w[p] * sc;
+                let ws = wp * sc;
                 sas[c] += wa * sc;
                 sss[c] += ws * sc;
                 say[c] += wa * y[p][c];
@@ -292,14 +316,15 @@ fn weighted_nnls(data: &Data, spec: [&[f64]; 3], weights: &[f64]) -> [[f64; 3]; 
 
 /// [`weighted_nnls`] with the bases a, s·(1 − w), s·w of Kd, Ks, Ks_90, with the points'
 /// shift weights w in `x`.
+#[inline(always)]
 fn fresnel_weighted_nnls(
     data: &Data,
     spec: [&[f64]; 3],
     x: &[f64],
-    weights: &[f64],
+    w: impl Fn(usize) -> f64,
 ) -> [[f64; 3]; 3] {
     let n = data.y.len();
-    let (y, a, x, w) = (&data.y[..n], &data.diffuse[..n], &x[..n], &weights[..n]);
+    let (y, a, x) = (&data.y[..n], &data.diffuse[..n], &x[..n]);
     let mut gram = [[[0.0; 3]; 3]; 3];
     let mut rhs = [[0.0; 3]; 3];
     for c in 0..3 {
@@ -307,7 +332,7 @@ fn fresnel_weighted_nnls(
         let (g, r) = (&mut gram[c], &mut rhs[c]);
         for p in 0..n {
             // Each channel's sums over its measured values only.
-            let wk = w[p] * data.keep.as_ref().map_or(1.0, |keep| keep[p][c]);
+            let wk = w(p) * data.keep.as_ref().map_or(1.0, |keep| keep[p][c]);
             let b = [a[p], s[p] * (1.0 - x[p]), s[p] * x[p]];
             for j in 0..3 {
                 let wb = wk * b[j];
@@ -351,19 +376,23 @@ pub(crate) fn solve(
     let floor = data.residual_floor;
     let mut epsilon = EPSILON_START;
     let mut current: Option<LinearFit> = None;
-    ws.weights.clear();
-    ws.weights.resize(n, 1.0);
+    // The next pass's weights: 1/max(‖r_p‖, cap) of the current iterate's residuals.
+    let mut cap: Option<f64> = None;
     if let (true, Some(last)) = (warm, ws.last) {
         let loss = loss_of(data, spec, [&last.kd, &last.ks, &last.kg], &mut ws.current);
-        let cap = (WARM_EPSILON_START * loss / n as f64).max(floor);
-        for (w, r) in ws.weights.iter_mut().zip(&ws.current) {
-            *w = 1.0 / r.max(cap);
-        }
+        cap = Some((WARM_EPSILON_START * loss / n as f64).max(floor));
         current = Some(LinearFit { loss, ..last });
         epsilon = (WARM_EPSILON_START * EPSILON_SHRINK).max(tolerance);
     }
     for _ in 0..MAX_PASSES {
-        let [kd, ks, kg] = weighted_nnls(data, spec, &ws.weights);
+        let weights = match cap {
+            Some(cap) => Weights::Capped {
+                norms: &ws.current,
+                cap,
+            },
+            None => Weights::Unit,
+        };
+        let [kd, ks, kg] = weighted_nnls(data, spec, weights);
         let mut next = LinearFit {
             kd,
             ks,
@@ -396,10 +425,7 @@ pub(crate) fn solve(
             break;
         }
         let mean = current.map_or(next.loss, |c| c.loss) / n as f64;
-        let cap = (epsilon * mean).max(floor);
-        for (w, r) in ws.weights.iter_mut().zip(&ws.current) {
-            *w = 1.0 / r.max(cap);
-        }
+        cap = Some((epsilon * mean).max(floor));
         epsilon = (epsilon * EPSILON_SHRINK).max(tolerance);
     }
     let fit = current.unwrap_or_else(|| LinearFit {

@@ -267,54 +267,98 @@ fn validate(options: &FitOptions) -> Result<(f64, f64), FitError> {
     Ok((o.m_min.ln(), o.m_max.ln()))
 }
 
+/// Brackets the profile's minimum along `target` from ln m = `x0` (each solve warm from
+/// the last, converged to `tolerance`): `x0 ± step`, then downhill in steps doubling
+/// each time until the profile rises again or the search range `range` ends. Returns an
+/// interval of ln m holding the lowest value found with a higher one (or a range end)
+/// on each side.
+fn bracket(
+    profile: &RefCell<Profile<'_>>,
+    base: [f64; 3],
+    target: Target,
+    x0: f64,
+    step: f64,
+    range: (f64, f64),
+    tolerance: f64,
+) -> (f64, f64) {
+    let shared = matches!(target, Target::Shared);
+    let at = |x: f64| {
+        profile
+            .borrow_mut()
+            .eval(target.apply(base, x.exp()), shared, tolerance, true)
+    };
+    let x0 = x0.clamp(range.0, range.1);
+    let f0 = at(x0);
+    let up = (x0 + step).min(range.1);
+    let down = (x0 - step).max(range.0);
+    let f_up = if up > x0 { at(up) } else { f64::INFINITY };
+    let f_down = if down < x0 { at(down) } else { f64::INFINITY };
+    if f0 <= f_up && f0 <= f_down {
+        return (down, up);
+    }
+    let (sign, mut end) = if f_up < f_down {
+        (1.0, up)
+    } else {
+        (-1.0, down)
+    };
+    let (mut behind, mut f_end, mut stride) = (x0, f_up.min(f_down), step);
+    while end > range.0 && end < range.1 {
+        stride *= 2.0;
+        let next = (end + sign * stride).clamp(range.0, range.1);
+        let f_next = at(next);
+        if f_next >= f_end {
+            return (behind.min(next), behind.max(next));
+        }
+        (behind, end, f_end) = (end, next, f_next);
+    }
+    (behind.min(end), behind.max(end))
+}
+
 /// The robust fit of data near those of a known fit `start` (its parameters and specular
-/// colour at 90°): Brent over ln m within ±`span` of `start`'s roughness (each channel's in
-/// turn for per-channel roughness, in rounds as [`fit`]'s), the first solve warm from
-/// `start`'s coefficients, no grid and no polish, converged to `precision`. `None` when a roughness found lies at an
-/// end of its bracket that is not an end of the search range: the fit may lie beyond, and
-/// the caller searches the whole range with [`fit`].
+/// colour at 90°): from `start`'s roughness, the minimum bracketed along ln m by steps of
+/// `step` ([`bracket`]) within the search range, then Brent within the bracket (each
+/// channel's in turn for per-channel roughness, in rounds as [`fit`]'s); the first solve
+/// warm from `start`'s coefficients, no grid and no polish, converged to `precision`.
+/// A local search: for data whose profile has one minimum within reach of `start`'s, as
+/// data moved a little from `start`'s have.
 pub(crate) fn fit_near(
     data: &Data,
     options: &FitOptions,
     start: &Params,
     start_kg: [f64; 3],
-    span: f64,
+    step: f64,
     precision: Precision,
-) -> Result<Option<(Found, [f64; 3])>, FitError> {
+) -> Result<(Found, [f64; 3]), FitError> {
     let ln_range = validate(options)?;
     let profile = RefCell::new(Profile::new(data));
     profile
         .borrow_mut()
         .workspace
         .start_from(start.kd, start.ks, start_kg);
-    let bracket = |x: f64| ((x - span).max(ln_range.0), (x + span).min(ln_range.1));
-    // Whether ln m = `x` found in `bracket` lies at one of its inner ends: within a
-    // hundredth of the span and four times Brent's tolerance, where Brent stops when the
-    // minimum lies beyond the end.
-    let at_inner_end = |x: f64, (lo, hi): (f64, f64)| {
-        let margin =
-            0.01 * span + 4.0 * (precision.ln_m_absolute + precision.ln_m_relative * x.abs());
-        (x - lo < margin && lo > ln_range.0) || (hi - x < margin && hi < ln_range.1)
+    let search = |base: [f64; 3], target: Target, c: usize| {
+        let range = bracket(
+            &profile,
+            base,
+            target,
+            base[c].ln(),
+            step,
+            ln_range,
+            precision.solve,
+        );
+        brent_from(&profile, base, target, range, true, precision)
     };
-    let m0 = start.m;
     match options.roughness {
-        Roughness::Shared => {
-            let range = bracket(m0[0].ln());
-            brent_from(&profile, m0, Target::Shared, range, true, precision)?;
-            if at_inner_end(profile.borrow().best_m()[0].ln(), range) {
-                return Ok(None);
-            }
-        }
+        Roughness::Shared => search(start.m, Target::Shared, 0)?,
         Roughness::PerChannel => {
             for _ in 0..MAX_ROUNDS {
                 let before = profile.borrow().best_loss();
                 for c in 0..3 {
-                    let base = profile.borrow().best.as_ref().map_or(m0, |(p, _, _)| p.m);
-                    let range = bracket(base[c].ln());
-                    brent_from(&profile, base, Target::Channel(c), range, true, precision)?;
-                    if at_inner_end(profile.borrow().best_m()[c].ln(), range) {
-                        return Ok(None);
-                    }
+                    let base = profile
+                        .borrow()
+                        .best
+                        .as_ref()
+                        .map_or(start.m, |(p, _, _)| p.m);
+                    search(base, Target::Channel(c), c)?;
                 }
                 let after = profile.borrow().best_loss();
                 if before - after
@@ -329,13 +373,13 @@ pub(crate) fn fit_near(
     let (params, ks_90, _) = profile
         .best
         .ok_or_else(|| FitError::Optimizer("no roughness was evaluated".into()))?;
-    Ok(Some((
+    Ok((
         Found {
             params,
             evaluations: profile.evaluations,
         },
         ks_90,
-    )))
+    ))
 }
 
 /// The robust fit: the parameters found and the specular colour at 90°.
@@ -384,4 +428,60 @@ pub(crate) fn fit(data: &Data, options: &FitOptions) -> Result<(Found, [f64; 3])
         }
     }
     Ok((found, ks_90))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::brdf::Model;
+    use crate::samples::Sample;
+
+    /// Two θL of Cook–Torrance values with roughness `m` and 2 % deterministic noise.
+    fn data(m: f64) -> Data {
+        let truth = Params::shared([8.0, 6.0, 3.0], [4.0, 3.5, 2.0], m);
+        let mut state = 0x2545_f491_4f6c_dd1d_u64;
+        let mut samples = Vec::new();
+        for theta_l in [-20.0, -40.0] {
+            for k in 0..120 {
+                let phi = theta_l / 2.0 - 50.0 + 100.0 * f64::from(k) / 119.0;
+                let beta = Model::CookTorrance
+                    .evaluate(&truth, theta_l - phi, phi)
+                    .map(|b| {
+                        state = state
+                            .wrapping_mul(6_364_136_223_846_793_005)
+                            .wrapping_add(1_442_695_040_888_963_407);
+                        b * (1.0 + 0.04 * ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5))
+                    });
+                samples.push(Sample::in_plane(theta_l, theta_l - phi, phi, beta));
+            }
+        }
+        Data::new(&samples, Model::CookTorrance, 7).unwrap()
+    }
+
+    /// A start whose roughness is a factor 2 off each way (ln m 0.69, many bracketing
+    /// steps): the bracket walks to the minimum and Brent finds the full search's.
+    #[test]
+    fn a_fit_near_a_distant_start_finds_the_full_search_minimum() {
+        let data = data(0.2);
+        let options = FitOptions::new(Model::CookTorrance);
+        let (full, _) = fit(&data, &options).unwrap();
+        for factor in [0.5, 2.0] {
+            let start = Params::shared([7.0, 5.0, 2.5], [3.0, 3.0, 1.5], 0.2 * factor);
+            let (near, _) =
+                fit_near(&data, &options, &start, start.ks, 0.02, Precision::FINE).unwrap();
+            let m = (near.params.m[0], full.params.m[0]);
+            assert!((m.0 / m.1 - 1.0).abs() < 1e-5, "factor {factor}: m {m:?}");
+            let loss = (data.loss(&near.params), data.loss(&full.params));
+            assert!(
+                loss.0 <= loss.1 * (1.0 + 1e-9),
+                "factor {factor}: loss {loss:?}"
+            );
+            assert!(
+                near.evaluations < full.evaluations,
+                "factor {factor}: {} evaluations, the full search {}",
+                near.evaluations,
+                full.evaluations
+            );
+        }
+    }
 }
