@@ -314,8 +314,7 @@ mod tests {
             serde_json::from_str(r#"{"light_distance_mm":1e300}"#).unwrap();
         assert_eq!(block.invalid(), Some(("light_distance_mm", 1e300)));
         assert!(serde_json::from_str::<SetupUncertainty>(r#"{"yaw":1}"#).is_err());
-        let block: SetupUncertainty =
-            serde_json::from_str(r#"{"camera_yaw_deg":-0.01}"#).unwrap();
+        let block: SetupUncertainty = serde_json::from_str(r#"{"camera_yaw_deg":-0.01}"#).unwrap();
         assert_eq!(block.invalid(), Some(("camera_yaw_deg", -0.01)));
     }
 }

@@ -72,10 +72,7 @@ impl WhiteTable {
             ("white_angular.u", self.u.len()),
         ] {
             if len != n {
-                return Err(error(
-                    field,
-                    format!("has {len} values for {n} angles"),
-                ));
+                return Err(error(field, format!("has {len} values for {n} angles")));
             }
         }
         if let Some(t) = self
@@ -187,7 +184,10 @@ mod tests {
         table.validate().unwrap();
         let angular = WhiteAngular::Table(&table);
         let (f, u) = angular.at(0.5);
-        assert!((f - 0.98).abs() < 1e-9 && (u - 0.01).abs() < 1e-9, "{f} {u}");
+        assert!(
+            (f - 0.98).abs() < 1e-9 && (u - 0.01).abs() < 1e-9,
+            "{f} {u}"
+        );
         let (f, _) = angular.at(70f64.to_radians().cos());
         assert!((f - 0.965).abs() < 1e-9, "{f}");
         assert_eq!(angular.at(0.0), (0.95, 0.02));

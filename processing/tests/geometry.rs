@@ -319,7 +319,11 @@ fn camera_yaw_and_roll_turn_the_rays_about_the_camera_centre() {
             let (xr, yr) = (x * cos_r - y * sin_r, x * sin_r + y * cos_r);
             let rolled_seen = rolled.pixel_geometry(u, v, -30.0);
             let rolled_expected = nominal.pixel_geometry(cx + xr / pitch, cy - yr / pitch, -30.0);
-            assert_eq!(rolled_seen.is_some(), rolled_expected.is_some(), "roll at {u}");
+            assert_eq!(
+                rolled_seen.is_some(),
+                rolled_expected.is_some(),
+                "roll at {u}"
+            );
             if let (Some(a), Some(b)) = (rolled_seen, rolled_expected) {
                 assert!((a.phi - b.phi).abs() < 1e-9 && (a.height_mm - b.height_mm).abs() < 1e-9);
                 compared += 1;
@@ -361,15 +365,29 @@ fn camera_yaw_and_roll_turn_the_rays_about_the_camera_centre() {
 fn bad_white_angular_dependence_is_named() {
     let mut s = d200();
     s.white_falloff = Some(0.7);
-    assert!(s.validate().unwrap_err().to_string().contains("white_falloff"));
+    assert!(s
+        .validate()
+        .unwrap_err()
+        .to_string()
+        .contains("white_falloff"));
     let json = r#"{"theta_i_deg":[0,60],"factor":[1,0.97],"u":[0,0.01]}"#;
     s.white_falloff = None;
     s.white_angular = Some(serde_json::from_str(json).unwrap());
     assert!(s.validate().is_ok());
     assert_eq!(s.white_angular().at(0.5), (0.97, 0.01));
     s.white_falloff = Some(0.01);
-    assert!(s.validate().unwrap_err().to_string().contains("white_falloff"));
+    assert!(s
+        .validate()
+        .unwrap_err()
+        .to_string()
+        .contains("white_falloff"));
     s.white_falloff = None;
-    s.white_angular = Some(serde_json::from_str(r#"{"theta_i_deg":[0,60],"factor":[1,-1],"u":[0,0.01]}"#).unwrap());
-    assert!(s.validate().unwrap_err().to_string().contains("white_angular.factor"));
+    s.white_angular = Some(
+        serde_json::from_str(r#"{"theta_i_deg":[0,60],"factor":[1,-1],"u":[0,0.01]}"#).unwrap(),
+    );
+    assert!(s
+        .validate()
+        .unwrap_err()
+        .to_string()
+        .contains("white_angular.factor"));
 }
