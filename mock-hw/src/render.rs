@@ -571,10 +571,7 @@ pub fn render(scene: &Scene, shot: &Shot) -> Frame16 {
             .camera_domain()
             .white_rgb()
             .map(|w| w * scene.rendered_white_reflectance()),
-        white_falloff: effects
-            .misalignment
-            .as_ref()
-            .map_or(0.0, |m| m.white_falloff),
+        white_falloff: scene.rendered_white_falloff(),
         retro: effects
             .retro_reflection
             .as_ref()

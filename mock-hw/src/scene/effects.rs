@@ -78,9 +78,10 @@ pub struct Misalignment {
     /// The rendered white reference's reflectance is `white.reflectance` × (1 + this)
     /// (setup.json keeps stating the nominal one); relative.
     pub white_reflectance_error: f64,
-    /// The white reference is not Lambertian: its reflectance is the rendered one ×
-    /// (1 − this·(1 − cos θi)), θi the light's angle of incidence on it (this much
-    /// darker at grazing); relative, within ±[`MAX_WHITE_FALLOFF`].
+    /// The white's falloff toward grazing departs from the stated `[white] falloff` by
+    /// this: its reflectance renders × (1 − a·(1 − cos θi)), a the sum, θi the light's
+    /// angle of incidence on it (setup.json keeps stating the nominal one); relative,
+    /// within ±[`MAX_WHITE_FALLOFF`].
     pub white_falloff: f64,
     /// The camera is this much farther from the axis than `setup.camera_distance_mm`, mm.
     pub camera_distance_error_mm: f64,
