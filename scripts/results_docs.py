@@ -569,6 +569,7 @@ SECTIONS = {
     "real-materials": ("results", real_materials_table),
     "coverage": ("results", coverage_table),
     "coverage-defaults": ("results", lambda: coverage_table("coverage-defaults.json")),
+    "coverage-lab": ("results", lambda: coverage_table("coverage-lab.json")),
     "verdicts": ("results", verdicts_table),
     "colour": ("results", colour_table),
     "summary": ("readme", summary_table),

@@ -97,6 +97,7 @@ impl Case {
             Case::Defaults | Case::Lab => Value::Object(
                 Source::ALL
                     .iter()
+                    .filter(|s| self == Case::Lab || !LAB_SOURCES.contains(s))
                     .map(|s| (s.key().to_string(), json!(s.default_uncertainty())))
                     .collect(),
             ),
@@ -115,6 +116,9 @@ impl Case {
         }
     }
 }
+
+/// The sources only [`Case::Lab`] draws the world's departures from.
+const LAB_SOURCES: [Source; 3] = [Source::CameraYaw, Source::CameraRoll, Source::WhiteFalloff];
 
 /// gold's own arm angles.
 const GOLD_THETA_L: [f64; 6] = [-20.0, -25.0, -30.0, -35.0, -40.0, -45.0];
