@@ -255,8 +255,8 @@ pub fn read_csv_from<R: Read>(reader: R) -> Result<Vec<Sample>, SamplesError> {
         .iter()
         .map(|name| header.iter().position(|h| h == name))
         .collect();
-    // The columns of [`Source::OPTIONAL_COLUMNS`] may be absent (no change).
-    let optional: Vec<String> = Source::OPTIONAL_COLUMNS
+    // The columns of [`Source::LATER`] may be absent (no change).
+    let optional: Vec<String> = Source::LATER
         .iter()
         .flat_map(|s| ["r", "g", "b"].map(|c| format!("u_{}_{c}", s.name())))
         .collect();

@@ -54,10 +54,10 @@ impl Source {
         Source::WhiteFalloff,
     ];
 
-    /// The sources whose samples CSV columns a file may lack (written by an older
-    /// extraction): read as no change.
-    pub const OPTIONAL_COLUMNS: [Source; 3] =
-        [Source::CameraYaw, Source::CameraRoll, Source::WhiteFalloff];
+    /// The sources added after the first seven: a samples CSV may lack their columns
+    /// (written by an earlier extraction; read as no change), and the Monte Carlo draws
+    /// them from a stream of their own (the others' draws are as they were).
+    pub const LATER: [Source; 3] = [Source::CameraYaw, Source::CameraRoll, Source::WhiteFalloff];
 
     /// Number of sources.
     pub const COUNT: usize = Self::ALL.len();

@@ -204,7 +204,7 @@ pub enum Mounting {
 
 /// Sources whose error is the instrument's, the same for every scan whatever its
 /// mounting (a line's source is `<source>:<what it moved>`).
-const INSTRUMENT_SOURCES: [&str; 2] = ["white_reflectance", "transform"];
+const INSTRUMENT_SOURCES: [&str; 3] = ["white_reflectance", "white_falloff", "transform"];
 
 /// Whether a shared line of `source` is shared by two scans of `mounting`.
 fn shared_between(source: &str, mounting: Mounting) -> bool {
