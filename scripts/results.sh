@@ -152,7 +152,8 @@ real_section() {
 # The uncertainty budget's coverage over 600 emulated scans whose setup is off by what
 # their setup.json states (every parameter of Cook–Torrance and Ward; about 7 min), and
 # over 400 scans with no uncertainty block, their setup off by what gonio's defaults
-# state (six θL, binned 4×4; about 30 min on two cores).
+# state (six θL, binned 4×4; about 30 min on two cores), and 400 more whose camera is
+# also turned and whose white is not Lambertian (about an hour on a shared machine).
 coverage_section() {
     local out=docs/results/uncertainty
     mkdir -p "$out"
@@ -165,6 +166,11 @@ coverage_section() {
         GONIO_COVERAGE_DEFAULTS_OUT="$PWD/$out/coverage-defaults.json" \
         cargo test --locked --workspace --test budget_coverage -- --nocapture \
         expanded_intervals_hold_the_truth_on_the_default_uncertainties
+    echo "== uncertainty budget: coverage with a turned camera and a white that is not Lambertian over 400 scans"
+    GONIO_COVERAGE_JOBS=2 GONIO_COVERAGE_LAB_SCANS=400 \
+        GONIO_COVERAGE_LAB_OUT="$PWD/$out/coverage-lab.json" \
+        cargo test --locked --workspace --test budget_coverage -- --nocapture \
+        expanded_intervals_hold_the_truth_with_a_turned_camera_and_a_real_white
 }
 
 # The verdicts of --model auto over 60 family scans and 3 noise seeds of each RGL file

@@ -647,6 +647,7 @@ SECTIONS = {
     "real-materials": ("results", real_materials_table),
     "coverage": ("results", coverage_table),
     "coverage-defaults": ("results", lambda: coverage_table("coverage-defaults.json")),
+    "coverage-lab": ("results", lambda: coverage_table("coverage-lab.json")),
     "verdicts": ("results", verdicts_table),
     "colour": ("results", colour_table),
     "colour-validation": ("results", colour_validation_table),

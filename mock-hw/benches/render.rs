@@ -33,10 +33,12 @@ fn render(c: &mut Criterion) {
         misalignment: Some(Misalignment {
             camera_offset_mm: 3.0,
             camera_yaw_deg: 0.2,
+            camera_roll_deg: 0.1,
             cylinder_tilt_deg: 0.5,
             arm_zero_offset_deg: 0.3,
             light_distance_error_mm: 5.0,
             white_reflectance_error: 0.01,
+            white_falloff: 0.03,
             camera_distance_error_mm: 2.0,
             arm_angle_errors_deg: vec![0.01; gold.theta_l_deg().len()],
         }),

@@ -25,7 +25,7 @@
 //! plus the θL's own angle error), and the strips are bands on the cylinder between the
 //! heights the nominal strip rows see at its front
 //! ([`crate::scene::SceneSetup::front_height_mm`]); the white strip reflects as the
-//! misalignment's white reflectance error says.
+//! misalignment's white reflectance error and falloff toward grazing say.
 
 pub mod brdf;
 pub mod effects;
@@ -362,6 +362,7 @@ impl Misaligned {
     fn new(scene: &Scene, m: &Misalignment, theta_l_deg: f64) -> Self {
         let s = scene.setup();
         let (sin_y, cos_y) = m.camera_yaw_deg.to_radians().sin_cos();
+        let (sin_r, cos_r) = m.camera_roll_deg.to_radians().sin_cos();
         let (sin_t, cos_t) = m.cylinder_tilt_deg.to_radians().sin_cos();
         let arm_error = m.arm_angle_error_deg(scene.theta_l_deg(), theta_l_deg);
         let (sin_l, cos_l) = (theta_l_deg + m.arm_zero_offset_deg + arm_error)
@@ -383,8 +384,10 @@ impl Misaligned {
                 0.0,
             ],
             forward: [-f * cos_y, -f * sin_y, 0.0],
-            right: [-sin_y, cos_y, 0.0],
-            up: [0.0, 0.0, 1.0],
+            // Yawed right (−sin ψ, cos ψ, 0) and up +z, turned by the roll about the
+            // optical axis (right toward up).
+            right: [-sin_y * cos_r, cos_y * cos_r, sin_r],
+            up: [sin_y * sin_r, -cos_y * sin_r, cos_r],
             axis: [0.0, sin_t, cos_t],
             radius: s.cylinder_radius_mm,
             light: [light * cos_l, light * sin_l, 0.0],
@@ -462,6 +465,8 @@ struct Lighting<'a> {
     /// Counts per unit β·cosθi at 1000 mm: t · ISO/100 · intensity/100.
     scale: f64,
     white_beta: [f64; 3],
+    /// The white's falloff toward grazing: its β × (1 − a·(1 − cos θi)); 0 when Lambertian.
+    white_falloff: f64,
     /// Retro-reflection kr and w².
     retro: Option<([f64; 3], f64)>,
     vignetting: Option<f64>,
@@ -473,7 +478,12 @@ impl Lighting<'_> {
     #[inline]
     fn signal(&self, local: &Local, strip: Strip, x_mm: f64, y_mm: f64) -> [f64; 3] {
         let beta = if strip == Strip::White {
-            self.white_beta
+            if self.white_falloff == 0.0 {
+                self.white_beta
+            } else {
+                let factor = 1.0 - self.white_falloff * (1.0 - local.cos_i.clamp(0.0, 1.0));
+                self.white_beta.map(|b| b * factor)
+            }
         } else {
             let g = Geom::new(
                 local.cos_i,
@@ -561,6 +571,7 @@ pub fn render(scene: &Scene, shot: &Shot) -> Frame16 {
             .camera_domain()
             .white_rgb()
             .map(|w| w * scene.rendered_white_reflectance()),
+        white_falloff: scene.rendered_white_falloff(),
         retro: effects
             .retro_reflection
             .as_ref()

@@ -22,6 +22,7 @@ use std::path::Path;
 
 use serde::Deserialize;
 
+use effects::MAX_WHITE_FALLOFF;
 use error::{check_positive, invalid};
 use material::Material;
 use spectral::{CameraDomain, Spectrum};
@@ -47,6 +48,9 @@ struct ScanFile {
 #[serde(deny_unknown_fields)]
 struct WhiteFile {
     reflectance: f64,
+    /// The white's falloff toward grazing, stated in setup.json and rendered; 0: Lambertian.
+    #[serde(default)]
+    falloff: f64,
 }
 
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -102,6 +106,7 @@ pub struct Scene {
     bracket_s: Vec<f64>,
     sample: Sample,
     white_reflectance: f64,
+    white_falloff: f64,
     light_intensity: f64,
     camera: CameraBody,
     effects: Effects,
@@ -176,6 +181,13 @@ impl Scene {
         if !(white.is_finite() && white > 0.0 && white <= 1.5) {
             return Err(invalid("white.reflectance", "must be in (0, 1.5]"));
         }
+        let falloff = file.white.falloff;
+        if !(falloff.is_finite() && falloff.abs() <= MAX_WHITE_FALLOFF) {
+            return Err(invalid(
+                "white.falloff",
+                format!("{falloff} must be in [-{MAX_WHITE_FALLOFF}, {MAX_WHITE_FALLOFF}]"),
+            ));
+        }
         check_positive("light.intensity", file.light.intensity)?;
         let camera = file.camera;
         if !(8..=16).contains(&camera.bit_depth) {
@@ -231,6 +243,7 @@ impl Scene {
             bracket_s: file.scan.bracket_s,
             sample,
             white_reflectance: white,
+            white_falloff: falloff,
             light_intensity: file.light.intensity,
             camera: CameraBody {
                 model: camera.model,
@@ -279,6 +292,17 @@ impl Scene {
             Some(m) => self.white_reflectance * (1.0 + m.white_reflectance_error),
             None => self.white_reflectance,
         }
+    }
+
+    /// The white's falloff toward grazing as rendered (its reflectance × (1 − a·(1 − cos θi))):
+    /// the stated `[white] falloff` plus the misalignment's `white_falloff`.
+    pub fn rendered_white_falloff(&self) -> f64 {
+        self.white_falloff
+            + self
+                .effects
+                .misalignment
+                .as_ref()
+                .map_or(0.0, |m| m.white_falloff)
     }
 
     /// Light intensity: raw G counts per second at ISO 100 of a perfect white facing
@@ -386,6 +410,7 @@ impl Scene {
             "sample_row": s.sample_row(),
             "white_row": s.white_row(),
             "white_reflectance": self.white_reflectance,
+            "white_falloff": self.white_falloff,
         });
         if let Some(uncertainty) = &s.uncertainty {
             json["uncertainty"] = serde_json::json!(uncertainty);

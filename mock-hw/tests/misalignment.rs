@@ -153,18 +153,21 @@ fn camera_offset_yaw_and_distance_move_the_limbs_where_tangent_rays_fall() {
 }
 
 #[test]
-fn cylinder_tilt_rotates_its_picture_about_the_principal_point() {
+fn cylinder_tilt_and_camera_roll_rotate_the_picture_about_the_principal_point() {
     // With the camera on the world x axis, tilting the cylinder about that axis by τ
     // rotates the cylinder's picture by τ about the principal point (clockwise, top to
     // the right): an upright limb at x = ±w maps to x = (±w + y sin τ)/cos τ at height y.
+    // Rolling the camera by τ (its right toward its up) turns the picture the same way.
+    for misalignment in ["cylinder_tilt_deg = 2.0", "camera_roll_deg = 2.0"] {
+        limbs_turned_by_two_degrees(misalignment);
+    }
+}
+
+fn limbs_turned_by_two_degrees(misalignment: &str) {
     let (pitch, cx, cy) = (0.030, 199.5, 59.5);
     let tau = 2f64.to_radians();
     let upright = render_frame(&scene(LAMBERTIAN, None), 0.0, 0.01);
-    let tilted = render_frame(
-        &scene(LAMBERTIAN, Some("cylinder_tilt_deg = 2.0")),
-        0.0,
-        0.01,
-    );
+    let tilted = render_frame(&scene(LAMBERTIAN, Some(misalignment)), 0.0, 0.01);
     // The upright limb: exact, from the tangent ray (see the test above).
     let half = (40.0f64 / 700.0).asin();
     let w = 85.0 * half.tan() / pitch;
@@ -178,11 +181,11 @@ fn cylinder_tilt_rotates_its_picture_about_the_principal_point() {
         let right = (w + up * tau.sin()) / tau.cos() + cx;
         assert!(
             f64::from(first) >= left - 1e-9 && f64::from(first) - left < 1.0,
-            "row {y}: first lit {first}, limb {left}"
+            "{misalignment}, row {y}: first lit {first}, limb {left}"
         );
         assert!(
             f64::from(last) <= right + 1e-9 && right - f64::from(last) < 1.0,
-            "row {y}: last lit {last}, limb {right}"
+            "{misalignment}, row {y}: last lit {last}, limb {right}"
         );
     }
 }
@@ -218,6 +221,40 @@ fn a_white_reflectance_error_scales_the_white_strip_only() {
         assert!(bright > 300, "{bright} bright white values");
         assert_eq!(largest_difference(&frame, &nominal, &SAMPLE_ROWS), 0);
     }
+}
+
+#[test]
+fn a_white_falloff_darkens_the_white_toward_grazing_only() {
+    let nominal = render_frame(&scene(CT, Some("")), -30.0, 0.01);
+    let falloff = 0.03;
+    let frame = render_frame(
+        &scene(CT, Some(&format!("white_falloff = {falloff}"))),
+        -30.0,
+        0.01,
+    );
+    // Each white value is its Lambertian one times 1 − a·(1 − cos θi) ∈ [1 − a, 1]
+    // (counts round to within ½); facing the light it is unchanged, toward grazing
+    // it is darker by nearly a.
+    let (mut near_one, mut darkest) = (0, 1.0f64);
+    for &y in &WHITE_ROWS {
+        for x in 0..frame.width() {
+            for (p, q) in frame.pixel(x, y).iter().zip(nominal.pixel(x, y)) {
+                let (p, q) = (f64::from(*p), f64::from(q));
+                assert!(
+                    p <= q + 1.0 && p >= q * (1.0 - falloff) - 1.0,
+                    "({x}, {y}): {p} against Lambertian {q}"
+                );
+                if q > 2000.0 {
+                    let ratio = p / q;
+                    near_one += usize::from(ratio > 0.999);
+                    darkest = darkest.min(ratio);
+                }
+            }
+        }
+    }
+    assert!(near_one > 10, "{near_one} values facing the light");
+    assert!(darkest < 1.0 - 0.5 * falloff, "darkest ratio {darkest}");
+    assert_eq!(largest_difference(&frame, &nominal, &SAMPLE_ROWS), 0);
 }
 
 #[test]

@@ -154,6 +154,11 @@ fn bad_values_are_named() {
             "effects.misalignment.camera_yaw_deg",
         ),
         (
+            "camera_roll_deg = 12.0",
+            "effects.misalignment.camera_roll_deg",
+        ),
+        ("white_falloff = 0.6", "effects.misalignment.white_falloff"),
+        (
             "camera_offset_mm = 500.0",
             "effects.misalignment.camera_offset_mm",
         ),
@@ -187,7 +192,7 @@ fn bad_values_are_named() {
             "arm_angle_errors_deg = [11.0]",
             "effects.misalignment.arm_angle_errors_deg",
         ),
-        ("camera_roll_deg = 1.0", "camera_roll_deg"),
+        ("camera_pitch_deg = 1.0", "camera_pitch_deg"),
     ] {
         let err = error_text(&format!("{SMALL}\n{CT}\n[effects.misalignment]\n{line}\n"));
         assert!(err.contains(key), "{line}: {err}");
@@ -329,6 +334,7 @@ fn truth_and_setup_json() {
             "principal_point_x",
             "principal_point_y",
             "sample_row",
+            "white_falloff",
             "white_reflectance",
             "white_row"
         ]
@@ -369,6 +375,19 @@ fn setup_uncertainty_is_stated_in_setup_json() {
     assert_eq!(one.binned(2).unwrap().setup_json()["uncertainty"], expected);
     // No table, no block.
     assert!(small(CT).unwrap().setup_json().get("uncertainty").is_none());
+    // The white's falloff: Lambertian unless `[white]` states one; stated as rendered.
+    assert_eq!(small(CT).unwrap().setup_json()["white_falloff"], 0.0);
+    let falloff = format!("{SMALL}\n{CT}").replace(
+        "[white]\nreflectance = 0.9",
+        "[white]\nreflectance = 0.9\nfalloff = 0.02",
+    );
+    let scene = Scene::from_toml_str(&falloff).unwrap();
+    assert_eq!(scene.setup_json()["white_falloff"], 0.02);
+    assert_eq!(scene.rendered_white_falloff(), 0.02);
+    let bad = Scene::from_toml_str(&falloff.replace("falloff = 0.02", "falloff = nan"))
+        .unwrap_err()
+        .to_string();
+    assert!(bad.contains("white.falloff"), "{bad}");
     for (line, key) in [
         (
             "camera_offset_mm = -0.1",
@@ -383,7 +402,11 @@ fn setup_uncertainty_is_stated_in_setup_json() {
             "white_reflectance = [0.01, -0.01, 0.01]",
             "setup.uncertainty.white_reflectance",
         ),
-        ("camera_yaw_deg = 0.1", "camera_yaw_deg"),
+        (
+            "camera_roll_deg = -0.1",
+            "setup.uncertainty.camera_roll_deg",
+        ),
+        ("camera_pitch_deg = 0.1", "camera_pitch_deg"),
     ] {
         let err = error_text(&with_uncertainty(line));
         assert!(err.contains(key), "{line}: {err}");

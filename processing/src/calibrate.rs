@@ -28,9 +28,9 @@ use crate::capture::Frame;
 use crate::extract::{self, ExtractError};
 use crate::geometry::{GeometryError, Setup};
 use crate::hdr::{self, HdrError, MergeOptions};
-use crate::setup_uncertainty::{SetupUncertainty, MAX_UNCERTAINTY};
+use crate::setup_uncertainty::{SetupUncertainty, Source, MAX_UNCERTAINTY};
 use observe::{Band, Side};
-use solve::{Limb, Observations, Parameter, PeakRow, TerminatorRow};
+use solve::{Limb, Observations, Parameter, PeakRow, Prior, TerminatorRow};
 
 /// Options of [`calibrate_scan`].
 #[derive(Debug, Clone, PartialEq)]
@@ -122,6 +122,9 @@ pub struct Calibration {
     pub camera_distance_mm: Option<Estimate>,
     pub cylinder_tilt_deg: Option<Estimate>,
     pub arm_zero_offset_deg: Option<Estimate>,
+    /// The camera's yaw and roll, estimated from the images and their stated values.
+    pub camera_yaw_deg: Option<Estimate>,
+    pub camera_roll_deg: Option<Estimate>,
     pub axis_in_image: AxisInImage,
     pub silhouette: Vec<SilhouetteEdge>,
     pub residuals: Residuals,
@@ -412,6 +415,37 @@ pub fn calibrate_scan(
     if parameters.is_empty() {
         return Err(CalibrateError::Underdetermined(notes.join("; ")));
     }
+    // The camera's turn: its yaw moves the picture as its offset does, its roll slants
+    // the limbs as the cylinder's tilt does; each is estimated with what setup.json
+    // states of it as a prior, so the images refine it as far as they tell it apart.
+    if !obs.limbs.is_empty() {
+        for (parameter, value, source) in [
+            (
+                Parameter::CameraYaw,
+                prior.camera_yaw_deg,
+                Source::CameraYaw,
+            ),
+            (
+                Parameter::CameraRoll,
+                prior.camera_roll_deg,
+                Source::CameraRoll,
+            ),
+        ] {
+            let sigma = prior
+                .inputs()
+                .iter()
+                .find(|i| i.source == source)
+                .map_or(0.0, |i| i.u[0]);
+            if sigma > 0.0 {
+                parameters.push(parameter);
+                obs.priors.push(Prior {
+                    parameter,
+                    value,
+                    sigma,
+                });
+            }
+        }
+    }
     let first = solve::fit(&start, &obs, &parameters)
         .ok_or_else(|| CalibrateError::Underdetermined("the least-squares fit failed".into()))?;
     // Uncertainties of the regressions at the fitted geometry, without the rows that
@@ -436,6 +470,22 @@ pub fn calibrate_scan(
     let camera_distance_mm = estimate(Parameter::CameraDistance, setup.camera_distance_mm);
     let cylinder_tilt_deg = estimate(Parameter::CylinderTilt, setup.cylinder_tilt_deg);
     let arm_zero_offset_deg = estimate(Parameter::ArmZeroOffset, setup.arm_zero_offset_deg);
+    let camera_yaw_deg = estimate(Parameter::CameraYaw, setup.camera_yaw_deg);
+    let camera_roll_deg = estimate(Parameter::CameraRoll, setup.camera_roll_deg);
+    for p in &obs.priors {
+        let (name, estimate) = match p.parameter {
+            Parameter::CameraYaw => ("camera yaw", camera_yaw_deg),
+            _ => ("camera roll", camera_roll_deg),
+        };
+        let Some(estimate) = estimate else { continue };
+        let prior = p.sigma;
+        if estimate.stderr > 0.9 * prior {
+            notes.push(format!(
+                "{name}: the images tell little beyond its stated uncertainty ({:.3}° against {prior}°)",
+                estimate.stderr
+            ));
+        }
+    }
     setup.uncertainty = SetupUncertainty {
         camera_offset_mm: standard_uncertainty(
             camera_offset_mm,
@@ -453,6 +503,8 @@ pub fn calibrate_scan(
             arm_zero_offset_deg,
             prior.uncertainty.arm_zero_offset_deg,
         ),
+        camera_yaw_deg: standard_uncertainty(camera_yaw_deg, prior.uncertainty.camera_yaw_deg),
+        camera_roll_deg: standard_uncertainty(camera_roll_deg, prior.uncertainty.camera_roll_deg),
         ..prior.uncertainty
     };
 
@@ -481,16 +533,21 @@ pub fn calibrate_scan(
         })
         .collect();
     let residuals = Residuals {
-        limb_px: rms(obs.limbs.iter().zip(r).map(|(l, r)| r * l.sigma)),
+        // Two residuals per limb: its mean, then its slope.
+        limb_px: rms(obs
+            .limbs
+            .iter()
+            .zip(r.iter().step_by(2))
+            .map(|(l, r)| r * l.sigma)),
         terminator_px: rms(obs
             .terminators
             .iter()
-            .zip(&r[n_limbs..])
+            .zip(&r[2 * n_limbs..])
             .map(|(t, r)| r * t.sigma)),
         peak_deg: rms(obs
             .peaks
             .iter()
-            .zip(&r[n_limbs + n_term..])
+            .zip(&r[2 * n_limbs + n_term..])
             .map(|(p, r)| (r * p.sigma).atan().to_degrees())),
         limbs: n_limbs,
         terminator_rows: n_term,
@@ -505,6 +562,8 @@ pub fn calibrate_scan(
         camera_distance_mm,
         cylinder_tilt_deg,
         arm_zero_offset_deg,
+        camera_yaw_deg,
+        camera_roll_deg,
         axis_in_image: axis_in_image(&setup),
         silhouette,
         residuals,

@@ -54,7 +54,7 @@ mod sharp;
 mod strip;
 
 use captures::find_captures;
-use columns::extract_theta;
+use columns::{extract_theta, ThetaSamples};
 use layout::StripLayout;
 use options::check_options;
 use sensitivity::{add_sensitivities, Strips};
@@ -179,7 +179,7 @@ pub fn extract_scan_with_progress(
         skipped_without_sidecar,
         white_reflectance,
         white_source,
-        inputs: options.uncertainty.then(|| setup.uncertainty.inputs()),
+        inputs: options.uncertainty.then(|| setup.inputs()),
     };
     for (done, (theta_l, paths)) in groups.into_iter().enumerate() {
         // Without a map to write, only the strip rows are kept and merged.
@@ -210,8 +210,13 @@ pub fn extract_scan_with_progress(
             map.write_exr(&hdr_dir.join(format!("theta_l_{theta_l:.1}.exr")))
                 .map_err(|error| ExtractError::Hdr { theta_l, error })?;
         }
-        let (mut samples, columns, dropped, centre_rows) =
-            extract_theta(&setup, &map, &layout, theta_l, options, white_reflectance);
+        let ThetaSamples {
+            mut samples,
+            columns,
+            dropped,
+            centre_rows,
+            white_angular,
+        } = extract_theta(&setup, &map, &layout, theta_l, options, white_reflectance);
         if options.uncertainty {
             let strips = Strips {
                 map: &map,
@@ -223,7 +228,7 @@ pub fn extract_scan_with_progress(
                 &strips,
                 options,
                 white_reflectance,
-                (&mut samples, &columns),
+                (&mut samples, &columns, &white_angular),
             );
         }
         extraction.per_theta.push(ThetaSummary {

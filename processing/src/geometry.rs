@@ -17,7 +17,10 @@
 use serde::{Deserialize, Serialize};
 
 use crate::brdf::Cosines;
-use crate::setup_uncertainty::SetupUncertainty;
+use crate::setup_uncertainty::{Input, SetupUncertainty, Source};
+use crate::white_angular::{
+    WhiteAngular, WhiteAngularError, WhiteTable, DEFAULT_FALLOFF, MAX_FALLOFF,
+};
 
 /// The physical setup of one scan. Lengths in millimetres, pixel pitch in micrometres,
 /// angles in degrees; see the module documentation for the frame.
@@ -45,6 +48,14 @@ pub struct Setup {
     /// `None`: not recorded (extraction then takes 1).
     #[serde(default)]
     pub white_reflectance: Option<f64>,
+    /// The white's falloff toward grazing incidence (relative; see
+    /// [`crate::white_angular`]); `None`: the default.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub white_falloff: Option<f64>,
+    /// A certificate's table of the white's reflectance factor against the angle of
+    /// incidence; it replaces the falloff.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub white_angular: Option<WhiteTable>,
     /// Sideways offset of the camera centre (+y, toward the image's right) from the
     /// plane through the cylinder axis parallel to the optical axis.
     #[serde(default)]
@@ -55,6 +66,14 @@ pub struct Setup {
     /// The light is at θL plus this (the arm's zero is off by this much).
     #[serde(default)]
     pub arm_zero_offset_deg: f64,
+    /// Yaw of the camera about the vertical through its centre, counter-clockwise seen
+    /// from above (the optical axis turned from −x toward −y).
+    #[serde(default)]
+    pub camera_yaw_deg: f64,
+    /// Roll of the camera about its optical axis, the image's right turned toward its
+    /// up (counter-clockwise seen from behind the camera).
+    #[serde(default)]
+    pub camera_roll_deg: f64,
     /// Standard uncertainties of the white reflectance, the geometry and the arm's angle
     /// (setup.json's `uncertainty` block; absent values take their defaults).
     #[serde(default, skip_serializing_if = "SetupUncertainty::is_empty")]
@@ -117,6 +136,8 @@ pub enum GeometryError {
         value: f64,
         max: f64,
     },
+    #[error(transparent)]
+    WhiteAngular(#[from] WhiteAngularError),
     #[error("setup field `{field}` = {value} is not a row of the {height}-row image")]
     RowOutside {
         field: &'static str,
@@ -161,7 +182,10 @@ pub(crate) struct SetupFrame {
     ex: [f64; 3],
     ey: [f64; 3],
     pub radius: f64,
-    focal: f64,
+    /// f times the unit optical axis, and the unit image right and up vectors.
+    forward: [f64; 3],
+    right: [f64; 3],
+    up: [f64; 3],
     /// Pixel pitch, mm.
     pitch: f64,
     cx: f64,
@@ -178,11 +202,8 @@ pub(crate) struct Hit {
 impl SetupFrame {
     /// Direction (not unit) of the ray through pixel (u, v).
     pub fn ray(&self, u: f64, v: f64) -> [f64; 3] {
-        [
-            -self.focal,
-            (u - self.cx) * self.pitch,
-            -(v - self.cy) * self.pitch,
-        ]
+        let (x, y) = ((u - self.cx) * self.pitch, -(v - self.cy) * self.pitch);
+        std::array::from_fn(|k| self.forward[k] + x * self.right[k] + y * self.up[k])
     }
 
     /// The ray's closest approach to the axis, in the plane ⊥ the axis: the point Q
@@ -339,10 +360,28 @@ impl Setup {
                 MAX_MISALIGNMENT_DEG,
             ),
             (
+                "camera_yaw_deg",
+                self.camera_yaw_deg,
+                -MAX_MISALIGNMENT_DEG,
+                MAX_MISALIGNMENT_DEG,
+            ),
+            (
+                "camera_roll_deg",
+                self.camera_roll_deg,
+                -MAX_MISALIGNMENT_DEG,
+                MAX_MISALIGNMENT_DEG,
+            ),
+            (
                 "white_reflectance",
                 self.white_reflectance.unwrap_or(1.0),
                 f64::MIN_POSITIVE,
                 2.0,
+            ),
+            (
+                "white_falloff",
+                self.white_falloff.unwrap_or(DEFAULT_FALLOFF),
+                -MAX_FALLOFF,
+                MAX_FALLOFF,
             ),
         ];
         for (field, value, min, max) in ranged {
@@ -353,6 +392,16 @@ impl Setup {
                     min,
                     max,
                 });
+            }
+        }
+        if let Some(table) = &self.white_angular {
+            table.validate()?;
+            if self.white_falloff.is_some() {
+                return Err(WhiteAngularError {
+                    field: "white_falloff",
+                    reason: "give either a falloff or a `white_angular` table, not both".into(),
+                }
+                .into());
             }
         }
         if let Some((key, value)) = self.uncertainty.invalid() {
@@ -400,18 +449,58 @@ impl Setup {
         self.white_reflectance.unwrap_or(1.0)
     }
 
+    /// The white's angular dependence: setup.json's table, else its falloff (default
+    /// [`DEFAULT_FALLOFF`]) with the `uncertainty` block's `white_falloff` (or its default).
+    pub fn white_angular(&self) -> WhiteAngular<'_> {
+        match &self.white_angular {
+            Some(table) => WhiteAngular::Table(table),
+            None => WhiteAngular::Falloff {
+                a: self.white_falloff.unwrap_or(DEFAULT_FALLOFF),
+                u: self
+                    .uncertainty
+                    .white_falloff
+                    .unwrap_or(Source::WhiteFalloff.default_uncertainty()),
+            },
+        }
+    }
+
+    /// Every source's standard uncertainty ([`SetupUncertainty::inputs`]), the white's
+    /// falloff taken from a certificate's table where setup.json gives one (its
+    /// uncertainty at grazing, stated).
+    pub fn inputs(&self) -> [Input; Source::COUNT] {
+        let mut inputs = self.uncertainty.inputs();
+        if self.white_angular.is_some() {
+            for input in inputs
+                .iter_mut()
+                .filter(|i| i.source == Source::WhiteFalloff)
+            {
+                input.u = [self.white_angular().grazing_uncertainty(); 3];
+                input.given = true;
+            }
+        }
+        inputs
+    }
+
     /// The frame of this setup (see the module documentation).
     pub(crate) fn frame(&self) -> SetupFrame {
         let tilt = self.cylinder_tilt_deg.to_radians();
         let axis = [0.0, tilt.sin(), tilt.cos()];
         let ex = [1.0, 0.0, 0.0];
+        let (sin_y, cos_y) = self.camera_yaw_deg.to_radians().sin_cos();
+        let (sin_r, cos_r) = self.camera_roll_deg.to_radians().sin_cos();
+        // Yawed: optical axis (−cos ψ, −sin ψ, 0), right (−sin ψ, cos ψ, 0), up +z; the
+        // roll then turns right and up about the optical axis.
+        let (right, up) = ([-sin_y, cos_y, 0.0], [0.0, 0.0, 1.0]);
+        let f = self.focal_length_mm;
         SetupFrame {
             camera: [self.camera_distance_mm, self.camera_offset_mm, 0.0],
             axis,
             ex,
             ey: cross(axis, ex),
             radius: self.cylinder_radius_mm,
-            focal: self.focal_length_mm,
+            forward: [-f * cos_y, -f * sin_y, 0.0],
+            right: std::array::from_fn(|k| cos_r * right[k] + sin_r * up[k]),
+            up: std::array::from_fn(|k| cos_r * up[k] - sin_r * right[k]),
             pitch: self.pixel_pitch_um * 1e-3,
             cx: self.principal_point(),
             cy: self.principal_row(),

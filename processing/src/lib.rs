@@ -15,6 +15,7 @@ pub mod metrics;
 pub mod multi_angle;
 pub mod samples;
 pub mod setup_uncertainty;
+pub mod white_angular;
 
 pub mod calibrate;
 pub mod capture;

@@ -251,13 +251,23 @@ pub fn read_csv_from<R: Read>(reader: R) -> Result<Vec<Sample>, SamplesError> {
         }
     };
     let names = uncertainty_columns();
-    let uncertainty_index: Vec<usize> = names
+    let found: Vec<Option<usize>> = names
         .iter()
-        .filter_map(|name| header.iter().position(|h| h == name))
+        .map(|name| header.iter().position(|h| h == name))
         .collect();
-    let uncertainty_index = match uncertainty_index.len() {
-        0 => None,
-        n if n == names.len() => Some(uncertainty_index),
+    // The columns of [`Source::LATER`] may be absent (no change).
+    let optional: Vec<String> = Source::LATER
+        .iter()
+        .flat_map(|s| ["r", "g", "b"].map(|c| format!("u_{}_{c}", s.name())))
+        .collect();
+    let required_missing = names
+        .iter()
+        .zip(&found)
+        .filter(|(name, i)| i.is_none() && !optional.contains(name))
+        .count();
+    let uncertainty_index = match (found.iter().flatten().count(), required_missing) {
+        (0, _) => None,
+        (_, 0) => Some(found),
         _ => {
             return Err(SamplesError::Header {
                 expected: format!("all or none of {}", names.join(",")),
@@ -322,7 +332,10 @@ pub fn read_csv_from<R: Read>(reader: R) -> Result<Vec<Sample>, SamplesError> {
             None => None,
             Some(index) => {
                 let mut u = [[0.0; 3]; 1 + Source::COUNT];
-                for (k, &i) in index.iter().enumerate() {
+                for (k, i) in index.iter().enumerate() {
+                    let Some(&i) = i.as_ref() else {
+                        continue;
+                    };
                     let text = record.get(i).unwrap_or("");
                     // A dropped channel has no uncertainty; a kept one needs its value.
                     if dropped[k % 3] && text.is_empty() {

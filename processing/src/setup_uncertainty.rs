@@ -5,7 +5,8 @@
 //! of the white reference's reflectance as a fraction of it (per channel R, G, B, or one
 //! value for all three), of the geometry in its setup.json unit, and of the arm's angle at
 //! each θL (its repeatability: independent from one θL to the next, where an arm zero
-//! error is common to all of them). A value absent from setup.json takes its
+//! error is common to all of them); of the white's falloff toward grazing (relative, see
+//! `processing/src/white_angular.rs`). A value absent from setup.json takes its
 //! [`Source::default_uncertainty`], and the output says it is a default.
 
 use serde::{Deserialize, Serialize};
@@ -28,11 +29,19 @@ pub enum Source {
     ArmZero,
     /// The arm's angle at each θL (repeatability): one error per θL, independent.
     ArmAngle,
+    /// `camera_yaw_deg`.
+    CameraYaw,
+    /// `camera_roll_deg`.
+    CameraRoll,
+    /// The white reference's reflectance factor against the angle of incidence: the
+    /// falloff toward grazing, or a certificate's table (its `u` column, one error for
+    /// every angle).
+    WhiteFalloff,
 }
 
 impl Source {
     /// Every source, in the order of the samples CSV columns and of the budget.
-    pub const ALL: [Source; 7] = [
+    pub const ALL: [Source; 10] = [
         Source::WhiteReflectance,
         Source::CameraOffset,
         Source::CameraDistance,
@@ -40,7 +49,15 @@ impl Source {
         Source::CylinderTilt,
         Source::ArmZero,
         Source::ArmAngle,
+        Source::CameraYaw,
+        Source::CameraRoll,
+        Source::WhiteFalloff,
     ];
+
+    /// The sources added after the first seven: a samples CSV may lack their columns
+    /// (written by an earlier extraction; read as no change), and the Monte Carlo draws
+    /// them from a stream of their own (the others' draws are as they were).
+    pub const LATER: [Source; 3] = [Source::CameraYaw, Source::CameraRoll, Source::WhiteFalloff];
 
     /// Number of sources.
     pub const COUNT: usize = Self::ALL.len();
@@ -55,6 +72,9 @@ impl Source {
             Source::CylinderTilt => "cylinder_tilt_deg",
             Source::ArmZero => "arm_zero_offset_deg",
             Source::ArmAngle => "arm_angle_deg",
+            Source::CameraYaw => "camera_yaw_deg",
+            Source::CameraRoll => "camera_roll_deg",
+            Source::WhiteFalloff => "white_falloff",
         }
     }
 
@@ -68,22 +88,34 @@ impl Source {
             Source::CylinderTilt => "cylinder_tilt",
             Source::ArmZero => "arm_zero",
             Source::ArmAngle => "arm_angle",
+            Source::CameraYaw => "camera_yaw",
+            Source::CameraRoll => "camera_roll",
+            Source::WhiteFalloff => "white_falloff",
         }
     }
 
     /// The unit of its standard uncertainty.
     pub fn unit(self) -> &'static str {
         match self {
-            Source::WhiteReflectance => "relative",
+            Source::WhiteReflectance | Source::WhiteFalloff => "relative",
             Source::CameraOffset | Source::CameraDistance | Source::LightDistance => "mm",
-            Source::CylinderTilt | Source::ArmZero | Source::ArmAngle => "°",
+            Source::CylinderTilt
+            | Source::ArmZero
+            | Source::ArmAngle
+            | Source::CameraYaw
+            | Source::CameraRoll => "°",
         }
     }
 
     /// The standard uncertainty taken when setup.json gives none: a certified diffuse
     /// reflectance standard's ±1 % (k = 2); a setup measured with a ruler and a square
     /// (0.5 mm sideways, 1 mm along the optical axis, 2 mm to the lamp, 0.1° of tilt and of
-    /// arm zero); a stepper arm's repeatability of 0.01°.
+    /// arm zero); a stepper arm's repeatability of 0.01°; a camera aimed so that the
+    /// cylinder's limbs sit symmetric about the image's centre column to about two pixels
+    /// (0.01° of yaw at 85 mm and 6.1 µm: beyond that the live view shows it) and levelled
+    /// with a bubble level (0.1° of roll, as the tilt); a white's falloff toward grazing
+    /// known to 1.5 % (the default falloff, [`crate::white_angular::DEFAULT_FALLOFF`],
+    /// 1 u from a Lambertian white and 1 u from one 3 % darker at grazing).
     pub fn default_uncertainty(self) -> f64 {
         match self {
             Source::WhiteReflectance => 0.005,
@@ -93,6 +125,9 @@ impl Source {
             Source::CylinderTilt => 0.1,
             Source::ArmZero => 0.1,
             Source::ArmAngle => 0.01,
+            Source::CameraYaw => 0.01,
+            Source::CameraRoll => 0.1,
+            Source::WhiteFalloff => crate::white_angular::DEFAULT_FALLOFF_UNCERTAINTY,
         }
     }
 }
@@ -134,6 +169,14 @@ pub struct SetupUncertainty {
     pub arm_zero_offset_deg: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub arm_angle_deg: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub camera_yaw_deg: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub camera_roll_deg: Option<f64>,
+    /// The standard uncertainty of the default falloff (a certificate's table in
+    /// setup.json's `white_angular` carries its own).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub white_falloff: Option<f64>,
 }
 
 /// Largest standard uncertainty accepted, in each source's unit (a relative white
@@ -203,6 +246,9 @@ impl SetupUncertainty {
             Source::CylinderTilt => self.cylinder_tilt_deg.map(|u| [u; 3]),
             Source::ArmZero => self.arm_zero_offset_deg.map(|u| [u; 3]),
             Source::ArmAngle => self.arm_angle_deg.map(|u| [u; 3]),
+            Source::CameraYaw => self.camera_yaw_deg.map(|u| [u; 3]),
+            Source::CameraRoll => self.camera_roll_deg.map(|u| [u; 3]),
+            Source::WhiteFalloff => self.white_falloff.map(|u| [u; 3]),
         }
     }
 
@@ -268,5 +314,7 @@ mod tests {
             serde_json::from_str(r#"{"light_distance_mm":1e300}"#).unwrap();
         assert_eq!(block.invalid(), Some(("light_distance_mm", 1e300)));
         assert!(serde_json::from_str::<SetupUncertainty>(r#"{"yaw":1}"#).is_err());
+        let block: SetupUncertainty = serde_json::from_str(r#"{"camera_yaw_deg":-0.01}"#).unwrap();
+        assert_eq!(block.invalid(), Some(("camera_yaw_deg", -0.01)));
     }
 }

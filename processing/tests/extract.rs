@@ -8,6 +8,7 @@ use gonio_processing::color::CameraModel;
 use gonio_processing::extract::{self, ExtractError, ExtractOptions, WhiteSource};
 use gonio_processing::geometry::Setup;
 use gonio_processing::samples::{self, Sample};
+use gonio_processing::white_angular::WhiteTable;
 
 const W: u32 = 64;
 const H: u32 = 48;
@@ -32,6 +33,11 @@ fn setup() -> Setup {
         camera_offset_mm: 0.0,
         cylinder_tilt_deg: 0.0,
         arm_zero_offset_deg: 0.0,
+        camera_yaw_deg: 0.0,
+        camera_roll_deg: 0.0,
+        // The synthetic white is Lambertian, and the setup says so.
+        white_falloff: Some(0.0),
+        white_angular: None,
         uncertainty: Default::default(),
     }
 }
@@ -46,6 +52,11 @@ struct Scene {
     kd: [f64; 3],
     /// setup.json's `white_reflectance`.
     recorded_white: Option<f64>,
+    /// The white's falloff toward grazing as rendered: its radiance × (1 − a·(1 − cos θi)).
+    white_falloff: f64,
+    /// setup.json's `white_falloff` and `white_angular`.
+    stated_falloff: Option<f64>,
+    stated_table: Option<WhiteTable>,
 }
 
 impl Default for Scene {
@@ -56,6 +67,9 @@ impl Default for Scene {
             sample_scale: 1.0,
             kd: KD,
             recorded_white: None,
+            white_falloff: 0.0,
+            stated_falloff: Some(0.0),
+            stated_table: None,
         }
     }
 }
@@ -64,6 +78,8 @@ impl Default for Scene {
 fn write_scan(dir: &Path, theta_ls: &[f64], scene: &Scene) {
     let setup = Setup {
         white_reflectance: scene.recorded_white,
+        white_falloff: scene.stated_falloff,
+        white_angular: scene.stated_table.clone(),
         ..setup()
     };
     fs::write(
@@ -81,14 +97,15 @@ fn write_scan(dir: &Path, theta_ls: &[f64], scene: &Scene) {
             for y in 0..H {
                 for x in 0..W {
                     // Irradiance cos θi/d² of the pixel's point, relative to 1 m.
-                    let irradiance = setup
-                        .pixel_geometry(f64::from(x), f64::from(y), theta_l)
-                        .map_or(0.0, |g| g.irradiance * 1e6);
+                    let g = setup.pixel_geometry(f64::from(x), f64::from(y), theta_l);
+                    let irradiance = g.map_or(0.0, |g| g.irradiance * 1e6);
+                    let cos_i = g.map_or(1.0, |g| g.cosines.n_dot_l.clamp(0.0, 1.0));
+                    let white_factor = 1.0 - scene.white_falloff * (1.0 - cos_i);
                     for (c, w) in white_rgb.iter().enumerate() {
                         // The white's radiance is ρ·PRD; the sample's is β/W_c times the PRD.
                         let prd = scene.white_level[c] * irradiance;
                         let radiance = if (24..44).contains(&y) {
-                            prd * scene.white_reflectance
+                            prd * scene.white_reflectance * white_factor
                         } else {
                             prd * scene.kd[c] / w * scene.sample_scale
                         };
@@ -487,4 +504,52 @@ fn a_channel_below_the_noise_floor_is_dropped_not_written_as_zero() {
         samples::read_csv_from(text.as_bytes()).unwrap(),
         extraction.samples
     );
+}
+
+#[test]
+fn the_white_falloff_or_table_setup_json_states_is_divided_out() {
+    // A white 4 % darker at grazing: β comes out as the sample's kd when setup.json
+    // states that falloff or a certificate's table of it, and low toward grazing when it
+    // states a Lambertian white.
+    let falloff = 0.04;
+    let theta: Vec<f64> = (0..=9).map(|k| 10.0 * f64::from(k)).collect();
+    let table = WhiteTable {
+        factor: theta
+            .iter()
+            .map(|t: &f64| 1.0 - falloff * (1.0 - t.to_radians().cos()))
+            .collect(),
+        u: vec![0.01; theta.len()],
+        theta_i_deg: theta,
+    };
+    for (stated_falloff, stated_table, holds) in [
+        (Some(falloff), None, true),
+        (None, Some(table), true),
+        (Some(0.0), None, false),
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        let scene = Scene {
+            white_falloff: falloff,
+            stated_falloff,
+            stated_table,
+            ..Scene::default()
+        };
+        write_scan(dir.path(), &[-30.0], &scene);
+        let extraction = extract::extract_scan(dir.path(), &ExtractOptions::default()).unwrap();
+        assert!(extraction.samples.len() > 25);
+        let worst = extraction
+            .samples
+            .iter()
+            .flat_map(|s| (0..3).map(move |c| (s.rgb[c] - KD[c]).abs() / KD[c]))
+            .fold(0.0f64, f64::max);
+        if holds {
+            // Linear interpolation of the table between 10° rows: within 0.1 %.
+            for s in &extraction.samples {
+                assert_beta_is_kd(s);
+            }
+            let u = extraction.samples[0].uncertainty.unwrap().sources;
+            assert!(u.iter().all(|c| c.iter().all(|v| v.is_finite())));
+        } else {
+            assert!(worst > 0.015, "a Lambertian white stated: worst {worst}");
+        }
+    }
 }

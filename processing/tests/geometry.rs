@@ -17,6 +17,10 @@ fn setup(radius: f64, camera: f64, light: f64, focal: f64, width: u32) -> Setup 
         camera_offset_mm: 0.0,
         cylinder_tilt_deg: 0.0,
         arm_zero_offset_deg: 0.0,
+        camera_yaw_deg: 0.0,
+        camera_roll_deg: 0.0,
+        white_falloff: None,
+        white_angular: None,
         uncertainty: Default::default(),
     }
 }
@@ -277,4 +281,113 @@ fn arm_zero_offset_is_a_light_angle_and_tilt_rotates_the_image() {
             "{a:?} vs {b:?}"
         );
     }
+}
+
+#[test]
+fn camera_yaw_and_roll_turn_the_rays_about_the_camera_centre() {
+    // Turning the camera leaves its centre where it is: a turned camera's pixel sees the
+    // ray that the unturned camera sees at the pixel turned back. Yaw ψ (counter-clockwise
+    // seen from above) turns a ray's bearing by ψ, so on the principal row pixel x sees
+    // what the unturned one sees at x' = f·tan(atan(x/f) − ψ); roll ρ (the image's right
+    // toward its up) puts image vector (x, y↑) at (x cos ρ − y sin ρ, x sin ρ + y cos ρ)
+    // of the unrolled image.
+    let nominal = Setup {
+        camera_offset_mm: 1.0,
+        ..d200()
+    };
+    let pitch = nominal.pixel_pitch_um * 1e-3;
+    let f = nominal.focal_length_mm;
+    let (cx, cy) = (nominal.principal_point(), nominal.principal_row());
+    let yaw = 0.7f64;
+    let yawed = Setup {
+        camera_yaw_deg: yaw,
+        ..nominal.clone()
+    };
+    let roll = -1.3f64;
+    let rolled = Setup {
+        camera_roll_deg: roll,
+        ..nominal.clone()
+    };
+    let (sin_r, cos_r) = roll.to_radians().sin_cos();
+    let mut compared = 0;
+    for u in (0..3872).step_by(97).map(f64::from) {
+        let x = (u - cx) * pitch;
+        let turned = f * ((x / f).atan() - yaw.to_radians()).tan();
+        let seen = yawed.pixel_geometry(u, cy, -30.0);
+        let expected = nominal.pixel_geometry(cx + turned / pitch, cy, -30.0);
+        for (v, y) in [(cy - 300.0, 300.0 * pitch), (cy + 150.0, -150.0 * pitch)] {
+            let (xr, yr) = (x * cos_r - y * sin_r, x * sin_r + y * cos_r);
+            let rolled_seen = rolled.pixel_geometry(u, v, -30.0);
+            let rolled_expected = nominal.pixel_geometry(cx + xr / pitch, cy - yr / pitch, -30.0);
+            assert_eq!(
+                rolled_seen.is_some(),
+                rolled_expected.is_some(),
+                "roll at {u}"
+            );
+            if let (Some(a), Some(b)) = (rolled_seen, rolled_expected) {
+                assert!((a.phi - b.phi).abs() < 1e-9 && (a.height_mm - b.height_mm).abs() < 1e-9);
+                compared += 1;
+            }
+        }
+        assert_eq!(seen.is_some(), expected.is_some(), "yaw at {u}");
+        if let (Some(a), Some(b)) = (seen, expected) {
+            assert!((a.phi - b.phi).abs() < 1e-9, "{a:?} {b:?}");
+            assert!((a.theta_i - b.theta_i).abs() < 1e-9);
+            assert!((a.cosines.n_dot_h - b.cosines.n_dot_h).abs() < 1e-12);
+            compared += 1;
+        }
+    }
+    assert!(compared > 40, "{compared} pixels compared");
+    // A positive yaw moves the cylinder toward the image's right: the column seeing the
+    // front of the cylinder (φ = 0) lies right of where the unturned camera sees it.
+    let front = |s: &Setup| {
+        (0..3872)
+            .map(f64::from)
+            .filter_map(|u| Some((u, s.pixel_geometry(u, cy, -30.0)?.phi.abs())))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .unwrap()
+            .0
+    };
+    assert!(front(&yawed) > front(&nominal) + 100.0);
+    for (field, bad) in [("camera_yaw_deg", 31.0), ("camera_roll_deg", f64::NAN)] {
+        let mut s = nominal.clone();
+        if field == "camera_yaw_deg" {
+            s.camera_yaw_deg = bad;
+        } else {
+            s.camera_roll_deg = bad;
+        }
+        let err = s.validate().unwrap_err();
+        assert!(err.to_string().contains(field), "{err}");
+    }
+}
+
+#[test]
+fn bad_white_angular_dependence_is_named() {
+    let mut s = d200();
+    s.white_falloff = Some(0.7);
+    assert!(s
+        .validate()
+        .unwrap_err()
+        .to_string()
+        .contains("white_falloff"));
+    let json = r#"{"theta_i_deg":[0,60],"factor":[1,0.97],"u":[0,0.01]}"#;
+    s.white_falloff = None;
+    s.white_angular = Some(serde_json::from_str(json).unwrap());
+    assert!(s.validate().is_ok());
+    assert_eq!(s.white_angular().at(0.5), (0.97, 0.01));
+    s.white_falloff = Some(0.01);
+    assert!(s
+        .validate()
+        .unwrap_err()
+        .to_string()
+        .contains("white_falloff"));
+    s.white_falloff = None;
+    s.white_angular = Some(
+        serde_json::from_str(r#"{"theta_i_deg":[0,60],"factor":[1,-1],"u":[0,0.01]}"#).unwrap(),
+    );
+    assert!(s
+        .validate()
+        .unwrap_err()
+        .to_string()
+        .contains("white_angular.factor"));
 }

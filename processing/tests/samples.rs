@@ -151,3 +151,38 @@ fn empty_beta_fields_are_dropped_values_and_empty_angles_are_errors() {
     let message = read_csv_from(bad.as_bytes()).unwrap_err().to_string();
     assert!(message.contains("theta_i"), "{message}");
 }
+
+#[test]
+fn uncertainty_columns_of_an_earlier_extraction_read_with_no_change_for_later_sources() {
+    // An earlier extraction wrote the noise and seven sources; the camera's yaw and roll
+    // and the white's falloff came later and read as no change. A file lacking an
+    // earlier column is refused.
+    let earlier = [
+        "noise",
+        "white_reflectance",
+        "camera_offset",
+        "camera_distance",
+        "light_distance",
+        "cylinder_tilt",
+        "arm_zero",
+        "arm_angle",
+    ];
+    let columns: Vec<String> = earlier
+        .iter()
+        .flat_map(|n| ["r", "g", "b"].map(|c| format!("u_{n}_{c}")))
+        .collect();
+    let values: Vec<String> = (1..=columns.len()).map(|k| format!("{k}")).collect();
+    let text = format!(
+        "theta_l,theta_i,theta_r,r,g,b,{}\n-20,-25,5,1,2,3,{}\n",
+        columns.join(","),
+        values.join(",")
+    );
+    let read = read_csv_from(text.as_bytes()).unwrap();
+    let u = read[0].uncertainty.unwrap();
+    assert_eq!(u.noise, [1.0, 2.0, 3.0]);
+    assert_eq!(u.sources[6], [22.0, 23.0, 24.0]);
+    assert!(u.sources[7..].iter().all(|s| *s == [0.0; 3]));
+    let without_tilt = text.replace("u_cylinder_tilt_g", "u_tilt_g");
+    let err = read_csv_from(without_tilt.as_bytes()).unwrap_err();
+    assert!(err.to_string().contains("u_cylinder_tilt_g"), "{err}");
+}

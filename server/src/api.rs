@@ -398,7 +398,7 @@ async fn confirm_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult
 /// Calibrates the setup from a scan that is no longer running and stores it as the
 /// setup of later scans (see `calibration`).
 #[utoipa::path(post, path = "/api/scans/{id}/calibrate",
-    summary = "Calibrate the setup from this ended scan's captures (strip rows, camera offset, cylinder tilt, arm zero offset, with standard uncertainties and residuals) and use it as the setup of later scans",
+    summary = "Calibrate the setup from this ended scan's captures (strip rows, camera offset, cylinder tilt, arm zero offset, camera yaw and roll, with standard uncertainties and residuals) and use it as the setup of later scans",
     params(("id" = i64, Path, description = "The scan's id")),
     responses(
         (status = 200, description = "The stored setup (setup.json fields) with its `calibration` and `provenance` (where each field came from: `calibrated from scan N`, or as the calibrated scan's setup.json said: `emulated scene`, `configuration [setup]`, an earlier calibration; for the `uncertainty` block an object naming each key's source); later scans' setup.json keep both", body = Object),

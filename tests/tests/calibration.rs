@@ -27,6 +27,7 @@ struct Misalignment {
     camera_offset_mm: f64,
     cylinder_tilt_deg: f64,
     arm_zero_offset_deg: f64,
+    camera_roll_deg: f64,
 }
 
 /// What one misaligned scan gave: the calibration block and the CT fits with the
@@ -64,8 +65,8 @@ fn run(name: &str, m: Misalignment) -> Outcome {
     std::fs::write(
         &scene,
         format!(
-            "{GOLD}\n[effects.misalignment]\ncamera_offset_mm = {}\ncylinder_tilt_deg = {}\narm_zero_offset_deg = {}\n{PRIOR_UNCERTAINTY}",
-            m.camera_offset_mm, m.cylinder_tilt_deg, m.arm_zero_offset_deg
+            "{GOLD}\n[effects.misalignment]\ncamera_offset_mm = {}\ncylinder_tilt_deg = {}\narm_zero_offset_deg = {}\ncamera_roll_deg = {}\n{PRIOR_UNCERTAINTY}",
+            m.camera_offset_mm, m.cylinder_tilt_deg, m.arm_zero_offset_deg, m.camera_roll_deg
         ),
     )
     .unwrap();
@@ -91,6 +92,7 @@ fn run(name: &str, m: Misalignment) -> Outcome {
         camera_offset_mm: m.camera_offset_mm,
         cylinder_tilt_deg: m.cylinder_tilt_deg,
         arm_zero_offset_deg: m.arm_zero_offset_deg,
+        camera_roll_deg: m.camera_roll_deg,
         ..nominal.clone()
     };
     let true_path = dir.join("true-setup.json");
@@ -131,6 +133,8 @@ fn assert_uncertainty_block(written: &Value) {
             "cylinder_tilt_deg": stderr("cylinder_tilt_deg"),
             "arm_zero_offset_deg": stderr("arm_zero_offset_deg"),
             "arm_angle_deg": 0.003,
+            "camera_yaw_deg": stderr("camera_yaw_deg"),
+            "camera_roll_deg": stderr("camera_roll_deg"),
         })
     );
     // The estimates' own, not the prior's.
@@ -226,6 +230,7 @@ fn every_misalignment_together_is_recovered() {
             camera_offset_mm: 3.0,
             cylinder_tilt_deg: 0.5,
             arm_zero_offset_deg: 0.3,
+            camera_roll_deg: 0.0,
         },
     );
     // One limb lit (θL < 0 everywhere): the distance stays the prior's, and says so.
@@ -247,6 +252,7 @@ fn nominal_error_alone(
         camera_offset_mm,
         cylinder_tilt_deg,
         arm_zero_offset_deg,
+        camera_roll_deg: 0.0,
     };
     let o = recovered(name, m);
     largest_error(&o.nominal, &o.truth)
@@ -270,4 +276,40 @@ fn an_arm_zero_offset_alone_is_recovered() {
     // An arm 0.3° off lifts the fitted Ks by about 3 %.
     let error = nominal_error_alone("arm", 0.0, 0.0, 0.3);
     assert!(error > 0.015, "nominal setup off by {error}");
+}
+
+#[test]
+fn a_rolled_camera_is_estimated_as_far_as_the_target_tells_it_from_a_tilt() {
+    // A roll slants the picture as a tilt of the cylinder does; only the light's and the
+    // camera's finite distances tell them apart, which this target barely sees. With the
+    // default prior (0 ± 0.1°), a roll of 0.1° and the tilt each come out within 4 of
+    // their standard uncertainties, the roll's no larger than its prior's; the camera's
+    // yaw, 0 ± 0.01°, stays within its own.
+    let o = run(
+        "roll",
+        Misalignment {
+            camera_offset_mm: 0.0,
+            cylinder_tilt_deg: 0.0,
+            arm_zero_offset_deg: 0.0,
+            camera_roll_deg: 0.1,
+        },
+    );
+    let c = &o.calibration;
+    let estimate = |key: &str| {
+        (
+            c[key]["value"].as_f64().unwrap(),
+            c[key]["stderr"].as_f64().unwrap(),
+        )
+    };
+    let (roll, roll_u) = estimate("camera_roll_deg");
+    let (tilt, tilt_u) = estimate("cylinder_tilt_deg");
+    let (yaw, yaw_u) = estimate("camera_yaw_deg");
+    println!("roll {roll} ± {roll_u}, tilt {tilt} ± {tilt_u}, yaw {yaw} ± {yaw_u}");
+    assert!(roll_u > 0.0 && roll_u <= 0.1 + 1e-9, "roll ± {roll_u}");
+    assert!((roll - 0.1).abs() <= 4.0 * roll_u, "roll {roll} ± {roll_u}");
+    assert!(tilt.abs() <= 4.0 * tilt_u, "tilt {tilt} ± {tilt_u}");
+    assert!(
+        yaw.abs() <= 4.0 * yaw_u && yaw_u <= 0.01 + 1e-9,
+        "yaw {yaw} ± {yaw_u}"
+    );
 }

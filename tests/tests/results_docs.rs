@@ -74,6 +74,7 @@ fn copy_inputs(from: &Path, to: &Path) {
     for output in [
         "docs/results/uncertainty/coverage.json",
         "docs/results/uncertainty/coverage-defaults.json",
+        "docs/results/uncertainty/coverage-lab.json",
         "docs/results/verdicts/verdicts.json",
         "docs/results/verdicts/command.txt",
         "docs/results/colour-validation/figures.json",

@@ -85,6 +85,12 @@ fn print_summary(c: &Calibration, prior: &gonio_processing::geometry::Setup, out
             "°"
         )
     );
+    for (name, estimate, value) in [
+        ("camera yaw", c.camera_yaw_deg, prior.camera_yaw_deg),
+        ("camera roll", c.camera_roll_deg, prior.camera_roll_deg),
+    ] {
+        println!("  {}", show(name, estimate, value, "°"));
+    }
     println!(
         "  strip rows: sample {:.1} ± {:.1}, white {:.1} ± {:.1}",
         c.sample_row.value, c.sample_row.stderr, c.white_row.value, c.white_row.stderr

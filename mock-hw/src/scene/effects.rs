@@ -64,6 +64,10 @@ pub struct Misalignment {
     /// from above (its optical axis from −x toward −y: the cylinder moves toward the
     /// image's right), degrees.
     pub camera_yaw_deg: f64,
+    /// The camera turned about its optical axis after the yaw, the image's right toward
+    /// its up (counter-clockwise seen from behind the camera: the scene turns clockwise
+    /// in the image), degrees.
+    pub camera_roll_deg: f64,
     /// The cylinder's axis turned about the world x axis, its top toward +y (leaning
     /// right in the image), degrees; the arm still turns about the vertical.
     pub cylinder_tilt_deg: f64,
@@ -74,6 +78,11 @@ pub struct Misalignment {
     /// The rendered white reference's reflectance is `white.reflectance` × (1 + this)
     /// (setup.json keeps stating the nominal one); relative.
     pub white_reflectance_error: f64,
+    /// The white's falloff toward grazing departs from the stated `[white] falloff` by
+    /// this: its reflectance renders × (1 − a·(1 − cos θi)), a the sum, θi the light's
+    /// angle of incidence on it (setup.json keeps stating the nominal one); relative,
+    /// within ±[`MAX_WHITE_FALLOFF`].
+    pub white_falloff: f64,
     /// The camera is this much farther from the axis than `setup.camera_distance_mm`, mm.
     pub camera_distance_error_mm: f64,
     /// The arm's repeatability: one error per θL of `[scan] theta_l_deg` (same length,
@@ -83,9 +92,12 @@ pub struct Misalignment {
     pub arm_angle_errors_deg: Vec<f64>,
 }
 
-/// Largest |yaw|, |tilt|, |arm zero offset| and |arm angle error| a scene may name,
+/// Largest |yaw|, |roll|, |tilt|, |arm zero offset| and |arm angle error| a scene may name,
 /// degrees.
 const MAX_MISALIGNMENT_DEG: f64 = 10.0;
+
+/// Largest |white falloff| a scene may name (the factor stays within [0.5, 1.5]).
+pub const MAX_WHITE_FALLOFF: f64 = 0.5;
 
 /// Largest rendered white reflectance a white reflectance error may give.
 const MAX_RENDERED_WHITE: f64 = 2.0;
@@ -115,6 +127,7 @@ impl Misalignment {
     ) -> Result<(), SceneError> {
         for (key, value) in [
             ("effects.misalignment.camera_yaw_deg", self.camera_yaw_deg),
+            ("effects.misalignment.camera_roll_deg", self.camera_roll_deg),
             (
                 "effects.misalignment.cylinder_tilt_deg",
                 self.cylinder_tilt_deg,
@@ -171,6 +184,15 @@ impl Misalignment {
                 format!(
                     "{} must exceed -1 and keep the rendered reflectance at most {MAX_RENDERED_WHITE}",
                     self.white_reflectance_error
+                ),
+            ));
+        }
+        if !(self.white_falloff.is_finite() && self.white_falloff.abs() <= MAX_WHITE_FALLOFF) {
+            return Err(invalid(
+                "effects.misalignment.white_falloff",
+                format!(
+                    "{} must be in [-{MAX_WHITE_FALLOFF}, {MAX_WHITE_FALLOFF}]",
+                    self.white_falloff
                 ),
             ));
         }

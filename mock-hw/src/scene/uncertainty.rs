@@ -39,6 +39,13 @@ pub struct SetupUncertainty {
     pub arm_zero_offset_deg: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub arm_angle_deg: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub camera_yaw_deg: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub camera_roll_deg: Option<f64>,
+    /// Of the white's falloff toward grazing (relative).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub white_falloff: Option<f64>,
 }
 
 impl SetupUncertainty {
@@ -58,6 +65,9 @@ impl SetupUncertainty {
             one("cylinder_tilt_deg", self.cylinder_tilt_deg),
             one("arm_zero_offset_deg", self.arm_zero_offset_deg),
             one("arm_angle_deg", self.arm_angle_deg),
+            one("camera_yaw_deg", self.camera_yaw_deg),
+            one("camera_roll_deg", self.camera_roll_deg),
+            one("white_falloff", self.white_falloff),
         ] {
             if let Some(u) = values
                 .iter()

@@ -24,6 +24,10 @@ pub fn d200_setup() -> Setup {
         camera_offset_mm: 0.0,
         cylinder_tilt_deg: 0.0,
         arm_zero_offset_deg: 0.0,
+        camera_yaw_deg: 0.0,
+        camera_roll_deg: 0.0,
+        white_falloff: None,
+        white_angular: None,
         uncertainty: Default::default(),
     }
 }

@@ -4,7 +4,9 @@
 //! Each observation gives a residual in units of its standard uncertainty:
 //! - a limb: the mean over rows of the measured minus the modelled limb column (the
 //!   column whose ray is tangent to the cylinder), in sensor pixels; its uncertainty is
-//!   the pixel quantisation, 1/√12 capture pixel, which rows do not average away;
+//!   the pixel quantisation, 1/√12 capture pixel, which rows do not average away; and
+//!   the slope of that difference over the rows (a camera roll or a cylinder tilt
+//!   slants the limb);
 //! - a terminator row: the white strip's brightness W(u) regressed on the model's
 //!   irradiance c(u) = n·(L − P)/|L − P|³ (signed, so it extends past the shadow line)
 //!   as W = a + b·c + e·c²; where the model is right, W vanishes where c does, a = 0.
@@ -18,6 +20,10 @@
 //!   symmetric in α peaks at x = 0. The factor (n·l)(n·v) undoes Cook–Torrance's
 //!   1/(cos θi cos θr), which finite distances make lopsided along a row, leaving D·G.
 //!   The residual is the parabola's vertex x₀ = −c₁/(2c₂) (≈ radians).
+//!
+//! - a prior: a parameter's distance from its stated value in its stated standard
+//!   uncertainty (the camera's yaw and roll, which the images tell apart from the
+//!   camera's offset and the cylinder's tilt only in part).
 //!
 //! Terminator and peak uncertainties come from their regressions' residuals, computed
 //! once at the starting geometry so that the objective stays smooth.
@@ -63,6 +69,17 @@ pub struct Observations {
     pub limbs: Vec<Limb>,
     pub terminators: Vec<TerminatorRow>,
     pub peaks: Vec<PeakRow>,
+    /// What is known of a parameter before the images: its stated value and standard
+    /// uncertainty, one residual each.
+    pub priors: Vec<Prior>,
+}
+
+/// A parameter's stated value and standard uncertainty (> 0).
+#[derive(Debug, Clone, Copy)]
+pub struct Prior {
+    pub parameter: Parameter,
+    pub value: f64,
+    pub sigma: f64,
 }
 
 /// Which setup fields are free, in parameter-vector order.
@@ -72,6 +89,8 @@ pub enum Parameter {
     CylinderTilt,
     ArmZeroOffset,
     CameraDistance,
+    CameraYaw,
+    CameraRoll,
 }
 
 impl Parameter {
@@ -81,6 +100,8 @@ impl Parameter {
             Parameter::CylinderTilt => s.cylinder_tilt_deg,
             Parameter::ArmZeroOffset => s.arm_zero_offset_deg,
             Parameter::CameraDistance => s.camera_distance_mm,
+            Parameter::CameraYaw => s.camera_yaw_deg,
+            Parameter::CameraRoll => s.camera_roll_deg,
         }
     }
 
@@ -90,6 +111,8 @@ impl Parameter {
             Parameter::CylinderTilt => s.cylinder_tilt_deg = value,
             Parameter::ArmZeroOffset => s.arm_zero_offset_deg = value,
             Parameter::CameraDistance => s.camera_distance_mm = value,
+            Parameter::CameraYaw => s.camera_yaw_deg = value,
+            Parameter::CameraRoll => s.camera_roll_deg = value,
         }
     }
 
@@ -97,7 +120,10 @@ impl Parameter {
     fn step(self) -> f64 {
         match self {
             Parameter::CameraOffset => 1e-3,
-            Parameter::CylinderTilt | Parameter::ArmZeroOffset => 1e-4,
+            Parameter::CylinderTilt
+            | Parameter::ArmZeroOffset
+            | Parameter::CameraYaw
+            | Parameter::CameraRoll => 1e-4,
             Parameter::CameraDistance => 1e-2,
         }
     }
@@ -240,13 +266,9 @@ fn residuals(setup: &Setup, obs: &Observations) -> Vec<f64> {
     const UNUSABLE: f64 = 1e3;
     let mut out = Vec::new();
     for limb in &obs.limbs {
-        let mean: f64 = limb
-            .points
-            .iter()
-            .map(|&(v, u)| u - limb_column(setup, v, limb.side))
-            .sum::<f64>()
-            / limb.points.len() as f64;
+        let (mean, slope) = limb_misfit(setup, limb);
         out.push(mean / limb.sigma);
+        out.push(slope.map_or(0.0, |(slope, sigma)| slope / sigma));
     }
     for row in &obs.terminators {
         out.push(terminator_offset(setup, row).map_or(UNUSABLE, |(r, _)| r / row.sigma));
@@ -254,7 +276,30 @@ fn residuals(setup: &Setup, obs: &Observations) -> Vec<f64> {
     for row in &obs.peaks {
         out.push(peak_vertex(setup, row).map_or(UNUSABLE, |(r, _)| r / row.sigma));
     }
+    for prior in &obs.priors {
+        out.push((prior.parameter.get(setup) - prior.value) / prior.sigma);
+    }
     out
+}
+
+/// A limb's measured minus modelled columns: their mean (pixels) and, over its rows,
+/// their least-squares slope (pixels per row) with its standard uncertainty (the
+/// limb's per-row uncertainty over √Σ(v − v̄)²; rows' quantisation errors independent,
+/// as they are along a limb that is not exactly vertical in the image); `None` for
+/// rows that do not spread.
+pub fn limb_misfit(setup: &Setup, limb: &Limb) -> (f64, Option<(f64, f64)>) {
+    let n = limb.points.len() as f64;
+    let misfit: Vec<(f64, f64)> = limb
+        .points
+        .iter()
+        .map(|&(v, u)| (v, u - limb_column(setup, v, limb.side)))
+        .collect();
+    let mean = misfit.iter().map(|p| p.1).sum::<f64>() / n;
+    let mean_v = misfit.iter().map(|p| p.0).sum::<f64>() / n;
+    let svv: f64 = misfit.iter().map(|p| (p.0 - mean_v).powi(2)).sum();
+    let svd: f64 = misfit.iter().map(|p| (p.0 - mean_v) * (p.1 - mean)).sum();
+    let slope = (svv > 0.0).then(|| (svd / svv, limb.sigma / svv.sqrt()));
+    (mean, slope)
 }
 
 /// Drops the terminator and peak rows whose residual at `setup` exceeds `limit`

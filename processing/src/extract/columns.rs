@@ -1,6 +1,8 @@
 //! One θL's samples from its merged strips: per column the strips' geometry and values
 //! (five-row means, or the centre row on a sharp peak), the drops, and per channel
-//! β_c = (L̄_sample,c / L̄_white,c) · (Ē_white / Ē_sample) · ρ_white · W_c.
+//! β_c = (L̄_sample,c / L̄_white,c) · (Ē_white / Ē_sample) · ρ_white · f_white(θi) · W_c,
+//! f_white the white's reflectance factor at its pixels' angle of incidence
+//! ([`crate::white_angular`]).
 
 use rayon::prelude::*;
 
@@ -45,6 +47,19 @@ impl Column {
     }
 }
 
+/// One θL's samples and what was made of its columns.
+pub(super) struct ThetaSamples {
+    pub(super) samples: Vec<Sample>,
+    /// The image column of each sample.
+    pub(super) columns: Vec<usize>,
+    pub(super) dropped: DropCounts,
+    /// Samples read from the centre row (sharp peaks).
+    pub(super) centre_rows: usize,
+    /// Per sample, the relative change of β for +1 standard uncertainty of the white's
+    /// angular dependence: u_f / f at the white's angle of incidence.
+    pub(super) white_angular: Vec<f64>,
+}
+
 pub(super) fn extract_theta(
     setup: &Setup,
     map: &HdrImage,
@@ -52,7 +67,7 @@ pub(super) fn extract_theta(
     theta_l: f64,
     options: &ExtractOptions,
     white_reflectance: f64,
-) -> (Vec<Sample>, Vec<usize>, DropCounts, usize) {
+) -> ThetaSamples {
     let columns: Vec<Column> = (0..map.width)
         .into_par_iter()
         .map(|x| {
@@ -119,8 +134,10 @@ pub(super) fn extract_theta(
     let white_rgb = options.camera.white_rgb();
     let limit = options.grazing_limit_deg;
 
+    let angular = setup.white_angular();
     let mut samples = Vec::new();
     let mut sample_columns = Vec::new();
+    let mut white_angular = Vec::new();
     let mut dropped = DropCounts::default();
     let mut centre_rows = 0;
     for (x, column) in columns.into_iter().enumerate() {
@@ -140,6 +157,9 @@ pub(super) fn extract_theta(
             ..Sample::default()
         };
         let mut noise = [0.0; 3];
+        // The factor stays within [0.5, 1.5] for a valid falloff and in (0, 2] for a
+        // valid table.
+        let (factor, factor_change) = angular.at(g.white_cos_i);
         for c in 0..3 {
             match DropReason::of(&sample, &white, c, threshold[c]) {
                 Some(reason) => {
@@ -150,6 +170,7 @@ pub(super) fn extract_theta(
                     point.rgb[c] = sample.rgb[c] / white.rgb[c]
                         * g.irradiance_ratio
                         * white_reflectance
+                        * factor
                         * white_rgb[c];
                     noise[c] = point.rgb[c] * relative_noise[c];
                 }
@@ -167,7 +188,18 @@ pub(super) fn extract_theta(
             }
             samples.push(point);
             sample_columns.push(x);
+            white_angular.push(if factor > 0.0 {
+                factor_change / factor
+            } else {
+                0.0
+            });
         }
     }
-    (samples, sample_columns, dropped, centre_rows)
+    ThetaSamples {
+        samples,
+        columns: sample_columns,
+        dropped,
+        centre_rows,
+        white_angular,
+    }
 }

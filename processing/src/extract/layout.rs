@@ -122,13 +122,16 @@ impl StripLayout {
 }
 
 /// The geometry of a column's sample (the mean of its strip pixels', or the centre
-/// pixel's), and the irradiance ratio Ē_white / E_sample of its two strips.
+/// pixel's), the irradiance ratio Ē_white / E_sample of its two strips and the white's
+/// angle of incidence.
 #[derive(Debug, Clone, Copy)]
 pub(super) struct ColumnGeometry {
     pub(super) theta_i: f64,
     pub(super) theta_r: f64,
     pub(super) cosines: Cosines,
     pub(super) irradiance_ratio: f64,
+    /// Mean cosine of the angle of incidence on the white strip's pixels.
+    pub(super) white_cos_i: f64,
 }
 
 impl ColumnGeometry {
@@ -146,6 +149,7 @@ impl ColumnGeometry {
                 v_dot_h: mean(&|g| g.cosines.v_dot_h, sample),
             },
             irradiance_ratio: mean(&|g| g.irradiance, white) / mean(&|g| g.irradiance, sample),
+            white_cos_i: mean(&|g| g.cosines.n_dot_l, white),
         }
     }
 }

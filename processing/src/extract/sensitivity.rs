@@ -1,10 +1,11 @@
 //! Each sample's sensitivity to the setup's uncertain inputs: the white reflectance
-//! scales β; a geometric source is moved by ± one standard uncertainty and the strips
-//! extracted again (slopes per radian of signed θh).
+//! scales β, its angular dependence scales it by u_f/f at the white's angle of incidence;
+//! a geometric source is moved by ± one standard uncertainty and the strips extracted
+//! again (slopes per radian of signed θh).
 
 use rayon::prelude::*;
 
-use super::columns::extract_theta;
+use super::columns::{extract_theta, ThetaSamples};
 use super::layout::StripLayout;
 use super::options::ExtractOptions;
 use crate::geometry::Setup;
@@ -19,17 +20,19 @@ pub(super) struct Strips<'a> {
     pub(super) theta_l: f64,
 }
 
-/// `setup` with `source` moved by `delta` (its unit); the white reflectance is not part
-/// of the geometry and is returned unchanged.
+/// `setup` with `source` moved by `delta` (its unit); the white is not part of the
+/// geometry and is returned unchanged.
 fn perturbed(setup: &Setup, source: Source, delta: f64) -> Setup {
     let mut s = setup.clone();
     match source {
-        Source::WhiteReflectance => {}
+        Source::WhiteReflectance | Source::WhiteFalloff => {}
         Source::CameraOffset => s.camera_offset_mm += delta,
         Source::CameraDistance => s.camera_distance_mm += delta,
         Source::LightDistance => s.light_distance_mm += delta,
         Source::CylinderTilt => s.cylinder_tilt_deg += delta,
         Source::ArmZero | Source::ArmAngle => s.arm_zero_offset_deg += delta,
+        Source::CameraYaw => s.camera_yaw_deg += delta,
+        Source::CameraRoll => s.camera_roll_deg += delta,
     }
     s
 }
@@ -85,20 +88,29 @@ pub(super) fn add_sensitivities(
     strips: &Strips,
     options: &ExtractOptions,
     white_reflectance: f64,
-    (samples, columns): (&mut [Sample], &[usize]),
+    (samples, columns, white_angular): (&mut [Sample], &[usize], &[f64]),
 ) {
-    let inputs = setup.uncertainty.inputs();
+    let inputs = setup.inputs();
     let half_angles: Vec<f64> = samples.iter().map(|s| s.half_difference().0).collect();
     let slope = slopes(samples, &half_angles);
     let stated: &[Sample] = samples;
     let changes: Vec<(usize, Vec<[f64; 3]>)> = inputs
         .par_iter()
         .enumerate()
-        .filter(|(_, input)| input.source != Source::WhiteReflectance && input.u[0] > 0.0)
+        .filter(|(_, input)| {
+            !matches!(
+                input.source,
+                Source::WhiteReflectance | Source::WhiteFalloff
+            ) && input.u[0] > 0.0
+        })
         .map(|(j, input)| {
             let [plus, minus] = [1.0, -1.0].map(|sign| {
                 let moved = perturbed(setup, input.source, sign * input.u[0]);
-                let (moved_samples, moved_columns, _, _) = extract_theta(
+                let ThetaSamples {
+                    samples: moved_samples,
+                    columns: moved_columns,
+                    ..
+                } = extract_theta(
                     &moved,
                     strips.map,
                     strips.layout,
@@ -133,6 +145,10 @@ pub(super) fn add_sensitivities(
         .collect();
     // Source::ALL begins with the white reference.
     let white = inputs[0].u;
+    let falloff = Source::ALL
+        .iter()
+        .position(|&s| s == Source::WhiteFalloff)
+        .unwrap_or(0);
     for (i, sample) in samples.iter_mut().enumerate() {
         let rgb = sample.rgb;
         let dropped = sample.dropped;
@@ -140,6 +156,7 @@ pub(super) fn add_sensitivities(
             .uncertainty
             .get_or_insert_with(SampleUncertainty::default);
         u.sources[0] = std::array::from_fn(|c| rgb[c] * white[c]);
+        u.sources[falloff] = rgb.map(|v| v * white_angular[i]);
         for (j, change) in &changes {
             u.sources[*j] = change[i];
         }

@@ -699,7 +699,19 @@ pub fn monte_carlo(
         .into_par_iter()
         .map(|d| {
             let mut normal = Normal::new(seed ^ (d as u64).wrapping_mul(0xd6e8_feb8_6659_fd93));
-            let z: Vec<f64> = (0..Source::COUNT).map(|_| normal.next()).collect();
+            // The sources added later draw from a stream of their own, so that adding
+            // them left every other draw as it was.
+            let mut later = Normal::new(!seed ^ (d as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15));
+            let z: Vec<f64> = Source::ALL
+                .iter()
+                .map(|s| {
+                    if Source::LATER.contains(s) {
+                        later.next()
+                    } else {
+                        normal.next()
+                    }
+                })
+                .collect();
             let z_angle: Vec<f64> = theta_l.iter().map(|_| normal.next()).collect();
             let moved: Vec<[f64; 3]> = samples
                 .iter()

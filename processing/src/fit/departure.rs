@@ -106,12 +106,24 @@ pub(crate) fn estimate(
     fresnel: bool,
     shared: bool,
 ) -> Result<Departure, FitError> {
-    // The columns: every source but the white's and the arm's angle, then the arm's angle
-    // per θL. The white's error scales every value: Kd and Ks take it up entirely, and its
-    // column, the measured values scaled, would only find their noise.
+    // The columns: every source but the white's, the camera's yaw and roll and the arm's
+    // angle, then the arm's angle per θL. The white's error scales every value: Kd and Ks
+    // take it up entirely, and its column, the measured values scaled, would only find
+    // their noise. The yaw moves the picture as the camera's offset does and the roll
+    // slants it as the cylinder's tilt does: the residuals cannot tell them from those,
+    // which take up their departures (as columns they only spread the others', and let a
+    // fluctuation of one θL's arm angle pass for a departure on an exact scan).
     let mut columns: Vec<(Source, Option<f64>)> = Source::ALL
         .iter()
-        .filter(|&&s| s != Source::ArmAngle && s != Source::WhiteReflectance)
+        .filter(|&&s| {
+            !matches!(
+                s,
+                Source::ArmAngle
+                    | Source::WhiteReflectance
+                    | Source::CameraYaw
+                    | Source::CameraRoll
+            )
+        })
         .map(|&s| (s, None))
         .collect();
     columns.extend(theta_l.iter().map(|&t| (Source::ArmAngle, Some(t))));

@@ -203,9 +203,15 @@ pub enum Mounting {
 }
 
 /// Sources whose error is the same for every scan whatever its mounting (a line's
-/// source is `<source>:<what it moved>`): the instrument's white and colour transform,
-/// and the model's misfit carried beyond the measured range, which alike samples share.
-const INSTRUMENT_SOURCES: [&str; 3] = ["white_reflectance", "transform", super::EXTRAPOLATION];
+/// source is `<source>:<what it moved>`): the instrument's white (its reflectance and
+/// its falloff towards grazing) and colour transform, and the model's misfit carried
+/// beyond the measured range, which alike samples share.
+const INSTRUMENT_SOURCES: [&str; 4] = [
+    "white_reflectance",
+    "white_falloff",
+    "transform",
+    super::EXTRAPOLATION,
+];
 
 /// Whether a shared line of `source` is shared by two scans of `mounting`.
 fn shared_between(source: &str, mounting: Mounting) -> bool {
