@@ -143,6 +143,17 @@ mod tests {
 
     /// The waits as planned with the queued scans' times kept in `times`, and planned
     /// afresh: the same.
+    /// Runs the steps `range` (journal order) of scan `id` to done.
+    fn run_steps(store: &mut Store, id: i64, range: std::ops::Range<usize>) {
+        for step in &store.steps(id).unwrap()[range] {
+            store.step_started(id, step.index).unwrap();
+            let done = &serde_json::Value::Null;
+            store
+                .step_done(id, step.index, done, &[], &now_rfc3339())
+                .unwrap();
+        }
+    }
+
     fn kept_and_fresh(store: &Store, times: &QueuedTimes) -> Vec<PlannedWait> {
         let timing = Timing::real();
         let now = OffsetDateTime::now_utc();
@@ -180,33 +191,12 @@ mod tests {
         store
             .transition(ids[0], &[ScanState::Queued], ScanState::Running, None)
             .unwrap();
-        for step in store.steps(ids[0]).unwrap().iter().take(3) {
-            store.step_started(ids[0], step.index).unwrap();
-            store
-                .step_done(
-                    ids[0],
-                    step.index,
-                    &serde_json::Value::Null,
-                    &[],
-                    &now_rfc3339(),
-                )
-                .unwrap();
-        }
+        run_steps(&mut store, ids[0], 0..3);
         kept_and_fresh(&store, &times);
         assert_eq!(times.len(), 2);
         // The first scan ends done: the others are estimated again with its journal.
-        for step in store.steps(ids[0]).unwrap().iter().skip(3) {
-            store.step_started(ids[0], step.index).unwrap();
-            store
-                .step_done(
-                    ids[0],
-                    step.index,
-                    &serde_json::Value::Null,
-                    &[],
-                    &now_rfc3339(),
-                )
-                .unwrap();
-        }
+        let all = store.steps(ids[0]).unwrap().len();
+        run_steps(&mut store, ids[0], 3..all);
         let after = kept_and_fresh(&store, &times);
         assert_eq!(after.len(), 2, "{after:?}");
         let _ = std::fs::remove_dir_all(&dir);

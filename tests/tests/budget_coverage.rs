@@ -382,6 +382,19 @@ fn expanded_intervals_hold_the_truth_of_scans_whose_setup_is_off() {
     }
 }
 
+/// A full run (400 scans, 200 per model) holds each parameter in 92–98 %, the target;
+/// a fast one (a few scans per model) holds the truth of most.
+fn holds_the_target(scans: usize, expanded: &Tally, pooled: f64) {
+    if scans >= 400 {
+        for (name, (hit, n)) in &expanded.0 {
+            let coverage = *hit as f64 / *n as f64;
+            assert!((0.92..=0.98).contains(&coverage), "{name}: {coverage}");
+        }
+    } else {
+        assert!(pooled >= 0.85, "pooled coverage {pooled}");
+    }
+}
+
 /// Scans of the CI run on the defaults (each a 6-θL scan binned 4×4: several seconds).
 const FAST_DEFAULT_SCANS: usize = 4;
 
@@ -393,16 +406,7 @@ fn expanded_intervals_hold_the_truth_on_the_default_uncertainties() {
         scans,
         std::env::var("GONIO_COVERAGE_DEFAULTS_OUT").ok(),
     );
-    // A full run (400 scans, 200 per model) holds each parameter in 92–98 %, the target;
-    // the fast one (2 scans per model) checks that the intervals hold the truth of most.
-    if scans >= 400 {
-        for (name, (hit, n)) in &expanded.0 {
-            let coverage = *hit as f64 / *n as f64;
-            assert!((0.92..=0.98).contains(&coverage), "{name}: {coverage}");
-        }
-    } else {
-        assert!(pooled >= 0.85, "pooled coverage {pooled}");
-    }
+    holds_the_target(scans, &expanded, pooled);
 }
 
 /// Scans of the CI run with the lab's further sources.
@@ -416,14 +420,5 @@ fn expanded_intervals_hold_the_truth_with_a_turned_camera_and_a_real_white() {
         scans,
         std::env::var("GONIO_COVERAGE_LAB_OUT").ok(),
     );
-    // As on the defaults: a full run (400 scans) holds each parameter in 92–98 %; the
-    // fast one checks that the intervals hold the truth of most.
-    if scans >= 400 {
-        for (name, (hit, n)) in &expanded.0 {
-            let coverage = *hit as f64 / *n as f64;
-            assert!((0.92..=0.98).contains(&coverage), "{name}: {coverage}");
-        }
-    } else {
-        assert!(pooled >= 0.85, "pooled coverage {pooled}");
-    }
+    holds_the_target(scans, &expanded, pooled);
 }
