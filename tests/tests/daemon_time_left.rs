@@ -12,17 +12,18 @@
 //! once the first θL is processed. The error at a poll is |estimate − actual| over the
 //! actual time left, counted no smaller than [`FLOOR_S`]: in the last seconds a
 //! relative error says nothing. How long the steps take depends on what else the
-//! machine runs, which no estimate made at the first second can know: the 35 % target
-//! is asserted for the estimates before the first θL is processed, and only when the
-//! machine was quiet (the 15 % one is printed: in the scan's last seconds it is not met),
-//! i.e. the processes other than the daemon
-//! (and the children it starts) used at most [`QUIET_SHARE`] of the cores' time from
-//! the timing probe's end to the scan's (read from /proc: a timed bound on a machine
-//! others share fails for the machine, not the code); otherwise they are measured and
-//! printed with that share and the load, and the test says it did not assert them.
-//! Asserted whatever the load: an estimate at every poll, never "finishing" with
-//! seconds of work left, and no estimate more than [`RATIO`] times off either way (the
-//! model it replaced said 6.6 s at the first second of a 92 s scan: 14×).
+//! machine runs, which no estimate made at the first second can know (the probe itself
+//! measures the machine as it is when the daemon starts). So the bounds on the estimates
+//! are asserted only when the machine was quiet, i.e. the processes other than the
+//! daemon (and the children it starts) used at most [`QUIET_SHARE`] of the cores' time
+//! from the daemon's start, the probe included, to the scan's end (read from /proc: a
+//! timed bound on a machine others share fails for the machine, not the code): every
+//! estimate within [`RATIO`] times of the time actually left either way (the model it
+//! replaced said 6.6 s at the first second of a 92 s scan: 14×), and the 35 % target for
+//! the estimates before the first θL is processed. The 15 % target is printed: in the
+//! scan's last seconds it is not met. Otherwise the figures are printed with that share
+//! and the load, and the test says it did not assert them. Asserted whatever the load:
+//! an estimate at every poll and never "finishing" with seconds of work left.
 
 use std::time::{Duration, Instant};
 
@@ -130,6 +131,9 @@ fn time_left_holds_from_the_first_second_of_a_new_data_directory_s_first_scan() 
     let dir = temp_dir("time-left");
     // An empty configuration is README's `gonio serve`: every key at its default.
     let daemon = Daemon::start(&dir, "");
+    // From the start: the probe measures the machine as it is, and a machine busy while
+    // it measures is not quiet for the scan's estimates either.
+    let ticks_before = cpu_ticks(daemon.pid());
     let costs = daemon.data.join("processing-costs.json");
     let probe_deadline = Instant::now() + Duration::from_secs(300);
     while !costs.exists() {
@@ -141,7 +145,6 @@ fn time_left_holds_from_the_first_second_of_a_new_data_directory_s_first_scan() 
         std::thread::sleep(Duration::from_millis(200));
     }
     let load_before = load_per_core();
-    let ticks_before = cpu_ticks(daemon.pid());
 
     let posted = Instant::now();
     let created = daemon.post(
@@ -178,6 +181,8 @@ fn time_left_holds_from_the_first_second_of_a_new_data_directory_s_first_scan() 
 
     // Every estimate against the time the scan actually had left.
     let mut worst = [0.0_f64; 2];
+    // The first estimate more than RATIO times off either way.
+    let mut off_by: Option<String> = None;
     eprintln!(
         "scan took {ended:.1} s; load per core {load_before:.2} before, {load_after:.2} \
          after; other processes used {:.0} % of the cores meanwhile",
@@ -197,11 +202,12 @@ fn time_left_holds_from_the_first_second_of_a_new_data_directory_s_first_scan() 
             poll.processed
         );
         let ratio = eta.max(FLOOR_S) / left.max(FLOOR_S);
-        assert!(
-            (1.0 / RATIO..=RATIO).contains(&ratio),
-            "{eta:.1} s estimated at {:.1} s with {left:.1} s left",
-            poll.at_s
-        );
+        if !(1.0 / RATIO..=RATIO).contains(&ratio) && off_by.is_none() {
+            off_by = Some(format!(
+                "{eta:.1} s estimated at {:.1} s with {left:.1} s left",
+                poll.at_s
+            ));
+        }
         let after_first = usize::from(poll.processed >= 1);
         worst[after_first] = worst[after_first].max(error);
         // Never "finishing" (under a second) while seconds of work remain.
@@ -234,12 +240,18 @@ fn time_left_holds_from_the_first_second_of_a_new_data_directory_s_first_scan() 
     );
     if others > QUIET_SHARE {
         eprintln!(
-            "targets not asserted: other processes used {:.0} % of the cores (quiet: ≤ {:.0} %)",
+            "targets not asserted: other processes used {:.0} % of the cores (quiet: ≤ {:.0} %){}",
             100.0 * others,
-            100.0 * QUIET_SHARE
+            100.0 * QUIET_SHARE,
+            off_by.map_or(String::new(), |o| format!("; {o}"))
         );
         return;
     }
+    assert!(
+        off_by.is_none(),
+        "on a quiet machine: {}",
+        off_by.unwrap_or_default()
+    );
     // Asserted: the estimates before the first θL is processed. Once it is, the error
     // in the scan's last seconds (the per-model fits and the automatic choice sharing the
     // cores) is printed against its target, not asserted: on a quiet machine it stays
