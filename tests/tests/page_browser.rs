@@ -87,8 +87,8 @@ fn check_plot(plot: &Value, colours: u64) {
         );
         let rows = budget["rows"].as_u64().unwrap();
         assert!(rows == 8 || rows == 11, "{budget}");
-        // label, value, noise, misfit, 7 sources, u_c, U, interval
-        assert_eq!(budget["columns"], json!(14), "{budget}");
+        // label, value, noise, misfit, 10 sources, u_c, U, interval
+        assert_eq!(budget["columns"], json!(17), "{budget}");
     }
     assert!(plot["markers"].as_u64().unwrap() > 20, "{plot}");
     assert_eq!(plot["hollow"], json!(true), "{plot}");
