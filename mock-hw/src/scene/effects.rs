@@ -81,7 +81,7 @@ pub struct Misalignment {
     /// The white's falloff toward grazing departs from the stated `[white] falloff` by
     /// this: its reflectance renders × (1 − a·(1 − cos θi)), a the sum, θi the light's
     /// angle of incidence on it (setup.json keeps stating the nominal one); relative,
-    /// within ±[`MAX_WHITE_FALLOFF`].
+    /// within ±`MAX_WHITE_FALLOFF`.
     pub white_falloff: f64,
     /// The camera is this much farther from the axis than `setup.camera_distance_mm`, mm.
     pub camera_distance_error_mm: f64,
