@@ -8,6 +8,7 @@
 
 use gonio_mock_hw::camera::CaptureTiming;
 use gonio_mock_hw::grbl::{move_duration_s, GrblConfig};
+use gonio_processing::fit::JUDGED_PER_THETA_L;
 use serde::{Deserialize, Serialize};
 
 use super::plan::{Step, AUTO_FIT, FIT_MODELS};
@@ -18,6 +19,9 @@ pub const METER_START_S: f64 = 1.0 / 60.0;
 /// Three exposures two stops and more apart: the middle of the one to five an
 /// automatic bracket takes.
 const EXPECTED_BRACKET_S: [f64; 3] = [0.25, 1.0 / 30.0, 1.0 / 250.0];
+/// θL of the timing probe's synthetic scan (each held out in turn by the automatic
+/// choice).
+pub const PROBE_THETA_COUNT: usize = 3;
 /// A homing cycle in controller seconds.
 const HOMING_S: f64 = 3.0;
 /// The frame size assumed when the setup gives none: a full-size 3872×2592 frame.
@@ -43,8 +47,9 @@ pub struct Costs {
     pub extract_s_per_point: f64,
     /// Each final fit of [`FIT_MODELS`], in that order, seconds per point.
     pub fit_s_per_point: [f64; 3],
-    /// The [`AUTO_FIT`] (every candidate, each θL held out in turn, the budget):
-    /// seconds per point, and seconds whatever the points.
+    /// The [`AUTO_FIT`] (every candidate, each θL held out in turn, the budget) on the
+    /// timing probe's scan of [`PROBE_THETA_COUNT`] θL, every point judged: seconds
+    /// per point, and seconds whatever the points.
     pub auto_s_per_point: f64,
     pub auto_s: f64,
 }
@@ -182,6 +187,25 @@ impl Timing {
         EXPECTED_BRACKET_S.iter().map(|&s| self.capture_s(s)).sum()
     }
 
+    /// Expected seconds of the automatic choice on a scan of `theta_count` θL. Its
+    /// final fit (the chosen model with its budget, priced as a Cook–Torrance fit)
+    /// takes every point; its leave-one-θL-out folds only the points judged
+    /// ([`JUDGED_PER_THETA_L`] at most per θL), each point fitted in the folds that
+    /// keep its θL (one fewer than the θL): the probe's per-point cost beyond its final
+    /// fit is scaled to those.
+    fn auto_s(&self, theta_count: usize) -> f64 {
+        let costs = &self.costs;
+        let per_theta = self.points_per_theta();
+        let stride = (per_theta / JUDGED_PER_THETA_L as f64).ceil().max(1.0);
+        let judged = per_theta / stride * theta_count as f64;
+        let final_per_point = costs.fit_s_per_point[0].min(costs.auto_s_per_point);
+        let folds_per_point = costs.auto_s_per_point - final_per_point;
+        let folds = theta_count.saturating_sub(1) as f64 / (PROBE_THETA_COUNT - 1) as f64;
+        costs.auto_s
+            + final_per_point * per_theta * theta_count as f64
+            + folds_per_point * judged * folds
+    }
+
     /// Expected seconds of `step` at `place` in its scan, with the arm at `from_deg`
     /// before it.
     pub fn prior_s(&self, step: &Step, from_deg: f64, place: &Place) -> f64 {
@@ -209,9 +233,7 @@ impl Timing {
             }
             Step::Hdr { .. } => costs.hdr_s_per_mpx_frame * bracket_mpx,
             Step::Extract => costs.extract_s_per_point * points,
-            Step::Fit { model } if model == AUTO_FIT.0 => {
-                costs.auto_s + costs.auto_s_per_point * points
-            }
+            Step::Fit { model } if model == AUTO_FIT.0 => self.auto_s(place.theta_count),
             Step::Fit { model } => {
                 let index = FIT_MODELS.iter().position(|(name, _)| name == model);
                 let per_point =
@@ -291,11 +313,30 @@ mod tests {
         let ward = Step::Fit {
             model: "ward".into(),
         };
-        let ratio = |count| {
-            timing.prior_s(&auto, 0.0, &place(count, count, 2))
-                / timing.prior_s(&ward, 0.0, &place(count, count, 2))
+        // The automatic choice: on the probe's own scan (a sixteenth of the pixels,
+        // three θL, every point judged) the probe's measure, a fixed part plus a part
+        // per point; with more θL each point is fitted in more folds; past the judged
+        // points per θL only its final fit grows with the points.
+        let costs = Costs::DEFAULT;
+        let probe_points = costs.points_per_column * 968.0 * PROBE_THETA_COUNT as f64;
+        let probe_shape = place(PROBE_THETA_COUNT, PROBE_THETA_COUNT, 2);
+        assert!(
+            (small.prior_s(&auto, 0.0, &probe_shape)
+                - (costs.auto_s + costs.auto_s_per_point * probe_points))
+                .abs()
+                < 1e-9
+        );
+        let ratio = |t: &Timing, count| {
+            t.prior_s(&auto, 0.0, &place(count, count, 2))
+                / t.prior_s(&ward, 0.0, &place(count, count, 2))
         };
-        assert!(ratio(6) < ratio(3));
+        assert!(ratio(&small, 6) > ratio(&small, 3));
+        let wide = timing.with_frame(2 * 3872, 2592);
+        let growth = |count| {
+            wide.prior_s(&auto, 0.0, &place(count, count, 2))
+                / timing.prior_s(&auto, 0.0, &place(count, count, 2))
+        };
+        assert!(growth(6) < 2.0 && growth(6) > 1.0, "{}", growth(6));
         assert!(
             (timing.prior_s(&ward, 0.0, &place(6, 6, 2))
                 - 2.0 * timing.prior_s(&ward, 0.0, &place(3, 3, 2)))
