@@ -69,32 +69,20 @@ fn family_scene(index: usize) -> (String, Value) {
         d.between(0.0, 4.0)
     };
     let seed = (d.uniform() * 1e9) as u64;
-    let mut out = String::new();
-    let mut section = String::new();
-    for line in GOLD.lines() {
-        if line.starts_with('[') {
-            section = line.to_owned();
+    let out = edited_gold(|section, key, line| match (section, key) {
+        ("[effects.noise]", _) if noise == 0.0 => None,
+        (_, "name") => Some(format!("name = \"family-{index}\"")),
+        ("[sample]", "kd") => Some(format!("kd = {}", list(&kd))),
+        ("[sample]", "ks") => Some(format!("ks = {}", list(&ks))),
+        ("[sample]", "m") => Some(format!("m = [{m:.4}]")),
+        ("[light]", "intensity") => Some(format!("intensity = {:.1}", 6000.0 * light)),
+        ("[effects]", "seed") => Some(format!("seed = {seed}")),
+        ("[effects.noise]", "electrons_per_dn") => {
+            Some(format!("electrons_per_dn = {:.6}", 9.0 / (noise * noise)))
         }
-        if section == "[effects.noise]" && noise == 0.0 {
-            continue;
-        }
-        let key = line.split(" = ").next().unwrap_or("");
-        let line = match (section.as_str(), key) {
-            (_, "name") => format!("name = \"family-{index}\""),
-            ("[sample]", "kd") => format!("kd = {}", list(&kd)),
-            ("[sample]", "ks") => format!("ks = {}", list(&ks)),
-            ("[sample]", "m") => format!("m = [{m:.4}]"),
-            ("[light]", "intensity") => format!("intensity = {:.1}", 6000.0 * light),
-            ("[effects]", "seed") => format!("seed = {seed}"),
-            ("[effects.noise]", "electrons_per_dn") => {
-                format!("electrons_per_dn = {:.6}", 9.0 / (noise * noise))
-            }
-            ("[effects.noise]", "read_noise_dn") => format!("read_noise_dn = {:.4}", 1.2 * noise),
-            _ => line.to_owned(),
-        };
-        out.push_str(&line);
-        out.push('\n');
-    }
+        ("[effects.noise]", "read_noise_dn") => Some(format!("read_noise_dn = {:.4}", 1.2 * noise)),
+        _ => Some(line.to_owned()),
+    });
     let drawn = json!({"kd": kd, "ks": ks, "m": m, "light": light, "noise": noise, "seed": seed});
     (out, drawn)
 }
@@ -102,37 +90,39 @@ fn family_scene(index: usize) -> (String, Value) {
 /// A scene of the gold geometry whose sample is the RGL file `bsdf`, noise seed `seed`
 /// (`None`: no noise), with a bracket wide enough for a film's specular.
 fn rgl_scene(name: &str, bsdf: &Path, seed: Option<u64>) -> String {
-    let mut out = String::new();
-    let mut in_sample = false;
-    let mut in_noise = false;
-    for line in GOLD.lines() {
-        if line.starts_with('[') {
-            in_sample = line == "[sample]";
-            in_noise = line == "[effects.noise]";
-            if in_sample {
-                out.push_str(&format!(
-                    "[sample]\nmodel = \"rgl\"\nbsdf = {:?}\n",
-                    bsdf.to_str().unwrap()
-                ));
-                continue;
-            }
-        }
-        if in_sample || (in_noise && seed.is_none()) {
-            continue;
-        }
-        let line = if line.starts_with("name = ") {
-            format!("name = {name:?}")
-        } else if line.starts_with("seed = ") {
-            format!("seed = {}", seed.unwrap_or(1))
-        } else if line.starts_with("bracket_s = ") {
+    edited_gold(|section, key, line| match (section, key) {
+        ("[sample]", _) if line.starts_with('[') => Some(format!(
+            "[sample]\nmodel = \"rgl\"\nbsdf = {:?}",
+            bsdf.to_str().unwrap()
+        )),
+        ("[sample]", _) => None,
+        ("[effects.noise]", _) if seed.is_none() => None,
+        (_, "name") => Some(format!("name = {name:?}")),
+        (_, "seed") => Some(format!("seed = {}", seed.unwrap_or(1))),
+        (_, "bracket_s") => Some(
             "bracket_s = [32.0, 8.0, 2.0, 0.5, 0.125, 0.03125, 0.0078125, 0.001953125, \
              0.00048828125, 0.0001220703125, 0.000030517578125]"
-                .to_owned()
-        } else {
-            line.to_owned()
-        };
-        out.push_str(&line);
-        out.push('\n');
+                .to_owned(),
+        ),
+        _ => Some(line.to_owned()),
+    })
+}
+
+/// The builtin gold scene with each line passed through `edit(section, key, line)`
+/// (section: the last `[...]` header, itself included; key: what precedes ` = `):
+/// its replacement, or `None` to drop the line.
+fn edited_gold(edit: impl Fn(&str, &str, &str) -> Option<String>) -> String {
+    let mut out = String::new();
+    let mut section = "";
+    for line in GOLD.lines() {
+        if line.starts_with('[') {
+            section = line;
+        }
+        let key = line.split(" = ").next().unwrap_or("");
+        if let Some(line) = edit(section, key, line) {
+            out.push_str(&line);
+            out.push('\n');
+        }
     }
     out
 }
