@@ -120,13 +120,17 @@ fn read_theta(dir: &Path, theta_l: f64) -> anyhow::Result<Vec<Sample>> {
     read_csv(&dir.join(&rel)).with_context(|| rel)
 }
 
+/// A θL's samples and live fits; the result says how many samples, and the seconds
+/// their extraction took (`extract_s`, the rest of the step being the live fits).
 fn samples(dir: &Path, plan: &ScanPlan, theta_l: f64) -> anyhow::Result<Value> {
+    let began = std::time::Instant::now();
     let samples = extract_theta(dir, theta_l)?;
+    let extract_s = began.elapsed().as_secs_f64();
     let rel = theta_samples_path(theta_l);
     write_atomic_with(&dir.join(&rel), |tmp| write_csv(tmp, &samples))
         .with_context(|| rel.clone())?;
     let live = live_fits(dir, plan, theta_l, &samples)?;
-    Ok(json!({ "path": rel, "samples": samples.len(), "live": live }))
+    Ok(json!({ "path": rel, "samples": samples.len(), "extract_s": extract_s, "live": live }))
 }
 
 /// The robust fits over every θL measured so far, `newest` the samples of the last

@@ -34,7 +34,7 @@ const CACHE_FILE: &str = "processing-costs.json";
 /// Where the synthetic scan is made, removed after.
 const WORK_DIR: &str = ".timing-probe";
 /// Version of the cache's contents: a cache of another version is measured again.
-const VERSION: u32 = 1;
+const VERSION: u32 = 2;
 /// The synthetic scan: the builtin gold scene binned by this factor…
 const BINNING: u32 = 4;
 /// …at these θL (three, so that the automatic choice holds each out in turn)…
@@ -177,12 +177,21 @@ fn measure(dir: &Path, started: Instant) -> anyhow::Result<Costs> {
             process::run(&step, dir, &plan, &mut prefetched, &budgets)
         })
     };
-    // Per θL: the samples step's seconds and the points fitted so far, the merges.
-    let (mut samples, mut hdr_s, mut points) = (Vec::new(), 0.0, 0.0);
+    // Per θL: the samples step's extraction (as it reports it) and live fits (the
+    // rest of its seconds, over the points fitted so far), the merges.
+    let (mut extraction_s, mut live_s, mut fitted, mut hdr_s, mut points) =
+        (0.0, 0.0, 0.0, 0.0, 0.0);
     for theta_l in THETA_L {
         let (took, result) = run(Step::Samples { theta_l })?;
         points += result.get("samples").and_then(Value::as_f64).unwrap_or(0.0);
-        samples.push((took, points));
+        let extract_s = result
+            .get("extract_s")
+            .and_then(Value::as_f64)
+            .unwrap_or(took)
+            .clamp(0.0, took);
+        extraction_s += extract_s;
+        live_s += took - extract_s;
+        fitted += points;
         hdr_s += run(Step::Hdr { theta_l })?.0;
     }
     let extract_s = run(Step::Extract)?.0;
@@ -207,15 +216,9 @@ fn measure(dir: &Path, started: Instant) -> anyhow::Result<Costs> {
     let thetas = THETA_L.len() as f64;
     let bracket_mpx = mpx * BRACKET_S.len() as f64;
     // A samples step = extraction (∝ the bracket's pixels) + live fits (∝ the points
-    // so far): the slope between the first and last θL, the rest extraction.
-    let (first, last) = (samples[0], samples[samples.len() - 1]);
-    let live = ((last.0 - first.0) / (last.1 - first.1)).max(0.0);
-    let live = if live.is_finite() { live } else { 0.0 };
-    let extraction = samples
-        .iter()
-        .map(|(took, points)| (took - live * points).max(0.0))
-        .sum::<f64>()
-        / thetas;
+    // so far).
+    let live = if fitted > 0.0 { live_s / fitted } else { 0.0 };
+    let extraction = extraction_s / thetas;
     let half = every_other.len() as f64;
     let auto_per_point = ((auto_s - half_s) / (points - half)).max(0.0);
     let auto_per_point = if auto_per_point.is_finite() {
