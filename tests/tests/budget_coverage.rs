@@ -288,8 +288,11 @@ fn run(index: usize, case: Case, dir: &Path, expanded: &mut Tally, noise_only: &
         noise_only.add(&name, noise[0] <= truth && truth <= noise[1]);
     }
     if let Ok(out) = std::env::var("GONIO_COVERAGE_SCANS_OUT") {
-        append_scan(&out, &json!({"scan": index, "case": format!("{case:?}"),
-                                  "model": label, "truth": truth, "budget": b}));
+        append_scan(
+            &out,
+            &json!({"scan": index, "case": format!("{case:?}"),
+                                  "model": label, "truth": truth, "budget": b}),
+        );
     }
     std::fs::remove_dir_all(&scan).ok();
 }
