@@ -18,6 +18,10 @@
 //! CI runs [`FAST_SCANS`] scans; `GONIO_COVERAGE_SCANS=N` runs N, and
 //! `GONIO_COVERAGE_OUT=FILE` writes the figures as JSON (`bash scripts/results.sh
 //! --coverage-only` runs 200 and writes docs/results' table from them).
+//! `GONIO_COVERAGE_DRAW=key,…` draws only those sources' departures (setup.json keys;
+//! the others stay at the stated setup), to compare one source's line with the spread
+//! it makes; `GONIO_COVERAGE_SCANS_OUT=FILE` appends each scan's truth and budget to FILE
+//! as a line of JSON.
 
 use std::collections::BTreeMap;
 use std::path::Path;
