@@ -18,6 +18,10 @@
 //! CI runs [`FAST_SCANS`] scans; `GONIO_COVERAGE_SCANS=N` runs N, and
 //! `GONIO_COVERAGE_OUT=FILE` writes the figures as JSON (`bash scripts/results.sh
 //! --coverage-only` runs 200 and writes docs/results' table from them).
+//! `GONIO_COVERAGE_DRAW=key,…` draws only those sources' departures (setup.json keys;
+//! the others stay at the stated setup), to compare one source's line with the spread
+//! it makes; `GONIO_COVERAGE_SCANS_OUT=FILE` appends each scan's truth and budget to FILE
+//! as a line of JSON.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -133,7 +137,19 @@ fn scene(index: usize, case: Case) -> (String, Model) {
     let mut draws =
         Draws(0x9e37_79b9_7f4a_7c15 ^ (index as u64 + 1).wrapping_mul(0xbf58_476d_1ce4_e5b9));
     let u = case.uncertainties();
-    let u = |key: &str| u[key].as_f64().unwrap();
+    // `GONIO_COVERAGE_DRAW=key,key…` draws only those sources' departures (the others
+    // at the stated setup; every draw is still taken, so the rest of the scan is alike).
+    let drawn = std::env::var("GONIO_COVERAGE_DRAW").ok();
+    let u = |key: &str| {
+        let key_drawn = drawn
+            .as_deref()
+            .is_none_or(|d| d.split(',').any(|k| k.trim() == key));
+        if key_drawn {
+            u[key].as_f64().unwrap()
+        } else {
+            0.0
+        }
+    };
     let model = if index.is_multiple_of(2) {
         Model::CookTorrance
     } else {
@@ -275,7 +291,29 @@ fn run(index: usize, case: Case, dir: &Path, expanded: &mut Tally, noise_only: &
         expanded.add(&name, hit);
         noise_only.add(&name, noise[0] <= truth && truth <= noise[1]);
     }
+    if let Ok(out) = std::env::var("GONIO_COVERAGE_SCANS_OUT") {
+        append_scan(
+            &out,
+            &json!({"scan": index, "case": format!("{case:?}"),
+                                  "model": label, "truth": truth, "budget": b}),
+        );
+    }
     std::fs::remove_dir_all(&scan).ok();
+}
+
+/// Appends one scan's record (its truth, the world's departures among them, and its
+/// budget) as a line of JSON to `out`: `GONIO_COVERAGE_SCANS_OUT=FILE` keeps every scan's,
+/// to see which line of the budget holds and which does not.
+fn append_scan(out: &str, record: &Value) {
+    use std::io::Write;
+    static LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _guard = LOCK.lock().unwrap_or_else(|e| e.into_inner());
+    let mut file = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(out)
+        .unwrap_or_else(|e| panic!("{out}: {e}"));
+    writeln!(file, "{record}").unwrap_or_else(|e| panic!("{out}: {e}"));
 }
 
 /// Runs `scans` scans of `case` and prints, per parameter, how often each interval held

@@ -6,8 +6,9 @@
 //! inputs of the setup (white reflectance, geometry, arm) each off by z_j standard
 //! uncertainties, with c_pj the change of β_p for z_j = 1 ([`SampleUncertainty::sources`],
 //! common to every point, or to one θL's points for the arm's angle), and e_p the
-//! independent noise. The lines are taken at the values with the setup's departure that
-//! best explains the residuals removed (`super::departure`). Each source's contribution
+//! independent noise. The noise and misfit lines are taken at the values with the setup's
+//! departure that best explains the residuals removed (`super::departure`), the sources'
+//! lines at the values as measured. Each source's contribution
 //! to a parameter comes from fitting again with the samples moved by ±k·c_·j and unmoved:
 //! the secant's slope and the second difference per standard uncertainty (the law of
 //! propagation with numerical sensitivity coefficients and its second-order term, JCGM 100
@@ -140,8 +141,8 @@ pub struct Budget {
     pub residual_to_noise: f64,
     /// The departure of the setup that best explains the fit's residuals, for each source
     /// the residuals identify (the arm's angle per θL; see `departure`'s criterion), in
-    /// standard uncertainties: the lines are taken at the values with it removed. Not a
-    /// calibration: the fitted values keep the stated setup.
+    /// standard uncertainties: the noise and misfit lines are taken at the values with it
+    /// removed. Not a calibration: the fitted values keep the stated setup.
     #[serde(default)]
     pub departure: Vec<SourceDeparture>,
     pub parameters: ParameterSet<ParameterBudget>,
@@ -418,7 +419,7 @@ pub fn budget(samples: &[Sample], result: &FitResult) -> Result<Budget, FitError
     let fresnel = result.ks_90.is_some();
     let theta_l = distinct_theta_l(samples);
 
-    // The lines are taken at the values with the setup's departure removed.
+    // The noise and misfit lines are taken at the values with the setup's departure removed.
     let departure = departure::estimate(
         &refit.data,
         samples,
@@ -440,10 +441,9 @@ pub fn budget(samples: &[Sample], result: &FitResult) -> Result<Budget, FitError
             std: Some(found.std),
         })
         .collect();
-    // The values as measured, when a departure is removed from them: the lines are taken
-    // there too, and the larger of each is kept (where a parameter does not follow a
-    // source linearly its sensitivity depends on where it is taken, and the world may
-    // be at either).
+    // The values as measured, when a departure is removed from them: the sources' lines
+    // are taken there (the values with the departure removed are the measured ones moved
+    // linearly along the columns, which distorts a sharp lobe rather than shifting it).
     // Each refit starts from the unmoved fit of its values.
     let measured = (!departures.is_empty()).then(|| Refit {
         near: Some((result.params(), result.specular_90())),
@@ -505,30 +505,17 @@ pub fn budget(samples: &[Sample], result: &FitResult) -> Result<Budget, FitError
         .position(|&s| s == Source::ArmAngle)
         .expect("the arm's angle is a source");
     jobs.extend(theta_l.iter().map(|&t| (angle, Some(t))));
-    let mut states = vec![(&refit, base.clone())];
-    if let Some(measured) = &measured {
-        states.push((measured, measured.fit(&measured.data.y)?));
-    }
+    let (state, state_base) = match &measured {
+        Some(measured) => (measured, measured.fit(&measured.data.y)?),
+        None => (&refit, base.clone()),
+    };
     let secants: Vec<(usize, Vec<Secant>)> = jobs
         .par_iter()
         .map(|&(j, at)| {
             let change = move |u: &SampleUncertainty| u.sources[j];
             let within =
                 move |s: &Sample| at.is_none_or(|t| (s.theta_l - t).abs() <= THETA_L_TOLERANCE);
-            let mut kept: Vec<Secant> = Vec::new();
-            for (state, base) in &states {
-                let found = state.secants(base, change, within)?;
-                if kept.is_empty() {
-                    kept = found;
-                } else {
-                    for (k, f) in kept.iter_mut().zip(found) {
-                        if f.line() > k.line() {
-                            *k = f;
-                        }
-                    }
-                }
-            }
-            Ok((j, kept))
+            Ok((j, state.secants(&state_base, change, within)?))
         })
         .collect::<Result<_, FitError>>()?;
     // Per source and parameter: the line, the excursions above and below within ±k u
