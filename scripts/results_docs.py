@@ -552,7 +552,11 @@ def colour_block(report, title):
         return f"{q['value']:.{digits}f} ± {q['expanded']:.{digits}f}"
 
     rows = [
-        [f"{a['aspecular']:g}", a["origin"], *(pm(a[k]) for k in ("L", "a", "b", "C", "h"))]
+        [
+            f"{a['aspecular']:g}",
+            a["origin"] + (" (beyond the data: not a reading)" if a.get("beyond_data") else ""),
+            *(pm(a[k]) for k in ("L", "a", "b", "C", "h")),
+        ]
         for a in report["angles"]
     ]
     flop = report.get("flop_index")
