@@ -552,7 +552,11 @@ def colour_block(report, title):
         return f"{q['value']:.{digits}f} ± {q['expanded']:.{digits}f}"
 
     rows = [
-        [f"{a['aspecular']:g}", a["origin"], *(pm(a[k]) for k in ("L", "a", "b", "C", "h"))]
+        [
+            f"{a['aspecular']:g}",
+            a["origin"] + (" (beyond the data: not a reading)" if a.get("beyond_data") else ""),
+            *(pm(a[k]) for k in ("L", "a", "b", "C", "h")),
+        ]
         for a in report["angles"]
     ]
     flop = report.get("flop_index")
@@ -586,6 +590,48 @@ def colour_table():
     return head + "\n\n" + "\n\n".join(blocks)
 
 
+def breakdown_rows(breakdown):
+    """Per kind of material: the coverage by coordinate, by origin and by the class of
+    lines dominating U; what it would be with each class left out; the median of
+    |error|/U (about 0.34 for a normal error and U = 2u)."""
+    def rate(c):
+        return wilson(c["within"], c["of"])
+
+    def group(label, g):
+        without = "; ".join(
+            f"without {w['term']} {w['count']['within']}/{w['count']['of']}" for w in g["without"]
+        )
+        return [
+            label,
+            "",
+            f"{rate(g['count'])}; median |error|/U {g['median_error_over_u']:.2f}; {without}",
+            "",
+        ]
+
+    rows = []
+    for kind in breakdown:
+        rows.append(group(f"breakdown: {kind['kind']}", kind["all"]))
+        rows += [group(f"… {kind['kind']}: {c['coordinate']}*", c["group"]) for c in kind["by_coordinate"]]
+        rows += [group(f"… {kind['kind']}: from the {o['origin']}", o["group"]) for o in kind["by_origin"]]
+        rows += [
+            group(f"… {kind['kind']}: U mostly {t['term']}", t["group"])
+            for t in kind["by_dominant_term"]
+            if t["group"]["count"]["of"]
+        ]
+    return rows
+
+
+def beyond_data_rows(beyond):
+    """Model values flagged beyond the data, and of those the ones whose truth is darker."""
+    if not beyond:
+        return []
+    flagged, darker = beyond["of_model_values"], beyond["truth_darker"]
+    return [
+        ["model values flagged beyond the data", "reported", f"{flagged['within']}/{flagged['of']}", ""],
+        ["… whose truth is darker than the value", "reported", f"{darker['within']}/{darker['of']}", ""],
+    ]
+
+
 def colour_validation_table():
     """The multi-angle colour against the emulator's spectral truth
     (tests/tests/colour_validation.rs): coverage of the expanded intervals, the ΔE00 to
@@ -617,6 +663,8 @@ def colour_validation_table():
         ["… from the data", "", rate(origin["data"]), ""],
         ["… from the model", "", rate(origin["model"]), ""],
         *[[f"… {k['kind']}", "", rate(k["count"]), ""] for k in f["coverage_by_kind"]],
+        *breakdown_rows(f.get("coverage_breakdown", [])),
+        *beyond_data_rows(f.get("beyond_data")),
         ["ΔE00 to the spectral truth", "reported", spread(f["delta_e00"]), ""],
         ["… from the model", "reported", spread(f["delta_e00_model"]), ""],
         [

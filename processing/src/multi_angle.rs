@@ -24,6 +24,8 @@
 pub mod compare;
 mod extrapolation;
 
+pub use extrapolation::FRESNEL_RISE;
+
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -123,6 +125,11 @@ pub struct AngleColour {
     pub theta_h: f64,
     pub theta_d: f64,
     pub origin: Origin,
+    /// A model value brighter than the measured columns support at its geometry for any
+    /// lobe of the microfacet form (`multi_angle::extrapolation::luminance_bound`): the
+    /// model's guess, not a reading.
+    #[serde(default)]
+    pub beyond_data: bool,
     /// Camera RGB β (white G = 100) and XYZ (white Y = 100).
     pub beta: [f64; 3],
     pub xyz: [f64; 3],
@@ -219,8 +226,9 @@ pub fn colour(
         let (theta_i, theta_r) = incidence_and_view(angle, side);
         let (theta_h, theta_d) = half_difference(angle, side);
         let data = measured.and_then(|m| data_value(m, theta_h, theta_d, &format!("{angle}")));
-        let (origin, beta, beta_lines) = match data {
-            Some((beta, lines)) => (Origin::Data, beta, lines),
+        let y_row = transform.matrix()[1];
+        let (origin, beta, beta_lines, bound) = match data {
+            Some((beta, lines)) => (Origin::Data, beta, lines, None),
             None => {
                 let beta = parametric.predict(theta_i, theta_r);
                 let mut lines: Vec<BetaLine> = model_lines
@@ -237,10 +245,14 @@ pub fn colour(
                     d[c] = change;
                     lines.push(((format!("{EXTRAPOLATION}:{c}"), true), d));
                 }
-                (Origin::Model, beta, lines)
+                let bound = measured.and_then(|m| {
+                    extrapolation::luminance_bound(&m.table, y_row, theta_h, theta_d)
+                });
+                (Origin::Model, beta, lines, bound)
             }
         };
         let xyz = transform.xyz(beta);
+        let beyond_data = bound.is_some_and(|b| xyz[1] > b);
         let white = transform.observer().white();
         let lab = lab_from_xyz(xyz, white);
         let jacobian = lab_jacobian(xyz, white);
@@ -272,6 +284,7 @@ pub fn colour(
             theta_h,
             theta_d,
             origin,
+            beyond_data,
             beta,
             xyz,
             l: Coordinate::new(lab[0], &lines, |d| d[0]),
@@ -294,6 +307,13 @@ pub fn colour(
             return Err(MultiAngleError::NotFinite { aspecular: angle });
         }
         angles.push(colour);
+    }
+    if angles.iter().any(|a| a.beyond_data) {
+        notes.push(format!(
+            "beyond_data: a model value brighter than the measured columns support at its \
+             geometry, {FRESNEL_RISE}·max over columns of Y(θh)·cos θi·cos θr there over the \
+             geometry's cos θi·cos θr, is the model's guess, not a reading"
+        ));
     }
     let flop = flop_of(&angles);
     Ok(ColourReport {

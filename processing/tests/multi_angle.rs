@@ -168,6 +168,31 @@ fn a_model_value_beyond_the_data_carries_the_colour_drift_the_data_show() {
 }
 
 #[test]
+fn a_model_value_brighter_than_the_data_support_is_flagged_beyond_the_data() {
+    let transform = ColourTransform::new(&CameraModel::builtin(), Conditions::D65Ten).unwrap();
+    let measured_lobe = fit([9.0, 6.5, 2.0], [25.0, 20.0, 7.0], 0.2);
+    let samples = measured_samples(&measured_lobe, |_| [1.0; 3]);
+    let flagged = |model: &FitResult| {
+        let measured = Measured::of(model, &samples).unwrap();
+        let report = colour(model, Some(&measured), &transform, &ASTM_E2539).unwrap();
+        report
+            .angles
+            .iter()
+            .filter(|a| a.beyond_data)
+            .map(|a| a.aspecular)
+            .collect::<Vec<_>>()
+    };
+    // The lobe the data were measured from, carried beyond them: within its bound.
+    assert_eq!(flagged(&measured_lobe), Vec::<f64>::new());
+    // A model whose lobe is ten times what was measured, beyond the data at −15°.
+    let claimed = fit([9.0, 6.5, 2.0], [250.0, 200.0, 70.0], 0.2);
+    let beyond = flagged(&claimed);
+    assert!(beyond.contains(&-15.0), "{beyond:?}");
+    // Values from the data are never flagged.
+    assert!(!beyond.contains(&45.0), "{beyond:?}");
+}
+
+#[test]
 fn compare_fails_gold_against_red_and_passes_a_sample_against_itself() {
     let gold = report(&fit([9.0, 6.5, 2.0], [25.0, 20.0, 7.0], 0.07));
     let red = report(&fit([20.0, 3.0, 2.5], [10.0, 10.0, 10.0], 0.15));

@@ -77,13 +77,17 @@ pub fn section(scan: &Scan) -> String {
             if !shown.in_gamut {
                 cell += " <span class=\"warn\">out of gamut</span>";
             }
-            let origin = match a.origin {
+            let mut origin = match a.origin {
                 Origin::Data => "data",
                 Origin::Model => "model",
-            };
+            }
+            .to_string();
+            if a.beyond_data {
+                origin += " <span class=\"warn\">beyond the data: not a reading</span>";
+            }
             vec![
                 format!("{}", a.aspecular),
-                origin.into(),
+                origin,
                 with_u(a.l),
                 with_u(a.a),
                 with_u(a.b),

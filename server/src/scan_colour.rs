@@ -58,7 +58,7 @@ fn with_swatches(report: &ColourReport) -> ApiResult<Value> {
 /// The scan's multi-angle colour.
 #[utoipa::path(get, path = "/api/scans/{id}/colour",
     summary = "The scan's multi-angle colour: CIELAB at ASTM E2539's aspecular angles, values ± U",
-    description = "45° illumination, D65 and the 10° observer; per angle L*, a*, b*, C*, h with their expanded uncertainty (k = 2), whether the geometry lies inside the measured range (`origin`: data) or the model extrapolates (model), and an sRGB swatch marked when out of gamut; the flop index. As `gonio colour SCAN_DIR` computes it, without each value's budget lines.",
+    description = "45° illumination, D65 and the 10° observer; per angle L*, a*, b*, C*, h with their expanded uncertainty (k = 2), whether the geometry lies inside the measured range (`origin`: data) or the model extrapolates (model), `beyond_data` when a model value is brighter than the measured columns support there (the model's guess, not a reading), and an sRGB swatch marked when out of gamut; the flop index. As `gonio colour SCAN_DIR` computes it, without each value's budget lines.",
     params(("id" = i64, Path, description = "The scan's id")),
     responses(
         (status = 200, description = "The colour", body = Object),

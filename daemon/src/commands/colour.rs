@@ -128,7 +128,9 @@ pub fn report(input: &Path, options: &Options) -> anyhow::Result<ColourReport> {
 
 /// The table as CSV: one row per angle, values and expanded uncertainties.
 pub fn csv(report: &ColourReport) -> String {
-    let mut out = String::from("aspecular,theta_i,theta_r,origin,L,U_L,a,U_a,b,U_b,C,U_C,h,U_h\n");
+    let mut out = String::from(
+        "aspecular,theta_i,theta_r,origin,L,U_L,a,U_a,b,U_b,C,U_C,h,U_h,beyond_data\n",
+    );
     for a in &report.angles {
         let _ = write!(
             out,
@@ -141,7 +143,7 @@ pub fn csv(report: &ColourReport) -> String {
         for c in [a.l, a.a, a.b, a.c, a.h] {
             let _ = write!(out, ",{:.4},{:.4}", c.value, c.expanded);
         }
-        out.push('\n');
+        let _ = writeln!(out, ",{}", a.beyond_data);
     }
     out
 }
@@ -170,6 +172,9 @@ fn summary(report: &ColourReport) -> String {
         let _ = write!(out, "{:>5} {:<6}", a.aspecular, origin(a.origin));
         for c in [a.l, a.a, a.b, a.c, a.h] {
             let _ = write!(out, " {:>7.2} ± {:<5.2}", c.value, c.expanded);
+        }
+        if a.beyond_data {
+            out.push_str("  beyond the data");
         }
         out.push('\n');
     }

@@ -20,6 +20,48 @@
 //! carried that far would move a channel's share by its size. A geometry inside the
 //! measured θd range (s* between the columns', only θh beyond) gets at most the drift
 //! to its nearest column.
+//!
+//! **Beyond the data** ([`luminance_bound`]): a microfacet lobe's radiance factor is
+//! π·D(θh)·G·F(θd)/(4 cos θi cos θr) plus the diffuse. At one θh, D is the same in every
+//! column, G ≤ 1 only falls toward grazing, and F rises from the measured θd to the
+//! geometry's by at most [`FRESNEL_RISE`]; in plane cos θi·cos θr = cos²θh − sin²θd. So
+//! the luminance the data support at (θh, θd) is at most
+//! FRESNEL_RISE·max_c Y_c(θh)·(cos²θh − sin²θd_c) / (cos²θh − sin²θd), Y_c the measured
+//! luminance of column c at θh (clamped to its points). A model value above it claims
+//! more than any lobe of that form can make of what was measured: it is the model's
+//! guess, not a reading, and is flagged so.
+
+/// The most Fresnel's factor rises between two θd up to 52.5° (as −15°'s, the largest of
+/// the standard geometries): Schlick's (F0 + (1 − F0)(1 − cos θd)⁵)/F0 ≤ 1.46 there for
+/// any F0 ≥ 0.02 (dielectrics of n ≥ 1.33, metals higher still, and rising less).
+pub const FRESNEL_RISE: f64 = 1.5;
+
+/// cos θi·cos θr of an in-plane geometry by its θh and s = sin²θd, floored at 0.01
+/// (80° from the normal on both sides).
+fn foreshortening(theta_h: f64, s: f64) -> f64 {
+    (theta_h.to_radians().cos().powi(2) - s).max(0.01)
+}
+
+/// The largest luminance Y the measured columns support at (θh, θd) for a lobe of the
+/// microfacet form (see the module), `y_row` the row of camera RGB → Y; `None` when no
+/// column knows all three channels there.
+pub(super) fn luminance_bound(
+    table: &Table,
+    y_row: [f64; 3],
+    theta_h: f64,
+    theta_d: f64,
+) -> Option<f64> {
+    let target = foreshortening(theta_h, theta_d.to_radians().sin().powi(2));
+    column_values(table, theta_h)
+        .into_iter()
+        .filter(|(_, v)| v.iter().all(|x| x.is_finite()))
+        .map(|(s, v)| {
+            let y: f64 = (0..3).map(|c| y_row[c] * v[c]).sum();
+            y.max(0.0) * foreshortening(theta_h, s)
+        })
+        .reduce(f64::max)
+        .map(|peak| FRESNEL_RISE * peak / target)
+}
 
 use crate::fit::table::Table;
 

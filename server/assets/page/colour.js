@@ -15,7 +15,8 @@ const pm = (q, digits = 1) => (q && Number.isFinite(q.value) && Number.isFinite(
   ? `${q.value.toFixed(digits)} ± ${q.expanded.toFixed(digits)}` : "–");
 
 function colourTable(c) {
-  const rows = c.angles.map((a) => `<tr><td>${a.aspecular}°</td><td>${escapeHtml(a.origin)}</td>` +
+  const rows = c.angles.map((a) => `<tr><td>${a.aspecular}°</td><td>${escapeHtml(a.origin)}` +
+    (a.beyond_data ? ` <span class="warn" title="brighter than the measured columns support at this geometry">beyond the data: not a reading</span>` : "") + "</td>" +
     ["L", "a", "b", "C", "h"].map((k) => `<td>${pm(a[k])}</td>`).join("") +
     `<td><span class="swatch" style="background:${a.swatch.hex}" title="${a.swatch.hex}"></span>` +
     (a.swatch.in_gamut ? "" : ` <span class="warn">out of gamut</span>`) + "</td></tr>").join("");
