@@ -6,17 +6,17 @@
 //! minimum lies near the known fit's. From there each step solves A·d = Σ_p g_p, with A
 //! the Gauss–Newton Hessian Σ_p J_pᵀ (I − u_p u_pᵀ)/‖r_p‖ J_p and g_p = J_pᵀ u_p the
 //! points' gradients (`super::uncertainty`, the sandwich's own terms), over the
-//! parameters free of their bound (a colour coefficient at 0 whose gradient pushes it
-//! below stays there), and halves the step until the loss falls, the coefficients
-//! clamped at 0. Each step costs two passes over the points, where a search along ln m
+//! parameters free of their bound (a colour coefficient at 0, or ln m at an end of the
+//! search range, whose gradient pushes it past stays there), and halves the step until
+//! the loss falls, the coefficients clamped at 0 and ln m to the range. Each step costs two passes over the points, where a search along ln m
 //! with the colour coefficients solved at each m costs dozens; the minimum it ends at is
 //! the same one (the loss's stationary point on the free parameters), to the precision of
 //! the loss's sum.
 //!
 //! It gives up (`None`) where the minimum is not a smooth one within reach: A singular
-//! (ln m without a lobe), the roughness leaving its search range, no decrease of the loss
-//! while the step is still large, or no convergence within [`MAX_STEPS`]; the caller then
-//! searches along ln m ([`super::robust::fit_near`]).
+//! (ln m without a lobe), no decrease of the loss while the step is still large, or no
+//! convergence within [`MAX_STEPS`]; the caller then searches along ln m
+//! ([`super::robust::fit_near`]).
 
 use nalgebra::{DMatrix, DVector};
 
@@ -109,17 +109,32 @@ pub(crate) fn refit(
     start_kg: [f64; 3],
 ) -> Option<(Found, [f64; 3])> {
     let layout = Layout::of(data, options);
-    let mut theta = vector(&layout, start, &start_kg);
+    let (lo, hi) = (options.robust.m_min.ln(), options.robust.m_max.ln());
+    // Colour coefficients are at least 0, ln m within the search range.
+    let bounds = |i: usize| {
+        if is_colour(&layout, i) {
+            (0.0, f64::INFINITY)
+        } else {
+            (lo, hi)
+        }
+    };
+    let mut theta: Vec<f64> = vector(&layout, start, &start_kg)
+        .iter()
+        .enumerate()
+        .map(|(i, v)| v.clamp(bounds(i).0, bounds(i).1))
+        .collect();
     let (mut params, mut ks_90) = parameters(&layout, &theta);
     let mut loss = data.loss_fresnel(&params, &ks_90);
-    let (lo, hi) = (options.robust.m_min.ln(), options.robust.m_max.ln());
     let mut evaluations = 1;
     for _ in 0..MAX_STEPS {
         let (hessian, descent) = gauss_newton(data, options, &params, &ks_90)?;
         evaluations += 1;
-        // A coefficient at its bound whose gradient pushes it below stays there.
+        // A parameter at a bound whose gradient pushes it past stays there.
         let free: Vec<bool> = (0..theta.len())
-            .map(|i| !(is_colour(&layout, i) && theta[i] <= 0.0 && descent[i] <= 0.0))
+            .map(|i| {
+                let (low, high) = bounds(i);
+                !((theta[i] <= low && descent[i] <= 0.0) || (theta[i] >= high && descent[i] >= 0.0))
+            })
             .collect();
         let d = step(&hessian, &descent, &free)?;
         // Colour coefficients come in threes of a kind (Kd, Ks, Ks_90), each step
@@ -149,19 +164,10 @@ pub(crate) fn refit(
         for _ in 0..MAX_HALVINGS {
             let trial: Vec<f64> = (0..theta.len())
                 .map(|i| {
-                    let v = theta[i] + t * d[i];
-                    if is_colour(&layout, i) {
-                        v.max(0.0)
-                    } else {
-                        v
-                    }
+                    let (low, high) = bounds(i);
+                    (theta[i] + t * d[i]).clamp(low, high)
                 })
                 .collect();
-            if (0..3).any(|c| !(lo..=hi).contains(&trial[layout.ln_m(c)])) {
-                // Past the search range: a shorter step.
-                t *= 0.5;
-                continue;
-            }
             let (p, k) = parameters(&layout, &trial);
             let trial_loss = data.loss_fresnel(&p, &k);
             evaluations += 1;
