@@ -38,6 +38,7 @@ pub mod fold_score;
 pub mod held_out;
 mod linear;
 mod nelder_mead;
+mod newton;
 mod options;
 mod robust;
 mod simplex;
@@ -302,12 +303,20 @@ struct Minimised {
     reused_seconds: f64,
 }
 
-/// Runs `options.method` on `samples`, and the colour-shift test where the model has one
-/// (with the fit it falls back to, `tied`, when given).
+/// The robust minimum of a fit near which another is sought: its parameters and
+/// specular colour at 90°, before any colour-shift test (Ks_90 its own where the model
+/// and samples have one).
+pub(crate) type Start = (Params, [f64; 3]);
+
+/// Runs `options.method` on `samples` (the robust method by Gauss–Newton steps from
+/// `start` when given, [`newton`], its full search where they give up), and the
+/// colour-shift test where the model has one (with the fit it falls back to, `tied`,
+/// when given).
 fn minimise(
     samples: &[Sample],
     options: &FitOptions,
     tied: Option<(Found, f64)>,
+    start: Option<&Start>,
 ) -> Result<Minimised, FitError> {
     if options.model.has_fresnel_colour() {
         if options.method == FitMethod::NelderMead {
@@ -327,7 +336,12 @@ fn minimise(
     let parameters = parameter_count(options.model, options.roughness);
     let mut data = Data::new(samples, options.model, parameters)?;
     let (mut found, mut ks_90) = match options.method {
-        FitMethod::Robust => robust::fit(&data, options)?,
+        FitMethod::Robust => {
+            match start.and_then(|(p, kg)| newton::refit(&data, options, p, *kg)) {
+                Some(found) => found,
+                None => robust::fit(&data, options)?,
+            }
+        }
         FitMethod::NelderMead => {
             let found = nelder_mead::fit(&data, options)?;
             let ks = found.params.ks;
@@ -355,7 +369,7 @@ fn minimise(
 pub fn loss_reached(samples: &[Sample], options: &FitOptions) -> Result<f64, FitError> {
     let Minimised {
         data, found, ks_90, ..
-    } = minimise(samples, options, None)?;
+    } = minimise(samples, options, None, None)?;
     let loss = data.loss_fresnel(&found.params, &ks_90);
     if !loss.is_finite() {
         return Err(FitError::Overflow("loss"));
@@ -365,7 +379,35 @@ pub fn loss_reached(samples: &[Sample], options: &FitOptions) -> Result<f64, Fit
 
 /// Fits `options.model` to `samples`.
 pub fn fit(samples: &[Sample], options: &FitOptions) -> Result<FitResult, FitError> {
-    fit_given(samples, options, None)
+    fit_given(samples, options, None, None)
+}
+
+/// The robust minimum of `options`' model on `samples` ([`Start`]): where fits of
+/// samples near these start from ([`fit_from`]).
+pub(crate) fn robust_minimum(samples: &[Sample], options: &FitOptions) -> Result<Start, FitError> {
+    let data = Data::new(
+        samples,
+        options.model,
+        parameter_count(options.model, options.roughness),
+    )?;
+    let (found, ks_90) = robust::fit(&data, options)?;
+    Ok((found.params, ks_90))
+}
+
+/// [`fit`] of samples near those whose robust minimum is `start` (a subset of them): by
+/// Gauss–Newton steps from it to the minimum within reach ([`newton`]), by the full
+/// search where they give up or without a start; with [`fit_fresnel_given`]'s `tied`
+/// when given.
+pub(crate) fn fit_from(
+    samples: &[Sample],
+    options: &FitOptions,
+    start: Option<&Start>,
+    tied: Option<&FitResult>,
+) -> Result<FitResult, FitError> {
+    match tied {
+        Some(tied) => fresnel_given(samples, options, tied, start),
+        None => fit_given(samples, options, None, start),
+    }
 }
 
 /// The table of `samples` ([`table`]) with `options`' parametric fit of the same
@@ -402,6 +444,16 @@ pub fn fit_fresnel_given(
     options: &FitOptions,
     tied: &FitResult,
 ) -> Result<FitResult, FitError> {
+    fresnel_given(samples, options, tied, None)
+}
+
+/// [`fit_fresnel_given`], from `start` when given ([`fit_from`]).
+fn fresnel_given(
+    samples: &[Sample],
+    options: &FitOptions,
+    tied: &FitResult,
+    start: Option<&Start>,
+) -> Result<FitResult, FitError> {
     let consistent = options.model == Model::CookTorranceFresnel
         && options.method == FitMethod::Robust
         && tied.model == Model::CookTorrance
@@ -418,14 +470,16 @@ pub fn fit_fresnel_given(
         params: tied.params(),
         evaluations: tied.evaluations,
     };
-    fit_given(samples, options, Some((found, tied.seconds)))
+    fit_given(samples, options, Some((found, tied.seconds)), start)
 }
 
-/// [`fit`], with the colour-shift test's tied fit and its seconds when given.
+/// [`fit`], with the colour-shift test's tied fit and its seconds when given, from
+/// `start` when given ([`fit_from`]).
 fn fit_given(
     samples: &[Sample],
     options: &FitOptions,
     tied: Option<(Found, f64)>,
+    from: Option<&Start>,
 ) -> Result<FitResult, FitError> {
     let start = Instant::now();
     let Minimised {
@@ -434,7 +488,7 @@ fn fit_given(
         ks_90,
         colour_shift,
         reused_seconds,
-    } = minimise(samples, options, tied)?;
+    } = minimise(samples, options, tied, from)?;
     let params = found.params;
     let m = match options.roughness {
         Roughness::Shared => FittedRoughness::Shared([params.m[0]]),

@@ -33,8 +33,8 @@ use super::draws::Normal;
 pub use super::draws::{Convergence, Distribution};
 use super::robust::Precision;
 use super::{
-    departure, parameter_count, robust, uncertainty, FitError, FitMethod, FitOptions, FitResult,
-    ParameterSet,
+    departure, newton, parameter_count, robust, uncertainty, FitError, FitMethod, FitOptions,
+    FitResult, ParameterSet,
 };
 use crate::brdf::{Params, Roughness, M_MAX, M_MIN};
 use crate::samples::{distinct_theta_l, Sample, SampleUncertainty, THETA_L_TOLERANCE};
@@ -237,16 +237,26 @@ struct Refit<'a> {
 impl Refit<'_> {
     /// θ of the fit to the measured values `moved` (one per sample).
     fn fit(&self, moved: &[[f64; 3]]) -> Result<Vec<f64>, FitError> {
-        let data = self.data.with_measured(moved.to_vec());
-        let (found, ks_90) = match &self.near {
-            Some((start, kg)) => {
-                robust::fit_near(&data, &self.options, start, *kg, WARM_STEP, self.precision)?
-            }
-            None => robust::fit(&data, &self.options)?,
-        };
-        let m = &found.params.m[..self.options.roughness.count()];
+        let (params, ks_90) = self.solve(&self.data.with_measured(moved.to_vec()))?;
+        let m = &params.m[..self.options.roughness.count()];
         let ks_90 = self.fresnel.then_some(ks_90);
-        Ok(vector(found.params.kd, found.params.ks, ks_90, m))
+        Ok(vector(params.kd, params.ks, ks_90, m))
+    }
+
+    /// The fit to `data` (the refitter's points): from `near` by Gauss–Newton steps
+    /// ([`newton::refit`]), or where they give up by a search along ln m from there
+    /// ([`robust::fit_near`]); the parameters and specular colour at 90°.
+    fn solve(&self, data: &Data) -> Result<(Params, [f64; 3]), FitError> {
+        let (found, ks_90) = match &self.near {
+            Some((start, kg)) => match newton::refit(data, &self.options, start, *kg) {
+                Some(found) => found,
+                None => {
+                    robust::fit_near(data, &self.options, start, *kg, WARM_STEP, self.precision)?
+                }
+            },
+            None => robust::fit(data, &self.options)?,
+        };
+        Ok((found.params, ks_90))
     }
 
     /// The measured β moved by `scale` × `change(sample)` where `at(sample)`.
@@ -449,16 +459,19 @@ pub fn budget(samples: &[Sample], result: &FitResult) -> Result<Budget, FitError
         near: Some((result.params(), result.specular_90())),
         ..refit.clone()
     });
+    // Their fit starts from the fit of the values as measured, which differ from them by
+    // the departure only (a few standard uncertainties of the sources at most).
     refit.data = refit.data.with_measured(departure.corrected);
-    let (found, ks_90) = robust::fit(&refit.data, &refit.options)?;
+    refit.near = Some((result.params(), result.specular_90()));
+    let (params, ks_90) = refit.solve(&refit.data)?;
     let base = vector(
-        found.params.kd,
-        found.params.ks,
+        params.kd,
+        params.ks,
         refit.fresnel.then_some(ks_90),
-        &found.params.m[..m.len()],
+        &params.m[..m.len()],
     );
-    refit.near = Some((found.params, ks_90));
-    let spread = uncertainty::estimate(&refit.data, &refit.options, &found.params, &ks_90);
+    refit.near = Some((params, ks_90));
+    let spread = uncertainty::estimate(&refit.data, &refit.options, &params, &ks_90);
     // The HC1 standard uncertainties in the same layout (stderr.m is m·σ(ln m)); the
     // fit's own where the corrected values' are not defined.
     let stderr = spread.as_ref().map_or(stderr, |s| &s.stderr);
@@ -478,7 +491,7 @@ pub fn budget(samples: &[Sample], result: &FitResult) -> Result<Budget, FitError
         .collect();
 
     // What is left of the residuals against the noise the samples state.
-    let estimates = refit.data.estimates(&found.params, &ks_90);
+    let estimates = refit.data.estimates(&params, &ks_90);
     let (mut residual2, mut noise2) = (0.0, 0.0);
     for ((s, e), y) in samples.iter().zip(&estimates).zip(&refit.data.y) {
         let u = s.uncertainty.as_ref().map_or([0.0; 3], |u| u.noise);

@@ -145,24 +145,29 @@ pub(crate) fn estimate(
     let keep = |p: usize, c: usize| data.keep.as_ref().is_none_or(|k| k[p][c] > 0.0);
     let mean = data.zero_loss / data.y.len().max(1) as f64;
     let floor = 1e-6 * mean + f64::MIN_POSITIVE;
-    // Per value: the row [c_·j | g_·k], its residual and 1/u².
-    let mut rows: Vec<(Vec<f64>, f64, f64)> = Vec::with_capacity(3 * data.y.len());
+    // Per value: the row [c_·j | g_·k], its residual and 1/u², summed into the normal
+    // equations as they come.
+    let mut normal = Normal::new(size);
+    let mut row = vec![0.0; size];
     for (p, sample) in samples.iter().enumerate() {
         let noise = sample.uncertainty.as_ref().map_or([0.0; 3], |u| u.noise);
         let changes: Vec<[f64; 3]> = columns.iter().map(|col| change(sample, col)).collect();
         for c in (0..3).filter(|&c| keep(p, c)) {
-            let row: Vec<f64> = changes
-                .iter()
-                .map(|d| d[c])
-                .chain(jacobian.iter().map(|g| g[p][c]))
-                .collect();
+            for (v, d) in row.iter_mut().zip(
+                changes
+                    .iter()
+                    .map(|d| d[c])
+                    .chain(jacobian.iter().map(|g| g[p][c])),
+            ) {
+                *v = d;
+            }
             let u = noise[c].max(floor);
-            rows.push((row, data.y[p][c] - estimates[p][c], 1.0 / (u * u)));
+            normal.add(&row, data.y[p][c] - estimates[p][c], 1.0 / (u * u));
         }
     }
-    if rows.len() <= size {
+    if normal.rows <= size {
         return Err(FitError::TooFewPoints {
-            points: rows.len(),
+            points: normal.rows,
             parameters: size,
         });
     }
@@ -171,7 +176,7 @@ pub(crate) fn estimate(
     // identified ([`identified`]); the model's parameters always stay.
     let mut active: Vec<bool> = vec![true; n_z];
     let (z, std) = loop {
-        let (z, std, scatter2) = solve_active(&rows, &active, n_z, size)?;
+        let (z, std, scatter2) = solve_active(&normal, &active, n_z)?;
         let worst = (0..n_z)
             .filter(|&j| active[j] && !identified(z[j], std[j]))
             .max_by(|&a, &b| unidentified(z[a], std[a]).total_cmp(&unidentified(z[b], std[b])));
@@ -213,60 +218,82 @@ pub(crate) fn estimate(
     })
 }
 
-/// The least-squares solution of the rows (row, residual, weight) over the model's
-/// columns and the active sources' (each with its N(0, 1) prior), the scatter s² of
-/// what is left over the noise re-estimated until it settles: every source's posterior
-/// mean and standard deviation (0 and 1, the prior, for an inactive one), and s².
+/// The weighted normal equations of the rows (row, residual r, weight w) over every
+/// column: Σ w·row·rowᵀ (upper triangle, row-major), Σ w·row·r and Σ w·r².
+struct Normal {
+    size: usize,
+    matrix: Vec<f64>,
+    rhs: Vec<f64>,
+    squares: f64,
+    rows: usize,
+}
+
+impl Normal {
+    fn new(size: usize) -> Self {
+        Normal {
+            size,
+            matrix: vec![0.0; size * size],
+            rhs: vec![0.0; size],
+            squares: 0.0,
+            rows: 0,
+        }
+    }
+
+    fn add(&mut self, row: &[f64], r: f64, w: f64) {
+        for (a, &ra) in row.iter().enumerate() {
+            let wa = w * ra;
+            self.rhs[a] += wa * r;
+            let line = &mut self.matrix[a * self.size..(a + 1) * self.size];
+            for (v, &rb) in line[a..].iter_mut().zip(&row[a..]) {
+                *v += wa * rb;
+            }
+        }
+        self.squares += w * r * r;
+        self.rows += 1;
+    }
+
+    /// Σ w·row_i·row_j.
+    fn at(&self, i: usize, j: usize) -> f64 {
+        self.matrix[i.min(j) * self.size + i.max(j)]
+    }
+}
+
+/// The least-squares solution of the rows summed in `normal` over the model's columns
+/// (those from `n_z` on) and the active sources' (each with its N(0, 1) prior), the
+/// scatter s² of what is left over the noise re-estimated until it settles: every
+/// source's posterior mean and standard deviation (0 and 1, the prior, for an inactive
+/// one), and s².
 fn solve_active(
-    rows: &[(Vec<f64>, f64, f64)],
+    normal: &Normal,
     active: &[bool],
     n_z: usize,
-    size: usize,
 ) -> Result<(Vec<f64>, Vec<f64>, f64), FitError> {
-    let kept: Vec<usize> = (0..size).filter(|&i| i >= n_z || active[i]).collect();
+    let kept: Vec<usize> = (0..normal.size)
+        .filter(|&i| i >= n_z || active[i])
+        .collect();
     let n = kept.len();
     let mut scatter2: f64 = 1.0;
     let mut found = (vec![0.0; n_z], vec![1.0; n_z]);
     for _ in 0..SCATTER_ROUNDS {
-        let mut normal = DMatrix::<f64>::zeros(n, n);
-        let mut rhs = DVector::<f64>::zeros(n);
-        for (row, r, w) in rows {
-            let w = w / scatter2;
-            for (a, &i) in kept.iter().enumerate() {
-                let wi = w * row[i];
-                rhs[a] += wi * r;
-                for (b, &j) in kept.iter().enumerate().skip(a) {
-                    normal[(a, b)] += wi * row[j];
-                }
-            }
-        }
-        for (a, &i) in kept.iter().enumerate() {
-            if i < n_z {
-                normal[(a, a)] += 1.0;
-            }
-            for b in 0..a {
-                normal[(a, b)] = normal[(b, a)];
-            }
-        }
-        let (solution, variance) = solve(normal, rhs)?;
+        let matrix = DMatrix::from_fn(n, n, |a, b| {
+            let prior = if a == b && kept[a] < n_z { 1.0 } else { 0.0 };
+            normal.at(kept[a], kept[b]) / scatter2 + prior
+        });
+        let rhs = DVector::from_fn(n, |a, _| normal.rhs[kept[a]] / scatter2);
+        let (solution, variance) = solve(matrix, rhs)?;
         for (a, &i) in kept.iter().enumerate().filter(|(_, &i)| i < n_z) {
             found.0[i] = solution[a];
             found.1[i] = variance[a].max(0.0).sqrt();
         }
-        // What is left, over the noise, per value (at least 1).
-        let left: f64 = rows
-            .iter()
-            .map(|(row, r, w)| {
-                let explained: f64 = kept
-                    .iter()
-                    .zip(solution.iter())
-                    .map(|(&i, x)| row[i] * x)
-                    .sum();
-                (r - explained).powi(2) * w
-            })
-            .sum::<f64>()
-            / (rows.len() - n) as f64;
-        let next = left.max(1.0);
+        // What is left, over the noise, per value (at least 1): Σ w (r − row·x)².
+        let mut left = normal.squares;
+        for (a, &i) in kept.iter().enumerate() {
+            left -= 2.0 * solution[a] * normal.rhs[i];
+            for (b, &j) in kept.iter().enumerate() {
+                left += solution[a] * solution[b] * normal.at(i, j);
+            }
+        }
+        let next = (left.max(0.0) / (normal.rows - n) as f64).max(1.0);
         let settled = (next - scatter2).abs() <= 1e-3 * scatter2;
         scatter2 = next;
         if settled {

@@ -21,7 +21,7 @@ use super::fold_score::score;
 pub use super::fold_score::{errors, lobe, Errors, Fold, LOBE_FRACTION};
 use super::linear::nnls2;
 use super::table::{Shape, Table, CHROMATICITY_WINDOWS};
-use super::{fit, fit_fresnel_given, FitError, FitOptions, FitResult};
+use super::{fit_from, robust_minimum, FitError, FitOptions, FitResult, Start};
 use crate::brdf::{Model, Roughness};
 use crate::color::CameraModel;
 use crate::samples::{distinct_theta_l, Sample, THETA_L_TOLERANCE};
@@ -245,10 +245,12 @@ fn fit_groups(variants: &[Variant]) -> Vec<Vec<usize>> {
 }
 
 /// The variants `group` of `variants` (see [`fit_groups`]) fitted without θL `theta_l`
-/// and scored there, each with its fit's shape.
+/// and scored there, each with its fit's shape; each fit starts from the variant's
+/// robust minimum on every θL (`starts`, [`fit_from`]; none where that failed).
 fn fold_group(
     samples: &[Sample],
     variants: &[Variant],
+    starts: &[Option<Start>],
     group: &[usize],
     theta_l: f64,
     camera: &CameraModel,
@@ -260,10 +262,10 @@ fn fold_group(
         .map(|&v| {
             let mut options = variants[v].options();
             options.uncertainty = false;
-            let fitted = match (&tied, options.model) {
-                (Some(t), Model::CookTorranceFresnel) => fit_fresnel_given(&others, &options, t),
-                _ => fit(&others, &options),
-            };
+            let tied_form = tied
+                .as_ref()
+                .filter(|_| options.model == Model::CookTorranceFresnel);
+            let fitted = fit_from(&others, &options, starts[v].as_ref(), tied_form);
             if options.model == Model::CookTorrance {
                 tied = fitted.as_ref().ok().cloned();
             }
@@ -499,6 +501,12 @@ pub fn leave_one_theta_l_out(
             needed: 2,
         });
     }
+    // Each fold's fit starts from the variant's minimum on every θL, which it differs
+    // from by one θL of several.
+    let starts: Vec<Option<Start>> = variants
+        .par_iter()
+        .map(|v| robust_minimum(samples, &v.options()).ok())
+        .collect();
     let groups = fit_groups(variants);
     let jobs: Vec<(&[usize], f64)> = theta_l
         .iter()
@@ -507,7 +515,7 @@ pub fn leave_one_theta_l_out(
     let outcomes: Vec<(usize, f64, FoldOutcome)> = jobs
         .par_iter()
         .flat_map_iter(|&(group, t)| {
-            fold_group(samples, variants, group, t, camera)
+            fold_group(samples, variants, &starts, group, t, camera)
                 .into_iter()
                 .map(move |(v, outcome)| (v, t, outcome))
         })

@@ -101,23 +101,31 @@ pub(crate) struct Spread {
     pub correlation: Correlation,
 }
 
-/// Positions of the parameters in θ.
-struct Layout {
-    fresnel: bool,
-    shared: bool,
+/// Positions of the parameters in θ: Kd, Ks, Ks_90 (when `fresnel`) per channel, then
+/// ln m (one when `shared`, else per channel).
+pub(crate) struct Layout {
+    pub fresnel: bool,
+    pub shared: bool,
 }
 
 impl Layout {
-    fn kd(&self, c: usize) -> usize {
+    /// The layout of a fit to `data` (Ks_90 its own where `data` has shift weights).
+    pub(crate) fn of(data: &Data, options: &FitOptions) -> Self {
+        Layout {
+            fresnel: data.shift_weight.is_some(),
+            shared: options.roughness == Roughness::Shared,
+        }
+    }
+    pub(crate) fn kd(&self, c: usize) -> usize {
         c
     }
-    fn ks(&self, c: usize) -> usize {
+    pub(crate) fn ks(&self, c: usize) -> usize {
         3 + c
     }
-    fn kg(&self, c: usize) -> Option<usize> {
+    pub(crate) fn kg(&self, c: usize) -> Option<usize> {
         self.fresnel.then_some(6 + c)
     }
-    fn ln_m(&self, c: usize) -> usize {
+    pub(crate) fn ln_m(&self, c: usize) -> usize {
         let base = if self.fresnel { 9 } else { 6 };
         if self.shared {
             base
@@ -125,7 +133,7 @@ impl Layout {
             base + c
         }
     }
-    fn len(&self) -> usize {
+    pub(crate) fn len(&self) -> usize {
         self.ln_m(2) + 1
     }
 }
@@ -159,7 +167,7 @@ pub(crate) fn shift_statistic(
 ) -> Option<f64> {
     let residuals = Residuals::new(data, options, params, ks_90)?;
     let layout = &residuals.layout;
-    let inverse = inverse_if_identifiable(&residuals.sums().hessian)?;
+    let inverse = inverse_if_identifiable(&residuals.sums(false).hessian)?;
     let hc3 = &inverse * residuals.hc3_spread(&inverse) * &inverse;
     let d = DVector::from_iterator(3, (0..3).map(|c| ks_90[c] - params.ks[c]));
     let mut sigma = DMatrix::<f64>::zeros(3, 3);
@@ -209,13 +217,31 @@ pub(crate) fn covariance(
 ) -> Option<Covariance> {
     let residuals = Residuals::new(data, options, params, ks_90)?;
     let (n, p) = (data.y.len(), residuals.layout.len());
-    let Sums { hessian, spread } = residuals.sums();
+    let Sums {
+        hessian, spread, ..
+    } = residuals.sums(true);
     let inverse = inverse_if_identifiable(&hessian)?;
     let hc1 = &inverse * spread * (n as f64 / (n - p) as f64) * &inverse;
     Some(Covariance {
         hc1,
         layout: residuals.layout,
     })
+}
+
+/// The Gauss–Newton system of the loss at (`params`, `ks_90`), θ laid out as in
+/// [`Layout::of`]: A (its Hessian without the model's second derivatives) and Σ_p g_p,
+/// the loss's gradient with its sign reversed; `None` when there are no more points than
+/// parameters.
+pub(crate) fn gauss_newton(
+    data: &Data,
+    options: &FitOptions,
+    params: &Params,
+    ks_90: &[f64; 3],
+) -> Option<(DMatrix<f64>, DVector<f64>)> {
+    let Sums {
+        hessian, descent, ..
+    } = Residuals::new(data, options, params, ks_90)?.sums(false);
+    Some((hessian, descent))
 }
 
 /// The most parameters a fit has: Kd, Ks, Ks_90 and m per channel.
@@ -232,10 +258,12 @@ struct PointTerm {
     gradient: [f64; MAX_PARAMETERS],
 }
 
-/// A and Σ_p g_p g_pᵀ (B without its small-sample factor).
+/// A, Σ_p g_p g_pᵀ (B without its small-sample factor) and Σ_p g_p (the loss's
+/// gradient with its sign reversed).
 struct Sums {
     hessian: DMatrix<f64>,
     spread: DMatrix<f64>,
+    descent: DVector<f64>,
 }
 
 /// The residuals of a fit at its parameters, read by the passes over the points.
@@ -258,10 +286,7 @@ impl<'a> Residuals<'a> {
         params: &Params,
         ks_90: &[f64; 3],
     ) -> Option<Self> {
-        let layout = Layout {
-            fresnel: data.shift_weight.is_some(),
-            shared: options.roughness == Roughness::Shared,
-        };
+        let layout = Layout::of(data, options);
         let n = data.y.len();
         if n <= layout.len() {
             return None;
@@ -332,26 +357,50 @@ impl<'a> Residuals<'a> {
         }
     }
 
-    /// A = Σ_p J_pᵀ M_p J_p and Σ_p g_p g_pᵀ, in one pass.
-    fn sums(&self) -> Sums {
-        let p = self.layout.len();
+    /// A = Σ_p J_pᵀ M_p J_p, Σ_p g_p g_pᵀ (when `spread`, else 0) and Σ_p g_p, in one
+    /// pass. J_pᵀ M_p J_p = (J_pᵀ J_p − g_p g_pᵀ)/‖r_p‖, each row of J_p nonzero only at
+    /// its channel's Kd, Ks, Ks_90 and ln m.
+    fn sums(&self, with_spread: bool) -> Sums {
+        let (layout, p) = (&self.layout, self.layout.len());
         let mut hessian: Square = [[0.0; MAX_PARAMETERS]; MAX_PARAMETERS];
         let mut spread: Square = [[0.0; MAX_PARAMETERS]; MAX_PARAMETERS];
+        let mut descent = DVector::<f64>::zeros(p);
+        // Each channel's nonzero columns, ascending.
+        let columns: [Vec<usize>; 3] = std::array::from_fn(|c| {
+            let mut k = vec![layout.kd(c), layout.ks(c)];
+            k.extend(layout.kg(c));
+            k.push(layout.ln_m(c));
+            k
+        });
         for point in 0..self.norms.len() {
             let term = self.term(point);
-            let weighted = term.weighted_jacobian(p);
+            let inverse = 1.0 / self.norms[point];
+            for (row, columns) in term.jacobian.iter().zip(&columns) {
+                for (a, &i) in columns.iter().enumerate() {
+                    let ji = row[i] * inverse;
+                    for &j in &columns[a..] {
+                        hessian[i][j] += ji * row[j];
+                    }
+                }
+            }
+            let g = &term.gradient;
             for i in 0..p {
+                descent[i] += g[i];
+                let gi = g[i] * inverse;
                 for j in i..p {
-                    hessian[i][j] += (0..3)
-                        .map(|c| term.jacobian[c][i] * weighted[c][j])
-                        .sum::<f64>();
-                    spread[i][j] += term.gradient[i] * term.gradient[j];
+                    hessian[i][j] -= gi * g[j];
+                }
+                if with_spread {
+                    for j in i..p {
+                        spread[i][j] += g[i] * g[j];
+                    }
                 }
             }
         }
         Sums {
             hessian: symmetric(&hessian, p),
             spread: symmetric(&spread, p),
+            descent,
         }
     }
 
@@ -376,19 +425,6 @@ impl<'a> Residuals<'a> {
 }
 
 impl PointTerm {
-    /// M_p J_p (3 × P).
-    fn weighted_jacobian(&self, p: usize) -> [[f64; MAX_PARAMETERS]; 3] {
-        let mut out = [[0.0; MAX_PARAMETERS]; 3];
-        for (c, row) in out.iter_mut().enumerate() {
-            for (j, v) in row.iter_mut().enumerate().take(p) {
-                *v = (0..3)
-                    .map(|d| self.curvature[c][d] * self.jacobian[d][j])
-                    .sum();
-            }
-        }
-        out
-    }
-
     /// tr(M_p J_p A⁻¹ J_pᵀ) with `inverse` = A⁻¹ (P × P).
     fn leverage(&self, inverse: &DMatrix<f64>, p: usize) -> f64 {
         // K = J_p A⁻¹ (3 × P), then tr(M_p K J_pᵀ) = Σ_cd M_cd (K J_pᵀ)_dc.
@@ -502,14 +538,14 @@ fn spread(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::brdf::Model;
     use crate::samples::Sample;
 
     /// A small two-θL scan of `model` with 2 % deterministic multiplicative noise, a
     /// colour shift in the truth, and one dropped value.
-    fn samples(model: Model) -> Vec<Sample> {
+    pub(crate) fn samples(model: Model) -> Vec<Sample> {
         let truth = Params::shared([8.0, 6.0, 3.0], [4.0, 3.5, 2.0], 0.15);
         let ks_90 = [2.0, 4.5, 3.0];
         let mut state = 0x2545_f491_4f6c_dd1d_u64;
@@ -553,7 +589,7 @@ mod tests {
             let ks_90 = [2.2, 4.4, 2.9];
             let residuals = Residuals::new(&data, &options, &params, &ks_90).unwrap();
             assert_eq!(residuals.layout.len(), expected, "{model} {roughness}");
-            let inverse = inverse_if_identifiable(&residuals.sums().hessian).unwrap();
+            let inverse = inverse_if_identifiable(&residuals.sums(false).hessian).unwrap();
             let total: f64 = (0..samples.len())
                 .map(|p| residuals.term(p).leverage(&inverse, expected))
                 .sum();
