@@ -19,9 +19,6 @@ pub const METER_START_S: f64 = 1.0 / 60.0;
 /// Three exposures two stops and more apart: the middle of the one to five an
 /// automatic bracket takes.
 const EXPECTED_BRACKET_S: [f64; 3] = [0.25, 1.0 / 30.0, 1.0 / 250.0];
-/// θL of the timing probe's synthetic scan (each held out in turn by the automatic
-/// choice).
-pub const PROBE_THETA_COUNT: usize = 3;
 /// A homing cycle in controller seconds.
 const HOMING_S: f64 = 3.0;
 /// The frame size assumed when the setup gives none: a full-size 3872×2592 frame.
@@ -47,9 +44,9 @@ pub struct Costs {
     pub extract_s_per_point: f64,
     /// Each final fit of [`FIT_MODELS`], in that order, seconds per point.
     pub fit_s_per_point: [f64; 3],
-    /// The [`AUTO_FIT`] (every candidate, each θL held out in turn, the budget) on the
-    /// timing probe's scan of [`PROBE_THETA_COUNT`] θL, every point judged: seconds
-    /// per point, and seconds whatever the points.
+    /// The [`AUTO_FIT`] (every candidate, each θL held out in turn) run after the
+    /// per-model fits, whose budgets it shares: seconds per point judged, and seconds
+    /// whatever the points.
     pub auto_s_per_point: f64,
     pub auto_s: f64,
 }
@@ -187,23 +184,16 @@ impl Timing {
         EXPECTED_BRACKET_S.iter().map(|&s| self.capture_s(s)).sum()
     }
 
-    /// Expected seconds of the automatic choice on a scan of `theta_count` θL. Its
-    /// final fit (the chosen model with its budget, priced as a Cook–Torrance fit)
-    /// takes every point; its leave-one-θL-out folds only the points judged
-    /// ([`JUDGED_PER_THETA_L`] at most per θL), each point fitted in the folds that
-    /// keep its θL (one fewer than the θL): the probe's per-point cost beyond its final
-    /// fit is scaled to those.
+    /// Expected seconds of the automatic choice on a scan of `theta_count` θL: its
+    /// candidates are fitted and judged on the points judged only
+    /// ([`JUDGED_PER_THETA_L`] at most per θL), and its final fit's budget is the one
+    /// the same model's fit step makes (they share it, in a scan as in the probe, which
+    /// measures the choice after the per-model fits).
     fn auto_s(&self, theta_count: usize) -> f64 {
-        let costs = &self.costs;
         let per_theta = self.points_per_theta();
         let stride = (per_theta / JUDGED_PER_THETA_L as f64).ceil().max(1.0);
         let judged = per_theta / stride * theta_count as f64;
-        let final_per_point = costs.fit_s_per_point[0].min(costs.auto_s_per_point);
-        let folds_per_point = costs.auto_s_per_point - final_per_point;
-        let folds = theta_count.saturating_sub(1) as f64 / (PROBE_THETA_COUNT - 1) as f64;
-        costs.auto_s
-            + final_per_point * per_theta * theta_count as f64
-            + folds_per_point * judged * folds
+        self.costs.auto_s + self.costs.auto_s_per_point * judged
     }
 
     /// Expected seconds of `step` at `place` in its scan, with the arm at `from_deg`
@@ -314,29 +304,20 @@ mod tests {
             model: "ward".into(),
         };
         // The automatic choice: on the probe's own scan (a sixteenth of the pixels,
-        // three θL, every point judged) the probe's measure, a fixed part plus a part
-        // per point; with more θL each point is fitted in more folds; past the judged
-        // points per θL only its final fit grows with the points.
+        // every point judged) the probe's measure, a fixed part plus a part per point;
+        // past the points judged per θL it no longer grows with the points.
         let costs = Costs::DEFAULT;
-        let probe_points = costs.points_per_column * 968.0 * PROBE_THETA_COUNT as f64;
-        let probe_shape = place(PROBE_THETA_COUNT, PROBE_THETA_COUNT, 2);
+        let probe_points = costs.points_per_column * 968.0 * 3.0;
         assert!(
-            (small.prior_s(&auto, 0.0, &probe_shape)
+            (small.prior_s(&auto, 0.0, &place(3, 3, 2))
                 - (costs.auto_s + costs.auto_s_per_point * probe_points))
                 .abs()
                 < 1e-9
         );
-        let ratio = |t: &Timing, count| {
-            t.prior_s(&auto, 0.0, &place(count, count, 2))
-                / t.prior_s(&ward, 0.0, &place(count, count, 2))
-        };
-        assert!(ratio(&small, 6) > ratio(&small, 3));
         let wide = timing.with_frame(2 * 3872, 2592);
-        let growth = |count| {
-            wide.prior_s(&auto, 0.0, &place(count, count, 2))
-                / timing.prior_s(&auto, 0.0, &place(count, count, 2))
-        };
-        assert!(growth(6) < 2.0 && growth(6) > 1.0, "{}", growth(6));
+        let judged = |t: &Timing| t.prior_s(&auto, 0.0, &place(6, 6, 2));
+        assert!((judged(&wide) - judged(&timing)).abs() < 1e-9 * judged(&timing));
+        assert!(small.prior_s(&auto, 0.0, &place(6, 6, 2)) < judged(&timing));
         assert!(
             (timing.prior_s(&ward, 0.0, &place(6, 6, 2))
                 - 2.0 * timing.prior_s(&ward, 0.0, &place(3, 3, 2)))

@@ -27,7 +27,7 @@ use crate::plan::{exposure_stem, theta_dir_name, ScanPlan, Step, AUTO_FIT, FIT_M
 use crate::process::{self, Prefetched};
 use crate::shared::Shared;
 use crate::store::now_rfc3339;
-use crate::timing::{Costs, PROBE_THETA_COUNT};
+use crate::timing::Costs;
 
 /// The cache of the measured costs in the data directory.
 const CACHE_FILE: &str = "processing-costs.json";
@@ -38,7 +38,7 @@ const VERSION: u32 = 2;
 /// The synthetic scan: the builtin gold scene binned by this factor…
 const BINNING: u32 = 4;
 /// …at these θL (three, so that the automatic choice holds each out in turn)…
-const THETA_L: [f64; PROBE_THETA_COUNT] = [-20.0, -30.0, -40.0];
+const THETA_L: [f64; 3] = [-20.0, -30.0, -40.0];
 /// …with these exposures, seconds.
 const BRACKET_S: [f64; 2] = [0.5, 0.02];
 /// The most the probe may take, wall-clock; past it the defaults stay.
