@@ -17,6 +17,7 @@ use gonio_processing::fit::{fit, fit_auto, FitOptions, FitResult, AUTO_CANDIDATE
 use gonio_processing::hdr::{merge, MergeOptions};
 use gonio_processing::metrics::err_p;
 use gonio_processing::samples::{read_csv, write_csv, Sample};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
 
@@ -175,25 +176,32 @@ fn live_fits(
         fits: BTreeMap::new(),
     };
     let earlier_fingerprint = fingerprint(&earlier);
-    for (model, _) in FIT_MODELS {
-        let options = FitOptions::new(model.parse::<Model>()?);
-        let entry = match fit(&all, &options) {
-            Ok(now) => {
-                let before = match saved
-                    .as_ref()
-                    .and_then(|s| s.of(model, &earlier_fingerprint))
-                {
-                    Some(before) => Some(before.clone()),
-                    None if earlier.is_empty() => None,
-                    None => fit(&earlier, &options).ok(),
-                };
-                let entry = live_entry(&now, before.as_ref(), newest, &all);
-                to_save.fits.insert(model.to_owned(), now);
-                entry
-            }
-            Err(err) => json!({ "error": err.to_string() }),
-        };
-        fits.insert(model.to_owned(), entry);
+    // The models are fitted side by side: each fit runs on one core.
+    let made: Vec<(Value, Option<FitResult>)> = FIT_MODELS
+        .par_iter()
+        .map(|(model, _)| {
+            let options = FitOptions::new(model.parse::<Model>()?);
+            Ok(match fit(&all, &options) {
+                Ok(now) => {
+                    let before = match saved
+                        .as_ref()
+                        .and_then(|s| s.of(model, &earlier_fingerprint))
+                    {
+                        Some(before) => Some(before.clone()),
+                        None if earlier.is_empty() => None,
+                        None => fit(&earlier, &options).ok(),
+                    };
+                    (live_entry(&now, before.as_ref(), newest, &all), Some(now))
+                }
+                Err(err) => (json!({ "error": err.to_string() }), None),
+            })
+        })
+        .collect::<anyhow::Result<_>>()?;
+    for ((model, _), (entry, now)) in FIT_MODELS.iter().zip(made) {
+        if let Some(now) = now {
+            to_save.fits.insert((*model).to_owned(), now);
+        }
+        fits.insert((*model).to_owned(), entry);
     }
     let rel = theta_fits_path(theta_l);
     write_atomic(&dir.join(&rel), &serde_json::to_vec(&to_save)?).with_context(|| rel)?;

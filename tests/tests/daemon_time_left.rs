@@ -23,7 +23,8 @@
 //! the estimates before the first θL is processed. The 15 % target is printed (the
 //! server's unit test `recorded_first_scans_are_estimated_within_the_targets` asserts
 //! it on journals of such scans recorded on a quiet machine). Otherwise the figures are printed with that share
-//! and the load, and the test says it did not assert them. Asserted whatever the load:
+//! and the load, and the test says it did not assert them (so too when the probe gave up
+//! past its budget on a busy machine: on a quiet one that fails). Asserted whatever the load:
 //! an estimate at every poll and never "finishing" with seconds of work left.
 
 use std::time::{Duration, Instant};
@@ -137,12 +138,29 @@ fn time_left_holds_from_the_first_second_of_a_new_data_directory_s_first_scan() 
     let ticks_before = cpu_ticks(daemon.pid());
     let costs = daemon.data.join("processing-costs.json");
     let probe_deadline = Instant::now() + Duration::from_secs(300);
+    // The probe gives up past its budget (the stated costs stay): on a busy machine,
+    // where the targets are then not asserted; on a quiet one that is a fault.
+    let mut probe_gave_up = None;
     while !costs.exists() {
         assert!(
             Instant::now() < probe_deadline,
             "the timing probe did not finish; see {}",
             daemon.log.display()
         );
+        let log = std::fs::read_to_string(&daemon.log).unwrap_or_default();
+        if let Some(line) = log.lines().find(|l| l.contains("timing probe:")) {
+            let others = others_share(ticks_before, cpu_ticks(daemon.pid()));
+            assert!(
+                others > QUIET_SHARE,
+                "on a quiet machine (other processes at {:.0} % of the cores): {line}",
+                100.0 * others
+            );
+            probe_gave_up = Some(format!(
+                "the timing probe gave up with other processes at {:.0} % of the cores",
+                100.0 * others
+            ));
+            break;
+        }
         std::thread::sleep(Duration::from_millis(200));
     }
     let load_before = load_per_core();
@@ -239,11 +257,12 @@ fn time_left_holds_from_the_first_second_of_a_new_data_directory_s_first_scan() 
         met(worst[1], AFTER_FIRST_THETA),
         100.0 * AFTER_FIRST_THETA
     );
-    if others > QUIET_SHARE {
+    if others > QUIET_SHARE || probe_gave_up.is_some() {
         eprintln!(
-            "targets not asserted: other processes used {:.0} % of the cores (quiet: ≤ {:.0} %){}",
+            "targets not asserted: other processes used {:.0} % of the cores (quiet: ≤ {:.0} %){}{}",
             100.0 * others,
             100.0 * QUIET_SHARE,
+            probe_gave_up.map_or(String::new(), |p| format!("; {p}")),
             off_by.map_or(String::new(), |o| format!("; {o}"))
         );
         return;
