@@ -6,7 +6,7 @@ use super::error::HdrError;
 use super::image::{channel_mask, map_rows, SATURATED, UNDEREXPOSED};
 use super::options::MergeOptions;
 use super::response::{self, Observations, LEVELS};
-use super::weighting::predicted_mean;
+use super::weighting::{Run, RUN};
 use crate::capture::Frame;
 
 /// Per-frame table from count to the quantised level 0..=255 of its normalised signal.
@@ -56,36 +56,42 @@ pub(super) fn merge_debevec_malik(
     order.sort_by(|&a, &b| ln_h[b].total_cmp(&ln_h[a]));
     let exposures: Vec<f64> = order.iter().map(|&j| ln_h[j].exp()).collect();
     let width = frames[0].width;
-    Ok(map_rows(&frames[0], |levels, y, row_rgb, row_mask| {
-        for (i, value) in row_rgb.iter_mut().enumerate() {
-            let index = 3 * width * y + i;
-            let curve = &curves[i % 3];
-            levels.clear();
-            levels.extend(order.iter().map(|&j| level(j, index)));
-            let reference = levels
-                .iter()
-                .zip(&exposures)
-                .find(|(&z, _)| z > 0 && z < LEVELS - 1)
-                .map(|(&z, h)| curve.exposure[z] / h);
-            let (radiance, flag) = match reference {
-                Some(l0) => {
-                    let estimate = predicted_mean(
-                        levels.len(),
-                        |k| exposures[k],
-                        |k| (levels[k] < LEVELS - 1).then(|| curve.exposure[levels[k]]),
+    Ok(map_rows(
+        &frames[0],
+        |run: &mut Run, y, row_rgb, row_mask| {
+            // A run holds one channel's values, read through its curve.
+            for (c, curve) in curves.iter().enumerate() {
+                for x0 in (0..width).step_by(RUN) {
+                    let len = RUN.min(width - x0);
+                    let index = 3 * (width * y + x0) + c;
+                    run.start(&exposures, len);
+                    for (k, &j) in order.iter().enumerate() {
+                        run.frame(k, |i| {
+                            let z = level(j, index + 3 * i);
+                            (
+                                curve.exposure[z],
+                                z == LEVELS - 1,
+                                (z > 0) & (z < LEVELS - 1),
+                            )
+                        });
+                    }
+                    run.references(|i, clipped| {
+                        let (radiance, flag) = match clipped {
+                            Some(k) => ((curve.g[LEVELS - 1] - ln_h[order[k]]).exp(), SATURATED),
+                            None => (0.0, UNDEREXPOSED),
+                        };
+                        row_rgb[3 * (x0 + i) + c] = radiance as f32;
+                        row_mask[x0 + i] |= channel_mask(flag, c);
+                    });
+                    let means = run.means(
                         |predicted| curve.in_range(predicted),
                         |_, predicted| curve.variance(predicted),
-                        l0,
                     );
-                    (estimate.max(0.0), 0)
+                    for (i, estimate) in means {
+                        row_rgb[3 * (x0 + i) + c] = estimate.max(0.0) as f32;
+                    }
                 }
-                None => match levels.iter().rposition(|&z| z == LEVELS - 1) {
-                    Some(k) => ((curve.g[LEVELS - 1] - ln_h[order[k]]).exp(), SATURATED),
-                    None => (0.0, UNDEREXPOSED),
-                },
-            };
-            *value = radiance as f32;
-            row_mask[i / 3] |= channel_mask(flag, i % 3);
-        }
-    }))
+            }
+        },
+    ))
 }

@@ -66,10 +66,10 @@ impl HdrImage {
 
 /// The values and mask of a map the size of `frame`, computed a row at a time in
 /// parallel: `row(scratch, y, rgb, mask)` fills row `y` (`rgb` RGB interleaved, `mask`
-/// a byte a pixel), `scratch` a buffer of the thread's own, kept from row to row.
-pub(super) fn map_rows<T: Send>(
+/// a byte a pixel), `scratch` buffers of the thread's own, kept from row to row.
+pub(super) fn map_rows<S: Default + Send>(
     frame: &Frame,
-    row: impl Fn(&mut Vec<T>, usize, &mut [f32], &mut [u8]) + Send + Sync,
+    row: impl Fn(&mut S, usize, &mut [f32], &mut [u8]) + Send + Sync,
 ) -> (Vec<f32>, Vec<u8>) {
     let width = frame.width;
     let mut rgb = vec![0f32; frame.data.len()];
@@ -77,7 +77,7 @@ pub(super) fn map_rows<T: Send>(
     rgb.par_chunks_mut(3 * width)
         .zip(mask.par_chunks_mut(width))
         .enumerate()
-        .for_each_init(Vec::new, |scratch, (y, (row_rgb, row_mask))| {
+        .for_each_init(S::default, |scratch, (y, (row_rgb, row_mask))| {
             row(scratch, y, row_rgb, row_mask)
         });
     (rgb, mask)
