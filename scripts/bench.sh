@@ -86,6 +86,7 @@ for line in sys.stdin:
 
 process_benches() {
     cargo bench --locked -p gonio-daemon --bench study_command | keep
+    cargo bench --locked -p gonio-daemon --bench fit_auto_command | keep
     cargo bench --locked -p gonio-daemon --bench hdr_command | keep
     cargo bench --locked -p gonio-daemon --bench scan -- --runs 5 | keep
 }

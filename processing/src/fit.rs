@@ -383,14 +383,24 @@ pub fn fit(samples: &[Sample], options: &FitOptions) -> Result<FitResult, FitErr
 }
 
 /// The robust minimum of `options`' model on `samples` ([`Start`]): where fits of
-/// samples near these start from ([`fit_from`]).
-pub(crate) fn robust_minimum(samples: &[Sample], options: &FitOptions) -> Result<Start, FitError> {
+/// samples near these start from ([`fit_from`]). From `near` when given (a minimum of
+/// the same samples with fewer free parameters: a shared roughness, or a constant
+/// specular colour) by Gauss–Newton steps to the minimum within reach of it ([`newton`]),
+/// by the full search where they give up or without it.
+pub(crate) fn robust_minimum_near(
+    samples: &[Sample],
+    options: &FitOptions,
+    near: Option<&Start>,
+) -> Result<Start, FitError> {
     let data = Data::new(
         samples,
         options.model,
         parameter_count(options.model, options.roughness),
     )?;
-    let (found, ks_90) = robust::fit(&data, options)?;
+    let (found, ks_90) = match near.and_then(|(p, kg)| newton::refit(&data, options, p, *kg)) {
+        Some(found) => found,
+        None => robust::fit(&data, options)?,
+    };
     Ok((found.params, ks_90))
 }
 

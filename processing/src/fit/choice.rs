@@ -48,7 +48,7 @@ use super::colour_change::{lobe_colour_change, LobeColourChange, MIN_UV_CHANGE};
 use super::held_out::{leave_one_theta_l_out, table_held_out, Form, HeldOut};
 use super::stride::judged;
 use super::table::Table;
-use super::{fit, parameter_count, FitError, FitResult};
+use super::{fit, fit_from, parameter_count, FitError, FitResult, Start};
 use crate::brdf::Roughness;
 use crate::color::CameraModel;
 use crate::samples::{distinct_theta_l, Sample};
@@ -332,12 +332,13 @@ pub fn fit_auto(
             }
         })
         .collect();
-    choose(samples, Criterion::Bic, candidates, fits, None, camera)
+    choose(samples, Criterion::Bic, candidates, fits, &[], None, camera)
 }
 
 /// The choice among variants already judged by leave-one-θL-out (`held`, from
-/// [`leave_one_theta_l_out`] on `samples`): the chosen variant fitted to every sample,
-/// with the choice recorded.
+/// [`leave_one_theta_l_out`] on `samples` or on every k-th of them,
+/// [`super::stride::judged`]): the chosen variant fitted to every sample, from its robust
+/// minimum on the samples judged ([`fit_from`]), with the choice recorded.
 pub fn choose_held_out(
     samples: &[Sample],
     held: &[HeldOut],
@@ -346,24 +347,28 @@ pub fn choose_held_out(
     let table = held.iter().find_map(|h| h.table.clone());
     let values = table.as_ref().map_or(0, Table::values);
     let candidates = held.iter().map(|h| held_out_candidate(h, values)).collect();
+    let starts: Vec<Option<Start>> = held.iter().map(|h| h.start).collect();
     choose(
         samples,
         Criterion::LeaveOneThetaLOut,
         candidates,
         Vec::new(),
+        &starts,
         table,
         camera,
     )
 }
 
-/// The best of `candidates` (fitted to every sample in `fits` when already done) with
-/// the choice recorded in its `selection`. When the table (`table`, of every sample)
-/// wins, the result is the best parametric candidate's fit predicting with it.
+/// The best of `candidates` (fitted to every sample in `fits` when already done, else
+/// from its robust minimum in `starts` on samples near these when given) with the choice
+/// recorded in its `selection`. When the table (`table`, of every sample) wins, the
+/// result is the best parametric candidate's fit predicting with it.
 fn choose(
     samples: &[Sample],
     criterion: Criterion,
     candidates: Vec<Candidate>,
     fits: Vec<Option<Result<FitResult, FitError>>>,
+    starts: &[Option<Start>],
     table: Option<Table>,
     camera: &CameraModel,
 ) -> Result<FitResult, FitError> {
@@ -395,7 +400,8 @@ fn choose(
             let variant = form.variant().ok_or_else(|| {
                 FitError::Optimizer(format!("{} is not a parametric model", form.label()))
             })?;
-            fit(samples, &variant.options())?
+            let start = starts.get(parametric).and_then(Option::as_ref);
+            fit_from(samples, &variant.options(), start, None)?
         }
     };
     let tabulated = chosen != parametric;

@@ -21,7 +21,7 @@ use super::fold_score::score;
 pub use super::fold_score::{errors, lobe, Errors, Fold, LOBE_FRACTION};
 use super::linear::nnls2;
 use super::table::{Shape, Table, CHROMATICITY_WINDOWS};
-use super::{fit_from, robust_minimum, FitError, FitOptions, FitResult, Start};
+use super::{fit_from, robust_minimum_near, FitError, FitOptions, FitResult, Start};
 use crate::brdf::{Model, Roughness};
 use crate::color::CameraModel;
 use crate::samples::{distinct_theta_l, Sample, THETA_L_TOLERANCE};
@@ -139,6 +139,10 @@ pub struct HeldOut {
     /// A parametric variant only: per θL left out, the shape ([`Shape`]) of its fit to the
     /// other θL, which a table judged beside it predicts relative to.
     pub shapes: Vec<(f64, Shape)>,
+    /// A parametric variant only: its robust minimum on every θL judged, where its folds
+    /// start from and where its fit to every sample starts from ([`super::fit_from`]);
+    /// `None` where that search failed.
+    pub(crate) start: Option<Start>,
 }
 
 /// The median of `values` (mean of the middle two for an even count); `None` if empty.
@@ -443,6 +447,7 @@ fn table_folds(
         table: None,
         one_specular_colour_lobe_uv: None,
         shapes: Vec::new(),
+        start: None,
     };
     let table = Table::new(samples, window).map_err(|e| e.to_string());
     for t in distinct_theta_l(samples) {
@@ -484,6 +489,53 @@ fn table_fold(
     score(theta_l, &held, &estimated, camera)
 }
 
+/// The variant of `variants` whose robust minimum `variant`'s is sought from: the same
+/// model with shared roughness for one per channel, and Cook–Torrance of the same
+/// roughness (else shared) for Cook–Torrance–Fresnel; `None` for the first ones searched.
+fn near_of(variants: &[Variant], variant: Variant) -> Option<usize> {
+    let model = match variant.model {
+        Model::CookTorranceFresnel => Model::CookTorrance,
+        model => model,
+    };
+    [variant.roughness, Roughness::Shared]
+        .into_iter()
+        .map(|roughness| Variant::new(model, roughness))
+        .filter(|&v| v != variant)
+        .find_map(|v| variants.iter().position(|&u| u == v))
+}
+
+/// Every variant's robust minimum on `samples` (`None` where its search failed), in
+/// parallel: the shared Cook–Torrance and Ward by the full search, then every other from
+/// the minimum of its [`near_of`] by Gauss–Newton steps ([`robust_minimum_near`]; the
+/// full search where they give up): one roughness per channel and a specular colour at
+/// 90° start as the shared roughness and the constant colour found, which they refine.
+fn minima(samples: &[Sample], variants: &[Variant]) -> Vec<Option<Start>> {
+    let near: Vec<Option<usize>> = variants.iter().map(|&v| near_of(variants, v)).collect();
+    let mut starts: Vec<Option<Start>> = vec![None; variants.len()];
+    // Each round searches the variants whose base is found (a chain is at most three long).
+    let mut done = vec![false; variants.len()];
+    while done.iter().any(|d| !d) {
+        let ready: Vec<usize> = (0..variants.len())
+            .filter(|&v| !done[v] && near[v].is_none_or(|b| done[b]))
+            .collect();
+        let found: Vec<(usize, Option<Start>)> = ready
+            .par_iter()
+            .map(|&v| {
+                let from = near[v].and_then(|b| starts[b].as_ref());
+                (
+                    v,
+                    robust_minimum_near(samples, &variants[v].options(), from).ok(),
+                )
+            })
+            .collect();
+        for (v, start) in found {
+            starts[v] = start;
+            done[v] = true;
+        }
+    }
+    starts
+}
+
 /// A fold scored with its fit's shape, or why it failed.
 type FoldOutcome = Result<(Fold, Shape), String>;
 
@@ -503,10 +555,7 @@ pub fn leave_one_theta_l_out(
     }
     // Each fold's fit starts from the variant's minimum on every θL, which it differs
     // from by one θL of several.
-    let starts: Vec<Option<Start>> = variants
-        .par_iter()
-        .map(|v| robust_minimum(samples, &v.options()).ok())
-        .collect();
+    let starts = minima(samples, variants);
     let groups = fit_groups(variants);
     let jobs: Vec<(&[usize], f64)> = theta_l
         .iter()
@@ -531,6 +580,7 @@ pub fn leave_one_theta_l_out(
                 table: None,
                 one_specular_colour_lobe_uv: None,
                 shapes: Vec::new(),
+                start: starts[v],
             };
             for (_, t, outcome) in outcomes.iter().filter(|(w, _, _)| *w == v) {
                 match outcome {

@@ -1,0 +1,81 @@
+//! `gonio fit --model auto` against `gonio fit --model cook-torrance` as whole processes
+//! (reading the samples, the fit, its uncertainty budget, writing the JSON), on the
+//! samples of the full-size `gold` scan and of the same scan binned 4 × 4. The scans are
+//! rendered by `gonio simulate` and extracted once; the two commands then run in turn
+//! `--runs` times (default 7), so a load that comes and goes weighs on both alike.
+//! Prints each median wall time and their ratio (target ≤ 2), then the result as JSON
+//! (`{"bench": "fit_auto_command", ...}`), which scripts/bench.sh keeps.
+//!
+//!     cargo bench -p gonio-daemon --bench fit_auto_command [-- --runs N]
+
+mod common;
+mod stats;
+
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::Instant;
+
+fn run(gonio: &str, args: &[&str], dir: &Path) {
+    let output = Command::new(gonio)
+        .args(args)
+        .current_dir(dir)
+        .stdin(Stdio::null())
+        .output()
+        .expect("running gonio");
+    assert!(output.status.success(), "gonio {args:?}: {output:?}");
+}
+
+/// The median wall seconds of `gonio fit --model auto` and of `--model cook-torrance` on
+/// `samples`, the two run in turn `runs` times, and the larger of their spreads.
+fn compare(gonio: &str, samples: &str, runs: usize, dir: &Path) -> (f64, f64, f64) {
+    let mut times = [Vec::new(), Vec::new()];
+    for _ in 0..runs {
+        for (model, times) in ["auto", "cook-torrance"].iter().zip(&mut times) {
+            let fit = ["fit", samples, "--model", model, "--out", "fit.json"];
+            let started = Instant::now();
+            run(gonio, &fit, dir);
+            times.push(started.elapsed().as_secs_f64());
+        }
+    }
+    let spread = stats::spread(&times[0]).max(stats::spread(&times[1]));
+    (stats::median(&times[0]), stats::median(&times[1]), spread)
+}
+
+fn main() {
+    let runs = common::runs(7);
+    let gonio = env!("CARGO_BIN_EXE_gonio");
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut rows = serde_json::Map::new();
+    for (name, binning) in [("full", "1"), ("binning_4", "4")] {
+        let scan = format!("scan_{name}");
+        let samples = format!("{name}.csv");
+        let simulate = [
+            "simulate",
+            "--scene",
+            "gold",
+            "--binning",
+            binning,
+            "--out",
+            &scan,
+        ];
+        run(gonio, &simulate, dir.path());
+        run(gonio, &["extract", &scan, "--out", &samples], dir.path());
+        let (auto, cook_torrance, spread) = compare(gonio, &samples, runs, dir.path());
+        let ratio = auto / cook_torrance;
+        println!(
+            "gonio fit, gold scan ({name}), median of {runs}: --model auto {auto:.3} s, \
+             --model cook-torrance {cook_torrance:.3} s, ratio {ratio:.2} (target ≤ 2)"
+        );
+        rows.insert(
+            name.to_string(),
+            serde_json::json!({
+                "auto_s": auto,
+                "cook_torrance_s": cook_torrance,
+                "ratio": ratio,
+                "spread": spread,
+            }),
+        );
+    }
+    rows.insert("bench".into(), "fit_auto_command".into());
+    println!("{}", serde_json::Value::Object(rows));
+}
