@@ -216,7 +216,15 @@ pub fn extract_scan_with_progress(
             dropped,
             centre_rows,
             white_angular,
-        } = extract_theta(&setup, &map, &layout, theta_l, options, white_reflectance);
+        } = extract_theta(
+            &setup,
+            &map,
+            &layout,
+            theta_l,
+            options,
+            white_reflectance,
+            None,
+        );
         if options.uncertainty {
             let strips = Strips {
                 map: &map,

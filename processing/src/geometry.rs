@@ -192,6 +192,21 @@ pub(crate) struct SetupFrame {
     cy: f64,
 }
 
+/// A setup's frame and its light's position for one θL ([`Setup::view`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct SetupView {
+    frame: SetupFrame,
+    light: [f64; 3],
+}
+
+impl SetupView {
+    /// [`Setup::pixel_geometry`] of pixel (u, v).
+    pub(crate) fn pixel_geometry(&self, u: f64, v: f64) -> Option<PixelGeometry> {
+        let hit = self.frame.hit(u, v)?;
+        Some(self.frame.geometry(&hit, self.light))
+    }
+}
+
 /// A ray's nearest meeting with the cylinder.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct Hit {
@@ -522,9 +537,15 @@ impl Setup {
     /// |θi| ≥ 90° (irradiance 0) means the point is not lit; callers that need lit
     /// points filter on it. Assumes a valid setup ([`Setup::validate`]).
     pub fn pixel_geometry(&self, u: f64, v: f64, theta_l_deg: f64) -> Option<PixelGeometry> {
-        let frame = self.frame();
-        let hit = frame.hit(u, v)?;
-        Some(frame.geometry(&hit, self.light_position(theta_l_deg)))
+        self.view(theta_l_deg).pixel_geometry(u, v)
+    }
+
+    /// The frame and the light for `theta_l_deg`, computed once for many pixels.
+    pub(crate) fn view(&self, theta_l_deg: f64) -> SetupView {
+        SetupView {
+            frame: self.frame(),
+            light: self.light_position(theta_l_deg),
+        }
     }
 
     /// The in-plane angles seen by pixel column `u` on the principal point's row (the

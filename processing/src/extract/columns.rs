@@ -4,6 +4,8 @@
 //! f_white the white's reflectance factor at its pixels' angle of incidence
 //! ([`crate::white_angular`]).
 
+use std::ops::Range;
+
 use rayon::prelude::*;
 
 use super::drops::{DropCounts, DropReason};
@@ -60,6 +62,10 @@ pub(super) struct ThetaSamples {
     pub(super) white_angular: Vec<f64>,
 }
 
+/// The samples of one θL's strips in `map` with `setup`. With `only`, the columns
+/// outside that range are left out (their geometry is not computed and they give no
+/// sample) but for the too-dark threshold, which is the whole image's: the samples of
+/// the columns [`super::sharp::NOISE_NEIGHBOURS`] or more inside the range are those of the whole image.
 pub(super) fn extract_theta(
     setup: &Setup,
     map: &HdrImage,
@@ -67,13 +73,19 @@ pub(super) fn extract_theta(
     theta_l: f64,
     options: &ExtractOptions,
     white_reflectance: f64,
+    only: Option<Range<usize>>,
 ) -> ThetaSamples {
+    let view = setup.view(theta_l);
+    let geometry_at = |x: usize| {
+        layout
+            .strip_geometry(&view, x, layout.sample_row)
+            .zip(layout.strip_geometry(&view, x, layout.white_row))
+    };
+    let inside = |x: usize| only.as_ref().is_none_or(|range| range.contains(&x));
     let columns: Vec<Column> = (0..map.width)
         .into_par_iter()
         .map(|x| {
-            let geometry = layout
-                .strip_geometry(setup, x, layout.sample_row, theta_l)
-                .zip(layout.strip_geometry(setup, x, layout.white_row, theta_l));
+            let geometry = if inside(x) { geometry_at(x) } else { None };
             let sample = StripRows::read(map, x, layout.sample_map_row);
             let white = StripRows::read(map, x, layout.white_map_row);
             let (curvature, white_curvature) = match &geometry {
@@ -104,7 +116,8 @@ pub(super) fn extract_theta(
         .zip(&noise)
         .map(|(column, noise)| is_sharp(&column.curvature, noise))
         .collect();
-    let columns: Vec<_> = columns
+    let raw = columns;
+    let columns: Vec<_> = raw
         .iter()
         .zip(&sharp)
         .zip(noise.iter().zip(&white_noise))
@@ -127,6 +140,21 @@ pub(super) fn extract_theta(
         for (c, brightest) in brightest_white.iter_mut().enumerate() {
             if white.flags[c] == 0 {
                 *brightest = brightest.max(white.rgb[c]);
+            }
+        }
+    }
+    // A column left out counts where its white is brighter and its strips lie on the
+    // lit cylinder.
+    if only.is_some() {
+        for (x, column) in raw.iter().enumerate().filter(|&(x, _)| !inside(x)) {
+            let white = column.white.mean();
+            let brighter = (0..3).any(|c| white.flags[c] == 0 && white.rgb[c] > brightest_white[c]);
+            if brighter && geometry_at(x).is_some() {
+                for (c, brightest) in brightest_white.iter_mut().enumerate() {
+                    if white.flags[c] == 0 {
+                        *brightest = brightest.max(white.rgb[c]);
+                    }
+                }
             }
         }
     }

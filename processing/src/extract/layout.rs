@@ -6,7 +6,7 @@ use std::ops::Range;
 
 use super::error::ExtractError;
 use crate::brdf::Cosines;
-use crate::geometry::{PixelGeometry, Setup};
+use crate::geometry::{PixelGeometry, Setup, SetupView};
 
 /// Rows averaged around each strip's centre row (paper §2.2).
 pub const STRIP_ROWS: usize = 5;
@@ -101,20 +101,18 @@ impl StripLayout {
         (self.scale * i) as f64 + (self.scale as f64 - 1.0) / 2.0
     }
 
-    /// The geometry of the strip rows around capture row `centre` at column `x`:
-    /// `None` if any of those pixels misses the cylinder or is unlit.
+    /// The geometry of the strip rows around capture row `centre` at column `x` seen
+    /// through `view`: `None` if any of those pixels misses the cylinder or is unlit.
     pub(super) fn strip_geometry(
         &self,
-        setup: &Setup,
+        view: &SetupView,
         x: usize,
         centre: usize,
-        theta_l: f64,
     ) -> Option<Vec<PixelGeometry>> {
         let u = self.sensor(x);
         (centre - STRIP_ROWS / 2..=centre + STRIP_ROWS / 2)
             .map(|y| {
-                setup
-                    .pixel_geometry(u, self.sensor(y), theta_l)
+                view.pixel_geometry(u, self.sensor(y))
                     .filter(|g| g.irradiance > 0.0 && g.theta_i.abs() < 90.0)
             })
             .collect()

@@ -8,6 +8,7 @@ use rayon::prelude::*;
 use super::columns::{extract_theta, ThetaSamples};
 use super::layout::StripLayout;
 use super::options::ExtractOptions;
+use super::sharp::NOISE_NEIGHBOURS;
 use crate::geometry::Setup;
 use crate::hdr::HdrImage;
 use crate::samples::{Sample, SampleUncertainty};
@@ -94,6 +95,14 @@ pub(super) fn add_sensitivities(
     let half_angles: Vec<f64> = samples.iter().map(|s| s.half_difference().0).collect();
     let slope = slopes(samples, &half_angles);
     let stated: &[Sample] = samples;
+    // The moved extractions need the stated samples' columns only, with the neighbours
+    // their rows' noise is pooled over.
+    let only = match (columns.first(), columns.last()) {
+        (Some(&first), Some(&last)) => {
+            Some(first.saturating_sub(NOISE_NEIGHBOURS)..last + NOISE_NEIGHBOURS + 1)
+        }
+        _ => return,
+    };
     let changes: Vec<(usize, Vec<[f64; 3]>)> = inputs
         .par_iter()
         .enumerate()
@@ -117,6 +126,7 @@ pub(super) fn add_sensitivities(
                     strips.theta_l,
                     options,
                     white_reflectance,
+                    only.clone(),
                 );
                 stated
                     .iter()

@@ -48,7 +48,7 @@ const CURVATURE_SE_PER_NOISE: f64 = 0.534_522_483_824_848_8;
 const MEDIAN_SIGMA_HAT: f64 = 0.832_554_611_157_697_8;
 
 /// Columns each side whose noise estimates are pooled with a column's own.
-const NOISE_NEIGHBOURS: usize = 8;
+pub(super) const NOISE_NEIGHBOURS: usize = 8;
 
 /// Per column and channel, one row's relative noise pooled over the column and its
 /// [`NOISE_NEIGHBOURS`] each side (the median of their own estimates, scaled to σ):
