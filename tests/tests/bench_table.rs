@@ -19,6 +19,11 @@ fn results(scan_spread: f64) -> String {
         &format!(
             r#"{{"bench": "scan", "ratio": 1.2, "wall_s": 12.0, "hardware_s": 10.0, "spread": {scan_spread}}}"#
         ),
+        &format!(
+            r#"{{"bench": "fit_auto_command",
+                "full": {{"auto_s": 1.4, "cook_torrance_s": 1.0, "ratio": 1.4, "spread": {scan_spread}}},
+                "binning_4": {{"auto_s": 0.5, "cook_torrance_s": 0.25, "ratio": 2.0, "spread": 0.05}}}}"#
+        ),
         r#"{"bench": "hdr_command", "whole_s": 1.0, "merge_s": 0.5, "spread": 0.1,
             "file_bytes": 1000000000, "decoded_bytes": 2000000000, "map_pixels": 100000000}"#,
     ]
@@ -95,6 +100,15 @@ fn every_row_stands_against_its_floor() {
     // `gonio hdr`: 1 GB read + 2 GB decoded + 1.3 GB of map at 5 GB/s = 0.86 s.
     let hdr = row(&readme, "`gonio hdr`, 4 Deflate TIFFs");
     assert_eq!(hdr[2..4], ["860 ms", "1.16"], "{hdr:?}");
+    // Auto against one fit, both scans in one row.
+    let auto = row(
+        &readme,
+        "`gonio fit --model auto` / `--model cook-torrance`",
+    );
+    assert_eq!(
+        auto[1], "1.40 (1.40 s / 1.00 s) / 2.00 (500 ms / 250 ms)",
+        "{auto:?}"
+    );
     // A row this run did not measure says so rather than keeping an old number.
     let ward = row(&readme, "robust Ward fit");
     assert_eq!(
@@ -121,6 +135,11 @@ fn an_unsteady_run_writes_no_table() {
     assert_eq!(readme, README);
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(stderr.contains("`scan`: runs spread 40%"), "{stderr}");
+    // A benchmark of several parts: each part's spread counts.
+    assert!(
+        stderr.contains("`fit_auto_command/full`: runs spread 40%"),
+        "{stderr}"
+    );
 
     // A criterion median whose interval is too wide for the table it is used in.
     let dir = temp_dir("bench-table-wide");
