@@ -400,15 +400,30 @@ fn fit_model(dir: &Path, plan: &ScanPlan, model: &str, budgets: &Budgets) -> any
         .map(|(_, name)| *name)
         .with_context(|| format!("unknown model {model:?}"))?;
     let samples = read_csv(&dir.join("samples.csv"))?;
-    let result = if model == AUTO_FIT.0 {
-        fit_auto(&samples, &AUTO_CANDIDATES, &CameraModel::builtin())?
-    } else {
-        let live = plan
-            .theta_l
+    // The last θL's live fit of a model, made on exactly these samples.
+    let live = |model: &str| {
+        plan.theta_l
             .last()
             .and_then(|&last| SavedFits::read(dir, last))
-            .and_then(|saved| saved.of(model, &fingerprint(&samples)).cloned());
-        match live {
+            .and_then(|saved| saved.of(model, &fingerprint(&samples)).cloned())
+    };
+    let result = if model == AUTO_FIT.0 {
+        let chosen = fit_auto(&samples, &AUTO_CANDIDATES, &CameraModel::builtin())?;
+        // A choice of one of the scan's per-model fits (shared roughness) is that fit,
+        // with the choice recorded: the choice's own refit from the samples it judged
+        // reaches the same minimum to its precision, and the scan's files then agree
+        // and share one budget.
+        match live(chosen.model.name()) {
+            Some(own) if own.roughness == chosen.roughness => FitResult {
+                selection: chosen.selection,
+                table: chosen.table,
+                seconds: chosen.seconds,
+                ..own
+            },
+            _ => chosen,
+        }
+    } else {
+        match live(model) {
             Some(result) => result,
             None => fit(&samples, &FitOptions::new(model.parse::<Model>()?))?,
         }
