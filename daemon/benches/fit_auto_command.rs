@@ -12,18 +12,7 @@ mod common;
 mod stats;
 
 use std::path::Path;
-use std::process::{Command, Stdio};
 use std::time::Instant;
-
-fn run(gonio: &str, args: &[&str], dir: &Path) {
-    let output = Command::new(gonio)
-        .args(args)
-        .current_dir(dir)
-        .stdin(Stdio::null())
-        .output()
-        .expect("running gonio");
-    assert!(output.status.success(), "gonio {args:?}: {output:?}");
-}
 
 /// The median wall seconds of `gonio fit --model auto` and of `--model cook-torrance` on
 /// `samples`, the two run in turn `runs` times, and the larger of their spreads.
@@ -33,7 +22,7 @@ fn compare(gonio: &str, samples: &str, runs: usize, dir: &Path) -> (f64, f64, f6
         for (model, times) in ["auto", "cook-torrance"].iter().zip(&mut times) {
             let fit = ["fit", samples, "--model", model, "--out", "fit.json"];
             let started = Instant::now();
-            run(gonio, &fit, dir);
+            common::run(gonio, &fit, dir);
             times.push(started.elapsed().as_secs_f64());
         }
     }
@@ -58,8 +47,8 @@ fn main() {
             "--out",
             &scan,
         ];
-        run(gonio, &simulate, dir.path());
-        run(gonio, &["extract", &scan, "--out", &samples], dir.path());
+        common::run(gonio, &simulate, dir.path());
+        common::run(gonio, &["extract", &scan, "--out", &samples], dir.path());
         let (auto, cook_torrance, spread) = compare(gonio, &samples, runs, dir.path());
         let ratio = auto / cook_torrance;
         println!(

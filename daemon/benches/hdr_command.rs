@@ -29,13 +29,17 @@ fn main() {
     let runs = common::runs(5);
     let gonio = env!("CARGO_BIN_EXE_gonio");
     let dir = tempfile::tempdir().expect("temp dir");
-    let status = Command::new(gonio)
-        .args(["simulate", "--scene", "gold", "--theta-l", "-20", "--out"])
-        .arg(dir.path())
-        .output()
-        .expect("running gonio simulate");
-    assert!(status.status.success(), "{status:?}");
-    let mut frames: Vec<PathBuf> = std::fs::read_dir(dir.path().join("theta_l_-20.0"))
+    let simulate = [
+        "simulate",
+        "--scene",
+        "gold",
+        "--theta-l",
+        "-20",
+        "--out",
+        "scan",
+    ];
+    common::run(gonio, &simulate, dir.path());
+    let mut frames: Vec<PathBuf> = std::fs::read_dir(dir.path().join("scan/theta_l_-20.0"))
         .expect("frames")
         .map(|e| e.expect("entry").path())
         .filter(|p| is_capture_path(p))

@@ -12,19 +12,7 @@
 mod common;
 mod stats;
 
-use std::path::Path;
-use std::process::{Command, Stdio};
 use std::time::Instant;
-
-fn run(gonio: &str, args: &[&str], dir: &Path) {
-    let output = Command::new(gonio)
-        .args(args)
-        .current_dir(dir)
-        .stdin(Stdio::null())
-        .output()
-        .expect("running gonio");
-    assert!(output.status.success(), "gonio {args:?}: {output:?}");
-}
 
 /// User + system CPU seconds of the children waited for so far.
 fn children_cpu_s() -> f64 {
@@ -42,12 +30,12 @@ fn main() {
     let runs = common::runs(3);
     let gonio = env!("CARGO_BIN_EXE_gonio");
     let dir = tempfile::tempdir().expect("temp dir");
-    run(
+    common::run(
         gonio,
         &["simulate", "--scene", "gold", "--out", "scan"],
         dir.path(),
     );
-    run(
+    common::run(
         gonio,
         &["extract", "scan", "--out", "samples.csv"],
         dir.path(),
@@ -65,7 +53,7 @@ fn main() {
     for _ in 0..runs {
         let before = children_cpu_s();
         let started = Instant::now();
-        run(gonio, &study, dir.path());
+        common::run(gonio, &study, dir.path());
         wall.push(started.elapsed().as_secs_f64());
         cpu.push(children_cpu_s() - before);
     }

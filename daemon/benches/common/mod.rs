@@ -1,4 +1,7 @@
-//! What the whole-process benchmarks share: their command line.
+//! What the whole-process benchmarks share: their command line, and running `gonio`.
+
+use std::path::Path;
+use std::process::{Command, Stdio};
 
 /// `--runs N` from the bench's arguments (`default` without it); `--bench`, which cargo
 /// passes to every bench target, is ignored, anything else refused.
@@ -13,4 +16,15 @@ pub fn runs(default: usize) -> usize {
         }
     }
     runs
+}
+
+/// Runs `gonio args` in `dir` and asserts that it succeeded.
+pub fn run(gonio: &str, args: &[&str], dir: &Path) {
+    let output = Command::new(gonio)
+        .args(args)
+        .current_dir(dir)
+        .stdin(Stdio::null())
+        .output()
+        .expect("running gonio");
+    assert!(output.status.success(), "gonio {args:?}: {output:?}");
 }
