@@ -336,9 +336,9 @@ pub fn fit_auto(
 }
 
 /// The choice among variants already judged by leave-one-θL-out (`held`, from
-/// [`leave_one_theta_l_out`] on `samples` or on every k-th of them,
-/// [`super::stride::judged`]): the chosen variant fitted to every sample, from its robust
-/// minimum on the samples judged ([`fit_from`]), with the choice recorded.
+/// [`leave_one_theta_l_out`] on `samples` or on every k-th of them, `fit::stride`): the
+/// chosen variant fitted to every sample, from its robust minimum on the samples judged
+/// (by Gauss–Newton steps, `fit::newton`), with the choice recorded.
 pub fn choose_held_out(
     samples: &[Sample],
     held: &[HeldOut],
