@@ -10,6 +10,7 @@ use crate::shared::Shared;
 use crate::store::{now_rfc3339, ScanState, Store, StoreError};
 
 /// Why a step did not complete.
+#[derive(Debug)]
 pub enum StepError {
     /// The operator paused, cancelled or stopped the scan: leave it as they set it.
     Halted,
