@@ -32,11 +32,15 @@ const DEFAULT_FRAME: (u32, u32) = (3872, 2592);
 pub struct Costs {
     /// Rendering and writing one emulated frame, seconds per megapixel.
     pub frame_s_per_mpx: f64,
+    /// Reading a frame whole (decoding it, as the metering step does), seconds per
+    /// megapixel.
+    pub read_s_per_mpx: f64,
     /// An HDR merge (decoding, merging, writing the map), seconds per megapixel per
     /// frame of the bracket.
     pub hdr_s_per_mpx_frame: f64,
-    /// A samples step's extraction, seconds per megapixel per frame of the bracket.
-    pub samples_s_per_mpx_frame: f64,
+    /// A samples step's extraction, seconds per pixel column per frame of the bracket
+    /// (it decodes and reads the strip rows only, whatever the frame's height).
+    pub extraction_s_per_column_frame: f64,
     /// A samples step's live fits, seconds per sample point fitted (every θL so far).
     pub live_fit_s_per_point: f64,
     /// Sample points one θL yields per pixel column of the frame.
@@ -54,12 +58,15 @@ pub struct Costs {
 
 impl Costs {
     /// The stated defaults: a debug build of the daemon on one core of a 2-core
-    /// virtual machine, measured by the timing probe there. Used until this machine's
-    /// own measurement is in.
+    /// virtual machine, measured by the timing probe there (reading a frame and the
+    /// extraction per column, measured later with an optimized build, scaled by 2.5,
+    /// the ratio of the other costs between the two). Used until this machine's own
+    /// measurement is in.
     pub const DEFAULT: Costs = Costs {
         frame_s_per_mpx: 0.28,
+        read_s_per_mpx: 0.1,
         hdr_s_per_mpx_frame: 0.18,
-        samples_s_per_mpx_frame: 0.09,
+        extraction_s_per_column_frame: 7.0e-5,
         live_fit_s_per_point: 3.0e-4,
         points_per_column: 0.36,
         extract_s_per_point: 8.0e-5,
@@ -73,8 +80,9 @@ impl Costs {
     pub fn is_valid(&self) -> bool {
         [
             self.frame_s_per_mpx,
+            self.read_s_per_mpx,
             self.hdr_s_per_mpx_frame,
-            self.samples_s_per_mpx_frame,
+            self.extraction_s_per_column_frame,
             self.live_fit_s_per_point,
             self.points_per_column,
             self.extract_s_per_point,
@@ -209,17 +217,16 @@ impl Timing {
         };
         let costs = &self.costs;
         let bracket_mpx = self.mpx() * place.frames as f64;
+        let bracket_columns = f64::from(self.frame.0) * place.frames as f64;
         let points = self.points_per_theta() * place.theta_count as f64;
         match step {
             Step::Home => travel_s(0.0) + HOMING_S * self.arm_time_scale,
             Step::Move { theta_l } => travel_s(*theta_l),
             // A capture, then reading its frame to choose the bracket.
-            Step::Meter { .. } => {
-                self.capture_s(METER_START_S) + costs.samples_s_per_mpx_frame * self.mpx()
-            }
+            Step::Meter { .. } => self.capture_s(METER_START_S) + costs.read_s_per_mpx * self.mpx(),
             Step::Capture { shutter_s, .. } => self.capture_s(*shutter_s),
             Step::Samples { .. } => {
-                costs.samples_s_per_mpx_frame * bracket_mpx
+                costs.extraction_s_per_column_frame * bracket_columns
                     + costs.live_fit_s_per_point * self.points_per_theta() * place.theta_rank as f64
             }
             Step::Hdr { .. } => costs.hdr_s_per_mpx_frame * bracket_mpx,
@@ -324,6 +331,13 @@ mod tests {
                 - 2.0 * timing.prior_s(&ward, 0.0, &place(3, 3, 2)))
             .abs()
                 < 1e-9
+        );
+        // A samples step's extraction reads the strip rows: it follows the frame's
+        // columns, not its height.
+        let tall = timing.with_frame(3872, 2 * 2592);
+        assert_eq!(
+            tall.prior_s(&samples, 0.0, &place(6, 1, 2)),
+            timing.prior_s(&samples, 0.0, &place(6, 1, 2))
         );
         assert!(Costs::DEFAULT.is_valid());
         let broken = Costs {

@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use gonio_mock_hw::render::render_frame;
 use gonio_mock_hw::scene::Scene;
-use gonio_processing::capture::Sidecar;
+use gonio_processing::capture::{Frame, Sidecar};
 use gonio_processing::samples::{read_csv, write_csv, Sample};
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
@@ -34,7 +34,7 @@ const CACHE_FILE: &str = "processing-costs.json";
 /// Where the synthetic scan is made, removed after.
 const WORK_DIR: &str = ".timing-probe";
 /// Version of the cache's contents: a cache of another version is measured again.
-const VERSION: u32 = 2;
+const VERSION: u32 = 3;
 /// The synthetic scan: the builtin gold scene binned by this factor…
 const BINNING: u32 = 4;
 /// …at these θL (three, so that the automatic choice holds each out in turn)…
@@ -169,6 +169,13 @@ fn measure(dir: &Path, started: Instant) -> anyhow::Result<Costs> {
         shutter_s: BRACKET_S.to_vec(),
         auto_bracket: false,
     };
+    // Reading a frame whole, as the metering step does.
+    let first = dir
+        .join(theta_dir_name(THETA_L[0]))
+        .join(format!("{}.tiff", exposure_stem(0)));
+    let (read_s, _) = timed(started, "reading a frame", || {
+        Frame::read(&first).map_err(anyhow::Error::from)
+    })?;
     let mut prefetched = Prefetched::default();
     // The fits share their budgets as the lane's do.
     let budgets = Budgets::default();
@@ -215,8 +222,8 @@ fn measure(dir: &Path, started: Instant) -> anyhow::Result<Costs> {
     anyhow::ensure!(points > 0.0, "the synthetic scan gave no samples");
     let thetas = THETA_L.len() as f64;
     let bracket_mpx = mpx * BRACKET_S.len() as f64;
-    // A samples step = extraction (∝ the bracket's pixels) + live fits (∝ the points
-    // so far).
+    // A samples step = extraction (∝ the bracket's columns: it reads the strip rows)
+    // + live fits (∝ the points so far).
     let live = if fitted > 0.0 { live_s / fitted } else { 0.0 };
     let extraction = extraction_s / thetas;
     let half = every_other.len() as f64;
@@ -228,8 +235,9 @@ fn measure(dir: &Path, started: Instant) -> anyhow::Result<Costs> {
     };
     let costs = Costs {
         frame_s_per_mpx: frame_s / (thetas * BRACKET_S.len() as f64 * mpx),
+        read_s_per_mpx: read_s / mpx,
         hdr_s_per_mpx_frame: hdr_s / (thetas * bracket_mpx),
-        samples_s_per_mpx_frame: extraction / bracket_mpx,
+        extraction_s_per_column_frame: extraction / (BRACKET_S.len() as f64 * f64::from(width)),
         live_fit_s_per_point: live,
         points_per_column: points / (thetas * f64::from(width)),
         extract_s_per_point: extract_s / points,
@@ -288,6 +296,7 @@ mod tests {
         let costs = measure_and_cache(&data).unwrap();
         assert!(costs.is_valid(), "{costs:?}");
         assert!(costs.hdr_s_per_mpx_frame > 0.0 && costs.fit_s_per_point[0] > 0.0);
+        assert!(costs.read_s_per_mpx > 0.0 && costs.extraction_s_per_column_frame > 0.0);
         assert!(costs.points_per_column > 0.0 && costs.points_per_column < 2.0);
         assert_eq!(read_cache(&data.join(CACHE_FILE)), Some(costs));
         assert!(!data.join(WORK_DIR).exists());
