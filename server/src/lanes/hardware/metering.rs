@@ -199,7 +199,7 @@ mod tests {
     const BINNING: u32 = 4;
 
     /// The median of `values` (the upper one of an even count).
-    fn median_log(values: &mut [f64]) -> f64 {
+    fn upper_median(values: &mut [f64]) -> f64 {
         values.sort_by(f64::total_cmp);
         values[values.len() / 2]
     }
@@ -233,7 +233,7 @@ mod tests {
             }
         }
         let mut counts: Vec<f64> = brackets.iter().map(|b| b.len() as f64).collect();
-        let frames = median_log(&mut counts) as usize;
+        let frames = upper_median(&mut counts) as usize;
         // Longest first, as the metering step plans them.
         let typical: Vec<f64> = (0..frames)
             .map(|i| {
@@ -242,7 +242,7 @@ mod tests {
                     .filter(|b| b.len() == frames)
                     .map(|b| b[frames - 1 - i])
                     .collect();
-                median_log(&mut shutters)
+                upper_median(&mut shutters)
             })
             .collect();
         assert_eq!(typical, EXPECTED_BRACKET_S, "{brackets:?}");
