@@ -346,10 +346,10 @@ fn metered_brackets_and_live_fits_come_from_step_results() {
 /// temporary directory, with the processing code of the time: when the processing
 /// steps' costs change shape, record them again), replayed every [`POLL_S`] as the API
 /// would answer, each error counted against no less than 10 s left. Asserted: within
-/// 35 % before the first θL is processed (the target from the first second;
-/// before the first metering the bracket is the example scenes' typical one), within
-/// 40 % after it and 3× either way throughout. The target after the first θL, 15 %,
-/// is printed, not met on every recording (the worst poll after it is 20–38 % off): a
+/// 35 % before the first θL is processed (the target from the first second; before the
+/// first metering the bracket is the example scenes' typical one), within 40 % after
+/// it and 3× either way throughout. The target after the first θL, 15 %, is printed,
+/// not met on every recording (each recording's worst poll is printed): a
 /// θL's processing is scaled by what those processed so far took, while later ones share
 /// the cores with more rendering and longer live fits and hold the arm back
 /// (`processing.max_backlog`), which the hardware lane's play does not follow; and the
