@@ -36,7 +36,7 @@ const COS_GRAZING: f64 = 1e-9;
 /// Smallest cos α used in tan²α.
 const COS_ALPHA_MIN: f64 = 1e-12;
 /// exp(−x) is below the smallest normal f64 for x above this: the lobe is 0 there.
-const EXP_UNDERFLOW: f64 = 708.0;
+pub(crate) const EXP_UNDERFLOW: f64 = 708.0;
 /// Range to which the roughness m is clamped.
 pub const M_MIN: f64 = 1e-6;
 /// Upper end of the roughness clamp, see [`M_MIN`].
@@ -192,7 +192,7 @@ impl Prepared {
 
 /// 1/m² of the roughness m clamped to [[`M_MIN`], [`M_MAX`]] (NaN taken as [`M_MAX`]).
 #[inline]
-fn inverse_square(m: f64) -> f64 {
+pub(crate) fn inverse_square(m: f64) -> f64 {
     let m = if m.is_nan() {
         M_MAX
     } else {
@@ -218,6 +218,12 @@ impl Basis {
         } else {
             (s, 2.0 * s * (x - 1.0))
         }
+    }
+
+    /// The lobe's terms at this point: tan²α of the half vector and the angular factor g
+    /// (s = g·exp(−tan²α/m²)/m²), for evaluating it over many points at once.
+    pub(crate) fn lobe_terms(&self) -> (f64, f64) {
+        (self.tan2_alpha, self.gain)
     }
 
     /// s and x = tan²α/m² at 1/m² = `inv_m2`; s is 0 at or past grazing and where

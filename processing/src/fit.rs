@@ -37,6 +37,7 @@ mod error;
 pub mod fold_score;
 pub mod held_out;
 mod linear;
+mod lobe_columns;
 mod nelder_mead;
 mod newton;
 mod options;

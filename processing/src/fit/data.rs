@@ -1,6 +1,7 @@
 //! Samples prepared for fitting, and what a method finds in them.
 
 use super::error::FitError;
+use super::lobe_columns::{LobeColumns, PlainModel};
 use crate::brdf::{Basis, Model, Params, Prepared};
 use crate::metrics;
 use crate::samples::{distinct_theta_l, Sample};
@@ -19,6 +20,8 @@ pub fn fits_colour_shift(model: Model, samples: &[Sample]) -> bool {
 #[derive(Clone)]
 pub(crate) struct Data {
     pub bases: Vec<Basis>,
+    /// The lobe's terms of `bases` as columns, for the loops over every point.
+    pub columns: LobeColumns,
     /// Diffuse basis per point (copied out of `bases` for the inner loops).
     pub diffuse: Vec<f64>,
     /// Weight of the specular colour at 90° per point (`Basis::shift_weight`), for the models
@@ -79,6 +82,7 @@ impl Data {
         let mean_norm = zero_loss / y.len() as f64;
         Ok(Data {
             diffuse: bases.iter().map(|b| b.diffuse).collect(),
+            columns: LobeColumns::of(&bases),
             shift_weight: fits_colour_shift(model, samples)
                 .then(|| bases.iter().map(Basis::shift_weight).collect()),
             bases,
@@ -115,6 +119,19 @@ impl Data {
     /// Eq. 10 loss of `params` with the specular colour at 90° `ks_90`, over the measured
     /// values (the inner loop of Nelder–Mead: the parameters are prepared once).
     pub fn loss_fresnel(&self, params: &Params, ks_90: &[f64; 3]) -> f64 {
+        let [m0, m1, m2] = params.m;
+        let plain = m1 == m0 && m2 == m0 && ks_90 == &params.ks;
+        if plain && params.ks.iter().all(|k| k.is_finite()) {
+            // One lobe and a constant specular colour: the columns' loop.
+            return self.columns.plain_loss(&PlainModel {
+                kd: params.kd,
+                ks: params.ks,
+                m: m0,
+                diffuse: &self.diffuse,
+                y: &self.y,
+                keep: self.keep.as_deref(),
+            });
+        }
         let prepared = Prepared::new(params, ks_90);
         let points = self.bases.iter().zip(&self.y);
         match &self.keep {

@@ -89,9 +89,7 @@ impl<'a> Profile<'a> {
 
     fn update_spec(&mut self, c: usize, m: f64) {
         if self.spec_m[c] != m {
-            for (s, b) in self.spec[c].iter_mut().zip(&self.data.bases) {
-                *s = b.specular(m);
-            }
+            self.data.columns.specular(m, &mut self.spec[c]);
             self.spec_m[c] = m;
         }
     }
