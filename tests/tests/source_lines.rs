@@ -11,7 +11,14 @@ const MAX_LINES: usize = 800;
 const SOURCE_ENDINGS: [&str; 7] = ["rs", "js", "html", "css", "py", "sh", "toml"];
 
 /// Folders that hold no source of ours: build output, environments, vendored code.
-const SKIPPED: [&str; 5] = ["target", ".git", ".venv-test", "vendor", "node_modules"];
+const SKIPPED: [&str; 6] = [
+    "target",
+    ".git",
+    ".venv-test",
+    ".venv-bench",
+    "vendor",
+    "node_modules",
+];
 
 fn sources(dir: &Path, out: &mut Vec<PathBuf>) {
     for entry in std::fs::read_dir(dir).unwrap() {
