@@ -7,9 +7,11 @@
 # written by hand.
 # The peers go into a virtual environment of their own, .venv-bench/ (numpy, scipy,
 # opencv-python-headless from PyPI); --no-peers skips them.
-# The machine must be idle: with a load average above 0.5 it refuses to start, and the
-# table is not written when a measurement was too unsteady (scripts/bench_table.py); the
-# table states the load average when the run started.
+# The machine must be idle: with a load average above 0.5, or a virtual machine whose host
+# takes more than 5 % of its CPU time (steal), it refuses to start; the table is not
+# written when a measurement was too unsteady or the host took more than that over the
+# run (scripts/bench_table.py); the table states the load average when the run started
+# and the steal over the run.
 # Usage: bash scripts/bench.sh [--no-peers]
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -23,6 +25,27 @@ max_load=0.5
 load=$(cut -d' ' -f1 /proc/loadavg)
 if ! python3 -c 'import sys; sys.exit(float(sys.argv[1]) > float(sys.argv[2]))' "$load" "$max_load"; then
     echo "bench.sh: the machine is busy (load average $load, above $max_load): not measuring" >&2
+    exit 1
+fi
+# Nor does it see the CPU time a virtual machine's host gives to other guests (steal):
+# more of it than this over a few seconds before the run, or over the whole run
+# (scripts/bench_table.py), and the numbers would measure the host.
+max_steal=0.05
+# Ticks of every CPU since boot, and those stolen (/proc/stat: user nice system idle
+# iowait irq softirq steal).
+cpu_ticks() {
+    awk '/^cpu / { print $2 + $3 + $4 + $5 + $6 + $7 + $8 + $9, $9 }' /proc/stat
+}
+# The share stolen between two `cpu_ticks` readings (total₀ steal₀ total₁ steal₁).
+steal_share() {
+    python3 -c 'import sys; t0, s0, t1, s1 = map(float, sys.argv[1:]); print(f"{(s1 - s0) / max(t1 - t0, 1):.4f}")' "$@"
+}
+read -r total_before steal_before < <(cpu_ticks)
+sleep 5
+read -r total_now steal_now < <(cpu_ticks)
+steal=$(steal_share "$total_before" "$steal_before" "$total_now" "$steal_now")
+if ! python3 -c 'import sys; sys.exit(float(sys.argv[1]) > float(sys.argv[2]))' "$steal" "$max_steal"; then
+    echo "bench.sh: the host takes $steal of the CPU time (steal, above $max_steal): not measuring" >&2
     exit 1
 fi
 work=$(mktemp -d)
@@ -119,5 +142,7 @@ hdr_memory
 process_benches
 peer_benches
 echo "{\"seconds\": $(($(date +%s) - started))}" | record duration
+read -r total_now steal_now < <(cpu_ticks)
+echo "{\"share\": $(steal_share "$total_before" "$steal_before" "$total_now" "$steal_now")}" | record steal
 python3 scripts/bench_table.py "$results" --criterion "$target/criterion"
 echo "README.md's table rewritten from $results"

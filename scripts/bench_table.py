@@ -11,8 +11,9 @@ time. A row whose work is not counted says so in its floor column.
 It refuses to write the table (exit status 1, the README left as it was) when a
 measurement it uses was too unsteady to stand for the code: a criterion median whose 95 %
 confidence interval is wider than MAX_CI_WIDTH of it, or a whole-process benchmark whose
-runs spread ((largest − smallest) / median) wider than MAX_RUN_SPREAD: a busy machine,
-whose numbers would read as slower code.
+runs spread ((largest − smallest) / median) wider than MAX_RUN_SPREAD, or a run during
+which a virtual machine's host took more than MAX_STEAL of its CPU time (steal): a busy
+machine, whose numbers would read as slower code.
 
 Usage: python3 scripts/bench_table.py RESULTS.jsonl [--criterion DIR] [--readme FILE]
 Needs only the Python standard library.
@@ -43,6 +44,8 @@ MAP_BYTES = 3 * 4 + 1
 MAX_CI_WIDTH = 0.10
 # Widest spread of a whole-process benchmark's runs, (largest − smallest) / median.
 MAX_RUN_SPREAD = 0.25
+# Largest share of the CPU time a virtual machine's host may take over the run (steal).
+MAX_STEAL = 0.05
 
 
 def criterion_medians(root):
@@ -120,6 +123,12 @@ class Table:
             for name, spread in spreads
             if spread > MAX_RUN_SPREAD
         ]
+        steal = self.results.get("steal")
+        if steal and steal["share"] > MAX_STEAL:
+            lines.append(
+                f"the host took {steal['share']:.0%} of the CPU time over the run (steal; "
+                f"limit {MAX_STEAL:.0%})"
+            )
         return lines
 
     def row(self, what, values, target, command, floors=None):
@@ -476,9 +485,11 @@ def conditions(results):
         return "Measured conditions unknown."
     took = results.get("duration")
     took = f"; the run took {took['seconds'] / 60:.0f} min" if took else ""
+    steal = results.get("steal")
+    steal = f", the host took {steal['share']:.1%} of the CPU time (steal)" if steal else ""
     return (
         f"Measured by `bash scripts/bench.sh` on {c['date']}: {c['cpu']}, {c['cores']} cores, "
-        f"load average {c['load']} when it started{took}; criterion medians, and medians of "
+        f"load average {c['load']} when it started{took}{steal}; criterion medians, and medians of "
         "the other benchmarks' own runs. "
         + floors_note(results)
     )

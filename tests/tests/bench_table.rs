@@ -8,9 +8,11 @@ use gonio_tests::temp_dir;
 
 const README: &str = "# gonio\n\n<!-- bench: costs -->\nold table\n<!-- /bench: costs -->\n";
 
-/// The floors and the whole-process results of a run, one JSON object a line.
-fn results(scan_spread: f64) -> String {
+/// The floors and the whole-process results of a run, one JSON object a line; `steal`
+/// the share of the CPU time the host took over the run.
+fn results(scan_spread: f64, steal: f64) -> String {
     [
+        &format!(r#"{{"bench": "steal", "share": {steal}}}"#),
         r#"{"bench": "conditions", "date": "2026-12-04", "cpu": "test", "cores": 2, "load": "0.1"}"#,
         r#"{"bench": "floors", "cores": 2, "read_bytes_per_s": 4e9, "copy_bytes_per_s": 5e9,
             "point_s": {"cook-torrance": 5e-9, "ward": 4e-9, "cook-torrance-fresnel": 6e-9}}"#,
@@ -48,11 +50,11 @@ fn criterion(dir: &Path, full_id: &str, median_ns: f64, width: f64) {
     std::fs::write(new.join("estimates.json"), estimates.to_string()).unwrap();
 }
 
-/// Writes the table from `results(spread)` into a README of its own in `dir`: the
-/// script's output and the README after it.
-fn run(dir: &Path, spread: f64) -> (Output, String) {
+/// Writes the table from `results(spread, steal)` into a README of its own in `dir`:
+/// the script's output and the README after it.
+fn run(dir: &Path, spread: f64, steal: f64) -> (Output, String) {
     let (results_file, readme) = (dir.join("results.jsonl"), dir.join("README.md"));
-    std::fs::write(&results_file, results(spread)).unwrap();
+    std::fs::write(&results_file, results(spread, steal)).unwrap();
     std::fs::write(&readme, README).unwrap();
     let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scripts/bench_table.py");
     let output = Command::new("python3")
@@ -86,10 +88,14 @@ fn every_row_stands_against_its_floor() {
         2e6,
         0.02,
     );
-    let (output, readme) = run(&dir, 0.05);
+    let (output, readme) = run(&dir, 0.05, 0.012);
     assert!(output.status.success(), "{output:?}");
     assert!(
         readme.contains("| what | median | floor | ÷ floor | target | command |"),
+        "{readme}"
+    );
+    assert!(
+        readme.contains("the host took 1.2% of the CPU time (steal)"),
         "{readme}"
     );
     let fit = row(&readme, "robust Cook–Torrance fit, 1,000 points");
@@ -130,7 +136,7 @@ fn an_unsteady_run_writes_no_table() {
         2e6,
         0.02,
     );
-    let (output, readme) = run(&dir, 0.4);
+    let (output, readme) = run(&dir, 0.4, 0.0);
     assert!(!output.status.success(), "{output:?}");
     assert_eq!(readme, README);
     let stderr = String::from_utf8_lossy(&output.stderr);
@@ -149,12 +155,29 @@ fn an_unsteady_run_writes_no_table() {
         2e6,
         0.3,
     );
-    let (output, readme) = run(&dir, 0.05);
+    let (output, readme) = run(&dir, 0.05, 0.0);
     assert!(!output.status.success(), "{output:?}");
     assert_eq!(readme, README);
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(
         stderr.contains("95 % interval 30% of its median"),
+        "{stderr}"
+    );
+
+    // Steady runs on a host that took a third of the CPU time: slower code, it would read.
+    let dir = temp_dir("bench-table-steal");
+    criterion(
+        &dir.join("criterion"),
+        "fit_1000/cook-torrance/robust/shared",
+        2e6,
+        0.02,
+    );
+    let (output, readme) = run(&dir, 0.05, 0.33);
+    assert!(!output.status.success(), "{output:?}");
+    assert_eq!(readme, README);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stderr.contains("the host took 33% of the CPU time over the run"),
         "{stderr}"
     );
 }
