@@ -127,55 +127,40 @@ fn every_row_stands_against_its_floor() {
     );
 }
 
-#[test]
-fn an_unsteady_run_writes_no_table() {
-    let dir = temp_dir("bench-table-unsteady");
+/// The script's complaint about a run whose criterion fit median has an interval of
+/// `width` of it, whose whole-process runs spread `spread` and during which the host
+/// took `steal` of the CPU time; it must refuse and leave the README as it was.
+fn refused(name: &str, width: f64, spread: f64, steal: f64) -> String {
+    let dir = temp_dir(name);
     criterion(
         &dir.join("criterion"),
         "fit_1000/cook-torrance/robust/shared",
         2e6,
-        0.02,
+        width,
     );
-    let (output, readme) = run(&dir, 0.4, 0.0);
+    let (output, readme) = run(&dir, spread, steal);
     assert!(!output.status.success(), "{output:?}");
     assert_eq!(readme, README);
-    let stderr = String::from_utf8_lossy(&output.stderr);
+    String::from_utf8_lossy(&output.stderr).into_owned()
+}
+
+#[test]
+fn an_unsteady_run_writes_no_table() {
+    let stderr = refused("bench-table-unsteady", 0.02, 0.4, 0.0);
     assert!(stderr.contains("`scan`: runs spread 40%"), "{stderr}");
     // A benchmark of several parts: each part's spread counts.
     assert!(
         stderr.contains("`fit_auto_command/full`: runs spread 40%"),
         "{stderr}"
     );
-
     // A criterion median whose interval is too wide for the table it is used in.
-    let dir = temp_dir("bench-table-wide");
-    criterion(
-        &dir.join("criterion"),
-        "fit_1000/cook-torrance/robust/shared",
-        2e6,
-        0.3,
-    );
-    let (output, readme) = run(&dir, 0.05, 0.0);
-    assert!(!output.status.success(), "{output:?}");
-    assert_eq!(readme, README);
-    let stderr = String::from_utf8_lossy(&output.stderr);
+    let stderr = refused("bench-table-wide", 0.3, 0.05, 0.0);
     assert!(
         stderr.contains("95 % interval 30% of its median"),
         "{stderr}"
     );
-
     // Steady runs on a host that took a third of the CPU time: slower code, it would read.
-    let dir = temp_dir("bench-table-steal");
-    criterion(
-        &dir.join("criterion"),
-        "fit_1000/cook-torrance/robust/shared",
-        2e6,
-        0.02,
-    );
-    let (output, readme) = run(&dir, 0.05, 0.33);
-    assert!(!output.status.success(), "{output:?}");
-    assert_eq!(readme, README);
-    let stderr = String::from_utf8_lossy(&output.stderr);
+    let stderr = refused("bench-table-steal", 0.02, 0.05, 0.33);
     assert!(
         stderr.contains("the host took 33% of the CPU time over the run"),
         "{stderr}"
