@@ -28,9 +28,9 @@ if ! python3 -c 'import sys; sys.exit(float(sys.argv[1]) > float(sys.argv[2]))' 
     exit 1
 fi
 # Nor does it see the CPU time a virtual machine's host gives to other guests (steal):
-# more of it than this over a few seconds before the run, or over the whole run
-# (scripts/bench_table.py), and the numbers would measure the host.
-max_steal=0.05
+# more of it than scripts/bench_table.py's MAX_STEAL over a few seconds before the run,
+# or over the whole run (which that script checks), and the numbers would measure the host.
+max_steal=$(python3 -c 'import sys; sys.path.insert(0, "scripts"); import bench_table; print(bench_table.MAX_STEAL)')
 # Ticks of every CPU since boot, and those stolen (/proc/stat: user nice system idle
 # iowait irq softirq steal).
 cpu_ticks() {

@@ -173,6 +173,12 @@ pub struct Prepared {
 }
 
 impl Prepared {
+    /// Whether one lobe with one specular colour serves every channel (m shared,
+    /// Ks_90 = Ks, Ks finite): the model of Cook–Torrance's and Ward's loss.
+    pub(crate) fn is_plain(&self) -> bool {
+        self.plain
+    }
+
     /// `params` with the specular colour at 90° `ks_90`.
     pub fn new(params: &Params, ks_90: &[f64; 3]) -> Self {
         let [m0, m1, m2] = params.m;

@@ -119,20 +119,18 @@ impl Data {
     /// Eq. 10 loss of `params` with the specular colour at 90° `ks_90`, over the measured
     /// values (the inner loop of Nelder–Mead: the parameters are prepared once).
     pub fn loss_fresnel(&self, params: &Params, ks_90: &[f64; 3]) -> f64 {
-        let [m0, m1, m2] = params.m;
-        let plain = m1 == m0 && m2 == m0 && ks_90 == &params.ks;
-        if plain && params.ks.iter().all(|k| k.is_finite()) {
+        let prepared = Prepared::new(params, ks_90);
+        if prepared.is_plain() {
             // One lobe and a constant specular colour: the columns' loop.
             return self.columns.plain_loss(&PlainModel {
                 kd: params.kd,
                 ks: params.ks,
-                m: m0,
+                m: params.m[0],
                 diffuse: &self.diffuse,
                 y: &self.y,
                 keep: self.keep.as_deref(),
             });
         }
-        let prepared = Prepared::new(params, ks_90);
         let points = self.bases.iter().zip(&self.y);
         match &self.keep {
             None => points
