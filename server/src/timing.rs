@@ -123,6 +123,8 @@ pub struct Timing {
     pub frame: (u32, u32),
     /// What processing costs on this machine.
     pub costs: Costs,
+    /// This machine's cores.
+    pub cores: usize,
 }
 
 impl Timing {
@@ -136,6 +138,7 @@ impl Timing {
             rendered: false,
             frame: DEFAULT_FRAME,
             costs: Costs::DEFAULT,
+            cores: std::thread::available_parallelism().map_or(2, |n| n.get()),
         }
     }
 
@@ -162,7 +165,7 @@ impl Timing {
     }
 
     /// Megapixels of a frame.
-    fn mpx(&self) -> f64 {
+    pub fn frame_mpx(&self) -> f64 {
         f64::from(self.frame.0) * f64::from(self.frame.1) / 1e6
     }
 
@@ -177,10 +180,32 @@ impl Timing {
     pub fn capture_s(&self, shutter_s: f64) -> f64 {
         let exposure = self.capture.capture_duration_s(shutter_s);
         if self.rendered {
-            exposure.max(self.costs.frame_s_per_mpx * self.mpx())
+            exposure.max(self.costs.frame_s_per_mpx * self.frame_mpx())
         } else {
             exposure
         }
+    }
+
+    /// Seconds of an emulated frame's rendering and writing on this machine's cores
+    /// (0 with a real camera): the part of a capture that draws on them.
+    pub fn render_s(&self) -> f64 {
+        if self.rendered {
+            self.costs.frame_s_per_mpx * self.frame_mpx()
+        } else {
+            0.0
+        }
+    }
+
+    /// The share of the cores the processing lane has while a frame renders. The
+    /// processing threads (the lane's pool, one more than the cores) run 10 nice
+    /// levels below the renderer's (one per core; `lanes/processing.rs`), and the
+    /// kernel shares the cores by the threads' weights: 1024 at nice 0, 110 at nice 10.
+    pub fn processing_share_while_rendering(&self) -> f64 {
+        const WEIGHT_NICE_0: f64 = 1024.0;
+        const WEIGHT_NICE_10: f64 = 110.0;
+        let cores = self.cores.max(1) as f64;
+        let processing = (cores + 1.0) * WEIGHT_NICE_10;
+        processing / (cores * WEIGHT_NICE_0 + processing)
     }
 
     /// Frames of the bracket a θL is expected to need before its metering says.
@@ -216,14 +241,14 @@ impl Timing {
             ) * self.arm_time_scale
         };
         let costs = &self.costs;
-        let bracket_mpx = self.mpx() * place.frames as f64;
+        let bracket_mpx = self.frame_mpx() * place.frames as f64;
         let bracket_columns = f64::from(self.frame.0) * place.frames as f64;
         let points = self.points_per_theta() * place.theta_count as f64;
         match step {
             Step::Home => travel_s(0.0) + HOMING_S * self.arm_time_scale,
             Step::Move { theta_l } => travel_s(*theta_l),
             // A capture, then reading its frame to choose the bracket.
-            Step::Meter { .. } => self.capture_s(METER_START_S) + costs.read_s_per_mpx * self.mpx(),
+            Step::Meter { .. } => self.capture_s(METER_START_S) + costs.read_s_per_mpx * self.frame_mpx(),
             Step::Capture { shutter_s, .. } => self.capture_s(*shutter_s),
             Step::Samples { .. } => {
                 costs.extraction_s_per_column_frame * bracket_columns

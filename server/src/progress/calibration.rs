@@ -49,51 +49,82 @@ impl Kind {
 }
 
 /// A step's run: when it began and ended (now for a step still under way).
-type Run = (OffsetDateTime, OffsetDateTime);
+pub(super) type Run = (OffsetDateTime, OffsetDateTime);
 
-/// The runs of the steps of `steps` that draw on this machine's cores: every
-/// processing step started, and with an emulated camera (`rendered`) the captures and
-/// metering steps, whose frames are rendered here.
-pub(super) fn core_runs(steps: &[StepRecord], rendered: bool, now: OffsetDateTime) -> Vec<Run> {
-    steps
-        .iter()
-        .filter(|r| {
-            r.step.lane() == Lane::Processing
-                || (rendered && matches!(r.step, Step::Capture { .. } | Step::Meter { .. }))
-        })
-        .filter_map(|r| {
-            let started = r.started.as_deref().and_then(parse_time)?;
-            let finished = match r.state {
-                StepState::Done => r.finished.as_deref().and_then(parse_time)?,
-                StepState::Started => now,
-                StepState::Pending => return None,
-            };
-            Some((started, finished.max(started)))
-        })
-        .collect()
+/// What draws on this machine's cores: the runs of the processing steps, and while an
+/// emulated camera renders a frame (the first [`Timing::render_s`] of each capture, a
+/// metering step whole: it renders, then decodes its frame), the renderer's, which
+/// leaves the processing lane [`Timing::processing_share_while_rendering`] of them.
+pub(super) struct CoreRuns {
+    processing: Vec<Run>,
+    rendering: Vec<Run>,
+    rendering_share: f64,
 }
 
-/// The seconds of `run` the step would have taken with the cores to itself: each
-/// moment counted over the number of `runs` (itself among them) under way then, as
-/// the steps running at once share the cores.
-pub(super) fn alone_s(run: Run, runs: &[Run]) -> f64 {
-    let mut cuts: Vec<OffsetDateTime> = runs
-        .iter()
-        .flat_map(|&(s, f)| [s, f])
-        .filter(|t| (run.0..=run.1).contains(t))
-        .chain([run.0, run.1])
-        .collect();
-    cuts.sort();
-    cuts.dedup();
-    cuts.windows(2)
-        .map(|w| {
-            let sharing = runs
-                .iter()
-                .filter(|&&(s, f)| s <= w[0] && f >= w[1])
-                .count();
-            (w[1] - w[0]).as_seconds_f64() / sharing.max(1) as f64
-        })
-        .sum()
+impl CoreRuns {
+    /// The core users of `steps` (one scan's journal) at `now`.
+    pub(super) fn of(steps: &[StepRecord], timing: &Timing, now: OffsetDateTime) -> Self {
+        let mut runs = CoreRuns {
+            processing: Vec::new(),
+            rendering: Vec::new(),
+            rendering_share: timing.processing_share_while_rendering(),
+        };
+        let render = time::Duration::seconds_f64(timing.render_s());
+        for r in steps {
+            let Some(started) = r.started.as_deref().and_then(parse_time) else {
+                continue;
+            };
+            let finished = match r.state {
+                StepState::Done => match r.finished.as_deref().and_then(parse_time) {
+                    Some(finished) => finished.max(started),
+                    None => continue,
+                },
+                StepState::Started => now.max(started),
+                StepState::Pending => continue,
+            };
+            match r.step {
+                _ if r.step.lane() == Lane::Processing => {
+                    runs.processing.push((started, finished));
+                }
+                Step::Meter { .. } if timing.rendered => runs.rendering.push((started, finished)),
+                Step::Capture { .. } if timing.rendered => {
+                    runs.rendering.push((started, finished.min(started + render)));
+                }
+                _ => {}
+            }
+        }
+        runs
+    }
+
+    /// The seconds of `run` a processing step would have taken with the cores to
+    /// itself: each moment counted as its share of the lane's (all of the cores, or
+    /// their share while a frame renders) over the processing steps under way then.
+    pub(super) fn alone_s(&self, run: Run) -> f64 {
+        let mut cuts: Vec<OffsetDateTime> = self
+            .processing
+            .iter()
+            .chain(&self.rendering)
+            .flat_map(|&(s, f)| [s, f])
+            .filter(|t| (run.0..=run.1).contains(t))
+            .chain([run.0, run.1])
+            .collect();
+        cuts.sort();
+        cuts.dedup();
+        let covering = |runs: &[Run], w: &[OffsetDateTime]| {
+            runs.iter().filter(|&&(s, f)| s <= w[0] && f >= w[1]).count()
+        };
+        cuts.windows(2)
+            .map(|w| {
+                let sharing = covering(&self.processing, w).max(1) as f64;
+                let share = if covering(&self.rendering, w) > 0 {
+                    self.rendering_share
+                } else {
+                    1.0
+                };
+                (w[1] - w[0]).as_seconds_f64() * share / sharing
+            })
+            .sum()
+    }
 }
 
 /// Measured over prior seconds of the done steps of each kind.
@@ -105,13 +136,13 @@ pub(super) struct Calibration {
 impl Calibration {
     /// What the done steps of `steps` (one scan's journal, at `now`) took against
     /// their priors: a hardware step its wall time, a processing step the time it
-    /// would have taken with the cores to itself ([`alone_s`]: beside other
+    /// would have taken with the cores to itself ([`CoreRuns::alone_s`]: beside other
     /// processing, or beside an emulated camera rendering, it had a share of them); a
     /// θL's samples and HDR steps only once both are done.
     pub(super) fn of(steps: &[StepRecord], timing: &Timing, now: OffsetDateTime) -> Self {
         let mut calibration = Calibration::default();
         let places = places(steps, timing);
-        let runs = core_runs(steps, timing.rendered, now);
+        let runs = CoreRuns::of(steps, timing, now);
         let unfinished: Vec<f64> = steps
             .iter()
             .filter(|r| Kind::of(&r.step) == Kind::Theta && r.state != StepState::Done)
@@ -133,7 +164,7 @@ impl Calibration {
             };
             let run = (started, finished.max(started));
             let measured = match record.step.lane() {
-                Lane::Processing => alone_s(run, &runs),
+                Lane::Processing => runs.alone_s(run),
                 Lane::Hardware => (run.1 - run.0).as_seconds_f64(),
             };
             let sum = calibration.sums.entry(Kind::of(&record.step)).or_default();

@@ -32,7 +32,7 @@ use time::OffsetDateTime;
 use crate::plan::{Lane, Step};
 use crate::store::{StepRecord, StepState};
 use crate::timing::Timing;
-use calibration::{alone_s, core_runs, Calibration, Kind};
+use calibration::{Calibration, CoreRuns, Kind};
 pub use journal::metered_bracket;
 use journal::{arm_angles, elapsed_s, parse_time, places};
 
@@ -64,8 +64,9 @@ pub struct Progress {
 
 /// When work of `work_s` seconds (with the cores to itself) begun at `start_s` ends,
 /// played forward beside the `rendering` (ascending, disjoint intervals of an emulated
-/// camera rendering, seconds from now): it has half the cores while a frame renders.
-fn share_cores(start_s: f64, work_s: f64, rendering: &[(f64, f64)]) -> f64 {
+/// camera rendering, seconds from now): it has `share` of the cores while a frame
+/// renders.
+fn share_cores(start_s: f64, work_s: f64, rendering: &[(f64, f64)], share: f64) -> f64 {
     let (mut at, mut left) = (start_s, work_s);
     for &(from, to) in rendering.iter().filter(|(_, to)| *to > start_s) {
         let alone = (from - at).max(0.0);
@@ -74,9 +75,9 @@ fn share_cores(start_s: f64, work_s: f64, rendering: &[(f64, f64)]) -> f64 {
         }
         left -= alone;
         at = at.max(from);
-        let shared = 0.5 * (to - at);
+        let shared = share * (to - at);
         if left <= shared {
-            return at + 2.0 * left;
+            return at + left / share;
         }
         left -= shared;
         at = to;
@@ -136,15 +137,33 @@ pub fn progress(
             continue;
         }
         let mut left_s = scale(&record.step, timing.prior_s(&record.step, from, place));
+        let mut render_s = timing.render_s();
         if record.state == StepState::Started {
-            left_s = left_of(left_s, elapsed_s(record, now));
+            let elapsed = elapsed_s(record, now);
+            left_s = left_of(left_s, elapsed);
+            render_s = (render_s - elapsed).max(0.0);
         }
-        if matches!(record.step, Step::Meter { .. }) {
+        if timing.rendered {
+            match record.step {
+                // A metering step renders its frame and decodes it, then its bracket's
+                // captures each render theirs.
+                Step::Meter { .. } => {
+                    rendering.push((hardware_s, hardware_s + left_s));
+                    let frames = place.frames.max(1);
+                    let each_s = bracket_s / frames as f64;
+                    for frame in 0..frames {
+                        let at = hardware_s + left_s + frame as f64 * each_s;
+                        rendering.push((at, at + each_s.min(timing.render_s())));
+                    }
+                    left_s += bracket_s;
+                }
+                Step::Capture { .. } => {
+                    rendering.push((hardware_s, hardware_s + left_s.min(render_s)));
+                }
+                _ => {}
+            }
+        } else if matches!(record.step, Step::Meter { .. }) {
             left_s += bracket_s;
-        }
-        let renders = matches!(record.step, Step::Capture { .. } | Step::Meter { .. });
-        if timing.rendered && renders {
-            rendering.push((hardware_s, hardware_s + left_s));
         }
         hardware_s += left_s;
     }
@@ -153,7 +172,7 @@ pub fn progress(
     // steps sharing them (as the done steps are measured). The lane's own step comes
     // before the steps not begun; a step in the background (an HDR merge, the automatic
     // choice) goes on beside them, sharing the cores.
-    let runs = core_runs(steps, timing.rendered, now);
+    let runs = CoreRuns::of(steps, timing, now);
     let (mut running_s, mut beside_s) = (0.0, 0.0_f64);
     for ((record, &from), place) in steps.iter().zip(&from_deg).zip(&places) {
         if record.state == StepState::Started && record.step.lane() == Lane::Processing {
@@ -162,7 +181,7 @@ pub fn progress(
                 .started
                 .as_deref()
                 .and_then(parse_time)
-                .map_or(0.0, |started| alone_s((started, now.max(started)), &runs));
+                .map_or(0.0, |started| runs.alone_s((started, now.max(started))));
             let left_s = left_of(expected, done_s);
             if record.step.runs_beside() {
                 beside_s = beside_s.max(left_s);
@@ -175,7 +194,8 @@ pub fn progress(
     // processing before it are done; the lane shares the cores with the rendering.
     // `work_s`: the lane's work without its waits for the hardware.
     let mut work_s = running_s;
-    let mut processing_s = share_cores(0.0, running_s, &rendering);
+    let share = timing.processing_share_while_rendering();
+    let mut processing_s = share_cores(0.0, running_s, &rendering, share);
     let mut parts: Vec<(Kind, f64)> = Vec::new();
     for (((record, &from), place), &after) in steps
         .iter()
@@ -186,7 +206,7 @@ pub fn progress(
         if record.state == StepState::Pending && record.step.lane() == Lane::Processing {
             let left_s = scale(&record.step, timing.prior_s(&record.step, from, place));
             work_s += left_s;
-            processing_s = share_cores(processing_s.max(after), left_s, &rendering);
+            processing_s = share_cores(processing_s.max(after), left_s, &rendering, share);
             match parts
                 .iter_mut()
                 .find(|(kind, _)| *kind == Kind::of(&record.step))

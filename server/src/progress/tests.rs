@@ -1,4 +1,4 @@
-use super::calibration::{alone_s, core_runs};
+use super::calibration::CoreRuns;
 use super::journal::parse_time;
 use super::*;
 use crate::plan::AUTO_FIT;
@@ -160,8 +160,8 @@ fn a_theta_s_processing_is_measured_by_the_time_the_lane_was_busy() {
 fn processing_shares_the_cores_with_an_emulated_camera_s_rendering() {
     let now = OffsetDateTime::now_utc();
     let fixed = plan(false);
-    // θL −20 captured; its samples step ran 4 s, the first 2 s beside the capture
-    // of θL −25's first frame, which an emulated camera renders on the cores.
+    // θL −20 captured; its samples step ran 4 s, beside the capture of θL −25's first
+    // frame (its first 2 s), which an emulated camera renders on the cores for 1 s.
     let mut steps = journal(&fixed, 4, now - Duration::seconds(60), |_| 0.5);
     let t0 = now - Duration::seconds(20);
     let timed = |record: &mut StepRecord, from: f64, to: f64| {
@@ -176,33 +176,41 @@ fn processing_shares_the_cores_with_an_emulated_camera_s_rendering() {
         .position(|r| matches!(r.step, Step::Capture { theta_l, .. } if theta_l == -25.0))
         .unwrap();
     timed(&mut steps[capture], 0.0, 2.0);
-    let rendered = Timing {
+    let mut rendered = Timing {
         rendered: true,
+        cores: 2,
         ..timing()
     };
-    let runs = core_runs(&steps, true, now);
+    rendered.costs.frame_s_per_mpx = 1.0 / rendered.with_frame(0, 0).frame_mpx();
+    assert!((rendered.render_s() - 1.0).abs() < 1e-12);
+    // Two threads at nice 0 against three at nice 10: 330 / (2048 + 330).
+    let share = rendered.processing_share_while_rendering();
+    assert!((share - 330.0 / 2378.0).abs() < 1e-12, "{share}");
     let samples = (
         parse_time(&at(t0, 0.0).unwrap()).unwrap(),
         parse_time(&at(t0, 4.0).unwrap()).unwrap(),
     );
-    assert!((alone_s(samples, &runs) - 3.0).abs() < 1e-6);
+    let alone = CoreRuns::of(&steps, &rendered, now).alone_s(samples);
+    assert!((alone - (3.0 + share)).abs() < 1e-6, "{alone}");
     // A real camera renders nothing here: the step had the cores to itself.
-    assert!((alone_s(samples, &core_runs(&steps, false, now)) - 4.0).abs() < 1e-6);
+    let real = Timing {
+        rendered: false,
+        ..rendered
+    };
+    assert!((CoreRuns::of(&steps, &real, now).alone_s(samples) - 4.0).abs() < 1e-6);
     let priors =
         prior(&rendered, &steps[4].step, 0.0, 3, 1) + prior(&rendered, &steps[5].step, 0.0, 3, 1);
     let ratio = Calibration::of(&steps, &rendered, now)
         .ratio(&Step::Samples { theta_l: -30.0 })
         .unwrap();
-    assert!(
-        (ratio - 4.0 / priors).abs() < 1e-9,
-        "{ratio} vs {}",
-        4.0 / priors
-    );
-    // Played forward, work has half the cores while a frame renders.
-    assert_eq!(share_cores(0.0, 3.0, &[(1.0, 3.0)]), 4.0);
-    assert_eq!(share_cores(0.0, 0.5, &[(1.0, 3.0)]), 0.5);
-    assert_eq!(share_cores(2.0, 0.5, &[(1.0, 3.0)]), 3.0);
-    assert_eq!(share_cores(5.0, 1.0, &[(1.0, 3.0)]), 6.0);
+    let expected = (3.0 + share + 1.0) / priors;
+    assert!((ratio - expected).abs() < 1e-9, "{ratio} vs {expected}");
+    // Played forward, work has the processing share of the cores while a frame renders.
+    assert_eq!(share_cores(0.0, 3.0, &[(1.0, 3.0)], 0.5), 4.0);
+    assert_eq!(share_cores(0.0, 0.5, &[(1.0, 3.0)], 0.5), 0.5);
+    assert_eq!(share_cores(2.0, 0.5, &[(1.0, 3.0)], 0.5), 3.0);
+    assert_eq!(share_cores(5.0, 1.0, &[(1.0, 3.0)], 0.5), 6.0);
+    assert!((share_cores(0.0, 1.75, &[(1.0, 3.0)], 0.25) - 3.25).abs() < 1e-12);
 }
 
 #[test]
@@ -434,9 +442,11 @@ fn replay(text: &str) -> Vec<Poll> {
         time_scale: 0.1,
         ..CaptureTiming::default()
     };
+    // Recorded on a 2-core machine.
     let timing = Timing {
         rendered: true,
         costs,
+        cores: 2,
         ..Timing::emulated(&board, capture)
     }
     .with_frame(3872, 2592);
