@@ -28,59 +28,74 @@ use super::plan::{
     theta_dir_name, theta_fits_path, theta_map_path, theta_map_record_path, theta_samples_path,
     ScanPlan, Step, AUTO_FIT, FIT_MODELS,
 };
+use super::store::now_rfc3339;
 
 /// Most frames decoded ahead of their HDR step (a full-size 16-bit frame is 60 MB).
 const PREFETCH_FRAMES: usize = 8;
 
 /// Frames decoded ahead of their HDR step, while the rest of their bracket is
 /// captured, so that the merge after a bracket's last capture decodes one frame
-/// rather than all. A cache only: the HDR step decodes whatever is not here.
+/// rather than all. A cache only: the HDR step decodes whatever is not here, and
+/// journals when the frames it took were decoded (`decoded_ahead`: the lane's work
+/// for the step, which the time left measures with the step's own).
 #[derive(Debug, Default)]
 pub struct Prefetched {
-    frames: Vec<Frame>,
+    frames: Vec<(Frame, DecodeRun)>,
     /// Frames that did not decode: the HDR step reports why.
     failed: Vec<PathBuf>,
 }
+
+/// When a frame decoded ahead began and ended decoding (RFC 3339).
+type DecodeRun = [String; 2];
 
 impl Prefetched {
     /// Forgets the frames not in `wanted` (paths of frames awaiting their HDR step),
     /// then decodes the first one not decoded yet, if there is room; returns whether
     /// it decoded one.
     pub fn advance(&mut self, wanted: &[PathBuf]) -> bool {
-        self.frames.retain(|f| wanted.contains(&f.path));
+        self.frames.retain(|(f, _)| wanted.contains(&f.path));
         self.failed.retain(|p| wanted.contains(p));
         if self.frames.len() >= PREFETCH_FRAMES {
             return false;
         }
         let Some(path) = wanted
             .iter()
-            .find(|p| !self.failed.contains(p) && !self.frames.iter().any(|f| &f.path == *p))
+            .find(|p| !self.failed.contains(p) && !self.frames.iter().any(|(f, _)| &f.path == *p))
         else {
             return false;
         };
+        let started = now_rfc3339();
         match Frame::read(path) {
-            Ok(frame) => self.frames.push(frame),
+            Ok(frame) => self.frames.push((frame, [started, now_rfc3339()])),
             Err(_) => self.failed.push(path.clone()),
         }
         true
     }
 
     /// The frames at `paths`, in order: those decoded ahead taken from here, the
-    /// others decoded now, in parallel.
-    fn take(&mut self, paths: &[PathBuf]) -> Result<Vec<Frame>, CaptureError> {
+    /// others decoded now, in parallel; and when those taken from here were decoded.
+    fn take(&mut self, paths: &[PathBuf]) -> Result<(Vec<Frame>, Vec<DecodeRun>), CaptureError> {
         let missing: Vec<PathBuf> = paths
             .iter()
-            .filter(|p| !self.frames.iter().any(|f| &f.path == *p))
+            .filter(|p| !self.frames.iter().any(|(f, _)| &f.path == *p))
             .cloned()
             .collect();
         let mut decoded = Frame::read_all(&missing)?.into_iter();
-        Ok(paths
+        let mut runs = Vec::new();
+        let frames = paths
             .iter()
-            .filter_map(|p| match self.frames.iter().position(|f| &f.path == p) {
-                Some(i) => Some(self.frames.swap_remove(i)),
-                None => decoded.next(),
-            })
-            .collect())
+            .filter_map(
+                |p| match self.frames.iter().position(|(f, _)| &f.path == p) {
+                    Some(i) => {
+                        let (frame, run) = self.frames.swap_remove(i);
+                        runs.push(run);
+                        Some(frame)
+                    }
+                    None => decoded.next(),
+                },
+            )
+            .collect();
+        Ok((frames, runs))
     }
 }
 
@@ -279,13 +294,13 @@ fn hdr(dir: &Path, theta_l: f64, prefetched: &mut Prefetched) -> anyhow::Result<
         tracing::info!("{rel}: kept, made from the same frames before the restart");
         return Ok(json!({ "path": rel, "frames": paths.len(), "kept": true }));
     }
-    let frames = prefetched.take(&paths)?;
+    let (frames, decoded_ahead) = prefetched.take(&paths)?;
     let image = merge(&frames, &MergeOptions::default())?;
     write_atomic_with(&map, |tmp| image.write_exr(tmp))?;
     let record = MapRecord::of(inputs, &map).with_context(|| rel.clone())?;
     write_atomic(&record_path, &serde_json::to_vec(&record)?)
         .with_context(|| theta_map_record_path(theta_l))?;
-    Ok(json!({ "path": rel, "frames": frames.len() }))
+    Ok(json!({ "path": rel, "frames": frames.len(), "decoded_ahead": decoded_ahead }))
 }
 
 /// The files an HDR map is made from (each capture and its sidecar, those that exist):
@@ -486,7 +501,11 @@ mod tests {
         assert!(prefetched.advance(&paths[..2]));
         assert!(!prefetched.advance(&paths[..2]));
         assert_eq!(prefetched.frames.len(), 2);
-        assert_eq!(prefetched.take(&paths).unwrap(), fresh);
+        let (frames, runs) = prefetched.take(&paths).unwrap();
+        assert_eq!(frames, fresh);
+        // When each frame taken was decoded, in order.
+        assert_eq!(runs.len(), 2);
+        assert!(runs.iter().all(|[from, to]| from <= to));
         assert!(prefetched.frames.is_empty());
         // Frames no longer awaited are forgotten; one that does not decode is not
         // tried again, and the HDR step reports it.

@@ -161,6 +161,7 @@ impl Shared {
         let costs = self.costs.get().copied().unwrap_or(self.timing.costs);
         Timing {
             costs,
+            max_backlog: self.config.processing.max_backlog,
             ..self.timing
         }
     }

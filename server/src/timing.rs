@@ -125,6 +125,9 @@ pub struct Timing {
     pub costs: Costs,
     /// This machine's cores.
     pub cores: usize,
+    /// Captured brackets awaiting processing at which the arm waits
+    /// (`processing.max_backlog`).
+    pub max_backlog: usize,
 }
 
 impl Timing {
@@ -139,6 +142,7 @@ impl Timing {
             frame: DEFAULT_FRAME,
             costs: Costs::DEFAULT,
             cores: std::thread::available_parallelism().map_or(2, |n| n.get()),
+            max_backlog: 2,
         }
     }
 
@@ -208,6 +212,13 @@ impl Timing {
         processing / (cores * WEIGHT_NICE_0 + processing)
     }
 
+    /// Expected seconds of decoding one frame (part of an HDR step; the processing lane
+    /// decodes a bracket's captured frames ahead of its step when it has nothing else).
+    pub fn decode_s(&self) -> f64 {
+        (self.costs.read_s_per_mpx * self.frame_mpx())
+            .min(self.costs.hdr_s_per_mpx_frame * self.frame_mpx())
+    }
+
     /// Frames of the bracket a θL is expected to need before its metering says.
     pub fn expected_frames(&self) -> usize {
         EXPECTED_BRACKET_S.len()
@@ -248,7 +259,9 @@ impl Timing {
             Step::Home => travel_s(0.0) + HOMING_S * self.arm_time_scale,
             Step::Move { theta_l } => travel_s(*theta_l),
             // A capture, then reading its frame to choose the bracket.
-            Step::Meter { .. } => self.capture_s(METER_START_S) + costs.read_s_per_mpx * self.frame_mpx(),
+            Step::Meter { .. } => {
+                self.capture_s(METER_START_S) + costs.read_s_per_mpx * self.frame_mpx()
+            }
             Step::Capture { shutter_s, .. } => self.capture_s(*shutter_s),
             Step::Samples { .. } => {
                 costs.extraction_s_per_column_frame * bracket_columns

@@ -21,8 +21,9 @@
 //! estimate within [`RATIO`] times of the time actually left either way (the model it
 //! replaced said 6.6 s at the first second of a 92 s scan: 14×), and the 35 % target for
 //! the estimates before the first θL is processed. The 15 % target is printed (the
-//! server's unit test `recorded_first_scans_are_estimated_within_the_targets` asserts
-//! it on journals of such scans recorded on a quiet machine). Otherwise the figures are printed with that share
+//! server's unit test `recorded_first_scans_are_estimated_within_the_targets` replays
+//! journals of such scans recorded on a quiet machine and prints it for each).
+//! Otherwise the figures are printed with that share
 //! and the load, and the test says it did not assert them (so too when the probe gave up
 //! past its budget on a busy machine: on a quiet one that fails). Asserted whatever the load:
 //! an estimate at every poll and never "finishing" with seconds of work left.

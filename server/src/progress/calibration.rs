@@ -51,7 +51,8 @@ impl Kind {
 /// A step's run: when it began and ended (now for a step still under way).
 pub(super) type Run = (OffsetDateTime, OffsetDateTime);
 
-/// What draws on this machine's cores: the runs of the processing steps, and while an
+/// What draws on this machine's cores: the runs of the processing steps (and of the
+/// frames decoded ahead of an HDR step), and while an
 /// emulated camera renders a frame (the first [`Timing::render_s`] of each capture, a
 /// metering step whole: it renders, then decodes its frame), the renderer's, which
 /// leaves the processing lane [`Timing::processing_share_while_rendering`] of them.
@@ -85,10 +86,12 @@ impl CoreRuns {
             match r.step {
                 _ if r.step.lane() == Lane::Processing => {
                     runs.processing.push((started, finished));
+                    runs.processing.extend(decoded_ahead(r));
                 }
                 Step::Meter { .. } if timing.rendered => runs.rendering.push((started, finished)),
                 Step::Capture { .. } if timing.rendered => {
-                    runs.rendering.push((started, finished.min(started + render)));
+                    runs.rendering
+                        .push((started, finished.min(started + render)));
                 }
                 _ => {}
             }
@@ -111,7 +114,9 @@ impl CoreRuns {
         cuts.sort();
         cuts.dedup();
         let covering = |runs: &[Run], w: &[OffsetDateTime]| {
-            runs.iter().filter(|&&(s, f)| s <= w[0] && f >= w[1]).count()
+            runs.iter()
+                .filter(|&&(s, f)| s <= w[0] && f >= w[1])
+                .count()
         };
         cuts.windows(2)
             .map(|w| {
@@ -125,6 +130,23 @@ impl CoreRuns {
             })
             .sum()
     }
+}
+
+/// When the frames an HDR step took were decoded ahead of it (its result's
+/// `decoded_ahead`: the processing lane's work for the step before it began).
+pub(super) fn decoded_ahead(record: &StepRecord) -> impl Iterator<Item = Run> + '_ {
+    record
+        .result
+        .as_ref()
+        .and_then(|r| r.get("decoded_ahead"))
+        .and_then(|d| d.as_array())
+        .into_iter()
+        .flatten()
+        .filter_map(|run| {
+            let from = parse_time(run.get(0)?.as_str()?)?;
+            let to = parse_time(run.get(1)?.as_str()?)?;
+            Some((from, to.max(from)))
+        })
 }
 
 /// Measured over prior seconds of the done steps of each kind.
@@ -164,7 +186,9 @@ impl Calibration {
             };
             let run = (started, finished.max(started));
             let measured = match record.step.lane() {
-                Lane::Processing => runs.alone_s(run),
+                Lane::Processing => {
+                    runs.alone_s(run) + decoded_ahead(record).map(|r| runs.alone_s(r)).sum::<f64>()
+                }
                 Lane::Hardware => (run.1 - run.0).as_seconds_f64(),
             };
             let sum = calibration.sums.entry(Kind::of(&record.step)).or_default();

@@ -11,19 +11,15 @@
 //! automatic choice another, a θL's samples and HDR merge a third. A processing step
 //! is measured by the time it would have taken with the cores to itself: the steps
 //! that draw on the cores at once (the processing steps, and an emulated camera's
-//! rendering) share them, each moment counted over their number. The lanes are then
-//! played forward: hardware steps one after the other; the processing steps under way
-//! each the rest of its expectation after the work it has done (measured as the done
-//! steps are), the lane's own step
-//! before the steps not begun, a step in the background (an HDR merge, the automatic
-//! choice) beside them, sharing the cores with the lane's work (together they take the
-//! sum of their times); each processing step not begun once the hardware steps before
-//! it and the processing before it are done, at half speed while an emulated camera
-//! renders. The estimate is when the last of them finishes, so processing that runs
-//! beside the hardware counts only where it ends later.
+//! rendering, and frames decoded ahead of their HDR step) share them, each moment
+//! counted over their number. The lanes are then played forward from now under the
+//! daemon's own rules ([`play`]): each step under way the rest of its expectation after
+//! the work it has done (measured as the done steps are), a bracket not metered yet
+//! its captures as the bracket last metered; the estimate is when the last step ends.
 
 mod calibration;
 mod journal;
+mod play;
 
 use serde::Serialize;
 use serde_json::Value;
@@ -32,9 +28,10 @@ use time::OffsetDateTime;
 use crate::plan::{Lane, Step};
 use crate::store::{StepRecord, StepState};
 use crate::timing::Timing;
-use calibration::{Calibration, CoreRuns, Kind};
+use calibration::{Calibration, CoreRuns};
 pub use journal::metered_bracket;
 use journal::{arm_angles, elapsed_s, parse_time, places};
+use play::{play, Rules, Work};
 
 /// What a step that has run longer than expected is still given, as a share of the
 /// time it has run: it is not about to end just because its prior said so.
@@ -60,29 +57,6 @@ pub struct Progress {
     pub eta_s: f64,
     /// The live fits after each θL (`live` of each done samples step), in order.
     pub live: Vec<Value>,
-}
-
-/// When work of `work_s` seconds (with the cores to itself) begun at `start_s` ends,
-/// played forward beside the `rendering` (ascending, disjoint intervals of an emulated
-/// camera rendering, seconds from now): it has `share` of the cores while a frame
-/// renders.
-fn share_cores(start_s: f64, work_s: f64, rendering: &[(f64, f64)], share: f64) -> f64 {
-    let (mut at, mut left) = (start_s, work_s);
-    for &(from, to) in rendering.iter().filter(|(_, to)| *to > start_s) {
-        let alone = (from - at).max(0.0);
-        if left <= alone {
-            return at + left;
-        }
-        left -= alone;
-        at = at.max(from);
-        let shared = share * (to - at);
-        if left <= shared {
-            return at + left / share;
-        }
-        left -= shared;
-        at = to;
-    }
-    at + left
 }
 
 /// Seconds still expected of work expected to take `expected_s` that has run for
@@ -120,109 +94,91 @@ pub fn progress(
         scale(&any_capture, prior_s)
     };
     let mut bracket_s = capture_scale(timing.expected_bracket_s());
-    // The hardware lane played forward: when each step would begin (counted from now),
-    // and when an emulated camera would be rendering on the cores.
-    let mut hardware_s = 0.0_f64;
-    let mut hardware_before = Vec::with_capacity(steps.len());
-    let mut rendering: Vec<(f64, f64)> = Vec::new();
+    let runs = CoreRuns::of(steps, timing, now);
+    let render_s = timing.render_s();
+    // The steps not done, as the play runs them: each its prior at its place, scaled;
+    // one under way the rest of it after the time it has run (a processing step: the
+    // work it has done, measured as the done steps are).
+    let mut work: Vec<Work> = Vec::with_capacity(steps.len());
     for ((record, &from), place) in steps.iter().zip(&from_deg).zip(&places) {
-        hardware_before.push(hardware_s);
         if record.state == StepState::Done {
             if let Some(bracket) = metered_bracket(record) {
                 bracket_s = capture_scale(bracket.iter().map(|&s| timing.capture_s(s)).sum());
             }
             continue;
         }
-        if record.step.lane() != Lane::Hardware {
-            continue;
-        }
-        let mut left_s = scale(&record.step, timing.prior_s(&record.step, from, place));
-        let mut render_s = timing.render_s();
-        if record.state == StepState::Started {
-            let elapsed = elapsed_s(record, now);
-            left_s = left_of(left_s, elapsed);
-            render_s = (render_s - elapsed).max(0.0);
-        }
-        if timing.rendered {
-            match record.step {
-                // A metering step renders its frame and decodes it, then its bracket's
-                // captures each render theirs.
-                Step::Meter { .. } => {
-                    rendering.push((hardware_s, hardware_s + left_s));
-                    let frames = place.frames.max(1);
-                    let each_s = bracket_s / frames as f64;
-                    for frame in 0..frames {
-                        let at = hardware_s + left_s + frame as f64 * each_s;
-                        rendering.push((at, at + each_s.min(timing.render_s())));
-                    }
-                    left_s += bracket_s;
+        let expected = scale(&record.step, timing.prior_s(&record.step, from, place));
+        let started = record.state == StepState::Started;
+        let mut item = Work {
+            step: record.step.clone(),
+            left_s: expected,
+            render_s: 0.0,
+            started,
+            decode_s_per_frame: 0.0,
+            captured: 0,
+        };
+        match record.step.lane() {
+            Lane::Hardware => {
+                let elapsed = if started { elapsed_s(record, now) } else { 0.0 };
+                item.left_s = left_of(expected, elapsed);
+                item.render_s = match record.step {
+                    // A metering step renders its frame, then decodes it.
+                    Step::Meter { .. } if timing.rendered => item.left_s,
+                    Step::Capture { .. } => (render_s - elapsed).max(0.0),
+                    _ => 0.0,
+                };
+            }
+            Lane::Processing => {
+                if started {
+                    let done_s = record
+                        .started
+                        .as_deref()
+                        .and_then(parse_time)
+                        .map_or(0.0, |started| runs.alone_s((started, now.max(started))));
+                    item.left_s = left_of(expected, done_s);
                 }
-                Step::Capture { .. } => {
-                    rendering.push((hardware_s, hardware_s + left_s.min(render_s)));
+                if let Step::Hdr { theta_l } = record.step {
+                    item.decode_s_per_frame = scale(&record.step, timing.decode_s());
+                    item.captured = steps
+                        .iter()
+                        .filter(|r| r.state == StepState::Done)
+                        .filter(
+                            |r| matches!(r.step, Step::Capture { theta_l: t, .. } if t == theta_l),
+                        )
+                        .count();
                 }
-                _ => {}
             }
-        } else if matches!(record.step, Step::Meter { .. }) {
-            left_s += bracket_s;
         }
-        hardware_s += left_s;
-    }
-    // The processing steps under way: each the rest of its expectation after the work
-    // it has done, the time since it began with the cores it shared counted over the
-    // steps sharing them (as the done steps are measured). The lane's own step comes
-    // before the steps not begun; a step in the background (an HDR merge, the automatic
-    // choice) goes on beside them, sharing the cores.
-    let runs = CoreRuns::of(steps, timing, now);
-    let (mut running_s, mut beside_s) = (0.0, 0.0_f64);
-    for ((record, &from), place) in steps.iter().zip(&from_deg).zip(&places) {
-        if record.state == StepState::Started && record.step.lane() == Lane::Processing {
-            let expected = scale(&record.step, timing.prior_s(&record.step, from, place));
-            let done_s = record
-                .started
-                .as_deref()
-                .and_then(parse_time)
-                .map_or(0.0, |started| runs.alone_s((started, now.max(started))));
-            let left_s = left_of(expected, done_s);
-            if record.step.runs_beside() {
-                beside_s = beside_s.max(left_s);
-            } else {
-                running_s += left_s;
+        work.push(item);
+        // A bracket not metered yet: its captures (journalled once it is), each a share
+        // of the bracket the scan last metered.
+        if let Step::Meter { theta_l } = record.step {
+            let frames = place.frames.max(1);
+            let each_s = bracket_s / frames as f64;
+            for index in 0..frames {
+                work.push(Work {
+                    step: Step::Capture {
+                        theta_l,
+                        index,
+                        shutter_s: 0.0,
+                    },
+                    left_s: each_s,
+                    render_s: each_s.min(render_s),
+                    started: false,
+                    decode_s_per_frame: 0.0,
+                    captured: 0,
+                });
             }
         }
     }
-    // Then each processing step not begun, once the hardware steps before it and the
-    // processing before it are done; the lane shares the cores with the rendering.
-    // `work_s`: the lane's work without its waits for the hardware.
-    let mut work_s = running_s;
-    let share = timing.processing_share_while_rendering();
-    let mut processing_s = share_cores(0.0, running_s, &rendering, share);
-    let mut parts: Vec<(Kind, f64)> = Vec::new();
-    for (((record, &from), place), &after) in steps
-        .iter()
-        .zip(&from_deg)
-        .zip(&places)
-        .zip(&hardware_before)
-    {
-        if record.state == StepState::Pending && record.step.lane() == Lane::Processing {
-            let left_s = scale(&record.step, timing.prior_s(&record.step, from, place));
-            work_s += left_s;
-            processing_s = share_cores(processing_s.max(after), left_s, &rendering, share);
-            match parts
-                .iter_mut()
-                .find(|(kind, _)| *kind == Kind::of(&record.step))
-            {
-                Some(part) => part.1 += left_s,
-                None => parts.push((Kind::of(&record.step), left_s)),
-            }
-        }
-    }
+    let rules = Rules {
+        max_backlog: timing.max_backlog,
+        share_while_rendering: timing.processing_share_while_rendering(),
+    };
+    let eta_s = play(&work, &rules);
     tracing::debug!(
-        hardware_s,
-        running_s,
-        beside_s,
-        processing_s,
-        "time left: processing not started {parts:.2?}; measured/prior this scan {:.2?}, \
-         the scan before {:.2?}",
+        eta_s,
+        "time left: measured/prior this scan {:.2?}, the scan before {:.2?}",
         own.sums,
         before.sums
     );
@@ -232,10 +188,7 @@ pub fn progress(
             .iter()
             .find(|s| s.step.lane() == Lane::Processing && s.state == StepState::Started)
             .map(|s| s.step.describe()),
-        // A step in the background shares the cores with the lane's work: both use
-        // every core, so together they take the sum of their times (the lane's waits
-        // for the hardware leave the cores to it).
-        eta_s: hardware_s.max(processing_s).max(work_s + beside_s),
+        eta_s,
         live: steps
             .iter()
             .filter(|s| s.state == StepState::Done && matches!(s.step, Step::Samples { .. }))

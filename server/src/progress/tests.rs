@@ -77,31 +77,36 @@ fn time_left_plays_both_lanes_forward_and_learns_from_done_steps() {
     let fixed = plan(false);
     let fresh = journal(&fixed, 0, now, |_| 0.0);
     let full = progress(&fresh, &[], &timing, now);
-    // Nothing done: each θL's processing once its bracket is captured and the
-    // processing before it is done, then the extraction and the fits.
+    // Nothing done: the hardware steps one after the other, the processing work on
+    // cores it shares (never more than all of them), each θL's after its bracket.
     let (mut hardware, mut processing, mut from) = (0.0_f64, 0.0_f64, 0.0);
     hardware += prior(&timing, &Step::Home, 0.0, 3, 3);
+    let mut last_bracket = 0.0;
     for (rank, &theta_l) in fixed.theta_l.iter().enumerate() {
         hardware += prior(&timing, &Step::Move { theta_l }, from, 3, rank + 1);
         from = theta_l;
         for &shutter_s in &fixed.shutter_s {
             hardware += timing.capture_s(shutter_s);
         }
-        processing = processing.max(hardware)
-            + prior(&timing, &Step::Samples { theta_l }, 0.0, 3, rank + 1)
+        last_bracket = prior(&timing, &Step::Samples { theta_l }, 0.0, 3, rank + 1)
             + prior(&timing, &Step::Hdr { theta_l }, 0.0, 3, rank + 1);
+        processing += last_bracket;
     }
-    processing += prior(&timing, &Step::Extract, 0.0, 3, 3);
+    let mut tail = prior(&timing, &Step::Extract, 0.0, 3, 3);
     for (model, _) in FIT_MODELS.iter().chain([&AUTO_FIT]) {
         let fit = Step::Fit {
             model: (*model).into(),
         };
-        processing += prior(&timing, &fit, 0.0, 3, 3);
+        tail += prior(&timing, &fit, 0.0, 3, 3);
     }
-    let expected = hardware.max(processing);
+    processing += tail;
+    let (least, most) = (
+        processing.max(hardware + last_bracket + tail),
+        hardware + processing,
+    );
     assert!(
-        (full.eta_s - expected).abs() < 1e-9,
-        "{full:?} vs {expected}"
+        full.eta_s >= least - 1e-9 && full.eta_s <= most + 1e-9,
+        "{full:?} outside [{least}, {most}]"
     );
     assert_eq!(
         full.theta_l,
@@ -148,6 +153,13 @@ fn a_theta_s_processing_is_measured_by_the_time_the_lane_was_busy() {
         "{ratio} vs {}",
         6.0 / priors
     );
+    // Frames decoded ahead of the merge (2 s, before it began) are its work too.
+    steps[5].result = Some(json!({ "decoded_ahead": [[at(t0, -3.0), at(t0, -1.0)]] }));
+    let ahead = Calibration::of(&steps, &timing, now)
+        .ratio(&Step::Hdr { theta_l: -25.0 })
+        .unwrap();
+    assert!((ahead - 8.0 / priors).abs() < 1e-9, "{ahead}");
+    steps[5].result = None;
     // While its merge still runs, a θL's samples alone say nothing.
     steps[5].state = StepState::Started;
     assert_eq!(
@@ -205,12 +217,6 @@ fn processing_shares_the_cores_with_an_emulated_camera_s_rendering() {
         .unwrap();
     let expected = (3.0 + share + 1.0) / priors;
     assert!((ratio - expected).abs() < 1e-9, "{ratio} vs {expected}");
-    // Played forward, work has the processing share of the cores while a frame renders.
-    assert_eq!(share_cores(0.0, 3.0, &[(1.0, 3.0)], 0.5), 4.0);
-    assert_eq!(share_cores(0.0, 0.5, &[(1.0, 3.0)], 0.5), 0.5);
-    assert_eq!(share_cores(2.0, 0.5, &[(1.0, 3.0)], 0.5), 3.0);
-    assert_eq!(share_cores(5.0, 1.0, &[(1.0, 3.0)], 0.5), 6.0);
-    assert!((share_cores(0.0, 1.75, &[(1.0, 3.0)], 0.25) - 3.25).abs() < 1e-12);
 }
 
 #[test]
@@ -349,20 +355,19 @@ fn metered_brackets_and_live_fits_come_from_step_results() {
 
 /// The first scans of new data directories as recorded on a quiet 2-core machine
 /// (tests/data/time-left: README's 6-θL scan of the full-size gold scene at time scale
-/// 0.1, each journal with the costs its daemon's timing probe measured; recorded by
-/// `tests/tests/daemon_time_left.rs`, which leaves each run's data directory in the
-/// temporary directory, with the processing code of the time: when the processing
-/// steps' costs change shape, record them again), replayed every [`POLL_S`] as the API
-/// would answer, each error counted against no less than 10 s left. Asserted: within
-/// 35 % before the first θL is processed (the target from the first second; before the
-/// first metering the bracket is the example scenes' typical one), within 40 % after
-/// it and 3× either way throughout. The target after the first θL, 15 %, is printed,
-/// not met on every recording (each recording's worst poll is printed): a
-/// θL's processing is scaled by what those processed so far took, while later ones share
-/// the cores with more rendering and longer live fits and hold the arm back
-/// (`processing.max_backlog`), which the hardware lane's play does not follow; and the
-/// per-model fits at the scan's end, each on one core, run beside the automatic choice
-/// faster than the model's shared-cores rule counts.
+/// 0.1, each journal with the costs its daemon's timing probe measured and the HDR
+/// steps' frames decoded ahead; recorded by `tests/tests/daemon_time_left.rs`, which
+/// leaves each run's data directory in the temporary directory, with the lanes and
+/// processing code of the time: when they change what a step costs or when it runs,
+/// record them again), replayed every [`POLL_S`] as the API would answer, each error
+/// counted against no less than 10 s left. Asserted: within 35 % before the first θL
+/// is processed (the target from the first second; before the first metering the
+/// bracket is the example scenes' typical one), within 35 % after it and 3× either way
+/// throughout. The target after the first θL, 15 %, is printed, not met on every
+/// recording (each recording's worst poll is printed): one scan's HDR merges, the same
+/// work, take from θL to θL a measured time that varies around their prior by more than
+/// that (the lowest and highest of each recording are printed), and the first θL's
+/// measure scales the rest.
 #[test]
 fn recorded_first_scans_are_estimated_within_the_targets() {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/time-left");
@@ -373,7 +378,7 @@ fn recorded_first_scans_are_estimated_within_the_targets() {
     files.sort();
     assert!(files.len() >= 6, "{}", dir.display());
     for file in files {
-        let polls = replay(&std::fs::read_to_string(&file).unwrap());
+        let (polls, hdr) = replay(&std::fs::read_to_string(&file).unwrap());
         let name = file.file_name().unwrap().to_string_lossy().into_owned();
         let mut worst = [0.0_f64; 3];
         for poll in &polls {
@@ -396,13 +401,15 @@ fn recorded_first_scans_are_estimated_within_the_targets() {
         }
         eprintln!(
             "{name}: worst error {:.0} % before metering, {:.0} % before the first θL is \
-             processed, {:.0} % after",
+             processed, {:.0} % after; HDR merges at {:.2}–{:.2}× their prior",
             100.0 * worst[0],
             100.0 * worst[1],
-            100.0 * worst[2]
+            100.0 * worst[2],
+            hdr.0,
+            hdr.1
         );
         assert!(
-            worst[0].max(worst[1]) <= 0.35 && worst[2] <= 0.40,
+            worst[0].max(worst[1]) <= 0.35 && worst[2] <= 0.35,
             "{name}: {worst:?}"
         );
     }
@@ -428,7 +435,9 @@ struct Poll {
 /// step, times and the result's `shutter_s`) as the API would have answered each
 /// second: the steps not begun then pending, those under way started, a θL's captures
 /// journalled once its metering planned them.
-fn replay(text: &str) -> Vec<Poll> {
+/// Also each HDR step's measured over prior seconds (its frames decoded ahead
+/// included), lowest and highest of the recording.
+fn replay(text: &str) -> (Vec<Poll>, (f64, f64)) {
     use gonio_mock_hw::camera::CaptureTiming;
     use gonio_mock_hw::grbl::GrblConfig;
     let recorded: Value = serde_json::from_str(text).unwrap();
@@ -467,6 +476,24 @@ fn replay(text: &str) -> Vec<Poll> {
             (record, time(&s["started"]), time(&s["finished"]))
         })
         .collect();
+    let full: Vec<StepRecord> = steps.iter().map(|s| s.0.clone()).collect();
+    let end = steps.iter().map(|s| s.2).max().unwrap();
+    let runs = CoreRuns::of(&full, &timing, end);
+    let places = super::journal::places(&full, &timing);
+    let hdr = steps
+        .iter()
+        .zip(&places)
+        .filter(|((r, _, _), _)| matches!(r.step, Step::Hdr { .. }))
+        .map(|((r, started, finished), place)| {
+            let measured: f64 = std::iter::once((*started, *finished))
+                .chain(super::calibration::decoded_ahead(r))
+                .map(|run| runs.alone_s(run))
+                .sum();
+            measured / timing.prior_s(&r.step, 0.0, place)
+        })
+        .fold((f64::INFINITY, 0.0_f64), |(lo, hi), x| {
+            (lo.min(x), hi.max(x))
+        });
     let t0 = steps.iter().map(|s| s.1).min().unwrap();
     let total_s = (steps.iter().map(|s| s.2).max().unwrap() - t0).as_seconds_f64();
     let mut polls = Vec::new();
@@ -505,5 +532,5 @@ fn replay(text: &str) -> Vec<Poll> {
         });
         at_s += POLL_S;
     }
-    polls
+    (polls, hdr)
 }

@@ -62,11 +62,12 @@ pub fn unprocessed_brackets(steps: &[StepRecord]) -> usize {
 }
 
 /// The frames (paths relative to the scan directory, as capture steps record them) of
-/// the θL whose HDR step is not done, in a scan's journal.
+/// the θL whose HDR step has not begun (one under way has decoded its own), in a
+/// scan's journal.
 pub fn frames_awaiting_hdr(steps: &[StepRecord]) -> Vec<String> {
     let pending: Vec<f64> = steps
         .iter()
-        .filter(|s| s.state != StepState::Done)
+        .filter(|s| s.state == StepState::Pending)
         .filter_map(|s| match s.step {
             Step::Hdr { theta_l } => Some(theta_l),
             _ => None,

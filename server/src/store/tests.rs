@@ -243,6 +243,10 @@ fn frames_awaiting_hdr_are_the_captures_of_brackets_not_merged() {
         frames_awaiting_hdr(&steps),
         vec!["theta_l_-25.0/exp_00.tiff".to_owned()]
     );
+    // A merge under way has decoded its frames: none are awaited.
+    let mut merging = steps.clone();
+    merging[4].state = StepState::Started;
+    assert!(frames_awaiting_hdr(&merging).is_empty());
 }
 
 #[test]
