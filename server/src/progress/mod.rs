@@ -74,8 +74,6 @@ pub fn progress(
     timing: &Timing,
     now: OffsetDateTime,
 ) -> Progress {
-    let from_deg = arm_angles(steps);
-    let places = places(steps, timing);
     let (own, before) = (
         Calibration::of(steps, timing, now),
         Calibration::of(earlier, timing, now),
@@ -85,6 +83,44 @@ pub fn progress(
             .or_else(|| before.ratio(step))
             .map_or(prior_s, |ratio| prior_s * ratio)
     };
+    let work = work_ahead(steps, timing, now, &scale);
+    let rules = Rules {
+        max_backlog: timing.max_backlog,
+        share_while_rendering: timing.processing_share_while_rendering(),
+    };
+    let eta_s = play(&work, &rules);
+    tracing::debug!(
+        eta_s,
+        "time left: measured/prior this scan {:.2?}, the scan before {:.2?}",
+        own.sums,
+        before.sums
+    );
+    Progress {
+        theta_l: theta_progress(steps),
+        processing_step: steps
+            .iter()
+            .find(|s| s.step.lane() == Lane::Processing && s.state == StepState::Started)
+            .map(|s| s.step.describe()),
+        eta_s,
+        live: steps
+            .iter()
+            .filter(|s| s.state == StepState::Done && matches!(s.step, Step::Samples { .. }))
+            .filter_map(|s| s.result.as_ref()?.get("live").cloned())
+            .collect(),
+    }
+}
+
+/// The steps of `steps` (one scan's journal) not done at `now`, as the play runs them:
+/// each its prior at its place, scaled by `scale` (step, prior seconds → expected
+/// seconds); one under way the rest of it after the time it has run (a processing step:
+/// the work it has done, measured as the done steps are); a metering step not done
+/// followed by its bracket's captures.
+fn work_ahead(
+    steps: &[StepRecord],
+    timing: &Timing,
+    now: OffsetDateTime,
+    scale: &dyn Fn(&Step, f64) -> f64,
+) -> Vec<Work> {
     let capture_scale = |prior_s: f64| {
         let any_capture = Step::Capture {
             theta_l: 0.0,
@@ -96,9 +132,8 @@ pub fn progress(
     let mut bracket_s = capture_scale(timing.expected_bracket_s());
     let runs = CoreRuns::of(steps, timing, now);
     let render_s = timing.render_s();
-    // The steps not done, as the play runs them: each its prior at its place, scaled;
-    // one under way the rest of it after the time it has run (a processing step: the
-    // work it has done, measured as the done steps are).
+    let from_deg = arm_angles(steps);
+    let places = places(steps, timing);
     let mut work: Vec<Work> = Vec::with_capacity(steps.len());
     for ((record, &from), place) in steps.iter().zip(&from_deg).zip(&places) {
         if record.state == StepState::Done {
@@ -171,30 +206,7 @@ pub fn progress(
             }
         }
     }
-    let rules = Rules {
-        max_backlog: timing.max_backlog,
-        share_while_rendering: timing.processing_share_while_rendering(),
-    };
-    let eta_s = play(&work, &rules);
-    tracing::debug!(
-        eta_s,
-        "time left: measured/prior this scan {:.2?}, the scan before {:.2?}",
-        own.sums,
-        before.sums
-    );
-    Progress {
-        theta_l: theta_progress(steps),
-        processing_step: steps
-            .iter()
-            .find(|s| s.step.lane() == Lane::Processing && s.state == StepState::Started)
-            .map(|s| s.step.describe()),
-        eta_s,
-        live: steps
-            .iter()
-            .filter(|s| s.state == StepState::Done && matches!(s.step, Step::Samples { .. }))
-            .filter_map(|s| s.result.as_ref()?.get("live").cloned())
-            .collect(),
-    }
+    work
 }
 
 /// How many θL of the journal are captured and processed.

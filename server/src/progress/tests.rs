@@ -534,3 +534,47 @@ fn replay(text: &str) -> (Vec<Poll>, (f64, f64)) {
     }
     (polls, hdr)
 }
+
+#[test]
+fn a_bracket_not_metered_brings_its_captures_and_only_an_emulated_camera_renders() {
+    let now = OffsetDateTime::now_utc();
+    let auto = plan(true);
+    let steps = journal(&auto, 0, now, |_| 0.0);
+    let same = |_: &Step, prior_s: f64| prior_s;
+    let rendered = Timing {
+        rendered: true,
+        ..timing()
+    };
+    let render_s = rendered.render_s();
+    assert!(render_s > 0.0);
+    for (timing, renders) in [(timing(), false), (rendered, true)] {
+        let work = work_ahead(&steps, &timing, now, &same);
+        // Each metering step is followed by the typical bracket's captures.
+        let meter = work
+            .iter()
+            .position(|w| matches!(w.step, Step::Meter { .. }))
+            .unwrap();
+        let frames = timing.expected_frames();
+        let captures = &work[meter + 1..meter + 1 + frames];
+        assert!(captures
+            .iter()
+            .all(|w| matches!(w.step, Step::Capture { theta_l, .. } if theta_l == -20.0)));
+        let bracket_s: f64 = captures.iter().map(|w| w.left_s).sum();
+        assert!((bracket_s - timing.expected_bracket_s()).abs() < 1e-9);
+        if renders {
+            assert_eq!(work[meter].render_s, work[meter].left_s);
+            assert!(captures
+                .iter()
+                .all(|w| w.render_s == w.left_s.min(render_s)));
+        } else {
+            assert!(work.iter().all(|w| w.render_s == 0.0), "{work:?}");
+        }
+        // An HDR step may decode its frames ahead, a decoding's share of its prior.
+        let hdr = work
+            .iter()
+            .find(|w| matches!(w.step, Step::Hdr { .. }))
+            .unwrap();
+        assert!(hdr.decode_s_per_frame > 0.0 && hdr.decode_s_per_frame < hdr.left_s);
+        assert_eq!(hdr.captured, 0);
+    }
+}
