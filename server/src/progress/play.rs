@@ -154,22 +154,29 @@ impl Play {
         if self.waits_for_beside {
             return;
         }
-        // Beside the others: each such step whose every step before it not done is a
-        // processing step it does not need, one of each kind.
-        for i in 0..self.work.len() {
-            let step = &self.work[i].step;
-            if self.run[i] != Run::Waiting || !step.runs_beside() || step.lane() != Lane::Processing
-            {
+        // Beside the others: the first step waiting of each kind that runs beside them,
+        // unless one of its kind runs, once every step before it not done is a
+        // processing step it does not need (a later one of the kind waits for the same
+        // steps and more). One pass, so that a long sweep's play stays linear per event.
+        let mut busy = Vec::new();
+        let mut first = Vec::new();
+        for (i, w) in self.work.iter().enumerate() {
+            if !w.step.runs_beside() || w.step.lane() != Lane::Processing {
                 continue;
             }
-            let kind = std::mem::discriminant(step);
-            let busy = (0..self.work.len()).any(|j| {
-                self.run[j] == Run::Beside && std::mem::discriminant(&self.work[j].step) == kind
-            });
+            let kind = std::mem::discriminant(&w.step);
+            match self.run[i] {
+                Run::Beside => busy.push(kind),
+                Run::Waiting if !first.iter().any(|&(k, _)| k == kind) => first.push((kind, i)),
+                _ => {}
+            }
+        }
+        for (kind, i) in first {
+            let step = &self.work[i].step;
             let ready = (0..i).filter(|&j| self.not_done(j)).all(|j| {
                 self.work[j].step.lane() == Lane::Processing && !step.needs(&self.work[j].step)
             });
-            if ready && !busy {
+            if ready && !busy.contains(&kind) {
                 self.begin(i, Run::Beside);
             }
         }
