@@ -4,6 +4,7 @@
 //! themselves (an interrupt is how they end).
 
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Mutex, PoisonError};
 use std::time::Duration;
 
@@ -12,6 +13,14 @@ static TEMPORARY: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
 
 /// Exit status after an interruption.
 const EXIT_INTERRUPTED: i32 = 130;
+
+/// Set once a signal came, before the temporary directories are removed.
+static INTERRUPTED: AtomicBool = AtomicBool::new(false);
+
+/// How long a command that failed after a signal waits for the watcher to end the
+/// process (it removes the directories, a few hundred milliseconds at most), before it
+/// exits as interrupted itself.
+const WATCHER_GRACE: Duration = Duration::from_secs(5);
 
 /// Watches for SIGINT and SIGTERM on a thread of its own while `command` runs.
 pub fn install(command: String) {
@@ -27,6 +36,7 @@ pub fn install(command: String) {
                 Err(_) => return,
             };
             let signal = runtime.block_on(wait_for_signal());
+            INTERRUPTED.store(true, Ordering::SeqCst);
             let removed = remove_registered();
             eprintln!(
                 "\ngonio {command}: interrupted by {signal}; stopped before finishing{}",
@@ -40,6 +50,16 @@ pub fn install(command: String) {
         });
     // Failing to start the watcher leaves the default signal action: acceptable.
     drop(watcher);
+}
+
+/// Called when the command failed: if a signal came, the failure is its consequence
+/// (a directory removed under the command) and not the news, so this waits for the
+/// watcher to say what was stopped and exit with 130 (not returning then).
+pub fn yield_to_signal() {
+    if INTERRUPTED.load(Ordering::SeqCst) {
+        std::thread::sleep(WATCHER_GRACE);
+        std::process::exit(EXIT_INTERRUPTED);
+    }
 }
 
 /// Waits for SIGINT or SIGTERM and names the one that came.

@@ -99,6 +99,7 @@ fn main() {
         )),
     };
     if let Err(err) = result {
+        interrupt::yield_to_signal();
         if is_broken_pipe(&err) && stdout_closed() {
             std::process::exit(EXIT_STDOUT_CLOSED);
         }
