@@ -24,6 +24,7 @@ use rusqlite::{Connection, Transaction, TransactionBehavior};
 
 use super::storage;
 
+pub use journal::brackets_behind;
 pub use records::{
     now_rfc3339, now_unix, LogEntry, NewScan, ScanRecord, ScanState, StepRecord, StepState,
     StoreError, PROCESSABLE,

@@ -12,6 +12,7 @@
 //! step ends.
 
 use crate::plan::{Lane, Step};
+use crate::store::brackets_behind;
 
 /// A step not done, as the play runs it.
 #[derive(Debug, Clone)]
@@ -117,25 +118,14 @@ impl Play {
         self.run[i] != Run::Done
     }
 
-    /// θL whose bracket is captured but not processed: a processing step not done
-    /// before the first hardware step not done (`store::journal::unprocessed_brackets`).
+    /// θL whose bracket is captured but not processed, as the hardware lane counts them.
     fn backlog(&self) -> usize {
-        let mut count = 0;
-        let mut counted = None;
-        for (i, w) in self.work.iter().enumerate() {
-            if !self.not_done(i) {
-                continue;
-            }
-            match (w.step.lane(), w.step.theta_l()) {
-                (Lane::Hardware, _) => break,
-                (Lane::Processing, Some(theta_l)) if counted != Some(theta_l) => {
-                    count += 1;
-                    counted = Some(theta_l);
-                }
-                (Lane::Processing, _) => {}
-            }
-        }
-        count
+        brackets_behind(
+            self.work
+                .iter()
+                .zip(&self.run)
+                .map(|(w, r)| (&w.step, *r == Run::Done)),
+        )
     }
 
     /// Starts what the lanes would start now.

@@ -43,13 +43,19 @@ pub fn beside_steps<'a>(
 /// θL whose bracket is captured (every hardware step before its processing is done)
 /// but not processed yet, in a scan's journal.
 pub fn unprocessed_brackets(steps: &[StepRecord]) -> usize {
+    brackets_behind(steps.iter().map(|r| (&r.step, r.state == StepState::Done)))
+}
+
+/// [`unprocessed_brackets`] of a journal given as its steps, each with whether it is
+/// done, in order.
+pub fn brackets_behind<'a>(steps: impl IntoIterator<Item = (&'a Step, bool)>) -> usize {
     let mut count = 0;
     let mut counted = None;
-    for record in steps {
-        if record.state == StepState::Done {
+    for (step, done) in steps {
+        if done {
             continue;
         }
-        match (record.step.lane(), record.step.theta_l()) {
+        match (step.lane(), step.theta_l()) {
             (Lane::Hardware, _) => break,
             (Lane::Processing, Some(theta_l)) if counted != Some(theta_l) => {
                 count += 1;
