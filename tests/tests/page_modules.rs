@@ -8,10 +8,17 @@ use gonio_tests::browser::Browser;
 use gonio_tests::{emulator_config, temp_dir, Daemon};
 use serde_json::{json, Value};
 
-/// Where the first measured marker of the plot is on screen, the plot scrolled into view.
-const FIRST_MARKER: &str = r#"(() => {
+/// Where the first measured marker of the plot that no other lies within 4 units of is
+/// on screen (the pointer on it can mean only it; markers of neighbouring θr overlap),
+/// the plot scrolled into view.
+const LONE_MARKER: &str = r#"(() => {
     document.querySelector('#plot svg').scrollIntoView({ block: 'center' });
-    const m = document.querySelector('#plot circle.marker');
+    const markers = [...document.querySelectorAll('#plot circle.marker')];
+    const at = m => [parseFloat(m.getAttribute('cx')), parseFloat(m.getAttribute('cy'))];
+    const m = markers.find(a => {
+        const [x, y] = at(a);
+        return markers.every(b => b === a || Math.hypot(at(b)[0] - x, at(b)[1] - y) > 4);
+    });
     const r = m.getBoundingClientRect();
     return { x: r.left + r.width / 2, y: r.top + r.height / 2, cx: m.getAttribute('cx'), cy: m.getAttribute('cy') };
 })()"#;
@@ -87,7 +94,7 @@ fn page_loads_its_modules_from_the_daemon_and_the_plot_gives_values_under_the_po
 
     // The pointer on a marker: that point ringed, its values written below the plot.
     let hint = page.eval(HOVER)["text"].clone();
-    let marker = page.eval(FIRST_MARKER);
+    let marker = page.eval(LONE_MARKER);
     page.call(
         "Input.dispatchMouseEvent",
         json!({"type": "mouseMoved", "x": marker["x"], "y": marker["y"]}),
