@@ -513,12 +513,13 @@ const EXAMPLES: [(&str, &str); 4] = [
 /// Everything a run measures, as JSON, and whether the targets hold by the test of
 /// `strict` (point estimates) or not (the 95 % intervals reach the target).
 fn validate(plan: &Plan, strict: bool) {
+    let scratch = temp_dir("colour-validation");
     let dir = match std::env::var_os("GONIO_COLOUR_CACHE") {
         Some(d) => {
             std::fs::create_dir_all(&d).unwrap();
             PathBuf::from(d)
         }
-        None => temp_dir("colour-validation"),
+        None => scratch.to_path_buf(),
     };
     let transform = ColourTransform::new(&CameraModel::builtin(), Conditions::D65Ten).unwrap();
     let observer = Observer::new(Conditions::D65Ten);
