@@ -200,6 +200,19 @@ impl Timing {
         }
     }
 
+    /// The part of a capture's seconds during which an emulated frame renders (0 with a
+    /// real camera): its rendering over the seconds the capture is expected to take at
+    /// these shutter times, at most all of them (a frame whose rendering outlasts its
+    /// exposure renders for the whole capture, however long that turns out to be).
+    pub fn render_fraction(&self, shutter_s: &[f64]) -> f64 {
+        let capture_s: f64 = shutter_s.iter().map(|&s| self.capture_s(s)).sum();
+        if capture_s > 0.0 {
+            (shutter_s.len() as f64 * self.render_s() / capture_s).min(1.0)
+        } else {
+            0.0
+        }
+    }
+
     /// The share of the cores the processing lane has while a frame renders. The
     /// processing threads (the lane's pool, one more than the cores) run 10 nice
     /// levels below the renderer's (one per core; `lanes/processing.rs`), and the

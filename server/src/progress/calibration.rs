@@ -53,8 +53,9 @@ pub(super) type Run = (OffsetDateTime, OffsetDateTime);
 
 /// What draws on this machine's cores: the runs of the processing steps (and of the
 /// frames decoded ahead of an HDR step), and while an
-/// emulated camera renders a frame (the first [`Timing::render_s`] of each capture, a
-/// metering step whole: it renders, then decodes its frame), the renderer's, which
+/// emulated camera renders a frame (the first [`Timing::render_fraction`] of each
+/// capture's seconds, a metering step whole: it renders, then decodes its frame), the
+/// renderer's, which
 /// leaves the processing lane [`Timing::processing_share_while_rendering`] of them.
 pub(super) struct CoreRuns {
     processing: Vec<Run>,
@@ -70,7 +71,6 @@ impl CoreRuns {
             rendering: Vec::new(),
             rendering_share: timing.processing_share_while_rendering(),
         };
-        let render = time::Duration::seconds_f64(timing.render_s());
         for r in steps {
             let Some(started) = r.started.as_deref().and_then(parse_time) else {
                 continue;
@@ -89,9 +89,9 @@ impl CoreRuns {
                     runs.processing.extend(decoded_ahead(r));
                 }
                 Step::Meter { .. } if timing.rendered => runs.rendering.push((started, finished)),
-                Step::Capture { .. } if timing.rendered => {
-                    runs.rendering
-                        .push((started, finished.min(started + render)));
+                Step::Capture { shutter_s, .. } if timing.rendered => {
+                    let rendering = (finished - started) * timing.render_fraction(&[shutter_s]);
+                    runs.rendering.push((started, started + rendering));
                 }
                 _ => {}
             }

