@@ -60,7 +60,7 @@ impl Prefetched {
         }
         let Some(path) = wanted
             .iter()
-            .find(|p| !self.failed.contains(p) && !self.frames.iter().any(|(f, _)| &f.path == *p))
+            .find(|p| !self.failed.contains(p) && self.position(p).is_none())
         else {
             return false;
         };
@@ -72,28 +72,31 @@ impl Prefetched {
         true
     }
 
+    /// Where the frame decoded from `path` is held, if it is.
+    fn position(&self, path: &Path) -> Option<usize> {
+        self.frames.iter().position(|(f, _)| f.path == path)
+    }
+
     /// The frames at `paths`, in order: those decoded ahead taken from here, the
     /// others decoded now, in parallel; and when those taken from here were decoded.
     fn take(&mut self, paths: &[PathBuf]) -> Result<(Vec<Frame>, Vec<DecodeRun>), CaptureError> {
         let missing: Vec<PathBuf> = paths
             .iter()
-            .filter(|p| !self.frames.iter().any(|(f, _)| &f.path == *p))
+            .filter(|p| self.position(p).is_none())
             .cloned()
             .collect();
         let mut decoded = Frame::read_all(&missing)?.into_iter();
         let mut runs = Vec::new();
         let frames = paths
             .iter()
-            .filter_map(
-                |p| match self.frames.iter().position(|(f, _)| &f.path == p) {
-                    Some(i) => {
-                        let (frame, run) = self.frames.swap_remove(i);
-                        runs.push(run);
-                        Some(frame)
-                    }
-                    None => decoded.next(),
-                },
-            )
+            .filter_map(|p| match self.position(p) {
+                Some(i) => {
+                    let (frame, run) = self.frames.swap_remove(i);
+                    runs.push(run);
+                    Some(frame)
+                }
+                None => decoded.next(),
+            })
             .collect();
         Ok((frames, runs))
     }

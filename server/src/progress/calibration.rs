@@ -160,11 +160,11 @@ impl Calibration {
     /// their priors: a hardware step its wall time, a processing step the time it
     /// would have taken with the cores to itself ([`CoreRuns::alone_s`]: beside other
     /// processing, or beside an emulated camera rendering, it had a share of them); a
-    /// θL's samples and HDR steps only once both are done.
-    pub(super) fn of(steps: &[StepRecord], timing: &Timing, now: OffsetDateTime) -> Self {
+    /// θL's samples and HDR steps only once both are done. `runs`: the journal's
+    /// [`CoreRuns`].
+    pub(super) fn of(steps: &[StepRecord], timing: &Timing, runs: &CoreRuns) -> Self {
         let mut calibration = Calibration::default();
         let places = places(steps, timing);
-        let runs = CoreRuns::of(steps, timing, now);
         let unfinished: Vec<f64> = steps
             .iter()
             .filter(|r| Kind::of(&r.step) == Kind::Theta && r.state != StepState::Done)

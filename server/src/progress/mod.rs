@@ -74,16 +74,17 @@ pub fn progress(
     timing: &Timing,
     now: OffsetDateTime,
 ) -> Progress {
+    let runs = CoreRuns::of(steps, timing, now);
     let (own, before) = (
-        Calibration::of(steps, timing, now),
-        Calibration::of(earlier, timing, now),
+        Calibration::of(steps, timing, &runs),
+        Calibration::of(earlier, timing, &CoreRuns::of(earlier, timing, now)),
     );
     let scale = |step: &Step, prior_s: f64| {
         own.ratio(step)
             .or_else(|| before.ratio(step))
             .map_or(prior_s, |ratio| prior_s * ratio)
     };
-    let work = work_ahead(steps, timing, now, &scale);
+    let work = work_ahead(steps, timing, now, &runs, &scale);
     let rules = Rules {
         max_backlog: timing.max_backlog,
         share_while_rendering: timing.processing_share_while_rendering(),
@@ -114,11 +115,12 @@ pub fn progress(
 /// each its prior at its place, scaled by `scale` (step, prior seconds → expected
 /// seconds); one under way the rest of it after the time it has run (a processing step:
 /// the work it has done, measured as the done steps are); a metering step not done
-/// followed by its bracket's captures.
+/// followed by its bracket's captures. `runs`: the journal's [`CoreRuns`] at `now`.
 fn work_ahead(
     steps: &[StepRecord],
     timing: &Timing,
     now: OffsetDateTime,
+    runs: &CoreRuns,
     scale: &dyn Fn(&Step, f64) -> f64,
 ) -> Vec<Work> {
     let capture_scale = |prior_s: f64| {
@@ -131,7 +133,6 @@ fn work_ahead(
     };
     let mut bracket_s = capture_scale(timing.expected_bracket_s());
     let mut bracket_rendering = timing.render_fraction(&EXPECTED_BRACKET_S);
-    let runs = CoreRuns::of(steps, timing, now);
     let from_deg = arm_angles(steps);
     let places = places(steps, timing);
     let mut work: Vec<Work> = Vec::with_capacity(steps.len());

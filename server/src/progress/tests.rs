@@ -50,6 +50,11 @@ fn journal(
         .collect()
 }
 
+/// What the done steps of `steps` took against their priors at `now`.
+fn calibration(steps: &[StepRecord], timing: &Timing, now: OffsetDateTime) -> Calibration {
+    Calibration::of(steps, timing, &CoreRuns::of(steps, timing, now))
+}
+
 fn plan(auto: bool) -> ScanPlan {
     ScanPlan {
         sample: "gold".into(),
@@ -144,7 +149,7 @@ fn a_theta_s_processing_is_measured_by_the_time_the_lane_was_busy() {
         record.started = at(t0, 0.0);
         record.finished = at(t0, took);
     }
-    let own = Calibration::of(&steps, &timing, now);
+    let own = calibration(&steps, &timing, now);
     let priors =
         prior(&timing, &steps[4].step, 0.0, 3, 1) + prior(&timing, &steps[5].step, 0.0, 3, 1);
     let ratio = own.ratio(&Step::Hdr { theta_l: -25.0 }).unwrap();
@@ -155,7 +160,7 @@ fn a_theta_s_processing_is_measured_by_the_time_the_lane_was_busy() {
     );
     // Frames decoded ahead of the merge (2 s, before it began) are its work too.
     steps[5].result = Some(json!({ "decoded_ahead": [[at(t0, -3.0), at(t0, -1.0)]] }));
-    let ahead = Calibration::of(&steps, &timing, now)
+    let ahead = calibration(&steps, &timing, now)
         .ratio(&Step::Hdr { theta_l: -25.0 })
         .unwrap();
     assert!((ahead - 8.0 / priors).abs() < 1e-9, "{ahead}");
@@ -163,7 +168,7 @@ fn a_theta_s_processing_is_measured_by_the_time_the_lane_was_busy() {
     // While its merge still runs, a θL's samples alone say nothing.
     steps[5].state = StepState::Started;
     assert_eq!(
-        Calibration::of(&steps, &timing, now).ratio(&steps[4].step),
+        calibration(&steps, &timing, now).ratio(&steps[4].step),
         None
     );
 }
@@ -225,7 +230,7 @@ fn processing_shares_the_cores_with_an_emulated_camera_s_rendering() {
     assert!((CoreRuns::of(&steps, &real, now).alone_s(samples) - 4.0).abs() < 1e-6);
     let priors =
         prior(&rendered, &steps[4].step, 0.0, 3, 1) + prior(&rendered, &steps[5].step, 0.0, 3, 1);
-    let ratio = Calibration::of(&steps, &rendered, now)
+    let ratio = calibration(&steps, &rendered, now)
         .ratio(&Step::Samples { theta_l: -30.0 })
         .unwrap();
     let expected = (3.0 + share + 1.0) / priors;
@@ -576,7 +581,13 @@ fn a_bracket_not_metered_brings_its_captures_and_only_an_emulated_camera_renders
     let render_s = rendered.render_s();
     assert!(render_s > 0.0);
     for (timing, renders) in [(timing(), false), (rendered, true)] {
-        let work = work_ahead(&steps, &timing, now, &same);
+        let work = work_ahead(
+            &steps,
+            &timing,
+            now,
+            &CoreRuns::of(&steps, &timing, now),
+            &same,
+        );
         // Each metering step is followed by the typical bracket's captures.
         let meter = work
             .iter()
