@@ -25,11 +25,12 @@
 //! `recorded_first_scans_are_estimated_within_the_targets` replays the journals of 14
 //! such scans recorded on a quiet machine with the release build a user runs
 //! (`GONIO_BIN=target/release/gonio GONIO_KEEP_TEST_DIRS=1`, which keeps this run's data
-//! directory in the temporary directory) and asserts that each target is met by at least three
-//! quarters of them. Otherwise the figures are printed with that share and the load,
-//! and the test says it did not assert them (so too when the probe gave up past its
-//! budget on a busy machine: on a quiet one that fails). Asserted whatever the load: an
-//! estimate at every poll and never "finishing" with seconds of work left.
+//! directory in the temporary directory) and asserts that each target is met by at
+//! least three quarters of them. On a machine that was not quiet the figures are
+//! printed with that share and the load, and the test says it did not assert the bound
+//! (so too when the probe gave up past its budget on a busy machine: on a quiet one that
+//! fails). Asserted whatever the load: an estimate at every poll and never "finishing"
+//! with seconds of work left.
 
 use std::time::{Duration, Instant};
 
@@ -48,7 +49,7 @@ const AFTER_FIRST_THETA: f64 = 0.15;
 const RATIO: f64 = 3.0;
 
 /// The most of the cores' time other processes may use for the machine to count as
-/// quiet (the first target asserted).
+/// quiet (the bound of [`RATIO`] asserted).
 const QUIET_SHARE: f64 = 0.2;
 
 /// One poll: seconds since the scan was posted, when it was answered, its estimate, θL
