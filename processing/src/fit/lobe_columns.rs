@@ -9,6 +9,8 @@
 //! ulps (the exp), the loss the point-by-point sum's to within rounding.
 
 use crate::brdf::{inverse_square, Basis, EXP_UNDERFLOW};
+#[cfg(target_arch = "x86_64")]
+use crate::simd::avx2_fma;
 
 /// Points per block of the loss: their norms are computed side by side, then added.
 const BLOCK: usize = 64;
@@ -60,11 +62,6 @@ impl LobeColumns {
         }
         plain_loss_portable(self, model)
     }
-}
-
-#[cfg(target_arch = "x86_64")]
-fn avx2_fma() -> bool {
-    std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
 }
 
 #[cfg(target_arch = "x86_64")]

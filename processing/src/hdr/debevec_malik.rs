@@ -3,7 +3,7 @@
 //! z the exposure e^g(z); radiance on the scale fixed by g(128) = 0.
 
 use super::error::HdrError;
-use super::image::{channel_mask, map_rows, SATURATED, UNDEREXPOSED};
+use super::image::{channel_mask, map_rows, Rows, SATURATED, UNDEREXPOSED};
 use super::options::MergeOptions;
 use super::response::{self, Observations, LEVELS};
 use super::weighting::{Run, RUN};
@@ -55,43 +55,71 @@ pub(super) fn merge_debevec_malik(
     let mut order: Vec<usize> = (0..frames.len()).collect();
     order.sort_by(|&a, &b| ln_h[b].total_cmp(&ln_h[a]));
     let exposures: Vec<f64> = order.iter().map(|&j| ln_h[j].exp()).collect();
-    let width = frames[0].width;
-    Ok(map_rows(
-        &frames[0],
-        |run: &mut Run, y, row_rgb, row_mask| {
-            // A run holds one channel's values, read through its curve.
-            for (c, curve) in curves.iter().enumerate() {
-                for x0 in (0..width).step_by(RUN) {
-                    let len = RUN.min(width - x0);
-                    let index = 3 * (width * y + x0) + c;
-                    run.start(&exposures, len);
-                    for (k, &j) in order.iter().enumerate() {
-                        run.frame(k, |i| {
-                            let z = level(j, index + 3 * i);
-                            (
-                                curve.exposure[z],
-                                z == LEVELS - 1,
-                                (z > 0) & (z < LEVELS - 1),
-                            )
-                        });
-                    }
-                    run.references(|i, clipped| {
-                        let (radiance, flag) = match clipped {
-                            Some(k) => ((curve.g[LEVELS - 1] - ln_h[order[k]]).exp(), SATURATED),
-                            None => (0.0, UNDEREXPOSED),
-                        };
-                        row_rgb[3 * (x0 + i) + c] = radiance as f32;
-                        row_mask[x0 + i] |= channel_mask(flag, c);
+    let merge = DebevecMalik {
+        frames,
+        tables: &tables,
+        curves: &curves,
+        ln_h: &ln_h,
+        order,
+        exposures,
+    };
+    Ok(map_rows(&frames[0], &merge))
+}
+
+/// A bracket's frames with their level tables and recovered curves.
+struct DebevecMalik<'a> {
+    frames: &'a [Frame],
+    tables: &'a [Vec<u8>],
+    /// One per channel.
+    curves: &'a [response::Curve],
+    ln_h: &'a [f64],
+    /// Frames longest exposure first, and their exposures.
+    order: Vec<usize>,
+    exposures: Vec<f64>,
+}
+
+impl Rows for DebevecMalik<'_> {
+    #[inline(always)]
+    fn row(&self, run: &mut Run, y: usize, row_rgb: &mut [f32], row_mask: &mut [u8]) {
+        let width = self.frames[0].width;
+        let level = |j: usize, index: usize| {
+            usize::from(self.tables[j][usize::from(self.frames[j].data[index])])
+        };
+        // A run holds one channel's values, read through its curve.
+        for (c, curve) in self.curves.iter().enumerate() {
+            for x0 in (0..width).step_by(RUN) {
+                let len = RUN.min(width - x0);
+                let index = 3 * (width * y + x0) + c;
+                run.start(&self.exposures, len);
+                for (k, &j) in self.order.iter().enumerate() {
+                    run.frame(k, |i| {
+                        let z = level(j, index + 3 * i);
+                        (
+                            curve.exposure[z],
+                            z == LEVELS - 1,
+                            (z > 0) & (z < LEVELS - 1),
+                        )
                     });
-                    let means = run.means(
-                        |predicted| curve.in_range(predicted),
-                        |_, predicted| curve.variance(predicted),
-                    );
-                    for (i, estimate) in means {
-                        row_rgb[3 * (x0 + i) + c] = estimate.max(0.0) as f32;
-                    }
+                }
+                run.references(|i, clipped| {
+                    let (radiance, flag) = match clipped {
+                        Some(k) => (
+                            (curve.g[LEVELS - 1] - self.ln_h[self.order[k]]).exp(),
+                            SATURATED,
+                        ),
+                        None => (0.0, UNDEREXPOSED),
+                    };
+                    row_rgb[3 * (x0 + i) + c] = radiance as f32;
+                    row_mask[x0 + i] |= channel_mask(flag, c);
+                });
+                let means = run.means(
+                    |predicted| curve.in_range(predicted),
+                    |_, predicted| curve.variance(predicted),
+                );
+                for (i, estimate) in means {
+                    row_rgb[3 * (x0 + i) + c] = estimate.max(0.0) as f32;
                 }
             }
-        },
-    ))
+        }
+    }
 }

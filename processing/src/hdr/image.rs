@@ -3,7 +3,10 @@
 
 use rayon::prelude::*;
 
+use super::weighting::Run;
 use crate::capture::Frame;
+#[cfg(target_arch = "x86_64")]
+use crate::simd::avx2_fma;
 
 /// Mask bit: some channel of the pixel was clipped in every frame that saw it.
 pub const SATURATED: u8 = 1;
@@ -64,21 +67,46 @@ impl HdrImage {
     }
 }
 
+/// How a merge fills one row of its map (see [`map_rows`]).
+pub(super) trait Rows: Sync {
+    /// Fills row `y` of the map: `rgb` RGB interleaved, `mask` a byte a pixel; `run` is
+    /// the thread's own, kept from row to row.
+    fn row(&self, run: &mut Run, y: usize, rgb: &mut [f32], mask: &mut [u8]);
+}
+
 /// The values and mask of a map the size of `frame`, computed a row at a time in
-/// parallel: `row(scratch, y, rgb, mask)` fills row `y` (`rgb` RGB interleaved, `mask`
-/// a byte a pixel), `scratch` buffers of the thread's own, kept from row to row.
-pub(super) fn map_rows<S: Default + Send>(
-    frame: &Frame,
-    row: impl Fn(&mut S, usize, &mut [f32], &mut [u8]) + Send + Sync,
-) -> (Vec<f32>, Vec<u8>) {
+/// parallel by `rows`.
+pub(super) fn map_rows(frame: &Frame, rows: &impl Rows) -> (Vec<f32>, Vec<u8>) {
     let width = frame.width;
     let mut rgb = vec![0f32; frame.data.len()];
     let mut mask = vec![0u8; frame.width * frame.height];
     rgb.par_chunks_mut(3 * width)
         .zip(mask.par_chunks_mut(width))
         .enumerate()
-        .for_each_init(S::default, |scratch, (y, (row_rgb, row_mask))| {
-            row(scratch, y, row_rgb, row_mask)
+        .for_each_init(Run::default, |run, (y, (row_rgb, row_mask))| {
+            fill_row(rows, run, y, row_rgb, row_mask)
         });
     (rgb, mask)
+}
+
+/// [`Rows::row`], compiled for AVX2 and FMA where the processor has them.
+fn fill_row(rows: &impl Rows, run: &mut Run, y: usize, rgb: &mut [f32], mask: &mut [u8]) {
+    #[cfg(target_arch = "x86_64")]
+    if avx2_fma() {
+        // SAFETY: the processor has AVX2 and FMA, checked just above.
+        return unsafe { fill_row_avx2(rows, run, y, rgb, mask) };
+    }
+    rows.row(run, y, rgb, mask);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn fill_row_avx2(
+    rows: &impl Rows,
+    run: &mut Run,
+    y: usize,
+    rgb: &mut [f32],
+    mask: &mut [u8],
+) {
+    rows.row(run, y, rgb, mask);
 }

@@ -2,7 +2,7 @@
 //! clipping), usable between `min_signal` and `max_signal`, with shot plus read noise;
 //! radiance is normalised signal per second at ISO 100.
 
-use super::image::{channel_mask, map_rows, SATURATED, UNDEREXPOSED};
+use super::image::{channel_mask, map_rows, Rows, SATURATED, UNDEREXPOSED};
 use super::options::MergeOptions;
 use super::weighting::{Run, RUN};
 use crate::capture::Frame;
@@ -17,8 +17,19 @@ struct LinearFrame<'a> {
     shot: f64,
 }
 
+/// A bracket's frames, longest exposure first, and the merge's constants.
+struct Linear<'a> {
+    sorted: Vec<LinearFrame<'a>>,
+    exposures: Vec<f64>,
+    /// Usable normalised signals.
+    lo: f64,
+    hi: f64,
+    /// Read noise variance, in normalised signal².
+    read_var: f64,
+    width: usize,
+}
+
 pub(super) fn merge_linear(frames: &[Frame], options: &MergeOptions) -> (Vec<f32>, Vec<u8>) {
-    let (lo, hi) = (options.min_signal, options.max_signal);
     let mut sorted: Vec<LinearFrame> = frames
         .iter()
         .map(|f| LinearFrame {
@@ -32,13 +43,25 @@ pub(super) fn merge_linear(frames: &[Frame], options: &MergeOptions) -> (Vec<f32
     // Longest exposure first: the first valid sample is the best single estimate.
     sorted.sort_by(|a, b| b.exposure.total_cmp(&a.exposure));
     let exposures: Vec<f64> = sorted.iter().map(|f| f.exposure).collect();
-    let read_var = options.noise.read_noise * options.noise.read_noise;
-    let width = frames[0].width;
-    map_rows(&frames[0], |run: &mut Run, y, row_rgb, row_mask| {
+    let linear = Linear {
+        sorted,
+        exposures,
+        lo: options.min_signal,
+        hi: options.max_signal,
+        read_var: options.noise.read_noise * options.noise.read_noise,
+        width: frames[0].width,
+    };
+    map_rows(&frames[0], &linear)
+}
+
+impl Rows for Linear<'_> {
+    #[inline(always)]
+    fn row(&self, run: &mut Run, y: usize, row_rgb: &mut [f32], row_mask: &mut [u8]) {
+        let (lo, hi, exposures) = (self.lo, self.hi, &self.exposures);
         for (r, rgb) in row_rgb.chunks_mut(RUN).enumerate() {
-            let (start, index) = (r * RUN, 3 * width * y + r * RUN);
-            run.start(&exposures, rgb.len());
-            for (j, f) in sorted.iter().enumerate() {
+            let (start, index) = (r * RUN, 3 * self.width * y + r * RUN);
+            run.start(exposures, rgb.len());
+            for (j, f) in self.sorted.iter().enumerate() {
                 let counts = &f.data[index..index + rgb.len()];
                 run.frame(j, |k| {
                     let s = (f64::from(counts[k]) - f.black) * f.inv_range;
@@ -55,11 +78,11 @@ pub(super) fn merge_linear(frames: &[Frame], options: &MergeOptions) -> (Vec<f32
             });
             let means = run.means(
                 |predicted| (predicted >= lo) & (predicted <= hi),
-                |j, predicted| sorted[j].shot * predicted + read_var,
+                |j, predicted| self.sorted[j].shot * predicted + self.read_var,
             );
             for (k, estimate) in means {
                 rgb[k] = estimate.max(0.0) as f32;
             }
         }
-    })
+    }
 }

@@ -22,15 +22,13 @@ pub(super) struct Run {
     exposure: Vec<f64>,
     /// Values in the run.
     len: usize,
-    /// The reading of value k in frame j at `j * RUN + k`, and whether it is clipped;
-    /// after [`Run::references`], only the values some frame reads in range, compacted.
+    /// The reading of value k in frame j at `j * RUN + k`, and whether it is clipped.
     reading: Vec<f64>,
     clipped: Vec<bool>,
     /// Per value: the first frame reading it in range and the last (shortest) clipping it.
     first: Vec<u32>,
     last_clipped: Vec<u32>,
-    /// Per compacted value: its place in the run, the estimate, the weighted sums.
-    place: Vec<usize>,
+    /// Per value: the estimate (0 for one no frame reads in range), the weighted sums.
     estimate: Vec<f64>,
     next: Vec<f64>,
     sum: Vec<f64>,
@@ -40,6 +38,7 @@ pub(super) struct Run {
 impl Run {
     /// Starts a run of `len` (≤ [`RUN`]) values of a bracket whose frames, longest
     /// exposure first, have exposures `exposure`.
+    #[inline(always)]
     pub fn start(&mut self, exposure: &[f64], len: usize) {
         debug_assert!(len <= RUN);
         self.exposure.clear();
@@ -56,6 +55,7 @@ impl Run {
 
     /// Sets frame `j`'s readings: `read(k)` gives value k's reading, whether it is clipped
     /// (then it never counts) and whether it is in range (usable as the first estimate).
+    #[inline(always)]
     pub fn frame(&mut self, j: usize, mut read: impl FnMut(usize) -> (f64, bool, bool)) {
         let n = self.len;
         let readings = self.reading[j * RUN..j * RUN + n].iter_mut();
@@ -80,26 +80,20 @@ impl Run {
     /// Gives `unread(k, shortest clipped frame)` each value no frame reads in range, and
     /// takes the others' first estimates: reading / exposure of the first (longest) frame
     /// reading them in range.
+    #[inline(always)]
     pub fn references(&mut self, mut unread: impl FnMut(usize, Option<usize>)) {
-        let frames = self.exposure.len();
-        self.place.clear();
         self.estimate.clear();
         for k in 0..self.len {
             let j = self.first[k];
-            if j == NONE {
+            let estimate = if j == NONE {
                 let last = self.last_clipped[k];
                 unread(k, (last != NONE).then_some(last as usize));
-                continue;
-            }
-            let j = j as usize;
-            let to = self.place.len();
-            self.estimate
-                .push(self.reading[j * RUN + k] / self.exposure[j]);
-            for j in 0..frames {
-                self.reading[j * RUN + to] = self.reading[j * RUN + k];
-                self.clipped[j * RUN + to] = self.clipped[j * RUN + k];
-            }
-            self.place.push(k);
+                0.0
+            } else {
+                let j = j as usize;
+                self.reading[j * RUN + k] / self.exposure[j]
+            };
+            self.estimate.push(estimate);
         }
     }
 
@@ -108,13 +102,15 @@ impl Run {
     /// estimate (estimate × exposure) is `usable`, each weighted by exposure² /
     /// `variance(frame, predicted reading)`. Predicted first from the reference, then
     /// again from that first mean; an estimate that leaves no frame is kept. Yields each
-    /// value's place in the run and its merge.
+    /// value's place in the run and its merge. Every value of the run is merged side by
+    /// side; those no frame reads in range are left out of what is yielded.
+    #[inline(always)]
     pub fn means(
         &mut self,
         usable: impl Fn(f64) -> bool,
         variance: impl Fn(usize, f64) -> f64,
     ) -> impl Iterator<Item = (usize, f64)> + '_ {
-        let m = self.place.len();
+        let m = self.len;
         self.next.resize(m, 0.0);
         for _ in 0..2 {
             self.sum.clear();
@@ -153,10 +149,13 @@ impl Run {
             }
             std::mem::swap(&mut self.estimate, &mut self.next);
         }
-        self.place
+        let read = self.first.iter().map(|&first| first != NONE);
+        self.estimate
             .iter()
             .copied()
-            .zip(self.estimate.iter().copied())
+            .zip(read)
+            .enumerate()
+            .filter_map(|(k, (estimate, read))| read.then_some((k, estimate)))
     }
 }
 
