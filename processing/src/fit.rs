@@ -338,7 +338,9 @@ fn minimise(
     let mut data = Data::new(samples, options.model, parameters)?;
     let (mut found, mut ks_90) = match options.method {
         FitMethod::Robust => {
-            match start.and_then(|(p, kg)| newton::refit(&data, options, p, *kg)) {
+            match start
+                .and_then(|(p, kg)| newton::refit(&data, options, p, *kg, newton::Tolerance::FINE))
+            {
                 Some(found) => found,
                 None => robust::fit(&data, options)?,
             }
@@ -398,7 +400,9 @@ pub(crate) fn robust_minimum_near(
         options.model,
         parameter_count(options.model, options.roughness),
     )?;
-    let (found, ks_90) = match near.and_then(|(p, kg)| newton::refit(&data, options, p, *kg)) {
+    let (found, ks_90) = match near
+        .and_then(|(p, kg)| newton::refit(&data, options, p, *kg, newton::Tolerance::FINE))
+    {
         Some(found) => found,
         None => robust::fit(&data, options)?,
     };

@@ -31,15 +31,27 @@ const MAX_STEPS: usize = 40;
 /// Most halvings of one step.
 const MAX_HALVINGS: usize = 30;
 
-/// Converged once a step moves ln m by at most this and every colour coefficient by at
-/// most this fraction of the largest of its kind's (a thousandth of the search's own
-/// precision on ln m, [`super::robust::Precision::FINE`]).
-const STEP_TOLERANCE: f64 = 1e-9;
+/// When a refit has converged.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Tolerance {
+    /// A step moves ln m by at most this and every colour coefficient by at most this
+    /// fraction of the largest of its kind's …
+    pub step: f64,
+    /// … or its predicted decrease of the loss, dᵀ·Σ_p g_p (twice the decrease of its
+    /// quadratic model), is at most this fraction of the loss.
+    pub decrement: f64,
+}
 
-/// … or once a step's predicted decrease of the loss, dᵀ·Σ_p g_p (twice the decrease of
-/// its quadratic model), is at most this fraction of the loss: ln m then moves by a few
-/// 1e-9 (on gold, red and opal).
-const DECREMENT_TOLERANCE: f64 = 1e-14;
+impl Tolerance {
+    /// The law of propagation's refits, whose differences are the sensitivities: steps
+    /// of a thousandth of the search's own precision on ln m
+    /// ([`super::robust::Precision::FINE`]); ln m then moves by a few 1e-9 (on gold, red
+    /// and opal).
+    pub(crate) const FINE: Tolerance = Tolerance {
+        step: 1e-9,
+        decrement: 1e-14,
+    };
+}
 
 /// A step along which the loss does not fall at any length is at the loss's rounding,
 /// converged, when its predicted decrease is at most this fraction of the loss.
@@ -101,12 +113,13 @@ fn step(hessian: &DMatrix<f64>, descent: &DVector<f64>, free: &[bool]) -> Option
 
 /// The fit of `data` near the known fit (`start`, its specular colour at 90° `start_kg`)
 /// by projected Gauss–Newton steps (see the module), with `options`' roughness form and
-/// search range; `None` where it gives up.
+/// search range, until `tolerance`; `None` where it gives up.
 pub(crate) fn refit(
     data: &Data,
     options: &FitOptions,
     start: &Params,
     start_kg: [f64; 3],
+    tolerance: Tolerance,
 ) -> Option<(Found, [f64; 3])> {
     let layout = Layout::of(data, options);
     let (lo, hi) = (options.robust.m_min.ln(), options.robust.m_max.ln());
@@ -147,10 +160,10 @@ pub(crate) fn refit(
         };
         let small = d.iter().enumerate().all(|(i, &v)| {
             let bound = if is_colour(&layout, i) { scale(i) } else { 1.0 };
-            v.abs() <= STEP_TOLERANCE * bound
+            v.abs() <= tolerance.step * bound
         });
         let predicted: f64 = d.iter().zip(descent.iter()).map(|(a, b)| a * b).sum();
-        if small || predicted <= DECREMENT_TOLERANCE * loss {
+        if small || predicted <= tolerance.decrement * loss {
             return Some((
                 Found {
                     params,
@@ -228,7 +241,7 @@ mod tests {
                 })
                 .collect();
             let moved = data.with_measured(moved);
-            let (found, kg) = refit(&moved, &options, &start.params, start_kg)
+            let (found, kg) = refit(&moved, &options, &start.params, start_kg, Tolerance::FINE)
                 .unwrap_or_else(|| panic!("{model} {roughness}: no convergence"));
             let (search, search_kg) = robust::fit(&moved, &options).unwrap();
             let label = format!(

@@ -136,6 +136,14 @@ impl Layout {
     pub(crate) fn len(&self) -> usize {
         self.ln_m(2) + 1
     }
+    /// The columns a row of channel `c` of a point's Jacobian can be nonzero at,
+    /// ascending: Kd, Ks, Ks_90 (with its own) and ln m; and how many there are.
+    fn columns(&self, c: usize) -> ([usize; 4], usize) {
+        match self.kg(c) {
+            Some(kg) => ([self.kd(c), self.ks(c), kg, self.ln_m(c)], 4),
+            None => ([self.kd(c), self.ks(c), self.ln_m(c), 0], 3),
+        }
+    }
 }
 
 /// The standard uncertainties and intervals at (`params`, `ks_90`); `None` when they
@@ -316,36 +324,55 @@ impl<'a> Residuals<'a> {
         })
     }
 
-    /// J_p, M_p and g_p of point `point`.
-    fn term(&self, point: usize) -> PointTerm {
+    /// Point `point`'s Jacobian J_p as [`Layout::columns`] lays it out: per channel its
+    /// values at that channel's columns, and whether the channel counts (a dropped one's
+    /// row is zero).
+    fn rows(&self, point: usize) -> ([[f64; 4]; 3], [bool; 3]) {
         let (data, layout, params) = (self.data, &self.layout, &self.params);
         let basis = &data.bases[point];
         let x = basis.shift_weight();
-        let keep = data.keep.as_ref().map_or([1.0; 3], |keep| keep[point]);
-        let mut jacobian = [[0.0; MAX_PARAMETERS]; 3];
+        let keep = data
+            .keep
+            .as_ref()
+            .map_or([true; 3], |keep| keep[point].map(|k| k > 0.0));
+        let mut rows = [[0.0; 4]; 3];
         // A shared roughness needs one lobe evaluation for all channels.
         let shared = basis.specular_and_slope(params.m[0]);
-        for c in (0..3).filter(|&c| keep[c] > 0.0) {
+        for c in (0..3).filter(|&c| keep[c]) {
             let (s, slope) = if params.m[c] == params.m[0] {
                 shared
             } else {
                 basis.specular_and_slope(params.m[c])
             };
             let colour = params.ks[c] + x * (self.ks_90[c] - params.ks[c]);
-            let row = &mut jacobian[c];
-            row[layout.kd(c)] = basis.diffuse;
-            match layout.kg(c) {
-                Some(kg) => {
-                    row[layout.ks(c)] = s * (1.0 - x);
-                    row[kg] = s * x;
-                }
-                None => row[layout.ks(c)] = s,
+            rows[c] = if layout.fresnel {
+                [basis.diffuse, s * (1.0 - x), s * x, colour * slope]
+            } else {
+                [basis.diffuse, s, colour * slope, 0.0]
+            };
+        }
+        (rows, keep)
+    }
+
+    /// u_p = r_p/‖r_p‖ of point `point` (of length ≤ 1 after the floor).
+    fn direction(&self, point: usize) -> [f64; 3] {
+        let norm = self.norms[point];
+        self.residuals[point].map(|r| r / norm)
+    }
+
+    /// J_p, M_p and g_p of point `point`.
+    fn term(&self, point: usize) -> PointTerm {
+        let (rows, keep) = self.rows(point);
+        let mut jacobian = [[0.0; MAX_PARAMETERS]; 3];
+        for c in (0..3).filter(|&c| keep[c]) {
+            let (columns, width) = self.layout.columns(c);
+            for (&i, &v) in columns[..width].iter().zip(&rows[c]) {
+                jacobian[c][i] = v;
             }
-            row[layout.ln_m(c)] += colour * slope;
         }
         let norm = self.norms[point];
-        let u: [f64; 3] = self.residuals[point].map(|r| r / norm);
-        // (I − u uᵀ)/‖r‖, with u of length ≤ 1 after the floor.
+        let u = self.direction(point);
+        // (I − u uᵀ)/‖r‖.
         let curvature = std::array::from_fn(|c| {
             std::array::from_fn(|d| (if c == d { 1.0 } else { 0.0 } - u[c] * u[d]) / norm)
         });
@@ -359,31 +386,32 @@ impl<'a> Residuals<'a> {
 
     /// A = Σ_p J_pᵀ M_p J_p, Σ_p g_p g_pᵀ (when `spread`, else 0) and Σ_p g_p, in one
     /// pass. J_pᵀ M_p J_p = (J_pᵀ J_p − g_p g_pᵀ)/‖r_p‖, each row of J_p nonzero only at
-    /// its channel's Kd, Ks, Ks_90 and ln m.
+    /// its channel's columns ([`Layout::columns`]), which are all the pass visits.
     fn sums(&self, with_spread: bool) -> Sums {
-        let (layout, p) = (&self.layout, self.layout.len());
+        let p = self.layout.len();
         let mut hessian: Square = [[0.0; MAX_PARAMETERS]; MAX_PARAMETERS];
         let mut spread: Square = [[0.0; MAX_PARAMETERS]; MAX_PARAMETERS];
-        let mut descent = DVector::<f64>::zeros(p);
-        // Each channel's nonzero columns, ascending.
-        let columns: [Vec<usize>; 3] = std::array::from_fn(|c| {
-            let mut k = vec![layout.kd(c), layout.ks(c)];
-            k.extend(layout.kg(c));
-            k.push(layout.ln_m(c));
-            k
-        });
+        let mut descent = [0.0; MAX_PARAMETERS];
+        let columns: [([usize; 4], usize); 3] = std::array::from_fn(|c| self.layout.columns(c));
         for point in 0..self.norms.len() {
-            let term = self.term(point);
+            let (rows, keep) = self.rows(point);
+            let u = self.direction(point);
             let inverse = 1.0 / self.norms[point];
-            for (row, columns) in term.jacobian.iter().zip(&columns) {
-                for (a, &i) in columns.iter().enumerate() {
-                    let ji = row[i] * inverse;
-                    for &j in &columns[a..] {
-                        hessian[i][j] += ji * row[j];
+            // g_p = J_pᵀ u_p, channel after channel.
+            let mut g = [0.0; MAX_PARAMETERS];
+            for c in (0..3).filter(|&c| keep[c]) {
+                let (columns, width) = &columns[c];
+                let (columns, row) = (&columns[..*width], &rows[c][..*width]);
+                for (&i, &v) in columns.iter().zip(row) {
+                    g[i] += v * u[c];
+                }
+                for (a, (&i, &v)) in columns.iter().zip(row).enumerate() {
+                    let ji = v * inverse;
+                    for (&j, &w) in columns[a..].iter().zip(&row[a..]) {
+                        hessian[i][j] += ji * w;
                     }
                 }
             }
-            let g = &term.gradient;
             for i in 0..p {
                 descent[i] += g[i];
                 let gi = g[i] * inverse;
@@ -400,7 +428,7 @@ impl<'a> Residuals<'a> {
         Sums {
             hessian: symmetric(&hessian, p),
             spread: symmetric(&spread, p),
-            descent,
+            descent: DVector::from_column_slice(&descent[..p]),
         }
     }
 
