@@ -27,6 +27,7 @@
 #![doc = include_str!("fit/choice.md")]
 
 pub mod agreement;
+mod block_sums;
 pub mod budget;
 mod choice;
 pub mod colour_change;

@@ -28,6 +28,7 @@
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
+use super::block_sums::{Block, Columns, Square, Totals, BLOCK, MAX_PARAMETERS};
 use super::data::Data;
 use super::options::FitOptions;
 use crate::brdf::{Params, Roughness};
@@ -138,7 +139,7 @@ impl Layout {
     }
     /// The columns a row of channel `c` of a point's Jacobian can be nonzero at,
     /// ascending: Kd, Ks, Ks_90 (with its own) and ln m; and how many there are.
-    fn columns(&self, c: usize) -> ([usize; 4], usize) {
+    fn columns(&self, c: usize) -> Columns {
         match self.kg(c) {
             Some(kg) => ([self.kd(c), self.ks(c), kg, self.ln_m(c)], 4),
             None => ([self.kd(c), self.ks(c), self.ln_m(c), 0], 3),
@@ -251,12 +252,6 @@ pub(crate) fn gauss_newton(
     } = Residuals::new(data, options, params, ks_90)?.sums(false);
     Some((hessian, descent))
 }
-
-/// The most parameters a fit has: Kd, Ks, Ks_90 and m per channel.
-const MAX_PARAMETERS: usize = 12;
-
-/// A symmetric P × P sum on the stack; only i ≤ j is accumulated.
-type Square = [[f64; MAX_PARAMETERS]; MAX_PARAMETERS];
 
 /// One point's part of the sandwich: its Jacobian J_p (a zero row for a dropped
 /// channel), its curvature M_p and its gradient g_p, on the stack.
@@ -389,46 +384,31 @@ impl<'a> Residuals<'a> {
     /// its channel's columns ([`Layout::columns`]), which are all the pass visits.
     fn sums(&self, with_spread: bool) -> Sums {
         let p = self.layout.len();
-        let mut hessian: Square = [[0.0; MAX_PARAMETERS]; MAX_PARAMETERS];
-        let mut spread: Square = [[0.0; MAX_PARAMETERS]; MAX_PARAMETERS];
-        let mut descent = [0.0; MAX_PARAMETERS];
-        let columns: [([usize; 4], usize); 3] = std::array::from_fn(|c| self.layout.columns(c));
-        for point in 0..self.norms.len() {
-            let (rows, keep) = self.rows(point);
-            let u = self.direction(point);
-            let inverse = 1.0 / self.norms[point];
-            // g_p = J_pᵀ u_p, channel after channel.
-            let mut g = [0.0; MAX_PARAMETERS];
-            for c in (0..3).filter(|&c| keep[c]) {
-                let (columns, width) = &columns[c];
-                let (columns, row) = (&columns[..*width], &rows[c][..*width]);
-                for (&i, &v) in columns.iter().zip(row) {
-                    g[i] += v * u[c];
-                }
-                for (a, (&i, &v)) in columns.iter().zip(row).enumerate() {
-                    let ji = v * inverse;
-                    for (&j, &w) in columns[a..].iter().zip(&row[a..]) {
-                        hessian[i][j] += ji * w;
+        let columns: [Columns; 3] = std::array::from_fn(|c| self.layout.columns(c));
+        let mut totals = Totals::zero();
+        let mut block = Block::zeroed();
+        let n = self.norms.len();
+        for start in (0..n).step_by(BLOCK) {
+            block.clear();
+            for (k, point) in (start..n.min(start + BLOCK)).enumerate() {
+                // A dropped channel's row and residual are zero.
+                let (rows, _) = self.rows(point);
+                let u = self.direction(point);
+                block.inverse[k] = 1.0 / self.norms[point];
+                for (c, (columns, width)) in columns.iter().enumerate() {
+                    for a in 0..*width {
+                        block.rows[c][a][k] = rows[c][a];
+                        // g_p = J_pᵀ u_p.
+                        block.gradient[columns[a]][k] += rows[c][a] * u[c];
                     }
                 }
             }
-            for i in 0..p {
-                descent[i] += g[i];
-                let gi = g[i] * inverse;
-                for j in i..p {
-                    hessian[i][j] -= gi * g[j];
-                }
-                if with_spread {
-                    for j in i..p {
-                        spread[i][j] += g[i] * g[j];
-                    }
-                }
-            }
+            totals.add(&block, &columns, p, with_spread);
         }
         Sums {
-            hessian: symmetric(&hessian, p),
-            spread: symmetric(&spread, p),
-            descent: DVector::from_column_slice(&descent[..p]),
+            hessian: symmetric(&totals.hessian, p),
+            spread: symmetric(&totals.spread, p),
+            descent: DVector::from_column_slice(&totals.descent[..p]),
         }
     }
 
