@@ -54,9 +54,10 @@ pub(super) struct Curve {
     read: f64,
     /// Quantisation: g′(z)²/12, the variance of ln x that level z's width adds.
     quantisation: [f64; LEVELS],
-    /// The level an exposure in range reads as, by [`bin`] from that of exposure[1]
-    /// (`first_bin`): a lookup instead of a search through `exposure`.
-    level_of_bin: Vec<u8>,
+    /// The quantisation of the level an exposure in range reads as, by [`bin`] from
+    /// that of exposure[1] (`first_bin`): one lookup instead of a search through
+    /// `exposure`.
+    quantisation_of_bin: Vec<f64>,
     first_bin: u64,
 }
 
@@ -81,11 +82,12 @@ impl Curve {
         // Each bin gets the level of its lowest exposure in range (at most 2¹⁹ bins, the
         // span of every positive float).
         let (first_bin, last_bin) = (bin(exposure[1]), bin(exposure[TOP - 1]));
-        let level_of_bin = (first_bin..=last_bin)
+        let quantisation = slope.map(|s| s * s / 12.0);
+        let quantisation_of_bin = (first_bin..=last_bin)
             .map(|b| {
                 let lowest = f64::from_bits(b << (f64::MANTISSA_DIGITS - 1 - BIN_BITS));
                 let z = exposure.partition_point(|&v| v < lowest.max(exposure[1]));
-                z.min(TOP) as u8
+                quantisation[z.min(TOP)]
             })
             .collect();
         Self {
@@ -93,8 +95,8 @@ impl Curve {
             exposure,
             shot,
             read,
-            quantisation: slope.map(|s| s * s / 12.0),
-            level_of_bin,
+            quantisation,
+            quantisation_of_bin,
             first_bin,
         }
     }
@@ -107,11 +109,11 @@ impl Curve {
     /// Variance of the exposure read for a noiseless exposure x (in range):
     /// a·x + b + x²·g′(z)²/12 with z the level x reads as (to within a level).
     pub fn variance(&self, x: f64) -> f64 {
-        let z = usize::try_from(bin(x).saturating_sub(self.first_bin))
+        let quantisation = usize::try_from(bin(x).saturating_sub(self.first_bin))
             .ok()
-            .and_then(|i| self.level_of_bin.get(i))
-            .map_or(TOP, |&z| usize::from(z));
-        self.shot * x + self.read + x * x * self.quantisation[z]
+            .and_then(|i| self.quantisation_of_bin.get(i))
+            .map_or(self.quantisation[TOP], |&q| q);
+        self.shot * x + self.read + x * x * quantisation
     }
 }
 
