@@ -396,11 +396,18 @@ EXTRACT = (
 )
 
 
+def extract_medians(t):
+    """The full-size `gold` scan's extraction with and without the samples' uncertainty."""
+    return (
+        t.median("extract/six_theta_l_scan_to_csv"),
+        t.median("extract/six_theta_l_scan_to_csv/no-uncertainty"),
+    )
+
+
 def budget_rows(t):
     """The uncertainty budget of a full-size scan: the samples' sensitivities (extraction
     with and without them) plus the propagation to a fit, and the Monte Carlo."""
-    with_u = t.median("extract/six_theta_l_scan_to_csv")
-    without = t.median("extract/six_theta_l_scan_to_csv/no-uncertainty")
+    with_u, without = extract_medians(t)
     extra = with_u - without if with_u and without else None
     # The Cook–Torrance fit without its budget, which both models' propagation is set against.
     fit_alone = t.median("fit_samples/cook-torrance/robust/shared")
@@ -449,8 +456,7 @@ def budget_rows(t):
 
 def scan_rows(t):
     f, files = t.floors(), t.results.get("extract_input")
-    with_u = t.median("extract/six_theta_l_scan_to_csv")
-    without = t.median("extract/six_theta_l_scan_to_csv/no-uncertainty")
+    with_u, without = extract_medians(t)
     read_floor = files["file_bytes"] / f["read_bytes_per_s"] if f and files else None
     t.row(
         "6-θL full-size `gold` scan (24 TIFFs) → samples.csv, with / without the samples' "
@@ -458,7 +464,7 @@ def scan_rows(t):
         [
             duration(with_u),
             duration(without),
-            f"{ratio(with_u, without)}" if with_u and without else None,
+            ratio(with_u, without),
         ],
         "ratio ≤ 1.5",
         EXTRACT,
