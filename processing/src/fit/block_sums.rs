@@ -40,11 +40,19 @@ impl Block {
         })
     }
 
-    /// Sets every term to zero.
-    pub fn clear(&mut self) {
-        self.rows = [[[0.0; BLOCK]; 4]; 3];
-        self.gradient = [[0.0; BLOCK]; MAX_PARAMETERS];
-        self.inverse = [0.0; BLOCK];
+    /// Readies the block for `len` points' terms among `p` parameters, which the caller
+    /// then writes in full (rows and 1/‖r‖) or adds to (g): g zero, and every term
+    /// past the points zero.
+    pub fn start(&mut self, len: usize, p: usize) {
+        for g in &mut self.gradient[..p] {
+            g.fill(0.0);
+        }
+        if len < BLOCK {
+            for row in self.rows.iter_mut().flatten() {
+                row[len..].fill(0.0);
+            }
+            self.inverse[len..].fill(0.0);
+        }
     }
 }
 

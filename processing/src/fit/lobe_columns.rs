@@ -53,6 +53,18 @@ impl LobeColumns {
         specular_portable(self, m, out);
     }
 
+    /// s(m) and its derivative with respect to ln m, ∂s/∂ln m = 2·s·(tan²α/m² − 1), at
+    /// every point into `s` and `slope` (as long as the columns; 0 both where s is 0):
+    /// [`Basis::specular_and_slope`] over the columns.
+    pub(crate) fn specular_and_slope(&self, m: f64, s: &mut [f64], slope: &mut [f64]) {
+        #[cfg(target_arch = "x86_64")]
+        if avx2_fma() {
+            // SAFETY: the processor has AVX2 and FMA, checked just above.
+            return unsafe { specular_and_slope_avx2(self, m, s, slope) };
+        }
+        specular_and_slope_portable(self, m, s, slope);
+    }
+
     /// Eq. 10 loss Σ_p ‖y_p − β_p‖ of `model`, dropped values left out.
     pub(crate) fn plain_loss(&self, model: &PlainModel) -> f64 {
         #[cfg(target_arch = "x86_64")]
@@ -83,6 +95,30 @@ fn specular_portable(columns: &LobeColumns, m: f64, out: &mut [f64]) {
     let (t, g, out) = (&columns.tan2_alpha[..n], &columns.gain[..n], &mut out[..n]);
     for p in 0..n {
         out[p] = lobe(t[p], g[p], inv_m2);
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn specular_and_slope_avx2(columns: &LobeColumns, m: f64, s: &mut [f64], slope: &mut [f64]) {
+    specular_and_slope_portable(columns, m, s, slope);
+}
+
+#[inline(always)]
+fn specular_and_slope_portable(columns: &LobeColumns, m: f64, s: &mut [f64], slope: &mut [f64]) {
+    let inv_m2 = inverse_square(m);
+    let n = s.len().min(slope.len()).min(columns.gain.len());
+    let (t, g) = (&columns.tan2_alpha[..n], &columns.gain[..n]);
+    let (s, slope) = (&mut s[..n], &mut slope[..n]);
+    for p in 0..n {
+        let v = lobe(t[p], g[p], inv_m2);
+        s[p] = v;
+        // 0 where s is 0: tan²α may be unbounded there (at grazing).
+        slope[p] = if v == 0.0 {
+            0.0
+        } else {
+            2.0 * v * (t[p] * inv_m2 - 1.0)
+        };
     }
 }
 
@@ -251,13 +287,22 @@ mod tests {
             .collect();
         let columns = LobeColumns::of(&bases);
         let mut out = vec![0.0; bases.len()];
+        let (mut both, mut slope) = (out.clone(), out.clone());
         for m in [1e-7, 0.01, 0.2, 1.0, 3.0, f64::NAN] {
             columns.specular(m, &mut out);
-            for (s, b) in out.iter().zip(&bases) {
+            columns.specular_and_slope(m, &mut both, &mut slope);
+            for ((s, b), (s2, slope)) in out.iter().zip(&bases).zip(both.iter().zip(&slope)) {
                 let expected = b.specular(m);
                 assert!(
                     ulps(*s, expected) <= 2 || (*s - expected).abs() < 1e-300,
                     "m {m}: {s} vs {expected}"
+                );
+                assert_eq!(s, s2, "m {m}");
+                let (_, expected) = b.specular_and_slope(m);
+                assert!(
+                    (slope - expected).abs() <= 1e-14 * expected.abs()
+                        || (slope - expected).abs() < 1e-300,
+                    "m {m}: slope {slope} vs {expected}"
                 );
             }
         }

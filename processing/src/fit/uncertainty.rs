@@ -25,13 +25,16 @@
 //! m·σ_ln m). When A is singular (a parameter has no effect on the loss, e.g. m when
 //! Ks = 0) the uncertainty is not defined and none is reported.
 
+use std::borrow::Cow;
+use std::ops::Range;
+
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
 use super::block_sums::{Block, Columns, Square, Totals, BLOCK, MAX_PARAMETERS};
 use super::data::Data;
 use super::options::FitOptions;
-use crate::brdf::{Params, Roughness};
+use crate::brdf::{Basis, Params, Roughness};
 
 /// The two-sided 95 % quantile of the standard normal distribution.
 pub const Z95: f64 = 1.959_963_984_540_054;
@@ -269,16 +272,51 @@ struct Sums {
     descent: DVector<f64>,
 }
 
-/// The residuals of a fit at its parameters, read by the passes over the points.
+/// The residuals of a fit at its parameters, read by the passes over the points; held
+/// as columns (per channel, one value per point) for the passes' loops.
 struct Residuals<'a> {
     data: &'a Data,
     layout: Layout,
     params: Params,
     ks_90: [f64; 3],
-    /// r_p = y_p − ŷ_p (0 in a dropped channel) per point.
-    residuals: Vec<[f64; 3]>,
+    /// The lobe at each channel's roughness: one for a shared m, else one per channel.
+    lobes: Vec<Lobe>,
+    /// The weight w of the specular colour at 90° per point ([`Basis::shift_weight`]),
+    /// all 0 where the colour is constant (Ks_90 = Ks).
+    weight: Cow<'a, [f64]>,
+    /// r_pc = y_pc − ŷ_pc (0 in a dropped channel) per channel and point.
+    residuals: [Vec<f64>; 3],
     /// ‖r_p‖ per point, at least `floor`.
     norms: Vec<f64>,
+}
+
+/// One channel's row of a point's Jacobian at [`Layout::columns`]: ∂β/∂(Kd, Ks, Ks_90
+/// when `fresnel`, ln m) at diffuse basis `a`, specular basis and slope `lobe` = (s,
+/// ∂s/∂ln m), weight `x` of the specular colour at 90° and `colour` = (Ks, Ks_90).
+#[inline(always)]
+fn jacobian_row(fresnel: bool, a: f64, lobe: [f64; 2], x: f64, colour: [f64; 2]) -> [f64; 4] {
+    let ([s, slope], [ks, kg]) = (lobe, colour);
+    let colour = ks + x * (kg - ks);
+    if fresnel {
+        [a, s * (1.0 - x), s * x, colour * slope]
+    } else {
+        [a, s, colour * slope, 0.0]
+    }
+}
+
+/// The specular basis s and its slope ∂s/∂ln m at every point, at one roughness.
+struct Lobe {
+    s: Vec<f64>,
+    slope: Vec<f64>,
+}
+
+impl Lobe {
+    fn at(data: &Data, m: f64) -> Self {
+        let n = data.y.len();
+        let (mut s, mut slope) = (vec![0.0; n], vec![0.0; n]);
+        data.columns.specular_and_slope(m, &mut s, &mut slope);
+        Lobe { s, slope }
+    }
 }
 
 impl<'a> Residuals<'a> {
@@ -294,65 +332,135 @@ impl<'a> Residuals<'a> {
         if n <= layout.len() {
             return None;
         }
-        // Dropped values (y = 0, estimate 0) leave no residual.
-        let mut residuals = data.estimates(params, ks_90);
-        for (r, y) in residuals.iter_mut().zip(&data.y) {
-            *r = std::array::from_fn(|c| y[c] - r[c]);
-        }
-        let mut norms: Vec<f64> = residuals
+        // A shared roughness needs one lobe evaluation for all channels.
+        let lobes: Vec<Lobe> = if params.m.iter().all(|&m| m == params.m[0]) {
+            vec![Lobe::at(data, params.m[0])]
+        } else {
+            params.m.iter().map(|&m| Lobe::at(data, m)).collect()
+        };
+        let weight = match &data.shift_weight {
+            Some(w) => Cow::Borrowed(w.as_slice()),
+            None if *ks_90 == params.ks => Cow::Owned(vec![0.0; n]),
+            None => Cow::Owned(data.bases.iter().map(Basis::shift_weight).collect()),
+        };
+        // β_c = Kd_c·a + s_c·(Ks_c + w·(Ks_90,c − Ks_c)); dropped values (y = 0, estimate
+        // 0) leave no residual.
+        let (w, a, y): (&[f64], _, _) = (&weight, &data.diffuse[..n], &data.y[..n]);
+        let residuals: [Vec<f64>; 3] = std::array::from_fn(|c| {
+            let s = &lobes[c.min(lobes.len() - 1)].s[..n];
+            let (kd, ks, shift) = (params.kd[c], params.ks[c], ks_90[c] - params.ks[c]);
+            let points = y.iter().zip(a).zip(&w[..n]).zip(s);
+            let estimate = |a: f64, w: f64, s: f64| kd * a + (ks + w * shift) * s;
+            match &data.keep {
+                Some(keep) => points
+                    .zip(keep)
+                    .map(|((((y, &a), &w), &s), k)| y[c] - estimate(a, w, s) * k[c])
+                    .collect(),
+                None => points
+                    .map(|(((y, &a), &w), &s)| y[c] - estimate(a, w, s))
+                    .collect(),
+            }
+        });
+        let [r0, r1, r2] = &residuals;
+        let mut norms: Vec<f64> = r0
             .iter()
-            .map(|r| crate::metrics::point_loss(r, &[0.0; 3]))
+            .zip(r1)
+            .zip(r2)
+            .map(|((r0, r1), r2)| (r0 * r0 + r1 * r1 + r2 * r2).sqrt())
             .collect();
-        let mut order = norms.clone();
-        let median = *order.select_nth_unstable_by(n / 2, f64::total_cmp).1;
-        let floor = 1e-6 * median + data.residual_floor;
-        for norm in &mut norms {
-            *norm = norm.max(floor);
+        // The median of values ≥ 0 is at most twice their mean, so the floor is below
+        // 4e-6 of the mean over the data's: where the smallest norm is above that (and
+        // none is NaN), it floors nothing and the median is not needed.
+        let (least, sum) = norms
+            .iter()
+            .fold((f64::INFINITY, 0.0), |(lo, sum), &v| (lo.min(v), sum + v));
+        if !(sum.is_finite() && least > 4e-6 * sum / n as f64 + data.residual_floor) {
+            let mut order = norms.clone();
+            let median = *order.select_nth_unstable_by(n / 2, f64::total_cmp).1;
+            let floor = 1e-6 * median + data.residual_floor;
+            for norm in &mut norms {
+                *norm = norm.max(floor);
+            }
         }
         Some(Residuals {
             data,
             layout,
             params: *params,
             ks_90: *ks_90,
+            lobes,
+            weight,
             residuals,
             norms,
         })
+    }
+
+    /// Channel `c`'s row of point `point`'s Jacobian at [`Layout::columns`], as if the
+    /// channel counted.
+    #[inline(always)]
+    fn row(&self, c: usize, point: usize) -> [f64; 4] {
+        let lobe = &self.lobes[c.min(self.lobes.len() - 1)];
+        jacobian_row(
+            self.layout.fresnel,
+            self.data.diffuse[point],
+            [lobe.s[point], lobe.slope[point]],
+            self.weight[point],
+            [self.params.ks[c], self.ks_90[c]],
+        )
+    }
+
+    /// Channel `c`'s rows of the Jacobians of `points` (at most [`BLOCK`]) into `rows`,
+    /// side by side: `rows[a][k]` is column a of point `points.start + k` (zero where
+    /// the channel was dropped).
+    fn fill_rows(&self, rows: &mut [[f64; BLOCK]; 4], c: usize, points: Range<usize>) {
+        let lobe = &self.lobes[c.min(self.lobes.len() - 1)];
+        let (s, slope) = (&lobe.s[points.clone()], &lobe.slope[points.clone()]);
+        let (w, a) = (
+            &self.weight[points.clone()],
+            &self.data.diffuse[points.clone()],
+        );
+        let (ks, kg) = (self.params.ks[c], self.ks_90[c]);
+        let [r0, r1, r2, r3] = rows;
+        let columns = r0
+            .iter_mut()
+            .zip(r1.iter_mut())
+            .zip(r2.iter_mut().zip(r3.iter_mut()));
+        let terms = a.iter().zip(s).zip(w.iter().zip(slope));
+        for (((r0, r1), (r2, r3)), ((&a, &s), (&x, &slope))) in columns.zip(terms) {
+            [*r0, *r1, *r2, *r3] = jacobian_row(self.layout.fresnel, a, [s, slope], x, [ks, kg]);
+        }
+        // A dropped channel's row and residual are zero.
+        if let Some(keep) = &self.data.keep {
+            for (k, keep) in keep[points].iter().enumerate() {
+                for row in rows.iter_mut() {
+                    row[k] *= keep[c];
+                }
+            }
+        }
     }
 
     /// Point `point`'s Jacobian J_p as [`Layout::columns`] lays it out: per channel its
     /// values at that channel's columns, and whether the channel counts (a dropped one's
     /// row is zero).
     fn rows(&self, point: usize) -> ([[f64; 4]; 3], [bool; 3]) {
-        let (data, layout, params) = (self.data, &self.layout, &self.params);
-        let basis = &data.bases[point];
-        let x = basis.shift_weight();
-        let keep = data
+        let keep = self
+            .data
             .keep
             .as_ref()
             .map_or([true; 3], |keep| keep[point].map(|k| k > 0.0));
-        let mut rows = [[0.0; 4]; 3];
-        // A shared roughness needs one lobe evaluation for all channels.
-        let shared = basis.specular_and_slope(params.m[0]);
-        for c in (0..3).filter(|&c| keep[c]) {
-            let (s, slope) = if params.m[c] == params.m[0] {
-                shared
+        let rows = std::array::from_fn(|c| {
+            if keep[c] {
+                self.row(c, point)
             } else {
-                basis.specular_and_slope(params.m[c])
-            };
-            let colour = params.ks[c] + x * (self.ks_90[c] - params.ks[c]);
-            rows[c] = if layout.fresnel {
-                [basis.diffuse, s * (1.0 - x), s * x, colour * slope]
-            } else {
-                [basis.diffuse, s, colour * slope, 0.0]
-            };
-        }
+                [0.0; 4]
+            }
+        });
         (rows, keep)
     }
 
     /// u_p = r_p/‖r_p‖ of point `point` (of length ≤ 1 after the floor).
     fn direction(&self, point: usize) -> [f64; 3] {
         let norm = self.norms[point];
-        self.residuals[point].map(|r| r / norm)
+        std::array::from_fn(|c| self.residuals[c][point] / norm)
     }
 
     /// J_p, M_p and g_p of point `point`.
@@ -388,18 +496,24 @@ impl<'a> Residuals<'a> {
         let mut totals = Totals::zero();
         let mut block = Block::zeroed();
         let n = self.norms.len();
+        let mut u = [0.0; BLOCK];
         for start in (0..n).step_by(BLOCK) {
-            block.clear();
-            for (k, point) in (start..n.min(start + BLOCK)).enumerate() {
-                // A dropped channel's row and residual are zero.
-                let (rows, _) = self.rows(point);
-                let u = self.direction(point);
+            let points = start..n.min(start + BLOCK);
+            block.start(points.len(), p);
+            for (k, point) in points.clone().enumerate() {
                 block.inverse[k] = 1.0 / self.norms[point];
-                for (c, (columns, width)) in columns.iter().enumerate() {
-                    for a in 0..*width {
-                        block.rows[c][a][k] = rows[c][a];
-                        // g_p = J_pᵀ u_p.
-                        block.gradient[columns[a]][k] += rows[c][a] * u[c];
+            }
+            for (c, (columns, width)) in columns.iter().enumerate() {
+                let residuals = &self.residuals[c][points.clone()];
+                for ((u, r), point) in u.iter_mut().zip(residuals).zip(points.clone()) {
+                    *u = r / self.norms[point];
+                }
+                self.fill_rows(&mut block.rows[c], c, points.clone());
+                for (a, &column) in columns[..*width].iter().enumerate() {
+                    // g_p = J_pᵀ u_p.
+                    let (rows, gradient) = (&block.rows[c][a], &mut block.gradient[column]);
+                    for ((g, row), u) in gradient.iter_mut().zip(rows).zip(&u) {
+                        *g += row * u;
                     }
                 }
             }
