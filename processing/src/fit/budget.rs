@@ -78,13 +78,15 @@ const MONTE_CARLO_PRECISION: Precision = Precision {
 };
 
 /// The Monte Carlo's Gauss–Newton refits stop at steps of 1e-5 (ln m, and colour
-/// coefficients relative to the largest of their kind) or a predicted decrease of 1e-8 of
-/// the loss: on the full-size gold scan, 1,000 draws' standard deviations move by
-/// 4e-6 of themselves and m's interval ends by 1e-4 of its width against the fine
-/// refits.
+/// coefficients relative to the largest of their kind), a predicted decrease of 1e-8 of
+/// the loss, or after a step taken whole that predicted 1e-6: on the full-size gold scan,
+/// 1,000 draws' standard deviations move by 4e-6 of themselves and m's interval ends by
+/// 1e-4 of its width against the fine refits (the step taken whole by a further 4e-6,
+/// and the interval's ends not at all).
 const MONTE_CARLO_TOLERANCE: newton::Tolerance = newton::Tolerance {
     step: 1e-5,
     decrement: 1e-8,
+    last: 1e-6,
 };
 
 /// One line of a parameter's budget: a source and its contribution (a standard
@@ -249,17 +251,53 @@ struct Refit<'a> {
 impl Refit<'_> {
     /// θ of the fit to the measured values `moved` (one per sample).
     fn fit(&self, moved: &[[f64; 3]]) -> Result<Vec<f64>, FitError> {
-        let (params, ks_90) = self.solve(&self.data.with_measured(moved.to_vec()))?;
+        self.fit_from(moved, self.near.as_ref())
+    }
+
+    /// θ of the fit to the measured values `moved`, started from `near` as
+    /// [`Refit::solve_from`] starts.
+    fn fit_from(
+        &self,
+        moved: &[[f64; 3]],
+        near: Option<&(Params, [f64; 3])>,
+    ) -> Result<Vec<f64>, FitError> {
+        let (params, ks_90) = self.solve_from(&self.data.with_measured(moved.to_vec()), near)?;
         let m = &params.m[..self.options.roughness.count()];
         let ks_90 = self.fresnel.then_some(ks_90);
         Ok(vector(params.kd, params.ks, ks_90, m))
     }
 
+    /// The parameters and specular colour at 90° of θ in [`vector`]'s order, the colour
+    /// coefficients clamped at 0.
+    fn parameters(&self, theta: &[f64]) -> (Params, [f64; 3]) {
+        let colour = |i: usize| theta[i].max(0.0);
+        let kd = std::array::from_fn(colour);
+        let ks = std::array::from_fn(|c| colour(3 + c));
+        let ks_90 = if self.fresnel {
+            std::array::from_fn(|c| colour(6 + c))
+        } else {
+            ks
+        };
+        let ln_m = &theta[if self.fresnel { 9 } else { 6 }..];
+        let m = std::array::from_fn(|c| ln_m[c.min(ln_m.len() - 1)].exp());
+        (Params { kd, ks, m }, ks_90)
+    }
+
+    /// The fit to `data` (the refitter's points): from `near` by Gauss–Newton steps.
+    fn solve(&self, data: &Data) -> Result<(Params, [f64; 3]), FitError> {
+        self.solve_from(data, self.near.as_ref())
+    }
+
     /// The fit to `data` (the refitter's points): from `near` by Gauss–Newton steps
     /// ([`newton::refit`]), or where they give up by a search along ln m from there
-    /// ([`robust::fit_near`]); the parameters and specular colour at 90°.
-    fn solve(&self, data: &Data) -> Result<(Params, [f64; 3]), FitError> {
-        let (found, ks_90) = match &self.near {
+    /// ([`robust::fit_near`]); without `near` by a search of the whole refit range
+    /// ([`robust::fit`]); the parameters and specular colour at 90°.
+    fn solve_from(
+        &self,
+        data: &Data,
+        near: Option<&(Params, [f64; 3])>,
+    ) -> Result<(Params, [f64; 3]), FitError> {
+        let (found, ks_90) = match near {
             Some((start, kg)) => {
                 match newton::refit(data, &self.options, start, *kg, self.tolerance) {
                     Some(found) => found,
@@ -308,16 +346,21 @@ impl Refit<'_> {
     ) -> Result<Vec<Secant>, FitError> {
         let h = SECANT_SPAN;
         // Values the source does not move refit to `base` itself.
-        let refit = |scale: f64| {
+        let refit = |scale: f64, near: Option<&(Params, [f64; 3])>| {
             let moved = self.moved(scale, change, at);
             if moved == self.data.y {
                 Ok(base.to_vec())
             } else {
-                self.fit(&moved)
+                self.fit_from(&moved, near)
             }
         };
-        let plus = refit(h)?;
-        let minus = refit(-h)?;
+        let plus = refit(h, self.near.as_ref())?;
+        // The other side starts where the parameters would be if they followed the
+        // source linearly: base − (plus − base), which leaves it a step of the order of
+        // the source's bend to go rather than of its line.
+        let mirrored: Vec<f64> = base.iter().zip(&plus).map(|(b, p)| 2.0 * b - p).collect();
+        let start = self.near.as_ref().map(|_| self.parameters(&mirrored));
+        let minus = refit(-h, start.as_ref().or(self.near.as_ref()))?;
         Ok(plus
             .iter()
             .zip(&minus)
@@ -483,7 +526,14 @@ pub fn budget(samples: &[Sample], result: &FitResult) -> Result<Budget, FitError
     // the departure only (a few standard uncertainties of the sources at most).
     refit.data = refit.data.with_measured(departure.corrected);
     refit.near = Some((result.params(), result.specular_90()));
-    let (params, ks_90) = refit.solve(&refit.data)?;
+    // The fit of the values as measured (where the sources' lines are taken when a
+    // departure is removed) runs alongside that of the corrected values.
+    let (solved, measured_base) = rayon::join(
+        || refit.solve(&refit.data),
+        || measured.as_ref().map(|m| m.fit(&m.data.y)).transpose(),
+    );
+    let (params, ks_90) = solved?;
+    let measured_base = measured_base?;
     let base = vector(
         params.kd,
         params.ks,
@@ -538,9 +588,9 @@ pub fn budget(samples: &[Sample], result: &FitResult) -> Result<Budget, FitError
         .position(|&s| s == Source::ArmAngle)
         .expect("the arm's angle is a source");
     jobs.extend(theta_l.iter().map(|&t| (angle, Some(t))));
-    let (state, state_base) = match &measured {
-        Some(measured) => (measured, measured.fit(&measured.data.y)?),
-        None => (&refit, base.clone()),
+    let (state, state_base) = match (&measured, measured_base) {
+        (Some(measured), Some(fit)) => (measured, fit),
+        _ => (&refit, base.clone()),
     };
     let secants: Vec<(usize, Vec<Secant>)> = jobs
         .par_iter()
