@@ -149,9 +149,12 @@ pub(crate) fn estimate(
     // equations as they come.
     let mut normal = Normal::new(size);
     let mut row = vec![0.0; size];
+    let mut changes = vec![[0.0; 3]; n_z];
     for (p, sample) in samples.iter().enumerate() {
         let noise = sample.uncertainty.as_ref().map_or([0.0; 3], |u| u.noise);
-        let changes: Vec<[f64; 3]> = columns.iter().map(|col| change(sample, col)).collect();
+        for (d, col) in changes.iter_mut().zip(&columns) {
+            *d = change(sample, col);
+        }
         for c in (0..3).filter(|&c| keep(p, c)) {
             for (v, d) in row.iter_mut().zip(
                 changes
@@ -240,7 +243,8 @@ impl Normal {
     }
 
     fn add(&mut self, row: &[f64], r: f64, w: f64) {
-        for (a, &ra) in row.iter().enumerate() {
+        // A zero entry adds nothing to its line (the arm's angle of the other θL).
+        for (a, &ra) in row.iter().enumerate().filter(|&(_, &ra)| ra != 0.0) {
             let wa = w * ra;
             self.rhs[a] += wa * r;
             let line = &mut self.matrix[a * self.size..(a + 1) * self.size];

@@ -35,6 +35,8 @@ use super::block_sums::{Block, Columns, Square, Totals, BLOCK, MAX_PARAMETERS};
 use super::data::Data;
 use super::options::FitOptions;
 use crate::brdf::{Basis, Params, Roughness};
+#[cfg(target_arch = "x86_64")]
+use crate::simd::avx2_fma;
 
 /// The two-sided 95 % quantile of the standard normal distribution.
 pub const Z95: f64 = 1.959_963_984_540_054;
@@ -304,6 +306,45 @@ fn jacobian_row(fresnel: bool, a: f64, lobe: [f64; 2], x: f64, colour: [f64; 2])
     }
 }
 
+/// The residuals r_pc = y_pc − β_pc per channel (0 where dropped) and their norms ‖r_p‖
+/// per point, at the lobes `lobes` (one, or one per channel) and the weights `weight` of
+/// the specular colour at 90°.
+fn residual_columns(
+    data: &Data,
+    weight: &[f64],
+    lobes: &[Lobe],
+    params: &Params,
+    ks_90: &[f64; 3],
+) -> ([Vec<f64>; 3], Vec<f64>) {
+    let n = data.y.len();
+    // β_c = Kd_c·a + s_c·(Ks_c + w·(Ks_90,c − Ks_c)); dropped values (y = 0, estimate
+    // 0) leave no residual.
+    let (w, a, y) = (weight, &data.diffuse[..n], &data.y[..n]);
+    let residuals: [Vec<f64>; 3] = std::array::from_fn(|c| {
+        let s = &lobes[c.min(lobes.len() - 1)].s[..n];
+        let (kd, ks, shift) = (params.kd[c], params.ks[c], ks_90[c] - params.ks[c]);
+        let points = y.iter().zip(a).zip(&w[..n]).zip(s);
+        let estimate = |a: f64, w: f64, s: f64| kd * a + (ks + w * shift) * s;
+        match &data.keep {
+            Some(keep) => points
+                .zip(keep)
+                .map(|((((y, &a), &w), &s), k)| y[c] - estimate(a, w, s) * k[c])
+                .collect(),
+            None => points
+                .map(|(((y, &a), &w), &s)| y[c] - estimate(a, w, s))
+                .collect(),
+        }
+    });
+    let [r0, r1, r2] = &residuals;
+    let norms: Vec<f64> = r0
+        .iter()
+        .zip(r1)
+        .zip(r2)
+        .map(|((r0, r1), r2)| (r0 * r0 + r1 * r1 + r2 * r2).sqrt())
+        .collect();
+    (residuals, norms)
+}
+
 /// The specular basis s and its slope ∂s/∂ln m at every point, at one roughness.
 struct Lobe {
     s: Vec<f64>,
@@ -343,31 +384,7 @@ impl<'a> Residuals<'a> {
             None if *ks_90 == params.ks => Cow::Owned(vec![0.0; n]),
             None => Cow::Owned(data.bases.iter().map(Basis::shift_weight).collect()),
         };
-        // β_c = Kd_c·a + s_c·(Ks_c + w·(Ks_90,c − Ks_c)); dropped values (y = 0, estimate
-        // 0) leave no residual.
-        let (w, a, y): (&[f64], _, _) = (&weight, &data.diffuse[..n], &data.y[..n]);
-        let residuals: [Vec<f64>; 3] = std::array::from_fn(|c| {
-            let s = &lobes[c.min(lobes.len() - 1)].s[..n];
-            let (kd, ks, shift) = (params.kd[c], params.ks[c], ks_90[c] - params.ks[c]);
-            let points = y.iter().zip(a).zip(&w[..n]).zip(s);
-            let estimate = |a: f64, w: f64, s: f64| kd * a + (ks + w * shift) * s;
-            match &data.keep {
-                Some(keep) => points
-                    .zip(keep)
-                    .map(|((((y, &a), &w), &s), k)| y[c] - estimate(a, w, s) * k[c])
-                    .collect(),
-                None => points
-                    .map(|(((y, &a), &w), &s)| y[c] - estimate(a, w, s))
-                    .collect(),
-            }
-        });
-        let [r0, r1, r2] = &residuals;
-        let mut norms: Vec<f64> = r0
-            .iter()
-            .zip(r1)
-            .zip(r2)
-            .map(|((r0, r1), r2)| (r0 * r0 + r1 * r1 + r2 * r2).sqrt())
-            .collect();
+        let (residuals, mut norms) = residual_columns(data, &weight, &lobes, params, ks_90);
         // The median of values ≥ 0 is at most twice their mean, so the floor is below
         // 4e-6 of the mean over the data's: where the smallest norm is above that (and
         // none is NaN), it floors nothing and the median is not needed.
@@ -411,6 +428,7 @@ impl<'a> Residuals<'a> {
     /// Channel `c`'s rows of the Jacobians of `points` (at most [`BLOCK`]) into `rows`,
     /// side by side: `rows[a][k]` is column a of point `points.start + k` (zero where
     /// the channel was dropped).
+    #[inline(always)]
     fn fill_rows(&self, rows: &mut [[f64; BLOCK]; 4], c: usize, points: Range<usize>) {
         let lobe = &self.lobes[c.min(self.lobes.len() - 1)];
         let (s, slope) = (&lobe.s[points.clone()], &lobe.slope[points.clone()]);
@@ -490,7 +508,24 @@ impl<'a> Residuals<'a> {
     /// A = Σ_p J_pᵀ M_p J_p, Σ_p g_p g_pᵀ (when `spread`, else 0) and Σ_p g_p, in one
     /// pass. J_pᵀ M_p J_p = (J_pᵀ J_p − g_p g_pᵀ)/‖r_p‖, each row of J_p nonzero only at
     /// its channel's columns ([`Layout::columns`]), which are all the pass visits.
+    /// Compiled for AVX2 and FMA too, and that copy chosen where the processor has them.
     fn sums(&self, with_spread: bool) -> Sums {
+        #[cfg(target_arch = "x86_64")]
+        if avx2_fma() {
+            // SAFETY: the processor has AVX2 and FMA, checked just above.
+            return unsafe { self.sums_avx2(with_spread) };
+        }
+        self.sums_portable(with_spread)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn sums_avx2(&self, with_spread: bool) -> Sums {
+        self.sums_portable(with_spread)
+    }
+
+    #[inline(always)]
+    fn sums_portable(&self, with_spread: bool) -> Sums {
         let p = self.layout.len();
         let columns: [Columns; 3] = std::array::from_fn(|c| self.layout.columns(c));
         let mut totals = Totals::zero();
