@@ -43,6 +43,7 @@ mod nelder_mead;
 mod newton;
 mod options;
 mod robust;
+mod secant;
 mod simplex;
 mod stride;
 pub mod table;

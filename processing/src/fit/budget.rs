@@ -32,6 +32,7 @@ use super::data::Data;
 use super::draws::Normal;
 pub use super::draws::{Convergence, Distribution};
 use super::robust::Precision;
+use super::secant::{Secant, LINEAR_TOLERANCE, SECANT_SPAN};
 use super::{
     departure, newton, parameter_count, robust, uncertainty, FitError, FitMethod, FitOptions,
     FitResult, ParameterSet,
@@ -40,23 +41,10 @@ use crate::brdf::{Params, Roughness, M_MAX, M_MIN};
 use crate::samples::{distinct_theta_l, Sample, SampleUncertainty, THETA_L_TOLERANCE};
 use crate::setup_uncertainty::Source;
 
-/// The coverage factor of the expanded uncertainty (≈ 95 % for a normal distribution).
-pub const COVERAGE_FACTOR: f64 = 2.0;
+pub use super::secant::COVERAGE_FACTOR;
 
 /// The refits search m within this factor of the fit's roughness (each way).
 const REFIT_M_RANGE: f64 = 1.5;
-
-/// Sensitivities are secants over ±this many standard uncertainties, the range the
-/// expanded interval covers: a robust fit does not follow the setup linearly (on a broad
-/// Ward lobe its m moves with about the cube of the camera's offset: a central difference
-/// over ±1 u gives a fifth of the change at 2 u).
-const SECANT_SPAN: f64 = COVERAGE_FACTOR;
-
-/// A parameter is taken as linear in a source when its refits at ±k u have their midpoint
-/// within this fraction of their span from the unmoved fit (the second-order term is then
-/// a tenth of the first at the interval's ends), or of k·u_c; otherwise the refits' ends
-/// bound its interval where they reach farther ([`IntervalFrom::RefitEnds`]).
-const LINEAR_TOLERANCE: f64 = 0.1;
 
 /// Points of the refits' grid over log m (the fit's own search uses 24 over a wider range).
 const REFIT_GRID_POINTS: usize = 6;
@@ -367,44 +355,6 @@ impl Refit<'_> {
             .zip(base)
             .map(|((&plus, &minus), &base)| Secant { base, plus, minus })
             .collect())
-    }
-}
-
-/// One parameter's fits with a source's values moved by ±[`SECANT_SPAN`] standard
-/// uncertainties and unmoved.
-#[derive(Debug, Clone, Copy, Default)]
-struct Secant {
-    base: f64,
-    plus: f64,
-    minus: f64,
-}
-
-impl Secant {
-    /// The line: √(c₁² + ½·c₂²) with c₁ the secant's slope and c₂ the second difference,
-    /// both per standard uncertainty (JCGM 100 §5.1.2, its note: the second-order term).
-    fn line(&self) -> f64 {
-        let h = SECANT_SPAN;
-        let slope = (self.plus - self.minus) / (2.0 * h);
-        let curvature = (self.plus - 2.0 * self.base + self.minus) / (h * h);
-        (slope * slope + 0.5 * curvature * curvature).sqrt()
-    }
-
-    /// How far the refits' midpoint lies from the unmoved fit: 0 where the parameter
-    /// follows the source linearly over ±[`SECANT_SPAN`] u.
-    fn bend(&self) -> f64 {
-        (0.5 * (self.plus + self.minus) - self.base).abs()
-    }
-
-    /// The bend's bound for a linear source: [`LINEAR_TOLERANCE`] of the refits' span.
-    fn bend_bound(&self) -> f64 {
-        LINEAR_TOLERANCE * (self.plus - self.minus).abs()
-    }
-
-    /// How far the parameter goes above and below the unmoved fit within ±k u (each ≥ 0).
-    fn excursions(&self) -> [f64; 2] {
-        let up = (self.plus - self.base).max(self.minus - self.base).max(0.0);
-        let down = (self.base - self.plus).max(self.base - self.minus).max(0.0);
-        [up, down]
     }
 }
 
