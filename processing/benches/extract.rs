@@ -102,8 +102,9 @@ fn extract_six_theta_scan(c: &mut Criterion) {
     );
     let mut group = c.benchmark_group("extract");
     group.sample_size(10);
-    // With each sample's uncertainty (the default: its noise, and ten more extractions of
-    // the strips per θL for the setup's sources), and without.
+    // With each sample's uncertainty (the default: its noise, and its change under each
+    // of the setup's sources, the geometric ones from the moved setups' geometry at
+    // knots), and without.
     for (name, uncertainty) in [
         ("six_theta_l_scan_to_csv", true),
         ("six_theta_l_scan_to_csv/no-uncertainty", false),

@@ -57,7 +57,7 @@ use captures::find_captures;
 use columns::{extract_theta, ThetaSamples};
 use layout::StripLayout;
 use options::check_options;
-use sensitivity::{add_sensitivities, Strips};
+use sensitivity::{add_sensitivities, Stated};
 
 pub use drops::DropCounts;
 pub use error::ExtractError;
@@ -216,27 +216,22 @@ pub fn extract_scan_with_progress(
             dropped,
             centre_rows,
             white_angular,
-        } = extract_theta(
-            &setup,
-            &map,
-            &layout,
-            theta_l,
-            options,
-            white_reflectance,
-            None,
-        );
+            geometry,
+            centre_row,
+        } = extract_theta(&setup, &map, &layout, theta_l, options, white_reflectance);
         if options.uncertainty {
-            let strips = Strips {
-                map: &map,
+            let stated = Stated {
                 layout: &layout,
                 theta_l,
+                columns: &columns,
+                geometry: &geometry,
+                centre_row: &centre_row,
             };
             add_sensitivities(
                 &setup,
-                &strips,
-                options,
-                white_reflectance,
-                (&mut samples, &columns, &white_angular),
+                &stated,
+                options.grazing_limit_deg,
+                (&mut samples, &white_angular),
             );
         }
         extraction.per_theta.push(ThetaSummary {

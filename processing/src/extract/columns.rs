@@ -4,8 +4,6 @@
 //! f_white the white's reflectance factor at its pixels' angle of incidence
 //! ([`crate::white_angular`]).
 
-use std::ops::Range;
-
 use rayon::prelude::*;
 
 use super::drops::{DropCounts, DropReason};
@@ -60,12 +58,12 @@ pub(super) struct ThetaSamples {
     /// Per sample, the relative change of β for +1 standard uncertainty of the white's
     /// angular dependence: u_f / f at the white's angle of incidence.
     pub(super) white_angular: Vec<f64>,
+    /// Per sample, the geometry it was given and whether it was read from the centre row.
+    pub(super) geometry: Vec<ColumnGeometry>,
+    pub(super) centre_row: Vec<bool>,
 }
 
-/// The samples of one θL's strips in `map` with `setup`. With `only`, the columns
-/// outside that range are left out (their geometry is not computed and they give no
-/// sample) but for the too-dark threshold, which is the whole image's: the samples of
-/// the columns [`super::sharp::NOISE_NEIGHBOURS`] or more inside the range are those of the whole image.
+/// The samples of one θL's strips in `map` with `setup`.
 pub(super) fn extract_theta(
     setup: &Setup,
     map: &HdrImage,
@@ -73,19 +71,14 @@ pub(super) fn extract_theta(
     theta_l: f64,
     options: &ExtractOptions,
     white_reflectance: f64,
-    only: Option<Range<usize>>,
 ) -> ThetaSamples {
     let view = setup.view(theta_l);
-    let geometry_at = |x: usize| {
-        layout
-            .strip_geometry(&view, x, layout.sample_row)
-            .zip(layout.strip_geometry(&view, x, layout.white_row))
-    };
-    let inside = |x: usize| only.as_ref().is_none_or(|range| range.contains(&x));
     let columns: Vec<Column> = (0..map.width)
         .into_par_iter()
         .map(|x| {
-            let geometry = if inside(x) { geometry_at(x) } else { None };
+            let geometry = layout
+                .strip_geometry(&view, x, layout.sample_row)
+                .zip(layout.strip_geometry(&view, x, layout.white_row));
             let sample = StripRows::read(map, x, layout.sample_map_row);
             let white = StripRows::read(map, x, layout.white_map_row);
             let (curvature, white_curvature) = match &geometry {
@@ -116,8 +109,7 @@ pub(super) fn extract_theta(
         .zip(&noise)
         .map(|(column, noise)| is_sharp(&column.curvature, noise))
         .collect();
-    let raw = columns;
-    let columns: Vec<_> = raw
+    let columns: Vec<_> = columns
         .iter()
         .zip(&sharp)
         .zip(noise.iter().zip(&white_noise))
@@ -143,21 +135,6 @@ pub(super) fn extract_theta(
             }
         }
     }
-    // A column left out counts where its white is brighter and its strips lie on the
-    // lit cylinder.
-    if only.is_some() {
-        for (x, column) in raw.iter().enumerate().filter(|&(x, _)| !inside(x)) {
-            let white = column.white.mean();
-            let brighter = (0..3).any(|c| white.flags[c] == 0 && white.rgb[c] > brightest_white[c]);
-            if brighter && geometry_at(x).is_some() {
-                for (c, brightest) in brightest_white.iter_mut().enumerate() {
-                    if white.flags[c] == 0 {
-                        *brightest = brightest.max(white.rgb[c]);
-                    }
-                }
-            }
-        }
-    }
     let threshold = brightest_white.map(|w| options.min_white_fraction * w);
     let white_rgb = options.camera.white_rgb();
     let limit = options.grazing_limit_deg;
@@ -166,6 +143,8 @@ pub(super) fn extract_theta(
     let mut samples = Vec::new();
     let mut sample_columns = Vec::new();
     let mut white_angular = Vec::new();
+    let mut geometry = Vec::new();
+    let mut centre_row = Vec::new();
     let mut dropped = DropCounts::default();
     let mut centre_rows = 0;
     for (x, column) in columns.into_iter().enumerate() {
@@ -221,6 +200,8 @@ pub(super) fn extract_theta(
             } else {
                 0.0
             });
+            geometry.push(g);
+            centre_row.push(sharp);
         }
     }
     ThetaSamples {
@@ -229,5 +210,7 @@ pub(super) fn extract_theta(
         dropped,
         centre_rows,
         white_angular,
+        geometry,
+        centre_row,
     }
 }

@@ -117,6 +117,22 @@ impl StripLayout {
             })
             .collect()
     }
+
+    /// Column `x`'s [`ColumnGeometry`] both ways a column is read, seen through `view`:
+    /// `[mean of the sample rows, centre row alone]`; `None` as [`Self::strip_geometry`].
+    pub(super) fn column_geometry(
+        &self,
+        view: &SetupView,
+        x: usize,
+    ) -> Option<[ColumnGeometry; 2]> {
+        let sample = self.strip_geometry(view, x, self.sample_row)?;
+        let white = self.strip_geometry(view, x, self.white_row)?;
+        let centre = std::slice::from_ref(&sample[STRIP_ROWS / 2]);
+        Some([
+            ColumnGeometry::new(&sample, &white),
+            ColumnGeometry::new(centre, &white),
+        ])
+    }
 }
 
 /// The geometry of a column's sample (the mean of its strip pixels', or the centre
@@ -148,6 +164,37 @@ impl ColumnGeometry {
             },
             irradiance_ratio: mean(&|g| g.irradiance, white) / mean(&|g| g.irradiance, sample),
             white_cos_i: mean(&|g| g.cosines.n_dot_l, white),
+        }
+    }
+
+    /// The fields as one array: θi, θr, n·l, n·v, n·h, v·h, irradiance ratio, white cos θi.
+    pub(super) fn to_array(self) -> [f64; 8] {
+        let c = self.cosines;
+        [
+            self.theta_i,
+            self.theta_r,
+            c.n_dot_l,
+            c.n_dot_v,
+            c.n_dot_h,
+            c.v_dot_h,
+            self.irradiance_ratio,
+            self.white_cos_i,
+        ]
+    }
+
+    /// The inverse of [`Self::to_array`].
+    pub(super) fn from_array(a: [f64; 8]) -> Self {
+        Self {
+            theta_i: a[0],
+            theta_r: a[1],
+            cosines: Cosines {
+                n_dot_l: a[2],
+                n_dot_v: a[3],
+                n_dot_h: a[4],
+                v_dot_h: a[5],
+            },
+            irradiance_ratio: a[6],
+            white_cos_i: a[7],
         }
     }
 }

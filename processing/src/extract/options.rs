@@ -29,8 +29,8 @@ pub struct ExtractOptions {
     /// When set, only the captures of this θL (degrees) are extracted.
     pub theta_l: Option<f64>,
     /// Whether each sample gets its uncertainty ([`Sample::uncertainty`](crate::samples::Sample::uncertainty)): its noise,
-    /// and its change under each of the setup's uncertain inputs (ten more extractions
-    /// of each θL's strips, one per geometric source and sign).
+    /// and its change under each of the setup's uncertain inputs (for a geometric one,
+    /// from the geometry the setup moved by ± its uncertainty gives each sample's column).
     pub uncertainty: bool,
 }
 

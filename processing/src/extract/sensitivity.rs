@@ -1,24 +1,23 @@
 //! Each sample's sensitivity to the setup's uncertain inputs: the white reflectance
 //! scales β, its angular dependence scales it by u_f/f at the white's angle of incidence;
-//! a geometric source is moved by ± one standard uncertainty and the strips extracted
-//! again (slopes per radian of signed θh).
+//! a geometric source is moved by ± one standard uncertainty and each sample's column
+//! given the geometry the moved setup sees (slopes per radian of signed θh).
 
 use rayon::prelude::*;
 
-use super::columns::{extract_theta, ThetaSamples};
-use super::layout::StripLayout;
-use super::options::ExtractOptions;
-use super::sharp::NOISE_NEIGHBOURS;
-use crate::geometry::Setup;
-use crate::hdr::HdrImage;
+use super::layout::{ColumnGeometry, StripLayout};
+use crate::geometry::{Setup, SetupView};
 use crate::samples::{Sample, SampleUncertainty};
 use crate::setup_uncertainty::Source;
 
-/// One θL's merged strips, as [`extract_theta`] reads them.
-pub(super) struct Strips<'a> {
-    pub(super) map: &'a HdrImage,
+/// One θL's stated samples as extraction made them: per sample its image column, the
+/// geometry it was given and whether it was read from the strip's centre row.
+pub(super) struct Stated<'a> {
     pub(super) layout: &'a StripLayout,
     pub(super) theta_l: f64,
+    pub(super) columns: &'a [usize],
+    pub(super) geometry: &'a [ColumnGeometry],
+    pub(super) centre_row: &'a [bool],
 }
 
 /// `setup` with `source` moved by `delta` (its unit); the white is not part of the
@@ -75,34 +74,138 @@ fn slopes(samples: &[Sample], half_angles: &[f64]) -> Vec<[f64; 3]> {
         .collect()
 }
 
+/// Columns from one knot to the next where the light and the camera face the surface: a
+/// moved setup's geometry is computed at the knots and its change from the stated
+/// geometry interpolated between them. Toward grazing, where the geometry bends faster,
+/// knots are closer ([`Knots::new`]); `interpolated_geometry_agrees_with_the_computed_one`
+/// bounds the error.
+const KNOT_SPACING: f64 = 32.0;
+
+/// A change of a column's geometry, both ways a column is read
+/// ([`StripLayout::column_geometry`]), as [`ColumnGeometry::to_array`] differences.
+type Change = [[f64; 8]; 2];
+
+/// Knots over the stated samples' columns, with the stated geometry there.
+struct Knots {
+    columns: Vec<usize>,
+    stated: Vec<Option<[ColumnGeometry; 2]>>,
+}
+
+impl Knots {
+    /// Knots from one before `first` to two past `last`, the next one [`KNOT_SPACING`]·c²
+    /// columns on (at least one), c the smaller of cos θi and cos θr at the knot: a
+    /// column's angles change at a rate that grows as 1/c toward grazing, and the
+    /// irradiance ratio as 1/c too, so the cubic's error grows there unless the knots
+    /// close in (at c^1.5 it reaches 0.3 % of the change).
+    fn new(layout: &StripLayout, view: &SetupView, first: usize, last: usize) -> Self {
+        let step = |stated: &Option<[ColumnGeometry; 2]>| {
+            let c = stated.map_or(0.0, |g| {
+                let (i, r) = (g[0].theta_i.to_radians(), g[0].theta_r.to_radians());
+                i.cos().min(r.cos()).max(0.0)
+            });
+            ((KNOT_SPACING * c * c) as usize).max(1)
+        };
+        let mut knots = Self {
+            columns: Vec::new(),
+            stated: Vec::new(),
+        };
+        let mut x = first.saturating_sub(step(&layout.column_geometry(view, first)));
+        let mut past_last = 0;
+        while past_last < 2 {
+            let stated = layout.column_geometry(view, x);
+            knots.columns.push(x);
+            past_last += usize::from(x > last);
+            x += step(&stated);
+            knots.stated.push(stated);
+        }
+        knots
+    }
+
+    /// Per knot, how the geometry seen through `moved` differs from the stated one.
+    fn changes(&self, layout: &StripLayout, moved: &SetupView) -> Vec<Option<Change>> {
+        self.columns
+            .iter()
+            .zip(&self.stated)
+            .map(|(&x, stated)| {
+                let stated = stated.as_ref()?;
+                let moved = layout.column_geometry(moved, x)?;
+                Some(std::array::from_fn(|way| {
+                    let (m, s) = (moved[way].to_array(), stated[way].to_array());
+                    std::array::from_fn(|f| m[f] - s[f])
+                }))
+            })
+            .collect()
+    }
+
+    /// The geometry the moved setup of `changes` gives column `x`, read `way` (0 the rows'
+    /// mean, 1 the centre row), whose stated geometry is `stated`: the stated one plus the
+    /// change interpolated by the cubic through the four knots around `x` (the knot's own
+    /// at a knot). Where one of those knots is off the cylinder, or past the first or the
+    /// last, it is computed at `x` itself; `None` if `x` is then off the cylinder.
+    fn moved(
+        &self,
+        changes: &[Option<Change>],
+        (layout, view): (&StripLayout, &SetupView),
+        (x, way, stated): (usize, usize, &ColumnGeometry),
+    ) -> Option<ColumnGeometry> {
+        let interpolated = match self.columns.binary_search(&x) {
+            Ok(k) => changes[k].map(|c| add(stated, &c[way], 1.0)),
+            Err(k) if k >= 2 && k + 1 < self.columns.len() => (|| {
+                let nodes: [f64; 4] = std::array::from_fn(|a| self.columns[k - 2 + a] as f64);
+                let t = x as f64;
+                let mut change = [0.0; 8];
+                for (a, knot) in changes[k - 2..k + 2].iter().enumerate() {
+                    let knot = &knot.as_ref()?[way];
+                    // Lagrange weight of node a at t.
+                    let w = (0..4)
+                        .filter(|&b| b != a)
+                        .map(|b| (t - nodes[b]) / (nodes[a] - nodes[b]))
+                        .product::<f64>();
+                    for (sum, v) in change.iter_mut().zip(knot) {
+                        *sum += w * v;
+                    }
+                }
+                Some(add(stated, &change, 1.0))
+            })(),
+            Err(_) => None,
+        };
+        interpolated.or_else(|| layout.column_geometry(view, x).map(|g| g[way]))
+    }
+}
+
+/// `g` plus `w` times `change` ([`ColumnGeometry::to_array`] order).
+fn add(g: &ColumnGeometry, change: &[f64; 8], w: f64) -> ColumnGeometry {
+    let a = g.to_array();
+    ColumnGeometry::from_array(std::array::from_fn(|f| a[f] + w * change[f]))
+}
+
 /// Fills each sample's [`SampleUncertainty::sources`]: how β at the sample's stated
 /// geometry changes when each uncertain input moves by one standard uncertainty.
 /// The white reflectance scales β. A geometric source changes where each pixel's value is
-/// placed, and a little the value itself (the strips' irradiance ratio): the strips are
-/// extracted again with the setup moved by ±u, and a column whose value v goes to v′ and
-/// whose signed θh moves by Δ changes β at its stated θh by (v′ − v) − Δ·dβ/dθh ([`slopes`]
-/// of the stated samples); half the difference of the two signs is taken (central
-/// difference). The change of θd at a fixed θh (a fraction of the source's own size) is
-/// left out. A column the moved extraction drops gets no change.
+/// placed, and a little the value itself (the strips' irradiance ratio and the white's
+/// angular factor): with the setup moved by ±u, each sample's column is given the moved
+/// setup's geometry (read the same way, the rows' mean or the centre row; [`Knots`]); a
+/// column whose value v goes to v′ and whose signed θh moves by Δ changes β at its stated
+/// θh by (v′ − v) − Δ·dβ/dθh ([`slopes`] of the stated samples); half the difference of
+/// the two signs is taken (central difference). The change of θd at a fixed θh (a
+/// fraction of the source's own size) is left out. A column the moved setup puts off
+/// the cylinder or past the grazing limit gets no change.
 pub(super) fn add_sensitivities(
     setup: &Setup,
-    strips: &Strips,
-    options: &ExtractOptions,
-    white_reflectance: f64,
-    (samples, columns, white_angular): (&mut [Sample], &[usize], &[f64]),
+    stated: &Stated,
+    grazing_limit_deg: f64,
+    (samples, white_angular): (&mut [Sample], &[f64]),
 ) {
+    let (Some(&first), Some(&last)) = (stated.columns.first(), stated.columns.last()) else {
+        return;
+    };
     let inputs = setup.inputs();
     let half_angles: Vec<f64> = samples.iter().map(|s| s.half_difference().0).collect();
     let slope = slopes(samples, &half_angles);
-    let stated: &[Sample] = samples;
-    // The moved extractions need the stated samples' columns only, with the neighbours
-    // their rows' noise is pooled over.
-    let only = match (columns.first(), columns.last()) {
-        (Some(&first), Some(&last)) => {
-            Some(first.saturating_sub(NOISE_NEIGHBOURS)..last + NOISE_NEIGHBOURS + 1)
-        }
-        _ => return,
-    };
+    let knots = Knots::new(stated.layout, &setup.view(stated.theta_l), first, last);
+    let angular = setup.white_angular();
+    let stated_samples: &[Sample] = samples;
+    let position = |source| Source::ALL.iter().position(|&s| s == source).unwrap_or(0);
     let changes: Vec<(usize, Vec<[f64; 3]>)> = inputs
         .par_iter()
         .enumerate()
@@ -114,33 +217,44 @@ pub(super) fn add_sensitivities(
         })
         .map(|(j, input)| {
             let [plus, minus] = [1.0, -1.0].map(|sign| {
-                let moved = perturbed(setup, input.source, sign * input.u[0]);
-                let ThetaSamples {
-                    samples: moved_samples,
-                    columns: moved_columns,
-                    ..
-                } = extract_theta(
-                    &moved,
-                    strips.map,
-                    strips.layout,
-                    strips.theta_l,
-                    options,
-                    white_reflectance,
-                    only.clone(),
-                );
-                stated
-                    .iter()
-                    .zip(columns)
-                    .enumerate()
-                    .map(|(i, (s, x))| {
-                        let Ok(k) = moved_columns.binary_search(x) else {
+                let view = perturbed(setup, input.source, sign * input.u[0]).view(stated.theta_l);
+                let changes = knots.changes(stated.layout, &view);
+                (0..stated_samples.len())
+                    .map(|i| {
+                        let g = &stated.geometry[i];
+                        let way = usize::from(stated.centre_row[i]);
+                        let moved = knots.moved(
+                            &changes,
+                            (stated.layout, &view),
+                            (stated.columns[i], way, g),
+                        );
+                        let Some(m) = moved else {
                             return [0.0; 3];
                         };
-                        let m = &moved_samples[k];
-                        let shift = m.half_difference().0 - half_angles[i];
-                        std::array::from_fn(|c| match (s.channel(c), m.channel(c)) {
-                            (Some(v), Some(moved)) => (moved - v) - shift * slope[i][c],
-                            _ => 0.0,
+                        if m.theta_i.abs() > grazing_limit_deg
+                            || m.theta_r.abs() > grazing_limit_deg
+                        {
+                            return [0.0; 3];
+                        }
+                        // v′/v: the strips' pixels are the same, their irradiance ratio
+                        // and the white's angular factor are the moved geometry's.
+                        let (factor, moved_factor) =
+                            (angular.at(g.white_cos_i).0, angular.at(m.white_cos_i).0);
+                        if !(factor > 0.0 && g.irradiance_ratio > 0.0) {
+                            return [0.0; 3];
+                        }
+                        let ratio = m.irradiance_ratio / g.irradiance_ratio * moved_factor / factor;
+                        let placed = Sample {
+                            theta_i: m.theta_i,
+                            theta_r: m.theta_r,
+                            cosines: Some(m.cosines),
+                            ..Sample::default()
+                        };
+                        let shift = placed.half_difference().0 - half_angles[i];
+                        let s = &stated_samples[i];
+                        std::array::from_fn(|c| {
+                            s.channel(c)
+                                .map_or(0.0, |v| v * (ratio - 1.0) - shift * slope[i][c])
                         })
                     })
                     .collect::<Vec<[f64; 3]>>()
@@ -155,10 +269,7 @@ pub(super) fn add_sensitivities(
         .collect();
     // Source::ALL begins with the white reference.
     let white = inputs[0].u;
-    let falloff = Source::ALL
-        .iter()
-        .position(|&s| s == Source::WhiteFalloff)
-        .unwrap_or(0);
+    let falloff = position(Source::WhiteFalloff);
     for (i, sample) in samples.iter_mut().enumerate() {
         let rgb = sample.rgb;
         let dropped = sample.dropped;
@@ -173,6 +284,82 @@ pub(super) fn add_sensitivities(
         for c in (0..3).filter(|&c| dropped[c]) {
             for source in &mut u.sources {
                 source[c] = 0.0;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Gold's full-size setup, turned and offset every way a setup can be.
+    fn misaligned() -> Setup {
+        serde_json::from_value(serde_json::json!({
+            "cylinder_radius_mm": 40.0, "camera_distance_mm": 700.0,
+            "light_distance_mm": 1000.0, "focal_length_mm": 85.0, "pixel_pitch_um": 6.1,
+            "image_width": 3872, "image_height": 2592, "sample_row": 1190, "white_row": 1401,
+            "camera_offset_mm": 1.5, "cylinder_tilt_deg": 0.5, "arm_zero_offset_deg": 0.3,
+            "camera_yaw_deg": 0.2, "camera_roll_deg": 0.4
+        }))
+        .expect("a setup")
+    }
+
+    /// For every geometric source moved by ± its default uncertainty, from near-normal
+    /// to grazing θL, every field of every column's interpolated geometry (both ways a
+    /// column is read) is within 1e-4 of the largest change the move makes to that
+    /// field over the columns, plus rounding.
+    #[test]
+    fn interpolated_geometry_agrees_with_the_computed_one() {
+        let setup = misaligned();
+        let layout = StripLayout::new(&setup, 3872, 2592, 0.0).expect("layout");
+        for theta_l in [-20.0, -45.0, -70.0] {
+            let view = setup.view(theta_l);
+            let stated: Vec<(usize, [ColumnGeometry; 2])> = (0..3872)
+                .filter_map(|x| Some((x, layout.column_geometry(&view, x)?)))
+                .filter(|(_, g)| g[0].theta_i.abs() <= 80.0 && g[0].theta_r.abs() <= 80.0)
+                .collect();
+            let (first, last) = (stated[0].0, stated[stated.len() - 1].0);
+            let knots = Knots::new(&layout, &view, first, last);
+            for source in Source::ALL
+                .into_iter()
+                .filter(|s| !matches!(s, Source::WhiteReflectance | Source::WhiteFalloff))
+            {
+                for sign in [1.0, -1.0] {
+                    let delta = sign * source.default_uncertainty();
+                    let moved_view = perturbed(&setup, source, delta).view(theta_l);
+                    let changes = knots.changes(&layout, &moved_view);
+                    let (knots, changes, layout, moved_view) =
+                        (&knots, &changes, &layout, &moved_view);
+                    let pairs: Vec<([f64; 8], [f64; 8], [f64; 8])> = stated
+                        .iter()
+                        .flat_map(|(x, g)| {
+                            let exact = layout.column_geometry(moved_view, *x);
+                            (0..2).filter_map(move |way| {
+                                let exact = exact?[way];
+                                let moved = knots
+                                    .moved(changes, (layout, moved_view), (*x, way, &g[way]))
+                                    .expect("interpolated where it is computed");
+                                Some((g[way].to_array(), exact.to_array(), moved.to_array()))
+                            })
+                        })
+                        .collect();
+                    assert!(pairs.len() > 1000, "{source:?}: {} columns", pairs.len());
+                    for f in 0..8 {
+                        let largest = pairs
+                            .iter()
+                            .map(|(s, e, _)| (e[f] - s[f]).abs())
+                            .fold(0.0, f64::max);
+                        let worst = pairs
+                            .iter()
+                            .map(|(s, e, m)| (m[f] - e[f]).abs() - 1e-13 * s[f].abs())
+                            .fold(0.0, f64::max);
+                        assert!(
+                            worst <= 1e-4 * largest,
+                            "θL {theta_l}, {source:?} {delta}, field {f}: error {worst:e} of a change up to {largest:e}"
+                        );
+                    }
+                }
             }
         }
     }
