@@ -8,6 +8,7 @@
 //! - β is the radiance factor in the camera-RGB domain (a perfect white gives 100 in G
 //!   after [`color`] conversion; raw extraction gives β = L_sample / L_white).
 
+mod decimal;
 mod simd;
 
 pub mod brdf;

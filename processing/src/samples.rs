@@ -18,9 +18,11 @@ use std::fs::File;
 use std::io::{BufWriter, Read, Write};
 use std::path::Path;
 
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::brdf::Cosines;
+use crate::decimal;
 use crate::setup_uncertainty::Source;
 
 /// One measured surface point: angles in degrees, β per camera channel.
@@ -408,58 +410,76 @@ pub fn write_csv(path: &Path, samples: &[Sample]) -> Result<(), SamplesError> {
     })
 }
 
-/// Writes samples as CSV text to any writer; numbers use Rust's shortest round-trip form.
+/// Writes samples as CSV text to any writer; numbers in Rust's shortest round-trip form
+/// ([`crate::decimal`]).
 /// When any sample carries 3D cosines, every row gets the four cosine columns (in-plane
 /// cosines for samples without). When every sample carries its uncertainty, the
-/// uncertainty columns follow. A dropped channel is written as an empty field.
-pub fn write_csv_to<W: Write>(writer: W, samples: &[Sample]) -> Result<(), SamplesError> {
+/// uncertainty columns follow. A dropped channel is written as an empty field. No field
+/// needs quoting (numbers and the header's names), so rows are formatted directly, in
+/// parallel blocks written in order.
+pub fn write_csv_to<W: Write>(mut writer: W, samples: &[Sample]) -> Result<(), SamplesError> {
     let with_cosines = samples.iter().any(|s| s.cosines.is_some());
     let with_uncertainty = !samples.is_empty() && samples.iter().all(|s| s.uncertainty.is_some());
-    let mut csv = csv::Writer::from_writer(writer);
-    let cosine_header: &[&str] = if with_cosines { &COSINE_COLUMNS } else { &[] };
-    let uncertainty_header = if with_uncertainty {
-        uncertainty_columns()
-    } else {
-        Vec::new()
-    };
-    csv.write_record(
-        HEADER
-            .iter()
-            .chain(cosine_header)
-            .map(|h| h.to_string())
-            .chain(uncertainty_header),
-    )
-    .map_err(SamplesError::Csv)?;
-    for s in samples {
-        let angles = [s.theta_l, s.theta_i, s.theta_r].map(|v| v.to_string());
-        let beta = [0, 1, 2].map(|c| s.channel(c).map_or_else(String::new, |v| v.to_string()));
-        let cosines = with_cosines.then(|| s.cosines().to_array().map(|v| v.to_string()));
-        let uncertainty: Vec<String> = match (&s.uncertainty, with_uncertainty) {
-            (Some(u), true) => std::iter::once(&u.noise)
-                .chain(&u.sources)
-                .flat_map(|v| {
-                    [0, 1, 2].map(|c| {
-                        if s.dropped[c] {
-                            String::new()
-                        } else {
-                            v[c].to_string()
-                        }
-                    })
-                })
-                .collect(),
-            _ => Vec::new(),
-        };
-        csv.write_record(
-            angles
-                .iter()
-                .chain(&beta)
-                .chain(cosines.iter().flatten())
-                .chain(&uncertainty),
-        )
-        .map_err(SamplesError::Csv)?;
+    let mut header: Vec<String> = HEADER.iter().map(|h| h.to_string()).collect();
+    if with_cosines {
+        header.extend(COSINE_COLUMNS.iter().map(|h| h.to_string()));
     }
-    csv.flush().map_err(|error| SamplesError::Io {
+    if with_uncertainty {
+        header.extend(uncertainty_columns());
+    }
+    let io = |error| SamplesError::Io {
         path: String::from("samples CSV output"),
         error,
-    })
+    };
+    writeln!(writer, "{}", header.join(",")).map_err(io)?;
+    // Rows per block formatted at once: a few hundred kB of text.
+    const BLOCK: usize = 1024;
+    let blocks: Vec<String> = samples
+        .par_chunks(BLOCK)
+        .map(|block| {
+            let mut text = String::new();
+            for s in block {
+                write_row(&mut text, s, with_cosines, with_uncertainty);
+            }
+            text
+        })
+        .collect();
+    for block in blocks {
+        writer.write_all(block.as_bytes()).map_err(io)?;
+    }
+    writer.flush().map_err(io)
+}
+
+/// One sample's CSV line, with its newline, appended to `text`.
+fn write_row(text: &mut String, s: &Sample, with_cosines: bool, with_uncertainty: bool) {
+    let number = |text: &mut String, v: f64| {
+        text.push(',');
+        decimal::push(text, v);
+    };
+    decimal::push(text, s.theta_l);
+    number(text, s.theta_i);
+    number(text, s.theta_r);
+    let channel = |text: &mut String, c: usize, v: f64| {
+        if s.dropped[c] {
+            text.push(',');
+        } else {
+            number(text, v);
+        }
+    };
+    for (c, &value) in s.rgb.iter().enumerate() {
+        channel(text, c, value);
+    }
+    if with_cosines {
+        for v in s.cosines().to_array() {
+            number(text, v);
+        }
+    }
+    if let (Some(u), true) = (&s.uncertainty, with_uncertainty) {
+        for v in std::iter::once(&u.noise).chain(&u.sources) {
+            for (c, &value) in v.iter().enumerate() {
+                channel(text, c, value);
+            }
+        }
+    }
+    text.push('\n');
 }
