@@ -411,7 +411,7 @@ pub fn write_csv(path: &Path, samples: &[Sample]) -> Result<(), SamplesError> {
 }
 
 /// Writes samples as CSV text to any writer; numbers in Rust's shortest round-trip form
-/// ([`crate::decimal`]).
+/// (the `decimal` module).
 /// When any sample carries 3D cosines, every row gets the four cosine columns (in-plane
 /// cosines for samples without). When every sample carries its uncertainty, the
 /// uncertainty columns follow. A dropped channel is written as an empty field. No field

@@ -149,7 +149,7 @@ impl Knots {
         (x, way, stated): (usize, usize, &ColumnGeometry),
     ) -> Option<ColumnGeometry> {
         let interpolated = match self.columns.binary_search(&x) {
-            Ok(k) => changes[k].map(|c| add(stated, &c[way], 1.0)),
+            Ok(k) => changes[k].map(|c| add(stated, &c[way])),
             Err(k) if k >= 2 && k + 1 < self.columns.len() => (|| {
                 let nodes: [f64; 4] = std::array::from_fn(|a| self.columns[k - 2 + a] as f64);
                 let t = x as f64;
@@ -165,7 +165,7 @@ impl Knots {
                         *sum += w * v;
                     }
                 }
-                Some(add(stated, &change, 1.0))
+                Some(add(stated, &change))
             })(),
             Err(_) => None,
         };
@@ -173,10 +173,10 @@ impl Knots {
     }
 }
 
-/// `g` plus `w` times `change` ([`ColumnGeometry::to_array`] order).
-fn add(g: &ColumnGeometry, change: &[f64; 8], w: f64) -> ColumnGeometry {
+/// `g` plus `change` ([`ColumnGeometry::to_array`] order).
+fn add(g: &ColumnGeometry, change: &[f64; 8]) -> ColumnGeometry {
     let a = g.to_array();
-    ColumnGeometry::from_array(std::array::from_fn(|f| a[f] + w * change[f]))
+    ColumnGeometry::from_array(std::array::from_fn(|f| a[f] + change[f]))
 }
 
 /// Fills each sample's [`SampleUncertainty::sources`]: how β at the sample's stated
