@@ -6,10 +6,10 @@
 //! ryu takes the even one and `Display` may take the other; both read back to the value.
 //! Samples CSV files are written so.
 
-use std::fmt::Write as _;
+use std::io::Write as _;
 
 /// Appends `v` to `text` as `write!(text, "{v}")` would (but for ties, see above).
-pub(crate) fn push(text: &mut String, v: f64) {
+pub(crate) fn push(text: &mut Vec<u8>, v: f64) {
     if !v.is_finite() {
         let _ = write!(text, "{v}");
         return;
@@ -18,7 +18,7 @@ pub(crate) fn push(text: &mut String, v: f64) {
     let shortest = buffer.format_finite(v);
     // ryu writes positional notation for 1e-5 ≤ |v| < 1e16, with `.0` on integers.
     let Some(e) = shortest.bytes().position(|b| b == b'e') else {
-        text.push_str(shortest.strip_suffix(".0").unwrap_or(shortest));
+        text.extend_from_slice(shortest.strip_suffix(".0").unwrap_or(shortest).as_bytes());
         return;
     };
     let (mantissa, exponent) = (
@@ -43,26 +43,97 @@ pub(crate) fn push(text: &mut String, v: f64) {
             .rev()
             .take_while(|&&d| d == b'0')
             .count();
-    text.push_str(sign);
+    text.extend_from_slice(sign.as_bytes());
     if leading >= end {
-        text.push('0');
+        text.push(b'0');
         return;
     }
-    let digits = std::str::from_utf8(&all[leading..end]).unwrap_or("0");
-    let point = int.len() as i32 + exponent - leading as i32;
+    positional(
+        text,
+        &all[leading..end],
+        int.len() as i32 + exponent - leading as i32,
+    );
+}
+
+/// Appends `digits` (no leading or trailing zeros) with the decimal point after the first
+/// `point` of them (before them, or past them, padded with zeros): `Display`'s layout.
+fn positional(text: &mut Vec<u8>, digits: &[u8], point: i32) {
     let len = digits.len() as i32;
     if point <= 0 {
-        text.push_str("0.");
-        text.extend(std::iter::repeat_n('0', (-point) as usize));
-        text.push_str(digits);
+        text.extend_from_slice(b"0.");
+        text.resize(text.len() + (-point) as usize, b'0');
+        text.extend_from_slice(digits);
     } else if point >= len {
-        text.push_str(digits);
-        text.extend(std::iter::repeat_n('0', (point - len) as usize));
+        text.extend_from_slice(digits);
+        text.resize(text.len() + (point - len) as usize, b'0');
     } else {
         let (whole, fraction) = digits.split_at(point as usize);
-        text.push_str(whole);
-        text.push('.');
-        text.push_str(fraction);
+        text.extend_from_slice(whole);
+        text.push(b'.');
+        text.extend_from_slice(fraction);
+    }
+}
+
+/// Exact powers of ten, 10⁰ … 10²² (every one an f64 without rounding).
+const POWERS_OF_TEN: [f64; 23] = [
+    1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
+    1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
+];
+
+/// Appends `v` rounded to `significant` significant digits (1 ≤ `significant` ≤ 15) in
+/// [`push`]'s layout, the rounded decimal itself: `0.0169687` for 0.01696870136943567 at
+/// 6. Values whose rounding step is not an exact power of ten in f64 (beyond 10^±22) are
+/// written whole.
+pub(crate) fn push_rounded(text: &mut Vec<u8>, v: f64, significant: i32) {
+    if v != 0.0 && v.is_finite() {
+        let mut shift = significant - 1 - leading_exponent(v.abs());
+        if let Some(&p) = POWERS_OF_TEN.get(shift.unsigned_abs() as usize) {
+            // |v| · 10^shift to the nearest integer (halves up): the digits, at most
+            // significant + 1 of them.
+            let scaled = if shift >= 0 { v.abs() * p } else { v.abs() / p };
+            let mut n = (scaled + 0.5) as u64;
+            if n == 0 {
+                text.push(b'0');
+                return;
+            }
+            while n.is_multiple_of(10) {
+                n /= 10;
+                shift -= 1;
+            }
+            let mut buffer = [0u8; 20];
+            let mut start = buffer.len();
+            while n > 0 {
+                start -= 1;
+                buffer[start] = b'0' + (n % 10) as u8;
+                n /= 10;
+            }
+            let digits = &buffer[start..];
+            if v < 0.0 {
+                text.push(b'-');
+            }
+            positional(text, digits, digits.len() as i32 - shift);
+            return;
+        }
+    }
+    push(text, v);
+}
+
+/// ⌊log10 a⌋ for a finite a > 0 (one less for a within rounding of a power of ten
+/// beyond 10^±22), from a's binary exponent.
+fn leading_exponent(a: f64) -> i32 {
+    let binary = ((a.to_bits() >> 52) & 0x7ff) as i32 - 1023;
+    // ⌊binary · log10 2⌋ (78913 / 2^18 = 0.301029...): ⌊log10 a⌋ or one less.
+    let estimate = (binary * 78913) >> 18;
+    let next = estimate + 1;
+    let power = match POWERS_OF_TEN.get(next.unsigned_abs() as usize) {
+        Some(&p) if next >= 0 => p,
+        Some(&p) => 1.0 / p,
+        None => return estimate,
+    };
+    if a >= power {
+        next
+    } else {
+        estimate
     }
 }
 
@@ -73,8 +144,9 @@ mod tests {
     /// `push` writes `v` as `Display` does; or, on a tie, as many characters that read
     /// back to `v`, differing only in the last digit. Returns whether it was a tie.
     fn same_as_display(v: f64) -> bool {
-        let mut text = String::new();
-        push(&mut text, v);
+        let mut bytes = Vec::new();
+        push(&mut bytes, v);
+        let text = String::from_utf8(bytes).expect("ASCII");
         let display = format!("{v}");
         if text == display {
             return false;
@@ -139,5 +211,49 @@ mod tests {
             assert!(!same_as_display(unit * 1e-6));
         }
         assert!(ties < 200, "{ties} ties");
+    }
+
+    #[test]
+    fn leading_exponent_is_that_of_the_leading_digit() {
+        for k in -22..=22 {
+            let p = 10f64.powi(k);
+            assert_eq!(leading_exponent(p), k, "{p}");
+            assert_eq!(leading_exponent(p * 1.000001), k, "{p}");
+            assert_eq!(leading_exponent(p * 0.999999), k - 1, "{p}");
+            assert_eq!(leading_exponent(p * 9.99999), k, "{p}");
+        }
+    }
+
+    /// `push_rounded` keeps at most the digits asked for and stays within half a unit of
+    /// the last one; zero, non-finite and out-of-range values are written whole.
+    #[test]
+    fn rounded_values_keep_their_significant_digits() {
+        let written = |v: f64| {
+            let mut bytes = Vec::new();
+            push_rounded(&mut bytes, v, 6);
+            String::from_utf8(bytes).expect("ASCII")
+        };
+        assert_eq!(written(0.01696870136943567), "0.0169687");
+        assert_eq!(written(-276.12345678), "-276.123");
+        assert_eq!(written(9.9999996), "10");
+        assert_eq!(written(123456789.0), "123457000");
+        assert_eq!(written(0.0), "0");
+        assert_eq!(written(1e-300), "0.".to_string() + &"0".repeat(299) + "1");
+        let mut state = 0x2545_f491_4f6c_dd1d_u64;
+        for _ in 0..200_000 {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            let unit = (state >> 11) as f64 / (1u64 << 53) as f64;
+            let v = (unit - 0.5) * 10f64.powi((state % 30) as i32 - 15);
+            if v.abs() < 1e-16 {
+                continue; // its rounding step, below 10⁻²², is no exact f64: written whole
+            }
+            let text = written(v);
+            let back: f64 = text.parse().unwrap();
+            assert!((back - v).abs() <= 5e-6 * v.abs(), "{v} {text}");
+            let digits = text.trim_start_matches(['-', '0', '.']).replace('.', "");
+            assert!(digits.trim_end_matches('0').len() <= 6, "{v} {text}");
+        }
     }
 }

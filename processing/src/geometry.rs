@@ -92,8 +92,6 @@ pub struct SurfaceAngles {
 /// point light's irradiance up to its intensity.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PixelGeometry {
-    /// Azimuth of the point's normal about the cylinder axis.
-    pub phi: f64,
     /// Signed in-plane angles (specular at θr = θi) of the light and viewing directions
     /// projected on the cylinder's cross-section plane through the point.
     pub theta_i: f64,
@@ -104,6 +102,24 @@ pub struct PixelGeometry {
     pub irradiance: f64,
     /// Position of the point along the cylinder axis, mm (0 at the camera's height).
     pub height_mm: f64,
+    /// The normal's components (n·ey, n·ex) in the plane ⊥ the axis, whence φ.
+    azimuth: (f64, f64),
+}
+
+impl PixelGeometry {
+    /// Azimuth φ of the point's normal about the cylinder axis, degrees.
+    pub fn phi(&self) -> f64 {
+        self.azimuth.0.atan2(self.azimuth.1).to_degrees()
+    }
+}
+
+/// How the light reaches one pixel's point (the white strip's share of
+/// [`PixelGeometry`]): cos θi of the true 3D direction and the irradiance up to the
+/// light's intensity, cos θi / |L − P|² in mm⁻²; only for a lit point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Lighting {
+    pub n_dot_l: f64,
+    pub irradiance: f64,
 }
 
 /// Why a [`Setup`] cannot be used.
@@ -205,6 +221,26 @@ impl SetupView {
         let hit = self.frame.hit(u, v)?;
         Some(self.frame.geometry(&hit, self.light))
     }
+
+    /// The [`Lighting`] of pixel (u, v); `None` where it misses the cylinder or is unlit.
+    pub(crate) fn lighting(&self, u: f64, v: f64) -> Option<Lighting> {
+        let hit = self.frame.hit(u, v)?;
+        lighting(hit.normal, sub(self.light, hit.point))
+    }
+}
+
+/// [`Lighting`] at a point of unit normal `n` seen from it at `to_light`; `None` where
+/// the light is behind the surface.
+fn lighting(n: [f64; 3], to_light: [f64; 3]) -> Option<Lighting> {
+    let l2 = dot(to_light, to_light);
+    let n_l = dot(to_light, n);
+    (n_l > 0.0 && l2 > 0.0).then(|| {
+        let distance = l2.sqrt();
+        Lighting {
+            n_dot_l: n_l / distance,
+            irradiance: n_l / (l2 * distance),
+        }
+    })
 }
 
 /// A ray's nearest meeting with the cylinder.
@@ -277,11 +313,6 @@ impl SetupFrame {
         })
     }
 
-    /// Azimuth (radians) of a normal about the axis.
-    pub fn azimuth(&self, normal: [f64; 3]) -> f64 {
-        dot(normal, self.ey).atan2(dot(normal, self.ex))
-    }
-
     /// Position along the axis of a point.
     pub fn height(&self, point: [f64; 3]) -> f64 {
         dot(point, self.axis)
@@ -295,20 +326,13 @@ impl SetupFrame {
         let tangent = cross(self.axis, n);
         let theta_i = dot(to_light, tangent).atan2(dot(to_light, n));
         let theta_r = -dot(to_camera, tangent).atan2(dot(to_camera, n));
-        let l2 = dot(to_light, to_light);
-        let n_l = dot(to_light, n);
-        let irradiance = if n_l > 0.0 && l2 > 0.0 {
-            n_l / (l2 * l2.sqrt())
-        } else {
-            0.0
-        };
         PixelGeometry {
-            phi: self.azimuth(n).to_degrees(),
             theta_i: theta_i.to_degrees(),
             theta_r: theta_r.to_degrees(),
             cosines: Cosines::from_directions(n, to_light, to_camera),
-            irradiance,
+            irradiance: lighting(n, to_light).map_or(0.0, |l| l.irradiance),
             height_mm: self.height(hit.point),
+            azimuth: (dot(n, self.ey), dot(n, self.ex)),
         }
     }
 }
@@ -557,7 +581,7 @@ impl Setup {
     pub fn angles_at_column(&self, u: f64, theta_l_deg: f64) -> Option<SurfaceAngles> {
         self.pixel_geometry(u, self.principal_row(), theta_l_deg)
             .map(|g| SurfaceAngles {
-                phi: g.phi,
+                phi: g.phi(),
                 theta_i: g.theta_i,
                 theta_r: g.theta_r,
             })

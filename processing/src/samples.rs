@@ -411,7 +411,7 @@ pub fn write_csv(path: &Path, samples: &[Sample]) -> Result<(), SamplesError> {
 }
 
 /// Writes samples as CSV text to any writer; numbers in Rust's shortest round-trip form
-/// (the `decimal` module).
+/// (the `decimal` module), the uncertainty columns rounded to 6 significant digits.
 /// When any sample carries 3D cosines, every row gets the four cosine columns (in-plane
 /// cosines for samples without). When every sample carries its uncertainty, the
 /// uncertainty columns follow. A dropped channel is written as an empty field. No field
@@ -434,10 +434,10 @@ pub fn write_csv_to<W: Write>(mut writer: W, samples: &[Sample]) -> Result<(), S
     writeln!(writer, "{}", header.join(",")).map_err(io)?;
     // Rows per block formatted at once: a few hundred kB of text.
     const BLOCK: usize = 1024;
-    let blocks: Vec<String> = samples
+    let blocks: Vec<Vec<u8>> = samples
         .par_chunks(BLOCK)
         .map(|block| {
-            let mut text = String::new();
+            let mut text = Vec::new();
             for s in block {
                 write_row(&mut text, s, with_cosines, with_uncertainty);
             }
@@ -445,23 +445,27 @@ pub fn write_csv_to<W: Write>(mut writer: W, samples: &[Sample]) -> Result<(), S
         })
         .collect();
     for block in blocks {
-        writer.write_all(block.as_bytes()).map_err(io)?;
+        writer.write_all(&block).map_err(io)?;
     }
     writer.flush().map_err(io)
 }
 
+/// Significant digits of the uncertainty columns: rounding them so changes a budget by
+/// under 10⁻⁵ of itself, far below what any uncertainty is known to.
+const UNCERTAINTY_DIGITS: i32 = 6;
+
 /// One sample's CSV line, with its newline, appended to `text`.
-fn write_row(text: &mut String, s: &Sample, with_cosines: bool, with_uncertainty: bool) {
-    let number = |text: &mut String, v: f64| {
-        text.push(',');
+fn write_row(text: &mut Vec<u8>, s: &Sample, with_cosines: bool, with_uncertainty: bool) {
+    let number = |text: &mut Vec<u8>, v: f64| {
+        text.push(b',');
         decimal::push(text, v);
     };
     decimal::push(text, s.theta_l);
     number(text, s.theta_i);
     number(text, s.theta_r);
-    let channel = |text: &mut String, c: usize, v: f64| {
+    let channel = |text: &mut Vec<u8>, c: usize, v: f64| {
         if s.dropped[c] {
-            text.push(',');
+            text.push(b',');
         } else {
             number(text, v);
         }
@@ -477,9 +481,12 @@ fn write_row(text: &mut String, s: &Sample, with_cosines: bool, with_uncertainty
     if let (Some(u), true) = (&s.uncertainty, with_uncertainty) {
         for v in std::iter::once(&u.noise).chain(&u.sources) {
             for (c, &value) in v.iter().enumerate() {
-                channel(text, c, value);
+                text.push(b',');
+                if !s.dropped[c] {
+                    decimal::push_rounded(text, value, UNCERTAINTY_DIGITS);
+                }
             }
         }
     }
-    text.push('\n');
+    text.push(b'\n');
 }

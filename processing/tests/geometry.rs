@@ -272,7 +272,7 @@ fn arm_zero_offset_is_a_light_angle_and_tilt_rotates_the_image() {
         );
         let seen = |s: &Setup, u: f64, v: f64| {
             let g = s.pixel_geometry(u, v, -30.0).expect("on the cylinder");
-            (g.height_mm, g.phi)
+            (g.height_mm, g.phi())
         };
         let a = seen(&upright, u, v);
         let b = seen(&tilted, cx + xr, cy - yr);
@@ -325,13 +325,15 @@ fn camera_yaw_and_roll_turn_the_rays_about_the_camera_centre() {
                 "roll at {u}"
             );
             if let (Some(a), Some(b)) = (rolled_seen, rolled_expected) {
-                assert!((a.phi - b.phi).abs() < 1e-9 && (a.height_mm - b.height_mm).abs() < 1e-9);
+                assert!(
+                    (a.phi() - b.phi()).abs() < 1e-9 && (a.height_mm - b.height_mm).abs() < 1e-9
+                );
                 compared += 1;
             }
         }
         assert_eq!(seen.is_some(), expected.is_some(), "yaw at {u}");
         if let (Some(a), Some(b)) = (seen, expected) {
-            assert!((a.phi - b.phi).abs() < 1e-9, "{a:?} {b:?}");
+            assert!((a.phi() - b.phi()).abs() < 1e-9, "{a:?} {b:?}");
             assert!((a.theta_i - b.theta_i).abs() < 1e-9);
             assert!((a.cosines.n_dot_h - b.cosines.n_dot_h).abs() < 1e-12);
             compared += 1;
@@ -343,7 +345,7 @@ fn camera_yaw_and_roll_turn_the_rays_about_the_camera_centre() {
     let front = |s: &Setup| {
         (0..3872)
             .map(f64::from)
-            .filter_map(|u| Some((u, s.pixel_geometry(u, cy, -30.0)?.phi.abs())))
+            .filter_map(|u| Some((u, s.pixel_geometry(u, cy, -30.0)?.phi().abs())))
             .min_by(|a, b| a.1.total_cmp(&b.1))
             .unwrap()
             .0

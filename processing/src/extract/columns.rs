@@ -7,18 +7,18 @@
 use rayon::prelude::*;
 
 use super::drops::{DropCounts, DropReason};
-use super::layout::{ColumnGeometry, StripLayout, STRIP_ROWS};
+use super::layout::{ColumnGeometry, StripLayout, StripPixels, STRIP_ROWS};
 use super::options::ExtractOptions;
 use super::sharp::{is_sharp, pooled_row_noise, Curvature};
 use super::strip::{StripRows, StripValue};
-use crate::geometry::{PixelGeometry, Setup};
+use crate::geometry::Setup;
 use crate::hdr::HdrImage;
 use crate::samples::{Sample, SampleUncertainty};
 
-/// One column before the samples are made: its strips' pixel geometry (`None` off the
+/// One column before the samples are made: what its strip pixels see (`None` off the
 /// cylinder or unlit), its strips' rows, and how each strip curves per channel.
 struct Column {
-    geometry: Option<(Vec<PixelGeometry>, Vec<PixelGeometry>)>,
+    pixels: Option<StripPixels>,
     sample: StripRows,
     white: StripRows,
     curvature: [Option<Curvature>; 3],
@@ -29,21 +29,13 @@ impl Column {
     /// The sample's geometry and the two strips' values: five-row means, or on a
     /// sharp peak the sample strip's centre row with that pixel's geometry.
     fn read(&self, sharp: bool) -> Option<(ColumnGeometry, StripValue, StripValue)> {
-        let (sample, white) = self.geometry.as_ref()?;
-        Some(if sharp {
-            let centre = std::slice::from_ref(&sample[STRIP_ROWS / 2]);
-            (
-                ColumnGeometry::new(centre, white),
-                self.sample.centre(),
-                self.white.mean(),
-            )
+        let geometry = self.pixels.as_ref()?.column_geometry(sharp);
+        let sample = if sharp {
+            self.sample.centre()
         } else {
-            (
-                ColumnGeometry::new(sample, white),
-                self.sample.mean(),
-                self.white.mean(),
-            )
-        })
+            self.sample.mean()
+        };
+        Some((geometry, sample, self.white.mean()))
     }
 }
 
@@ -76,20 +68,18 @@ pub(super) fn extract_theta(
     let columns: Vec<Column> = (0..map.width)
         .into_par_iter()
         .map(|x| {
-            let geometry = layout
-                .strip_geometry(&view, x, layout.sample_row)
-                .zip(layout.strip_geometry(&view, x, layout.white_row));
+            let pixels = layout.strip_pixels(&view, x);
             let sample = StripRows::read(map, x, layout.sample_map_row);
             let white = StripRows::read(map, x, layout.white_map_row);
-            let (curvature, white_curvature) = match &geometry {
-                Some((sample_pixels, white_pixels)) => (
-                    sample.curvatures(sample_pixels),
-                    white.curvatures(white_pixels),
+            let (curvature, white_curvature) = match &pixels {
+                Some(p) => (
+                    sample.curvatures(&p.sample.map(|g| g.irradiance)),
+                    white.curvatures(&p.white.map(|l| l.irradiance)),
                 ),
                 None => ([None; 3], [None; 3]),
             };
             Column {
-                geometry,
+                pixels,
                 sample,
                 white,
                 curvature,

@@ -6,7 +6,7 @@ use std::ops::Range;
 
 use super::error::ExtractError;
 use crate::brdf::Cosines;
-use crate::geometry::{PixelGeometry, Setup, SetupView};
+use crate::geometry::{Lighting, PixelGeometry, Setup, SetupView};
 
 /// Rows averaged around each strip's centre row (paper §2.2).
 pub const STRIP_ROWS: usize = 5;
@@ -101,37 +101,67 @@ impl StripLayout {
         (self.scale * i) as f64 + (self.scale as f64 - 1.0) / 2.0
     }
 
-    /// The geometry of the strip rows around capture row `centre` at column `x` seen
-    /// through `view`: `None` if any of those pixels misses the cylinder or is unlit.
-    pub(super) fn strip_geometry(
+    /// The values `pixel` gives the strip rows around capture row `centre` at sensor
+    /// column `u`, top to bottom; `None` if any row's is.
+    fn rows<T: Copy>(
         &self,
-        view: &SetupView,
-        x: usize,
+        u: f64,
         centre: usize,
-    ) -> Option<Vec<PixelGeometry>> {
+        pixel: impl Fn(f64, f64) -> Option<T>,
+    ) -> Option<[T; STRIP_ROWS]> {
+        let first = centre - STRIP_ROWS / 2;
+        let rows: [Option<T>; STRIP_ROWS] =
+            std::array::from_fn(|i| pixel(u, self.sensor(first + i)));
+        let mut all = [rows[0]?; STRIP_ROWS];
+        for (to, row) in all.iter_mut().zip(rows) {
+            *to = row?;
+        }
+        Some(all)
+    }
+
+    /// What column `x`'s strip pixels see through `view`: `None` if any of them misses
+    /// the cylinder or is unlit.
+    pub(super) fn strip_pixels(&self, view: &SetupView, x: usize) -> Option<StripPixels> {
         let u = self.sensor(x);
-        (centre - STRIP_ROWS / 2..=centre + STRIP_ROWS / 2)
-            .map(|y| {
-                view.pixel_geometry(u, self.sensor(y))
+        Some(StripPixels {
+            sample: self.rows(u, self.sample_row, |u, v| {
+                view.pixel_geometry(u, v)
                     .filter(|g| g.irradiance > 0.0 && g.theta_i.abs() < 90.0)
-            })
-            .collect()
+            })?,
+            white: self.rows(u, self.white_row, |u, v| view.lighting(u, v))?,
+        })
     }
 
     /// Column `x`'s [`ColumnGeometry`] both ways a column is read, seen through `view`:
-    /// `[mean of the sample rows, centre row alone]`; `None` as [`Self::strip_geometry`].
+    /// `[mean of the sample rows, centre row alone]`; `None` as [`Self::strip_pixels`].
     pub(super) fn column_geometry(
         &self,
         view: &SetupView,
         x: usize,
     ) -> Option<[ColumnGeometry; 2]> {
-        let sample = self.strip_geometry(view, x, self.sample_row)?;
-        let white = self.strip_geometry(view, x, self.white_row)?;
-        let centre = std::slice::from_ref(&sample[STRIP_ROWS / 2]);
-        Some([
-            ColumnGeometry::new(&sample, &white),
-            ColumnGeometry::new(centre, &white),
-        ])
+        let pixels = self.strip_pixels(view, x)?;
+        Some([false, true].map(|centre| pixels.column_geometry(centre)))
+    }
+}
+
+/// What one column's strip pixels see, rows top to bottom: the sample's whole geometry,
+/// the white's lighting.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct StripPixels {
+    pub(super) sample: [PixelGeometry; STRIP_ROWS],
+    pub(super) white: [Lighting; STRIP_ROWS],
+}
+
+impl StripPixels {
+    /// The column's [`ColumnGeometry`], its sample read as the mean of the rows or, with
+    /// `centre`, the centre row alone.
+    pub(super) fn column_geometry(&self, centre: bool) -> ColumnGeometry {
+        let sample = if centre {
+            std::slice::from_ref(&self.sample[STRIP_ROWS / 2])
+        } else {
+            &self.sample[..]
+        };
+        ColumnGeometry::new(sample, &self.white)
     }
 }
 
@@ -149,10 +179,12 @@ pub(super) struct ColumnGeometry {
 }
 
 impl ColumnGeometry {
-    pub(super) fn new(sample: &[PixelGeometry], white: &[PixelGeometry]) -> Self {
+    fn new(sample: &[PixelGeometry], white: &[Lighting]) -> Self {
         let mean = |f: &dyn Fn(&PixelGeometry) -> f64, of: &[PixelGeometry]| {
             of.iter().map(f).sum::<f64>() / of.len() as f64
         };
+        let white_mean =
+            |f: &dyn Fn(&Lighting) -> f64| white.iter().map(f).sum::<f64>() / white.len() as f64;
         Self {
             theta_i: mean(&|g| g.theta_i, sample),
             theta_r: mean(&|g| g.theta_r, sample),
@@ -162,8 +194,8 @@ impl ColumnGeometry {
                 n_dot_h: mean(&|g| g.cosines.n_dot_h, sample),
                 v_dot_h: mean(&|g| g.cosines.v_dot_h, sample),
             },
-            irradiance_ratio: mean(&|g| g.irradiance, white) / mean(&|g| g.irradiance, sample),
-            white_cos_i: mean(&|g| g.cosines.n_dot_l, white),
+            irradiance_ratio: white_mean(&|l| l.irradiance) / mean(&|g| g.irradiance, sample),
+            white_cos_i: white_mean(&|l| l.n_dot_l),
         }
     }
 

@@ -137,40 +137,60 @@ impl Knots {
             .collect()
     }
 
-    /// The geometry the moved setup of `changes` gives column `x`, read `way` (0 the rows'
-    /// mean, 1 the centre row), whose stated geometry is `stated`: the stated one plus the
-    /// change interpolated by the cubic through the four knots around `x` (the knot's own
-    /// at a knot). Where one of those knots is off the cylinder, or past the first or the
-    /// last, it is computed at `x` itself; `None` if `x` is then off the cylinder.
-    fn moved(
-        &self,
-        changes: &[Option<Change>],
-        (layout, view): (&StripLayout, &SetupView),
-        (x, way, stated): (usize, usize, &ColumnGeometry),
-    ) -> Option<ColumnGeometry> {
-        let interpolated = match self.columns.binary_search(&x) {
-            Ok(k) => changes[k].map(|c| add(stated, &c[way])),
-            Err(k) if k >= 2 && k + 1 < self.columns.len() => (|| {
+    /// Where column `x` falls among the knots: on one, or between the middle two of four
+    /// consecutive knots with their Lagrange weights at `x` (cubic interpolation).
+    fn place(&self, x: usize) -> Place {
+        match self.columns.binary_search(&x) {
+            Ok(k) => Place::Knot(k),
+            Err(k) if k >= 2 && k + 1 < self.columns.len() => {
                 let nodes: [f64; 4] = std::array::from_fn(|a| self.columns[k - 2 + a] as f64);
                 let t = x as f64;
-                let mut change = [0.0; 8];
-                for (a, knot) in changes[k - 2..k + 2].iter().enumerate() {
-                    let knot = &knot.as_ref()?[way];
-                    // Lagrange weight of node a at t.
-                    let w = (0..4)
+                let weights = std::array::from_fn(|a| {
+                    (0..4)
                         .filter(|&b| b != a)
                         .map(|b| (t - nodes[b]) / (nodes[a] - nodes[b]))
-                        .product::<f64>();
-                    for (sum, v) in change.iter_mut().zip(knot) {
+                        .product::<f64>()
+                });
+                Place::Between(k - 2, weights)
+            }
+            Err(_) => Place::Outside,
+        }
+    }
+
+    /// The geometry the moved setup of `changes` gives column `x` at `place`, read `way`
+    /// (0 the rows' mean, 1 the centre row), whose stated geometry is `stated`: the
+    /// stated one plus the change at the knot or interpolated between the knots around
+    /// `x`. Where one of those knots is off the cylinder, or `x` lies before the second
+    /// knot or past the one before last, it is computed at `x` itself; `None` if `x` is
+    /// then off the cylinder.
+    fn moved(
+        changes: &[Option<Change>],
+        (layout, view): (&StripLayout, &SetupView),
+        (x, place, way, stated): (usize, &Place, usize, &ColumnGeometry),
+    ) -> Option<ColumnGeometry> {
+        let interpolated = match place {
+            Place::Knot(k) => changes[*k].map(|c| add(stated, &c[way])),
+            Place::Between(first, weights) => (|| {
+                let mut change = [0.0; 8];
+                for (w, knot) in weights.iter().zip(&changes[*first..*first + 4]) {
+                    for (sum, v) in change.iter_mut().zip(&knot.as_ref()?[way]) {
                         *sum += w * v;
                     }
                 }
                 Some(add(stated, &change))
             })(),
-            Err(_) => None,
+            Place::Outside => None,
         };
         interpolated.or_else(|| layout.column_geometry(view, x).map(|g| g[way]))
     }
+}
+
+/// Where a column falls among the [`Knots`] ([`Knots::place`]).
+enum Place {
+    Knot(usize),
+    /// The first of four knots and their weights.
+    Between(usize, [f64; 4]),
+    Outside,
 }
 
 /// `g` plus `change` ([`ColumnGeometry::to_array`] order).
@@ -204,6 +224,7 @@ pub(super) fn add_sensitivities(
     let slope = slopes(samples, &half_angles);
     let knots = Knots::new(stated.layout, &setup.view(stated.theta_l), first, last);
     let angular = setup.white_angular();
+    let places: Vec<Place> = stated.columns.iter().map(|&x| knots.place(x)).collect();
     let stated_samples: &[Sample] = samples;
     let position = |source| Source::ALL.iter().position(|&s| s == source).unwrap_or(0);
     let changes: Vec<(usize, Vec<[f64; 3]>)> = inputs
@@ -223,10 +244,10 @@ pub(super) fn add_sensitivities(
                     .map(|i| {
                         let g = &stated.geometry[i];
                         let way = usize::from(stated.centre_row[i]);
-                        let moved = knots.moved(
+                        let moved = Knots::moved(
                             &changes,
                             (stated.layout, &view),
-                            (stated.columns[i], way, g),
+                            (stated.columns[i], &places[i], way, g),
                         );
                         let Some(m) = moved else {
                             return [0.0; 3];
@@ -337,9 +358,12 @@ mod tests {
                             let exact = layout.column_geometry(moved_view, *x);
                             (0..2).filter_map(move |way| {
                                 let exact = exact?[way];
-                                let moved = knots
-                                    .moved(changes, (layout, moved_view), (*x, way, &g[way]))
-                                    .expect("interpolated where it is computed");
+                                let moved = Knots::moved(
+                                    changes,
+                                    (layout, moved_view),
+                                    (*x, &knots.place(*x), way, &g[way]),
+                                )
+                                .expect("interpolated where it is computed");
                                 Some((g[way].to_array(), exact.to_array(), moved.to_array()))
                             })
                         })

@@ -3,7 +3,6 @@
 
 use super::layout::STRIP_ROWS;
 use super::sharp::Curvature;
-use crate::geometry::PixelGeometry;
 use crate::hdr::HdrImage;
 
 /// One strip's rows at one column: each row's radiance and flags.
@@ -28,11 +27,10 @@ impl StripRows {
         rows
     }
 
-    /// How each channel curves over the rows, per unit of their pixels' irradiance.
-    pub(super) fn curvatures(&self, pixels: &[PixelGeometry]) -> [Option<Curvature>; 3] {
-        let irradiance = std::array::from_fn(|i| pixels[i].irradiance);
+    /// How each channel curves over the rows, per unit of their pixels' `irradiance`.
+    pub(super) fn curvatures(&self, irradiance: &[f64; STRIP_ROWS]) -> [Option<Curvature>; 3] {
         std::array::from_fn(|c| {
-            self.reflected(c, &irradiance)
+            self.reflected(c, irradiance)
                 .and_then(|v| Curvature::of(&v))
         })
     }
