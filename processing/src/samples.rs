@@ -227,20 +227,24 @@ pub fn read_csv_from<R: Read>(reader: R) -> Result<Vec<Sample>, SamplesError> {
     let mut csv = csv::ReaderBuilder::new()
         .has_headers(true)
         .flexible(true)
-        .trim(csv::Trim::All)
         .from_reader(reader);
-    let header = csv.headers().map_err(SamplesError::Csv)?.clone();
-    let leading: Vec<&str> = header.iter().take(HEADER.len()).collect();
-    if leading != HEADER {
+    let header: Vec<String> = csv
+        .headers()
+        .map_err(SamplesError::Csv)?
+        .iter()
+        .map(|h| h.trim().to_string())
+        .collect();
+    let header_text = || header.join(",");
+    if header.len() < HEADER.len() || header[..HEADER.len()] != HEADER {
         return Err(SamplesError::Header {
             expected: HEADER.join(","),
-            found: header.iter().collect::<Vec<_>>().join(","),
+            found: header_text(),
         });
     }
     // Indices of the cosine columns: all four or none.
     let cosine_index: Vec<usize> = COSINE_COLUMNS
         .iter()
-        .filter_map(|name| header.iter().position(|h| h == *name))
+        .filter_map(|name| header.iter().position(|h| h == name))
         .collect();
     let cosine_index = match cosine_index.len() {
         0 => None,
@@ -248,7 +252,7 @@ pub fn read_csv_from<R: Read>(reader: R) -> Result<Vec<Sample>, SamplesError> {
         _ => {
             return Err(SamplesError::Header {
                 expected: format!("all or none of {}", COSINE_COLUMNS.join(",")),
-                found: header.iter().collect::<Vec<_>>().join(","),
+                found: header_text(),
             })
         }
     };
@@ -273,20 +277,73 @@ pub fn read_csv_from<R: Read>(reader: R) -> Result<Vec<Sample>, SamplesError> {
         _ => {
             return Err(SamplesError::Header {
                 expected: format!("all or none of {}", names.join(",")),
-                found: header.iter().collect::<Vec<_>>().join(","),
+                found: header_text(),
             })
         }
     };
+    let columns = Columns {
+        cosine: cosine_index,
+        uncertainty: uncertainty_index,
+        names,
+    };
+    // Rows are read in blocks, each block's fields parsed in parallel; the first bad row
+    // in file order is the one reported.
+    const BLOCK: usize = 1024;
+    let mut block = vec![csv::ByteRecord::new(); BLOCK];
     let mut samples = Vec::new();
-    for record in csv.records() {
-        let record = record.map_err(|e| match e.position() {
-            Some(pos) => SamplesError::Row {
-                line: pos.line(),
-                message: e.to_string(),
-            },
-            None => SamplesError::Csv(e),
-        })?;
+    loop {
+        let mut filled = 0;
+        while filled < BLOCK
+            && csv
+                .read_byte_record(&mut block[filled])
+                .map_err(|e| match e.position() {
+                    Some(pos) => SamplesError::Row {
+                        line: pos.line(),
+                        message: e.to_string(),
+                    },
+                    None => SamplesError::Csv(e),
+                })?
+        {
+            filled += 1;
+        }
+        let rows: Vec<Result<Sample, SamplesError>> = block[..filled]
+            .par_iter()
+            .map(|r| columns.sample(r))
+            .collect();
+        for row in rows {
+            samples.push(row?);
+        }
+        if filled < BLOCK {
+            return Ok(samples);
+        }
+    }
+}
+
+/// Where a samples CSV holds its optional columns.
+struct Columns {
+    /// The four cosine columns, if present.
+    cosine: Option<Vec<usize>>,
+    /// Per uncertainty column ([`uncertainty_columns`] order), where it is, if present.
+    uncertainty: Option<Vec<Option<usize>>>,
+    names: Vec<String>,
+}
+
+impl Columns {
+    /// The sample of one row.
+    fn sample(&self, record: &csv::ByteRecord) -> Result<Sample, SamplesError> {
         let line = record.position().map_or(0, csv::Position::line);
+        let text = std::str::from_utf8(record.as_slice()).map_err(|_| SamplesError::Row {
+            line,
+            message: String::from("not UTF-8 text"),
+        })?;
+        // Field `i`, trimmed; empty when absent.
+        let field = |i: usize| {
+            record
+                .range(i)
+                .and_then(|r| text.get(r))
+                .unwrap_or("")
+                .trim_ascii()
+        };
         if record.len() < HEADER.len() {
             return Err(SamplesError::Row {
                 line,
@@ -300,9 +357,8 @@ pub fn read_csv_from<R: Read>(reader: R) -> Result<Vec<Sample>, SamplesError> {
         }
         let mut values = [0.0; 6];
         let mut dropped = [false; 3];
-        for (i, ((value, column), text)) in
-            values.iter_mut().zip(HEADER).zip(record.iter()).enumerate()
-        {
+        for (i, (value, column)) in values.iter_mut().zip(HEADER).enumerate() {
+            let text = field(i);
             // An empty β field is a dropped value; the angles are always required.
             if i >= 3 && text.is_empty() {
                 dropped[i - 3] = true;
@@ -310,17 +366,19 @@ pub fn read_csv_from<R: Read>(reader: R) -> Result<Vec<Sample>, SamplesError> {
                 *value = parse_field(text, line, column)?;
             }
         }
-        let cosines = match &cosine_index {
+        let cosines = match &self.cosine {
             None => None,
             Some(index) => {
                 let mut c = [0.0; 4];
                 for ((value, column), &i) in c.iter_mut().zip(COSINE_COLUMNS).zip(index) {
-                    let text = record.get(i).ok_or_else(|| SamplesError::Field {
-                        line,
-                        column,
-                        message: String::from("missing"),
-                    })?;
-                    *value = parse_field(text, line, column)?;
+                    if i >= record.len() {
+                        return Err(SamplesError::Field {
+                            line,
+                            column,
+                            message: String::from("missing"),
+                        });
+                    }
+                    *value = parse_field(field(i), line, column)?;
                 }
                 Some(Cosines {
                     n_dot_l: c[0],
@@ -330,7 +388,7 @@ pub fn read_csv_from<R: Read>(reader: R) -> Result<Vec<Sample>, SamplesError> {
                 })
             }
         };
-        let uncertainty = match &uncertainty_index {
+        let uncertainty = match &self.uncertainty {
             None => None,
             Some(index) => {
                 let mut u = [[0.0; 3]; 1 + Source::COUNT];
@@ -338,13 +396,13 @@ pub fn read_csv_from<R: Read>(reader: R) -> Result<Vec<Sample>, SamplesError> {
                     let Some(&i) = i.as_ref() else {
                         continue;
                     };
-                    let text = record.get(i).unwrap_or("");
+                    let text = field(i);
                     // A dropped channel has no uncertainty; a kept one needs its value.
                     if dropped[k % 3] && text.is_empty() {
                         continue;
                     }
-                    u[k / 3][k % 3] =
-                        parse_field(text, line, "uncertainty").map_err(|e| e.named(&names[k]))?;
+                    u[k / 3][k % 3] = parse_field(text, line, "uncertainty")
+                        .map_err(|e| e.named(&self.names[k]))?;
                 }
                 if u[0].iter().any(|&v| v < 0.0) {
                     return Err(SamplesError::Row {
@@ -358,7 +416,7 @@ pub fn read_csv_from<R: Read>(reader: R) -> Result<Vec<Sample>, SamplesError> {
                 })
             }
         };
-        samples.push(Sample {
+        Ok(Sample {
             theta_l: values[0],
             theta_i: values[1],
             theta_r: values[2],
@@ -366,9 +424,8 @@ pub fn read_csv_from<R: Read>(reader: R) -> Result<Vec<Sample>, SamplesError> {
             cosines,
             dropped,
             uncertainty,
-        });
+        })
     }
-    Ok(samples)
 }
 
 /// One CSV field as a finite number.
