@@ -118,6 +118,22 @@ pub(crate) fn push_rounded(text: &mut Vec<u8>, v: f64, significant: i32) {
     push(text, v);
 }
 
+/// `v` rounded to `significant` significant digits (1 ≤ `significant` ≤ 15): the f64
+/// nearest the decimal [`push_rounded`] writes, which reads back as itself. Values it
+/// writes whole are returned as they are.
+pub(crate) fn rounded(v: f64, significant: i32) -> f64 {
+    if v == 0.0 || !v.is_finite() {
+        return v;
+    }
+    let shift = significant - 1 - leading_exponent(v.abs());
+    // n / 10^k and n · 10^k of an integer n and an exact power are correctly rounded.
+    match POWERS_OF_TEN.get(shift.unsigned_abs() as usize) {
+        Some(&p) if shift >= 0 => (v * p).round() / p,
+        Some(&p) => (v / p).round() * p,
+        None => v,
+    }
+}
+
 /// ⌊log10 a⌋ for a finite a > 0 (one less for a within rounding of a power of ten
 /// beyond 10^±22), from a's binary exponent.
 fn leading_exponent(a: f64) -> i32 {
@@ -252,6 +268,9 @@ mod tests {
             let text = written(v);
             let back: f64 = text.parse().unwrap();
             assert!((back - v).abs() <= 5e-6 * v.abs(), "{v} {text}");
+            // `rounded` is the value read back, and is written the same.
+            assert_eq!(rounded(v, 6), back, "{v} {text}");
+            assert_eq!(written(back), text);
             let digits = text.trim_start_matches(['-', '0', '.']).replace('.', "");
             assert!(digits.trim_end_matches('0').len() <= 6, "{v} {text}");
         }

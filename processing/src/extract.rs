@@ -233,6 +233,11 @@ pub fn extract_scan_with_progress(
                 options.grazing_limit_deg,
                 (&mut samples, &white_angular),
             );
+            // Stated to the digits the samples CSV holds: fits of these samples and of
+            // their file are the same.
+            for u in samples.iter_mut().filter_map(|s| s.uncertainty.as_mut()) {
+                *u = u.as_written();
+            }
         }
         extraction.per_theta.push(ThetaSummary {
             theta_l,

@@ -60,6 +60,19 @@ pub struct SampleUncertainty {
     pub sources: [[f64; 3]; Source::COUNT],
 }
 
+impl SampleUncertainty {
+    /// The uncertainty as the samples CSV states it: every value rounded to 6
+    /// significant digits (`UNCERTAINTY_DIGITS`), so that samples in memory and read
+    /// back from their file are the same.
+    pub(crate) fn as_written(&self) -> Self {
+        let round = |v: [f64; 3]| v.map(|x| decimal::rounded(x, UNCERTAINTY_DIGITS));
+        Self {
+            noise: round(self.noise),
+            sources: self.sources.map(round),
+        }
+    }
+}
+
 fn none_dropped(dropped: &[bool; 3]) -> bool {
     !dropped.iter().any(|&d| d)
 }
