@@ -80,56 +80,66 @@ const POWERS_OF_TEN: [f64; 23] = [
     1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
 ];
 
+/// |v| rounded to `significant` significant digits (1 ≤ `significant` ≤ 15), halves
+/// up, as n · 10^−shift with n an integer (at most `significant` + 1 digits) and the
+/// exact power 10^|shift|; `None` for 0, non-finite values and rounding steps beyond
+/// 10^±22, which are no exact f64.
+fn rounded_digits(v: f64, significant: i32) -> Option<(u64, i32, f64)> {
+    if v == 0.0 || !v.is_finite() {
+        return None;
+    }
+    let shift = significant - 1 - leading_exponent(v.abs());
+    let &p = POWERS_OF_TEN.get(shift.unsigned_abs() as usize)?;
+    let scaled = if shift >= 0 { v.abs() * p } else { v.abs() / p };
+    Some(((scaled + 0.5) as u64, shift, p))
+}
+
 /// Appends `v` rounded to `significant` significant digits (1 ≤ `significant` ≤ 15) in
 /// [`push`]'s layout, the rounded decimal itself: `0.0169687` for 0.01696870136943567 at
 /// 6. Values whose rounding step is not an exact power of ten in f64 (beyond 10^±22) are
 /// written whole.
 pub(crate) fn push_rounded(text: &mut Vec<u8>, v: f64, significant: i32) {
-    if v != 0.0 && v.is_finite() {
-        let mut shift = significant - 1 - leading_exponent(v.abs());
-        if let Some(&p) = POWERS_OF_TEN.get(shift.unsigned_abs() as usize) {
-            // |v| · 10^shift to the nearest integer (halves up): the digits, at most
-            // significant + 1 of them.
-            let scaled = if shift >= 0 { v.abs() * p } else { v.abs() / p };
-            let mut n = (scaled + 0.5) as u64;
-            if n == 0 {
-                text.push(b'0');
-                return;
-            }
-            while n.is_multiple_of(10) {
-                n /= 10;
-                shift -= 1;
-            }
-            let mut buffer = [0u8; 20];
-            let mut start = buffer.len();
-            while n > 0 {
-                start -= 1;
-                buffer[start] = b'0' + (n % 10) as u8;
-                n /= 10;
-            }
-            let digits = &buffer[start..];
-            if v < 0.0 {
-                text.push(b'-');
-            }
-            positional(text, digits, digits.len() as i32 - shift);
-            return;
-        }
+    let Some((mut n, mut shift, _)) = rounded_digits(v, significant) else {
+        push(text, v);
+        return;
+    };
+    if n == 0 {
+        text.push(b'0');
+        return;
     }
-    push(text, v);
+    while n.is_multiple_of(10) {
+        n /= 10;
+        shift -= 1;
+    }
+    let mut buffer = [0u8; 20];
+    let mut start = buffer.len();
+    while n > 0 {
+        start -= 1;
+        buffer[start] = b'0' + (n % 10) as u8;
+        n /= 10;
+    }
+    let digits = &buffer[start..];
+    if v < 0.0 {
+        text.push(b'-');
+    }
+    positional(text, digits, digits.len() as i32 - shift);
 }
 
 /// `v` rounded to `significant` significant digits (1 ≤ `significant` ≤ 15): the f64
 /// nearest the decimal [`push_rounded`] writes, which reads back as itself. Values it
 /// writes whole are returned as they are.
 pub(crate) fn rounded(v: f64, significant: i32) -> f64 {
-    if v == 0.0 || !v.is_finite() {
-        return v;
-    }
-    let shift = significant - 1 - leading_exponent(v.abs());
-    // n / 10^k and n · 10^k of an integer n and an exact power are correctly rounded.
-    match POWERS_OF_TEN.get(shift.unsigned_abs() as usize) {
-        Some(&p) if shift >= 0 => (v * p).round() / p,
-        Some(&p) => (v / p).round() * p,
+    match rounded_digits(v, significant) {
+        // n / 10^k and n · 10^k of an integer n < 2^53 and an exact power are correctly
+        // rounded.
+        Some((n, shift, p)) => {
+            let magnitude = if shift >= 0 {
+                n as f64 / p
+            } else {
+                n as f64 * p
+            };
+            magnitude.copysign(v)
+        }
         None => v,
     }
 }

@@ -165,6 +165,11 @@ impl StripPixels {
     }
 }
 
+/// The mean of `field` over `of` (never empty: a strip's rows, or its centre row).
+fn mean<T>(of: &[T], field: impl Fn(&T) -> f64) -> f64 {
+    of.iter().map(field).sum::<f64>() / of.len() as f64
+}
+
 /// The geometry of a column's sample (the mean of its strip pixels', or the centre
 /// pixel's), the irradiance ratio Ē_white / E_sample of its two strips and the white's
 /// angle of incidence.
@@ -180,22 +185,17 @@ pub(super) struct ColumnGeometry {
 
 impl ColumnGeometry {
     fn new(sample: &[PixelGeometry], white: &[Lighting]) -> Self {
-        let mean = |f: &dyn Fn(&PixelGeometry) -> f64, of: &[PixelGeometry]| {
-            of.iter().map(f).sum::<f64>() / of.len() as f64
-        };
-        let white_mean =
-            |f: &dyn Fn(&Lighting) -> f64| white.iter().map(f).sum::<f64>() / white.len() as f64;
         Self {
-            theta_i: mean(&|g| g.theta_i, sample),
-            theta_r: mean(&|g| g.theta_r, sample),
+            theta_i: mean(sample, |g| g.theta_i),
+            theta_r: mean(sample, |g| g.theta_r),
             cosines: Cosines {
-                n_dot_l: mean(&|g| g.cosines.n_dot_l, sample),
-                n_dot_v: mean(&|g| g.cosines.n_dot_v, sample),
-                n_dot_h: mean(&|g| g.cosines.n_dot_h, sample),
-                v_dot_h: mean(&|g| g.cosines.v_dot_h, sample),
+                n_dot_l: mean(sample, |g| g.cosines.n_dot_l),
+                n_dot_v: mean(sample, |g| g.cosines.n_dot_v),
+                n_dot_h: mean(sample, |g| g.cosines.n_dot_h),
+                v_dot_h: mean(sample, |g| g.cosines.v_dot_h),
             },
-            irradiance_ratio: white_mean(&|l| l.irradiance) / mean(&|g| g.irradiance, sample),
-            white_cos_i: white_mean(&|l| l.n_dot_l),
+            irradiance_ratio: mean(white, |l| l.irradiance) / mean(sample, |g| g.irradiance),
+            white_cos_i: mean(white, |l| l.n_dot_l),
         }
     }
 
