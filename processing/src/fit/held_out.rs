@@ -14,6 +14,9 @@
 //! parametric candidate fitted without that θL.
 #![doc = include_str!("held_out.md")]
 
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Mutex, OnceLock};
+
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -316,9 +319,13 @@ fn known(samples: &[Sample], theta_l: f64) -> Result<Vec<Sample>, String> {
 /// model reaches below what its own data interpolate to, except by extrapolating better
 /// beyond the measured θd.
 pub fn table_held_out(samples: &[Sample], base: Option<&HeldOut>, camera: &CameraModel) -> HeldOut {
+    // The windows are judged in parallel, and kept in order: the narrowest on a tie.
+    let judged: Vec<HeldOut> = CHROMATICITY_WINDOWS
+        .par_iter()
+        .map(|&window| table_folds(samples, window, base, camera))
+        .collect();
     let mut best: Option<(f64, HeldOut)> = None;
-    for window in CHROMATICITY_WINDOWS {
-        let held = table_folds(samples, window, base, camera);
+    for held in judged {
         let uv = held.median_delta_e_uv(false).unwrap_or(f64::INFINITY);
         if best.as_ref().is_none_or(|(b, _)| uv < *b) {
             best = Some((uv, held));
@@ -351,15 +358,12 @@ pub fn one_specular_colour_lobe_uv(
     camera: &CameraModel,
 ) -> Option<f64> {
     let folds: Vec<f64> = distinct_theta_l(samples)
-        .iter()
-        .filter_map(|&t| {
+        .into_par_iter()
+        .filter_map(|t| {
             let held = known(samples, t).ok()?;
-            let others = one_specular_colour(&table.without(t)?);
             let shape = base.and_then(|b| b.shape_without(t));
-            let estimated: Vec<[f64; 3]> = held
-                .iter()
-                .map(|s| others.predict_sample(s, shape))
-                .collect();
+            let others = one_specular_colour(&table.without(t)?).relative_to(shape);
+            let estimated: Vec<[f64; 3]> = held.iter().map(|s| others.predict_sample(s)).collect();
             score(t, &held, &estimated, camera).ok()?.lobe?.delta_e_uv
         })
         .collect();
@@ -450,17 +454,23 @@ fn table_folds(
         start: None,
     };
     let table = Table::new(samples, window).map_err(|e| e.to_string());
-    for t in distinct_theta_l(samples) {
-        let outcome = match &table {
-            Ok(table) => table_fold(
-                samples,
-                table,
-                t,
-                base.and_then(|b| b.shape_without(t)),
-                camera,
-            ),
-            Err(e) => Err(e.clone()),
-        };
+    let outcomes: Vec<(f64, Result<Fold, String>)> = distinct_theta_l(samples)
+        .into_par_iter()
+        .map(|t| {
+            let outcome = match &table {
+                Ok(table) => table_fold(
+                    samples,
+                    table,
+                    t,
+                    base.and_then(|b| b.shape_without(t)),
+                    camera,
+                ),
+                Err(e) => Err(e.clone()),
+            };
+            (t, outcome)
+        })
+        .collect();
+    for (t, outcome) in outcomes {
         match outcome {
             Ok(f) => held.folds.push(f),
             Err(e) => held.failed.push((t, e)),
@@ -481,11 +491,9 @@ fn table_fold(
     let held = known(samples, theta_l)?;
     let others = table
         .without(theta_l)
-        .ok_or_else(|| "no other θL to interpolate".to_string())?;
-    let estimated: Vec<[f64; 3]> = held
-        .iter()
-        .map(|s| others.predict_sample(s, shape))
-        .collect();
+        .ok_or_else(|| "no other θL to interpolate".to_string())?
+        .relative_to(shape);
+    let estimated: Vec<[f64; 3]> = held.iter().map(|s| others.predict_sample(s)).collect();
     score(theta_l, &held, &estimated, camera)
 }
 
@@ -504,40 +512,112 @@ fn near_of(variants: &[Variant], variant: Variant) -> Option<usize> {
         .find_map(|v| variants.iter().position(|&u| u == v))
 }
 
-/// Every variant's robust minimum on `samples` (`None` where its search failed), in
-/// parallel: the shared Cook–Torrance and Ward by the full search, then every other from
-/// the minimum of its [`near_of`] by Gauss–Newton steps ([`robust_minimum_near`]; the
-/// full search where they give up): one roughness per channel and a specular colour at
-/// 90° start as the shared roughness and the constant colour found, which they refine.
-fn minima(samples: &[Sample], variants: &[Variant]) -> Vec<Option<Start>> {
-    let near: Vec<Option<usize>> = variants.iter().map(|&v| near_of(variants, v)).collect();
-    let mut starts: Vec<Option<Start>> = vec![None; variants.len()];
-    // Each round searches the variants whose base is found (a chain is at most three long).
-    let mut done = vec![false; variants.len()];
-    while done.iter().any(|d| !d) {
-        let ready: Vec<usize> = (0..variants.len())
-            .filter(|&v| !done[v] && near[v].is_none_or(|b| done[b]))
-            .collect();
-        let found: Vec<(usize, Option<Start>)> = ready
-            .par_iter()
-            .map(|&v| {
-                let from = near[v].and_then(|b| starts[b].as_ref());
-                (
-                    v,
-                    robust_minimum_near(samples, &variants[v].options(), from).ok(),
-                )
-            })
-            .collect();
-        for (v, start) in found {
-            starts[v] = start;
-            done[v] = true;
+/// The work of [`leave_one_theta_l_out`] as a graph of tasks on the pool: every
+/// variant's robust minimum on `samples`, the shared Cook–Torrance and Ward by the full
+/// search, every other as soon as the minimum of its [`near_of`] is found, by
+/// Gauss–Newton steps from it ([`robust_minimum_near`]; the full search where they give
+/// up): one roughness per channel and a specular colour at 90° start as the shared
+/// roughness and the constant colour found, which they refine. A group of
+/// [`fit_groups`] is fitted without each θL as soon as its variants' minima are found,
+/// while other minima are still sought.
+struct Graph<'a> {
+    samples: &'a [Sample],
+    variants: &'a [Variant],
+    theta_l: &'a [f64],
+    camera: &'a CameraModel,
+    near: Vec<Option<usize>>,
+    groups: Vec<Vec<usize>>,
+    /// Each variant's minimum once sought (`None` inside where its search failed).
+    starts: Vec<OnceLock<Option<Start>>>,
+    /// Per group, how many of its variants' minima are still sought.
+    waiting: Vec<AtomicUsize>,
+    /// Each fold's variant, θL and outcome, as they end.
+    outcomes: Mutex<Vec<(usize, f64, FoldOutcome)>>,
+}
+
+impl<'a> Graph<'a> {
+    fn new(
+        samples: &'a [Sample],
+        variants: &'a [Variant],
+        theta_l: &'a [f64],
+        camera: &'a CameraModel,
+    ) -> Self {
+        let groups = fit_groups(variants);
+        Graph {
+            samples,
+            variants,
+            theta_l,
+            camera,
+            near: variants.iter().map(|&v| near_of(variants, v)).collect(),
+            waiting: groups.iter().map(|g| AtomicUsize::new(g.len())).collect(),
+            groups,
+            starts: variants.iter().map(|_| OnceLock::new()).collect(),
+            outcomes: Mutex::new(Vec::new()),
         }
     }
-    starts
+
+    /// Runs every task; returns the minima and each variant's fold outcomes in θL order.
+    fn run(self) -> (Vec<Option<Start>>, Vec<Folds>) {
+        rayon::scope(|scope| {
+            for v in (0..self.variants.len()).filter(|&v| self.near[v].is_none()) {
+                let graph = &self;
+                scope.spawn(move |scope| graph.search(scope, v));
+            }
+        });
+        let starts: Vec<Option<Start>> = self
+            .starts
+            .iter()
+            .map(|s| s.get().copied().flatten())
+            .collect();
+        let mut outcomes = self
+            .outcomes
+            .into_inner()
+            .unwrap_or_else(|e| e.into_inner());
+        let position = |t: f64| self.theta_l.iter().position(|&u| u == t);
+        outcomes.sort_by_key(|(v, t, _)| (*v, position(*t)));
+        let mut by_variant: Vec<Folds> = vec![Vec::new(); self.variants.len()];
+        for (v, t, outcome) in outcomes {
+            by_variant[v].push((t, outcome));
+        }
+        (starts, by_variant)
+    }
+
+    /// Seeks variant `v`'s minimum, then starts what waited for it.
+    fn search<'s>(&'s self, scope: &rayon::Scope<'s>, v: usize) {
+        let from = self.near[v].and_then(|b| self.starts[b].get().copied().flatten());
+        let start =
+            robust_minimum_near(self.samples, &self.variants[v].options(), from.as_ref()).ok();
+        let _ = self.starts[v].set(start);
+        for w in (0..self.variants.len()).filter(|&w| self.near[w] == Some(v)) {
+            scope.spawn(move |scope| self.search(scope, w));
+        }
+        for (g, group) in self.groups.iter().enumerate() {
+            if group.contains(&v) && self.waiting[g].fetch_sub(1, Ordering::AcqRel) == 1 {
+                for &t in self.theta_l {
+                    scope.spawn(move |_| self.fold(group, t));
+                }
+            }
+        }
+    }
+
+    /// `group` fitted without θL `t` and scored there.
+    fn fold(&self, group: &[usize], t: f64) {
+        let starts: Vec<Option<Start>> = self
+            .starts
+            .iter()
+            .map(|s| s.get().copied().flatten())
+            .collect();
+        let done = fold_group(self.samples, self.variants, &starts, group, t, self.camera);
+        let mut outcomes = self.outcomes.lock().unwrap_or_else(|e| e.into_inner());
+        outcomes.extend(done.into_iter().map(|(v, outcome)| (v, t, outcome)));
+    }
 }
 
 /// A fold scored with its fit's shape, or why it failed.
 type FoldOutcome = Result<(Fold, Shape), String>;
+
+/// A variant's fold outcomes by the θL left out.
+type Folds = Vec<(f64, FoldOutcome)>;
 
 /// Every variant judged at every θL of `samples` in turn, fits in parallel (one job per
 /// θL and group of `fit_groups`). Needs two θL at least (each fit sees the others).
@@ -555,24 +635,12 @@ pub fn leave_one_theta_l_out(
     }
     // Each fold's fit starts from the variant's minimum on every θL, which it differs
     // from by one θL of several.
-    let starts = minima(samples, variants);
-    let groups = fit_groups(variants);
-    let jobs: Vec<(&[usize], f64)> = theta_l
-        .iter()
-        .flat_map(|&t| groups.iter().map(move |g| (g.as_slice(), t)))
-        .collect();
-    let outcomes: Vec<(usize, f64, FoldOutcome)> = jobs
-        .par_iter()
-        .flat_map_iter(|&(group, t)| {
-            fold_group(samples, variants, &starts, group, t, camera)
-                .into_iter()
-                .map(move |(v, outcome)| (v, t, outcome))
-        })
-        .collect();
+    let (starts, outcomes) = Graph::new(samples, variants, &theta_l, camera).run();
     Ok(variants
         .iter()
+        .zip(outcomes)
         .enumerate()
-        .map(|(v, &variant)| {
+        .map(|(v, (&variant, outcomes))| {
             let mut held = HeldOut {
                 form: Form::Parametric(variant),
                 folds: Vec::new(),
@@ -582,13 +650,13 @@ pub fn leave_one_theta_l_out(
                 shapes: Vec::new(),
                 start: starts[v],
             };
-            for (_, t, outcome) in outcomes.iter().filter(|(w, _, _)| *w == v) {
+            for (t, outcome) in outcomes {
                 match outcome {
                     Ok((f, shape)) => {
-                        held.folds.push(f.clone());
-                        held.shapes.push((*t, *shape));
+                        held.folds.push(f);
+                        held.shapes.push((t, shape));
                     }
-                    Err(e) => held.failed.push((*t, e.clone())),
+                    Err(e) => held.failed.push((t, e)),
                 }
             }
             held

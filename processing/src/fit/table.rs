@@ -243,12 +243,12 @@ impl Shape {
 }
 
 impl Column {
-    /// The ratio of channel `c`'s known values to `shape` (1 without one) at signed θh
-    /// `h`: linear between the two known values around it, the end one's beyond; `None`
-    /// when the column knows no value of `c`.
-    fn ratio_along(&self, h: f64, c: usize, shape: Option<&Shape>) -> Option<f64> {
-        let known = |p: &&[f64; 4]| p[c + 1].is_finite();
-        let ratio = |p: &[f64; 4]| p[c + 1] / shape.map_or(1.0, |s| s.at(p[0], self.theta_d)[c]);
+    /// Channel `c`'s value `value(point, θd)` of the column's points (β, or its ratio to
+    /// a shape) at signed θh `h`: linear between the two points around it that know
+    /// channel `c`, the end one's beyond; `None` when the column knows no value of `c`.
+    /// A missing value is NaN (a stored value is finite or missing).
+    fn along(&self, h: f64, c: usize, value: &impl Fn(&[f64; 4], f64) -> f64) -> Option<f64> {
+        let known = |p: &&[f64; 4]| !p[c + 1].is_nan();
         let k = self.points.partition_point(|p| p[0] <= h);
         let left = self.points[..k].iter().rev().find(known);
         let right = self.points[k..].iter().find(known);
@@ -259,10 +259,10 @@ impl Column {
                 } else {
                     0.0
                 };
-                let (ra, rb) = (ratio(a), ratio(b));
+                let (ra, rb) = (value(a, self.theta_d), value(b, self.theta_d));
                 Some(ra + w * (rb - ra))
             }
-            (Some(p), None) | (None, Some(p)) => Some(ratio(p)),
+            (Some(p), None) | (None, Some(p)) => Some(value(p, self.theta_d)),
             (None, None) => None,
         }
     }
@@ -367,21 +367,47 @@ impl Table {
     /// β at signed θh `h` and θd `d` (degrees) relative to `shape` (see the module).
     pub fn predict(&self, h: f64, d: f64, shape: Option<&Shape>) -> [f64; 3] {
         let model = shape.map(|s| s.at(h, d));
-        std::array::from_fn(|c| {
-            let ratio = self.ratio(h, d, c, shape);
-            match model {
-                Some(m) => m[c] * ratio.unwrap_or(1.0),
-                None => ratio.unwrap_or(0.0),
-            }
+        relative(model, |c| {
+            self.interpolate(h, d, c, &|p: &[f64; 4], theta_d| {
+                p[c + 1] / shape.map_or(1.0, |s| s.at(p[0], theta_d)[c])
+            })
         })
     }
 
-    /// The ratio of channel `c` to `shape` at (`h`, `d`): linear in θd between the two
-    /// columns around `d` that know the channel, the nearest one's beyond; `None` when
-    /// no column knows it.
-    fn ratio(&self, h: f64, d: f64, c: usize, shape: Option<&Shape>) -> Option<f64> {
+    /// The table relative to `shape`, for many predictions with the same shape: each
+    /// stored value divided by the shape at its point once, not at every prediction.
+    pub fn relative_to(&self, shape: Option<&Shape>) -> RelativeTable {
+        let ratios = match shape {
+            None => self.clone(),
+            Some(s) => self.with_values(|column| {
+                column
+                    .points
+                    .iter()
+                    .map(|p| {
+                        let m = s.at(p[0], column.theta_d);
+                        std::array::from_fn(|c| p[c + 1] / m[c])
+                    })
+                    .collect()
+            }),
+        };
+        RelativeTable {
+            ratios,
+            shape: shape.copied(),
+        }
+    }
+
+    /// Channel `c`'s `value` at (`h`, `d`): linear in θd between the two columns around
+    /// `d` that know the channel ([`Column::along`]), the nearest one's beyond; `None`
+    /// when no column knows it.
+    fn interpolate(
+        &self,
+        h: f64,
+        d: f64,
+        c: usize,
+        value: &impl Fn(&[f64; 4], f64) -> f64,
+    ) -> Option<f64> {
         let k = self.columns.partition_point(|col| col.theta_d <= d);
-        let at = |col: &Column| Some((col.theta_d, col.ratio_along(h, c, shape)?));
+        let at = |col: &Column| Some((col.theta_d, col.along(h, c, value)?));
         let below = self.columns[..k].iter().rev().find_map(at);
         let above = self.columns[k..].iter().find_map(at);
         match (below, above) {
@@ -405,6 +431,34 @@ impl Table {
     pub fn predict_sample(&self, s: &Sample, shape: Option<&Shape>) -> [f64; 3] {
         let (h, d) = sample_angles(s);
         self.predict(h, d, shape)
+    }
+}
+
+/// β relative to the model M from its ratio R (see the module): M·R per channel, M
+/// alone where no column knows the channel; without a model, R, 0 where unknown.
+fn relative(model: Option<[f64; 3]>, ratio: impl Fn(usize) -> Option<f64>) -> [f64; 3] {
+    std::array::from_fn(|c| match model {
+        Some(m) => m[c] * ratio(c).unwrap_or(1.0),
+        None => ratio(c).unwrap_or(0.0),
+    })
+}
+
+/// A table relative to one shape ([`Table::relative_to`]): its values' ratios to the
+/// shape, which [`Table::predict`] would find at every prediction. Predicts the same.
+pub struct RelativeTable {
+    ratios: Table,
+    shape: Option<Shape>,
+}
+
+impl RelativeTable {
+    /// β at a sample's point, as [`Table::predict_sample`] with the table's shape.
+    pub fn predict_sample(&self, s: &Sample) -> [f64; 3] {
+        let (h, d) = sample_angles(s);
+        let model = self.shape.map(|s| s.at(h, d));
+        relative(model, |c| {
+            self.ratios
+                .interpolate(h, d, c, &|p: &[f64; 4], _| p[c + 1])
+        })
     }
 }
 

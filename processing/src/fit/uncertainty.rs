@@ -258,10 +258,12 @@ pub(crate) fn gauss_newton(
     Some((hessian, descent))
 }
 
-/// One point's part of the sandwich: its Jacobian J_p (a zero row for a dropped
-/// channel), its curvature M_p and its gradient g_p, on the stack.
+/// One point's part of the sandwich, on the stack: its Jacobian J_p, each channel's
+/// row at that channel's columns ([`Layout::columns`]; a zero row for a dropped
+/// channel), its curvature M_p and its gradient g_p.
 struct PointTerm {
-    jacobian: [[f64; MAX_PARAMETERS]; 3],
+    rows: [[f64; 4]; 3],
+    columns: [Columns; 3],
     curvature: [[f64; 3]; 3],
     gradient: [f64; MAX_PARAMETERS],
 }
@@ -483,23 +485,24 @@ impl<'a> Residuals<'a> {
 
     /// J_p, M_p and g_p of point `point`.
     fn term(&self, point: usize) -> PointTerm {
-        let (rows, keep) = self.rows(point);
-        let mut jacobian = [[0.0; MAX_PARAMETERS]; 3];
-        for c in (0..3).filter(|&c| keep[c]) {
-            let (columns, width) = self.layout.columns(c);
-            for (&i, &v) in columns[..width].iter().zip(&rows[c]) {
-                jacobian[c][i] = v;
-            }
-        }
+        let (rows, _) = self.rows(point);
+        let columns: [Columns; 3] = std::array::from_fn(|c| self.layout.columns(c));
         let norm = self.norms[point];
         let u = self.direction(point);
         // (I − u uᵀ)/‖r‖.
         let curvature = std::array::from_fn(|c| {
             std::array::from_fn(|d| (if c == d { 1.0 } else { 0.0 } - u[c] * u[d]) / norm)
         });
-        let gradient = std::array::from_fn(|i| (0..3).map(|c| jacobian[c][i] * u[c]).sum());
+        // g_p = J_pᵀ u_p.
+        let mut gradient = [0.0; MAX_PARAMETERS];
+        for ((row, (at, width)), u) in rows.iter().zip(&columns).zip(u) {
+            for (&i, v) in at[..*width].iter().zip(row) {
+                gradient[i] += v * u;
+            }
+        }
         PointTerm {
-            jacobian,
+            rows,
+            columns,
             curvature,
             gradient,
         }
@@ -565,10 +568,11 @@ impl<'a> Residuals<'a> {
     /// (capped at [`MAX_LEVERAGE`]), with `inverse` = A⁻¹.
     fn hc3_spread(&self, inverse: &DMatrix<f64>) -> DMatrix<f64> {
         let p = self.layout.len();
+        let inverse = square(inverse);
         let mut spread: Square = [[0.0; MAX_PARAMETERS]; MAX_PARAMETERS];
         for point in 0..self.norms.len() {
             let term = self.term(point);
-            let leverage = term.leverage(inverse, p).clamp(0.0, MAX_LEVERAGE);
+            let leverage = term.leverage(&inverse).clamp(0.0, MAX_LEVERAGE);
             let scale = 1.0 / ((1.0 - leverage) * (1.0 - leverage));
             for (i, row) in spread.iter_mut().enumerate().take(p) {
                 let gi = scale * term.gradient[i];
@@ -582,24 +586,43 @@ impl<'a> Residuals<'a> {
 }
 
 impl PointTerm {
-    /// tr(M_p J_p A⁻¹ J_pᵀ) with `inverse` = A⁻¹ (P × P).
-    fn leverage(&self, inverse: &DMatrix<f64>, p: usize) -> f64 {
-        // K = J_p A⁻¹ (3 × P), then tr(M_p K J_pᵀ) = Σ_cd M_cd (K J_pᵀ)_dc.
-        let mut k = [[0.0; MAX_PARAMETERS]; 3];
-        for (row, jacobian) in k.iter_mut().zip(&self.jacobian) {
-            for (j, v) in row.iter_mut().enumerate().take(p) {
-                *v = (0..p).map(|i| jacobian[i] * inverse[(i, j)]).sum();
-            }
-        }
+    /// tr(M_p J_p A⁻¹ J_pᵀ) = Σ_cd M_cd Q_cd, Q_cd = J_c A⁻¹ J_dᵀ, with `inverse` = A⁻¹,
+    /// each row of J_p taken at its channel's columns only; M and Q are symmetric, so
+    /// each pair c < d is found once and counted twice.
+    fn leverage(&self, inverse: &Square) -> f64 {
         let mut trace = 0.0;
-        for (curvature, jacobian) in self.curvature.iter().zip(&self.jacobian) {
-            for (m, k_row) in curvature.iter().zip(&k) {
-                let kj: f64 = k_row.iter().zip(jacobian).take(p).map(|(a, b)| a * b).sum();
-                trace += m * kj;
+        for c in 0..3 {
+            let ((at_c, width_c), row_c) = (&self.columns[c], &self.rows[c]);
+            for d in c..3 {
+                let ((at_d, width_d), row_d) = (&self.columns[d], &self.rows[d]);
+                let mut q = 0.0;
+                for (&i, jc) in at_c[..*width_c].iter().zip(row_c) {
+                    let k: f64 = at_d[..*width_d]
+                        .iter()
+                        .zip(row_d)
+                        .map(|(&j, jd)| inverse[i][j] * jd)
+                        .sum();
+                    q += jc * k;
+                }
+                let twice = if c == d { 1.0 } else { 2.0 };
+                trace += twice * self.curvature[c][d] * q;
             }
         }
         trace
     }
+}
+
+/// The P × P matrix `m` (P ≤ [`MAX_PARAMETERS`]) as a square array, zero beyond P.
+fn square(m: &DMatrix<f64>) -> Square {
+    std::array::from_fn(|i| {
+        std::array::from_fn(|j| {
+            if i < m.nrows() && j < m.ncols() {
+                m[(i, j)]
+            } else {
+                0.0
+            }
+        })
+    })
 }
 
 /// The P × P symmetric matrix whose upper triangle `upper` holds.
@@ -748,7 +771,7 @@ pub(crate) mod tests {
             assert_eq!(residuals.layout.len(), expected, "{model} {roughness}");
             let inverse = inverse_if_identifiable(&residuals.sums(false).hessian).unwrap();
             let total: f64 = (0..samples.len())
-                .map(|p| residuals.term(p).leverage(&inverse, expected))
+                .map(|p| residuals.term(p).leverage(&square(&inverse)))
                 .sum();
             assert!(
                 (total - expected as f64).abs() < 1e-8,
