@@ -1,5 +1,7 @@
 //! Samples prepared for fitting, and what a method finds in them.
 
+use std::sync::Arc;
+
 use super::error::FitError;
 use super::lobe_columns::{LobeColumns, PlainModel};
 use crate::brdf::{Basis, Model, Params, Prepared};
@@ -16,22 +18,23 @@ pub fn fits_colour_shift(model: Model, samples: &[Sample]) -> bool {
     model.has_fresnel_colour() && distinct_theta_l(samples).len() >= 2
 }
 
-/// Samples prepared for fitting.
+/// Samples prepared for fitting. What depends on the points' geometry alone is shared
+/// between the copies that differ in their measured values ([`Data::with_measured`]).
 #[derive(Clone)]
 pub(crate) struct Data {
-    pub bases: Vec<Basis>,
+    pub bases: Arc<[Basis]>,
     /// The lobe's terms of `bases` as columns, for the loops over every point.
-    pub columns: LobeColumns,
+    pub columns: Arc<LobeColumns>,
     /// Diffuse basis per point (copied out of `bases` for the inner loops).
-    pub diffuse: Vec<f64>,
+    pub diffuse: Arc<[f64]>,
     /// Weight of the specular colour at 90° per point (`Basis::shift_weight`), for the models
     /// that have one, when the samples span several θL (see [`fits_colour_shift`]).
-    pub shift_weight: Option<Vec<f64>>,
+    pub shift_weight: Option<Arc<[f64]>>,
     /// Measured β per point; 0 where a channel was dropped.
     pub y: Vec<[f64; 3]>,
     /// Per point and channel 1 (measured) or 0 (dropped: left out of the loss);
     /// `None` when no value was dropped.
-    pub keep: Option<Vec<[f64; 3]>>,
+    pub keep: Option<Arc<[[f64; 3]]>>,
     /// Residual norms below this count as this in reweighting.
     pub residual_floor: f64,
     /// Eq. 10 loss of the all-zero model, Σ_p ‖y_p‖: the scale of the data.
@@ -82,10 +85,10 @@ impl Data {
         let mean_norm = zero_loss / y.len() as f64;
         Ok(Data {
             diffuse: bases.iter().map(|b| b.diffuse).collect(),
-            columns: LobeColumns::of(&bases),
+            columns: Arc::new(LobeColumns::of(&bases)),
             shift_weight: fits_colour_shift(model, samples)
                 .then(|| bases.iter().map(Basis::shift_weight).collect()),
-            bases,
+            bases: bases.into(),
             y,
             keep,
             residual_floor: 1e-12 * mean_norm + f64::MIN_POSITIVE,
@@ -97,17 +100,21 @@ impl Data {
     /// left out).
     pub fn with_measured(&self, mut y: Vec<[f64; 3]>) -> Data {
         if let Some(keep) = &self.keep {
-            for (v, keep) in y.iter_mut().zip(keep) {
+            for (v, keep) in y.iter_mut().zip(keep.iter()) {
                 *v = std::array::from_fn(|c| v[c] * keep[c]);
             }
         }
         let zero_loss: f64 = y.iter().map(|v| metrics::point_loss(v, &[0.0; 3])).sum();
         let mean_norm = zero_loss / y.len().max(1) as f64;
         Data {
+            bases: Arc::clone(&self.bases),
+            columns: Arc::clone(&self.columns),
+            diffuse: Arc::clone(&self.diffuse),
+            shift_weight: self.shift_weight.clone(),
             y,
+            keep: self.keep.clone(),
             residual_floor: 1e-12 * mean_norm + f64::MIN_POSITIVE,
             zero_loss,
-            ..self.clone()
         }
     }
 
@@ -137,7 +144,7 @@ impl Data {
                 .map(|(b, y)| metrics::point_loss(y, &b.evaluate_prepared(&prepared)))
                 .sum(),
             Some(keep) => points
-                .zip(keep)
+                .zip(keep.iter())
                 .map(|((b, y), keep)| {
                     let estimate = b.evaluate_prepared(&prepared);
                     metrics::point_loss(y, &std::array::from_fn(|c| estimate[c] * keep[c]))
@@ -156,7 +163,7 @@ impl Data {
             .map(|b| b.evaluate_prepared(&prepared))
             .collect();
         if let Some(keep) = &self.keep {
-            for (estimate, keep) in estimates.iter_mut().zip(keep) {
+            for (estimate, keep) in estimates.iter_mut().zip(keep.iter()) {
                 for (e, k) in estimate.iter_mut().zip(keep) {
                     *e *= k;
                 }

@@ -21,12 +21,16 @@
 //! calibration, `gonio calibrate`'s job.
 
 use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
 
 use super::data::Data;
 use super::FitError;
 use crate::brdf::Params;
 use crate::samples::{Sample, THETA_L_TOLERANCE};
 use crate::setup_uncertainty::Source;
+
+/// Samples whose rows one task sums into the normal equations.
+const NORMAL_BLOCK: usize = 1024;
 
 /// Rounds of the scatter s² (it settles in 2–3).
 const SCATTER_ROUNDS: usize = 5;
@@ -146,27 +150,41 @@ pub(crate) fn estimate(
     let mean = data.zero_loss / data.y.len().max(1) as f64;
     let floor = 1e-6 * mean + f64::MIN_POSITIVE;
     // Per value: the row [c_·j | g_·k], its residual and 1/u², summed into the normal
-    // equations as they come.
-    let mut normal = Normal::new(size);
-    let mut row = vec![0.0; size];
-    let mut changes = vec![[0.0; 3]; n_z];
-    for (p, sample) in samples.iter().enumerate() {
-        let noise = sample.uncertainty.as_ref().map_or([0.0; 3], |u| u.noise);
-        for (d, col) in changes.iter_mut().zip(&columns) {
-            *d = change(sample, col);
-        }
-        for c in (0..3).filter(|&c| keep(p, c)) {
-            for (v, d) in row.iter_mut().zip(
-                changes
-                    .iter()
-                    .map(|d| d[c])
-                    .chain(jacobian.iter().map(|g| g[p][c])),
-            ) {
-                *v = d;
+    // equations as they come, a block of samples at a time in parallel (the blocks' sums
+    // added in order: the same sums on any number of threads).
+    let block = |(k, block): (usize, &[Sample])| {
+        let mut normal = Normal::new(size);
+        let mut row = vec![0.0; size];
+        let mut changes = vec![[0.0; 3]; n_z];
+        for (i, sample) in block.iter().enumerate() {
+            let p = k * NORMAL_BLOCK + i;
+            let noise = sample.uncertainty.as_ref().map_or([0.0; 3], |u| u.noise);
+            for (d, col) in changes.iter_mut().zip(&columns) {
+                *d = change(sample, col);
             }
-            let u = noise[c].max(floor);
-            normal.add(&row, data.y[p][c] - estimates[p][c], 1.0 / (u * u));
+            for c in (0..3).filter(|&c| keep(p, c)) {
+                for (v, d) in row.iter_mut().zip(
+                    changes
+                        .iter()
+                        .map(|d| d[c])
+                        .chain(jacobian.iter().map(|g| g[p][c])),
+                ) {
+                    *v = d;
+                }
+                let u = noise[c].max(floor);
+                normal.add(&row, data.y[p][c] - estimates[p][c], 1.0 / (u * u));
+            }
         }
+        normal
+    };
+    let blocks: Vec<Normal> = samples
+        .par_chunks(NORMAL_BLOCK)
+        .enumerate()
+        .map(block)
+        .collect();
+    let mut normal = Normal::new(size);
+    for b in &blocks {
+        normal.merge(b);
     }
     if normal.rows <= size {
         return Err(FitError::TooFewPoints {
@@ -256,6 +274,18 @@ impl Normal {
         self.rows += 1;
     }
 
+    /// Adds the rows summed in `other` (of the same size).
+    fn merge(&mut self, other: &Normal) {
+        for (v, o) in self.matrix.iter_mut().zip(&other.matrix) {
+            *v += o;
+        }
+        for (v, o) in self.rhs.iter_mut().zip(&other.rhs) {
+            *v += o;
+        }
+        self.squares += other.squares;
+        self.rows += other.rows;
+    }
+
     /// Σ w·row_i·row_j.
     fn at(&self, i: usize, j: usize) -> f64 {
         self.matrix[i.min(j) * self.size + i.max(j)]
@@ -316,31 +346,27 @@ fn jacobian(
     fresnel: bool,
     shared: bool,
 ) -> Vec<Vec<[f64; 3]>> {
-    let at = |p: &Params, k: &[f64; 3]| data.estimates(p, k);
-    let base = at(params, ks_90);
-    let difference = |a: &[[f64; 3]], b: &[[f64; 3]], scale: f64| -> Vec<[f64; 3]> {
-        a.iter()
-            .zip(b)
-            .map(|(a, b)| std::array::from_fn(|c| (a[c] - b[c]) / scale))
-            .collect()
-    };
-    let mut columns = Vec::new();
+    // Each column as the difference of two evaluations at every point, (upper, lower,
+    // step): found in parallel.
+    type Point = (Params, [f64; 3]);
+    let mut differences: Vec<(Point, Point, f64)> = Vec::new();
+    let base = (*params, *ks_90);
     for c in 0..3 {
         // Kd and Ks enter linearly: a unit step is exact.
         let mut p = *params;
         p.kd[c] += 1.0;
-        columns.push(difference(&at(&p, ks_90), &base, 1.0));
+        differences.push(((p, *ks_90), base, 1.0));
         let mut p = *params;
         p.ks[c] += 1.0;
         let mut k = *ks_90;
         if !fresnel {
             k[c] += 1.0;
         }
-        columns.push(difference(&at(&p, &k), &base, 1.0));
+        differences.push(((p, k), base, 1.0));
         if fresnel {
             let mut k = *ks_90;
             k[c] += 1.0;
-            columns.push(difference(&at(params, &k), &base, 1.0));
+            differences.push(((*params, k), base, 1.0));
         }
     }
     let channels: Vec<Vec<usize>> = if shared {
@@ -354,13 +380,26 @@ fn jacobian(
             up.m[c] *= LN_M_STEP.exp();
             down.m[c] *= (-LN_M_STEP).exp();
         }
-        columns.push(difference(
-            &at(&up, ks_90),
-            &at(&down, ks_90),
-            2.0 * LN_M_STEP,
-        ));
+        differences.push(((up, *ks_90), (down, *ks_90), 2.0 * LN_M_STEP));
     }
-    columns
+    let base_estimates = data.estimates(params, ks_90);
+    differences
+        .par_iter()
+        .map(|((p, k), lower, scale)| {
+            let upper = data.estimates(p, k);
+            let lower = if *lower == base {
+                None
+            } else {
+                Some(data.estimates(&lower.0, &lower.1))
+            };
+            let lower = lower.as_deref().unwrap_or(&base_estimates);
+            upper
+                .iter()
+                .zip(lower)
+                .map(|(a, b)| std::array::from_fn(|c| (a[c] - b[c]) / scale))
+                .collect()
+        })
+        .collect()
 }
 
 /// x of `normal`·x = `rhs` and the diagonal of `normal`'s inverse (the posterior

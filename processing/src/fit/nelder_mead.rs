@@ -73,7 +73,7 @@ fn initial_params(data: &Data, m: f64) -> Params {
         kd[c] = data
             .y
             .iter()
-            .zip(&data.diffuse)
+            .zip(data.diffuse.iter())
             .map(|(y, a)| y[c] / a)
             .fold(f64::INFINITY, f64::min)
             .max(0.0);

@@ -329,7 +329,7 @@ fn residual_columns(
         let estimate = |a: f64, w: f64, s: f64| kd * a + (ks + w * shift) * s;
         match &data.keep {
             Some(keep) => points
-                .zip(keep)
+                .zip(keep.iter())
                 .map(|((((y, &a), &w), &s), k)| y[c] - estimate(a, w, s) * k[c])
                 .collect(),
             None => points
@@ -382,7 +382,7 @@ impl<'a> Residuals<'a> {
             params.m.iter().map(|&m| Lobe::at(data, m)).collect()
         };
         let weight = match &data.shift_weight {
-            Some(w) => Cow::Borrowed(w.as_slice()),
+            Some(w) => Cow::Borrowed(&w[..]),
             None if *ks_90 == params.ks => Cow::Owned(vec![0.0; n]),
             None => Cow::Owned(data.bases.iter().map(Basis::shift_weight).collect()),
         };
