@@ -2,7 +2,8 @@
 //! (reading the samples, the fit, its uncertainty budget, writing the JSON), on the
 //! samples of the full-size `gold` scan and of the same scan binned 4 × 4. The scans are
 //! rendered by `gonio simulate` and extracted once; the two commands then run in turn
-//! `--runs` times (default 7), so a load that comes and goes weighs on both alike.
+//! `--runs` times (default 7), so a load that comes and goes weighs on both alike, each
+//! run timing five processes in a row.
 //! Prints each median wall time and their ratio (target ≤ 2), then the result as JSON
 //! (`{"bench": "fit_auto_command", ...}`), which scripts/bench.sh keeps.
 //!
@@ -14,16 +15,23 @@ mod stats;
 use std::path::Path;
 use std::time::Instant;
 
+/// Processes timed together as one run: a process of a few tens of milliseconds alone
+/// varies by as much as it takes with the scheduler's whims, a batch far less.
+const BATCH: usize = 5;
+
 /// The median wall seconds of `gonio fit --model auto` and of `--model cook-torrance` on
-/// `samples`, the two run in turn `runs` times, and the larger of their spreads.
+/// `samples` (a run: [`BATCH`] processes in a row, its time per process), the two run in
+/// turn `runs` times, and the larger of their spreads.
 fn compare(gonio: &str, samples: &str, runs: usize, dir: &Path) -> (f64, f64, f64) {
     let mut times = [Vec::new(), Vec::new()];
     for _ in 0..runs {
         for (model, times) in ["auto", "cook-torrance"].iter().zip(&mut times) {
             let fit = ["fit", samples, "--model", model, "--out", "fit.json"];
             let started = Instant::now();
-            common::run(gonio, &fit, dir);
-            times.push(started.elapsed().as_secs_f64());
+            for _ in 0..BATCH {
+                common::run(gonio, &fit, dir);
+            }
+            times.push(started.elapsed().as_secs_f64() / BATCH as f64);
         }
     }
     let spread = stats::spread(&times[0]).max(stats::spread(&times[1]));

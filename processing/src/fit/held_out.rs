@@ -251,18 +251,35 @@ fn fit_groups(variants: &[Variant]) -> Vec<Vec<usize>> {
     groups
 }
 
+/// A θL's samples apart from the others: what its folds are fitted to and scored at.
+struct Split {
+    /// The samples of every other θL.
+    others: Vec<Sample>,
+    /// The θL's samples with a channel known ([`known`]).
+    held: Result<Vec<Sample>, String>,
+}
+
+impl Split {
+    fn of(samples: &[Sample], theta_l: f64) -> Self {
+        Split {
+            others: split(samples, theta_l, false),
+            held: known(samples, theta_l),
+        }
+    }
+}
+
 /// The variants `group` of `variants` (see [`fit_groups`]) fitted without θL `theta_l`
-/// and scored there, each with its fit's shape; each fit starts from the variant's
-/// robust minimum on every θL (`starts`, [`fit_from`]; none where that failed).
+/// (to `split.others`) and scored there, each with its fit's shape; each fit starts from
+/// the variant's robust minimum on every θL (`starts`, [`fit_from`]; none where that
+/// failed).
 fn fold_group(
-    samples: &[Sample],
+    split: &Split,
     variants: &[Variant],
     starts: &[Option<Start>],
     group: &[usize],
     theta_l: f64,
     camera: &CameraModel,
 ) -> Vec<(usize, FoldOutcome)> {
-    let others = split(samples, theta_l, false);
     let mut tied: Option<FitResult> = None;
     group
         .iter()
@@ -272,28 +289,29 @@ fn fold_group(
             let tied_form = tied
                 .as_ref()
                 .filter(|_| options.model == Model::CookTorranceFresnel);
-            let fitted = fit_from(&others, &options, starts[v].as_ref(), tied_form);
+            let fitted = fit_from(&split.others, &options, starts[v].as_ref(), tied_form);
             if options.model == Model::CookTorrance {
                 tied = fitted.as_ref().ok().cloned();
             }
             let outcome = fitted
                 .map_err(|e| e.to_string())
-                .and_then(|f| scored(samples, &f, theta_l, camera));
+                .and_then(|f| scored(&split.held, &f, theta_l, camera));
             (v, outcome)
         })
         .collect()
 }
 
-/// `fitted` (fitted without θL `theta_l`) scored at that θL's samples; its shape beside.
+/// `fitted` (fitted without θL `theta_l`) scored at that θL's samples with a channel
+/// known, `held`; its shape beside.
 fn scored(
-    samples: &[Sample],
+    held: &Result<Vec<Sample>, String>,
     fitted: &FitResult,
     theta_l: f64,
     camera: &CameraModel,
 ) -> FoldOutcome {
-    let held = known(samples, theta_l)?;
+    let held = held.as_ref().map_err(Clone::clone)?;
     let estimated: Vec<[f64; 3]> = held.iter().map(|s| fitted.predict_sample(s)).collect();
-    let mut scored = score(theta_l, &held, &estimated, camera)?;
+    let mut scored = score(theta_l, held, &estimated, camera)?;
     scored.colour_shift = fitted.colour_shift.map(|c| c.fitted);
     Ok((scored, fitted.shape()))
 }
@@ -531,6 +549,8 @@ struct Graph<'a> {
     starts: Vec<OnceLock<Option<Start>>>,
     /// Per group, how many of its variants' minima are still sought.
     waiting: Vec<AtomicUsize>,
+    /// Per θL, its samples apart from the others, made by the first fold that needs them.
+    splits: Vec<OnceLock<Split>>,
     /// Each fold's variant, θL and outcome, as they end.
     outcomes: Mutex<Vec<(usize, f64, FoldOutcome)>>,
 }
@@ -552,6 +572,7 @@ impl<'a> Graph<'a> {
             waiting: groups.iter().map(|g| AtomicUsize::new(g.len())).collect(),
             groups,
             starts: variants.iter().map(|_| OnceLock::new()).collect(),
+            splits: theta_l.iter().map(|_| OnceLock::new()).collect(),
             outcomes: Mutex::new(Vec::new()),
         }
     }
@@ -593,21 +614,23 @@ impl<'a> Graph<'a> {
         }
         for (g, group) in self.groups.iter().enumerate() {
             if group.contains(&v) && self.waiting[g].fetch_sub(1, Ordering::AcqRel) == 1 {
-                for &t in self.theta_l {
-                    scope.spawn(move |_| self.fold(group, t));
+                for k in 0..self.theta_l.len() {
+                    scope.spawn(move |_| self.fold(group, k));
                 }
             }
         }
     }
 
-    /// `group` fitted without θL `t` and scored there.
-    fn fold(&self, group: &[usize], t: f64) {
+    /// `group` fitted without the `k`-th θL and scored there.
+    fn fold(&self, group: &[usize], k: usize) {
+        let t = self.theta_l[k];
+        let split = self.splits[k].get_or_init(|| Split::of(self.samples, t));
         let starts: Vec<Option<Start>> = self
             .starts
             .iter()
             .map(|s| s.get().copied().flatten())
             .collect();
-        let done = fold_group(self.samples, self.variants, &starts, group, t, self.camera);
+        let done = fold_group(split, self.variants, &starts, group, t, self.camera);
         let mut outcomes = self.outcomes.lock().unwrap_or_else(|e| e.into_inner());
         outcomes.extend(done.into_iter().map(|(v, outcome)| (v, t, outcome)));
     }
