@@ -346,27 +346,26 @@ fn jacobian(
     fresnel: bool,
     shared: bool,
 ) -> Vec<Vec<[f64; 3]>> {
-    // Each column as the difference of two evaluations at every point, (upper, lower,
-    // step): found in parallel.
+    // Each column as the difference of two evaluations at every point, (upper, lower
+    // or the fit's own when `None`, step): found in parallel.
     type Point = (Params, [f64; 3]);
-    let mut differences: Vec<(Point, Point, f64)> = Vec::new();
-    let base = (*params, *ks_90);
+    let mut differences: Vec<(Point, Option<Point>, f64)> = Vec::new();
     for c in 0..3 {
         // Kd and Ks enter linearly: a unit step is exact.
         let mut p = *params;
         p.kd[c] += 1.0;
-        differences.push(((p, *ks_90), base, 1.0));
+        differences.push(((p, *ks_90), None, 1.0));
         let mut p = *params;
         p.ks[c] += 1.0;
         let mut k = *ks_90;
         if !fresnel {
             k[c] += 1.0;
         }
-        differences.push(((p, k), base, 1.0));
+        differences.push(((p, k), None, 1.0));
         if fresnel {
             let mut k = *ks_90;
             k[c] += 1.0;
-            differences.push(((*params, k), base, 1.0));
+            differences.push(((*params, k), None, 1.0));
         }
     }
     let channels: Vec<Vec<usize>> = if shared {
@@ -380,18 +379,14 @@ fn jacobian(
             up.m[c] *= LN_M_STEP.exp();
             down.m[c] *= (-LN_M_STEP).exp();
         }
-        differences.push(((up, *ks_90), (down, *ks_90), 2.0 * LN_M_STEP));
+        differences.push(((up, *ks_90), Some((down, *ks_90)), 2.0 * LN_M_STEP));
     }
     let base_estimates = data.estimates(params, ks_90);
     differences
         .par_iter()
         .map(|((p, k), lower, scale)| {
             let upper = data.estimates(p, k);
-            let lower = if *lower == base {
-                None
-            } else {
-                Some(data.estimates(&lower.0, &lower.1))
-            };
+            let lower = lower.map(|(p, k)| data.estimates(&p, &k));
             let lower = lower.as_deref().unwrap_or(&base_estimates);
             upper
                 .iter()

@@ -551,8 +551,8 @@ struct Graph<'a> {
     waiting: Vec<AtomicUsize>,
     /// Per θL, its samples apart from the others, made by the first fold that needs them.
     splits: Vec<OnceLock<Split>>,
-    /// Each fold's variant, θL and outcome, as they end.
-    outcomes: Mutex<Vec<(usize, f64, FoldOutcome)>>,
+    /// Each fold's variant, θL (its index in `theta_l`) and outcome, as they end.
+    outcomes: Mutex<Vec<(usize, usize, FoldOutcome)>>,
 }
 
 impl<'a> Graph<'a> {
@@ -585,22 +585,25 @@ impl<'a> Graph<'a> {
                 scope.spawn(move |scope| graph.search(scope, v));
             }
         });
-        let starts: Vec<Option<Start>> = self
-            .starts
-            .iter()
-            .map(|s| s.get().copied().flatten())
-            .collect();
+        let starts = self.starts();
         let mut outcomes = self
             .outcomes
             .into_inner()
             .unwrap_or_else(|e| e.into_inner());
-        let position = |t: f64| self.theta_l.iter().position(|&u| u == t);
-        outcomes.sort_by_key(|(v, t, _)| (*v, position(*t)));
+        outcomes.sort_by_key(|&(v, k, _)| (v, k));
         let mut by_variant: Vec<Folds> = vec![Vec::new(); self.variants.len()];
-        for (v, t, outcome) in outcomes {
-            by_variant[v].push((t, outcome));
+        for (v, k, outcome) in outcomes {
+            by_variant[v].push((self.theta_l[k], outcome));
         }
         (starts, by_variant)
+    }
+
+    /// Every variant's minimum found so far (`None` where not yet, or where it failed).
+    fn starts(&self) -> Vec<Option<Start>> {
+        self.starts
+            .iter()
+            .map(|s| s.get().copied().flatten())
+            .collect()
     }
 
     /// Seeks variant `v`'s minimum, then starts what waited for it.
@@ -625,14 +628,9 @@ impl<'a> Graph<'a> {
     fn fold(&self, group: &[usize], k: usize) {
         let t = self.theta_l[k];
         let split = self.splits[k].get_or_init(|| Split::of(self.samples, t));
-        let starts: Vec<Option<Start>> = self
-            .starts
-            .iter()
-            .map(|s| s.get().copied().flatten())
-            .collect();
-        let done = fold_group(split, self.variants, &starts, group, t, self.camera);
+        let done = fold_group(split, self.variants, &self.starts(), group, t, self.camera);
         let mut outcomes = self.outcomes.lock().unwrap_or_else(|e| e.into_inner());
-        outcomes.extend(done.into_iter().map(|(v, outcome)| (v, t, outcome)));
+        outcomes.extend(done.into_iter().map(|(v, outcome)| (v, k, outcome)));
     }
 }
 

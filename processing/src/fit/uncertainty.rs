@@ -263,7 +263,6 @@ pub(crate) fn gauss_newton(
 /// channel), its curvature M_p and its gradient g_p.
 struct PointTerm {
     rows: [[f64; 4]; 3],
-    columns: [Columns; 3],
     curvature: [[f64; 3]; 3],
     gradient: [f64; MAX_PARAMETERS],
 }
@@ -459,22 +458,20 @@ impl<'a> Residuals<'a> {
     }
 
     /// Point `point`'s Jacobian J_p as [`Layout::columns`] lays it out: per channel its
-    /// values at that channel's columns, and whether the channel counts (a dropped one's
-    /// row is zero).
-    fn rows(&self, point: usize) -> ([[f64; 4]; 3], [bool; 3]) {
+    /// values at that channel's columns (a dropped channel's row is zero).
+    fn rows(&self, point: usize) -> [[f64; 4]; 3] {
         let keep = self
             .data
             .keep
             .as_ref()
             .map_or([true; 3], |keep| keep[point].map(|k| k > 0.0));
-        let rows = std::array::from_fn(|c| {
+        std::array::from_fn(|c| {
             if keep[c] {
                 self.row(c, point)
             } else {
                 [0.0; 4]
             }
-        });
-        (rows, keep)
+        })
     }
 
     /// u_p = r_p/‖r_p‖ of point `point` (of length ≤ 1 after the floor).
@@ -483,10 +480,15 @@ impl<'a> Residuals<'a> {
         std::array::from_fn(|c| self.residuals[c][point] / norm)
     }
 
-    /// J_p, M_p and g_p of point `point`.
-    fn term(&self, point: usize) -> PointTerm {
-        let (rows, _) = self.rows(point);
-        let columns: [Columns; 3] = std::array::from_fn(|c| self.layout.columns(c));
+    /// Every channel's [`Layout::columns`].
+    fn columns(&self) -> [Columns; 3] {
+        std::array::from_fn(|c| self.layout.columns(c))
+    }
+
+    /// J_p, M_p and g_p of point `point`, each row of J_p at its channel's `columns`
+    /// ([`Residuals::columns`]).
+    fn term(&self, point: usize, columns: &[Columns; 3]) -> PointTerm {
+        let rows = self.rows(point);
         let norm = self.norms[point];
         let u = self.direction(point);
         // (I − u uᵀ)/‖r‖.
@@ -495,14 +497,13 @@ impl<'a> Residuals<'a> {
         });
         // g_p = J_pᵀ u_p.
         let mut gradient = [0.0; MAX_PARAMETERS];
-        for ((row, (at, width)), u) in rows.iter().zip(&columns).zip(u) {
+        for ((row, (at, width)), u) in rows.iter().zip(columns).zip(u) {
             for (&i, v) in at[..*width].iter().zip(row) {
                 gradient[i] += v * u;
             }
         }
         PointTerm {
             rows,
-            columns,
             curvature,
             gradient,
         }
@@ -530,7 +531,7 @@ impl<'a> Residuals<'a> {
     #[inline(always)]
     fn sums_portable(&self, with_spread: bool) -> Sums {
         let p = self.layout.len();
-        let columns: [Columns; 3] = std::array::from_fn(|c| self.layout.columns(c));
+        let columns = self.columns();
         let mut totals = Totals::zero();
         let mut block = Block::zeroed();
         let n = self.norms.len();
@@ -569,10 +570,11 @@ impl<'a> Residuals<'a> {
     fn hc3_spread(&self, inverse: &DMatrix<f64>) -> DMatrix<f64> {
         let p = self.layout.len();
         let inverse = square(inverse);
+        let columns = self.columns();
         let mut spread: Square = [[0.0; MAX_PARAMETERS]; MAX_PARAMETERS];
         for point in 0..self.norms.len() {
-            let term = self.term(point);
-            let leverage = term.leverage(&inverse).clamp(0.0, MAX_LEVERAGE);
+            let term = self.term(point, &columns);
+            let leverage = term.leverage(&inverse, &columns).clamp(0.0, MAX_LEVERAGE);
             let scale = 1.0 / ((1.0 - leverage) * (1.0 - leverage));
             for (i, row) in spread.iter_mut().enumerate().take(p) {
                 let gi = scale * term.gradient[i];
@@ -587,14 +589,13 @@ impl<'a> Residuals<'a> {
 
 impl PointTerm {
     /// tr(M_p J_p A⁻¹ J_pᵀ) = Σ_cd M_cd Q_cd, Q_cd = J_c A⁻¹ J_dᵀ, with `inverse` = A⁻¹,
-    /// each row of J_p taken at its channel's columns only; M and Q are symmetric, so
+    /// each row of J_p taken at its channel's `columns` only; M and Q are symmetric, so
     /// each pair c < d is found once and counted twice.
-    fn leverage(&self, inverse: &Square) -> f64 {
+    fn leverage(&self, inverse: &Square, columns: &[Columns; 3]) -> f64 {
         let mut trace = 0.0;
-        for c in 0..3 {
-            let ((at_c, width_c), row_c) = (&self.columns[c], &self.rows[c]);
-            for d in c..3 {
-                let ((at_d, width_d), row_d) = (&self.columns[d], &self.rows[d]);
+        let channels = || columns.iter().zip(&self.rows).enumerate();
+        for (c, ((at_c, width_c), row_c)) in channels() {
+            for (d, ((at_d, width_d), row_d)) in channels().skip(c) {
                 let mut q = 0.0;
                 for (&i, jc) in at_c[..*width_c].iter().zip(row_c) {
                     let k: f64 = at_d[..*width_d]
@@ -769,9 +770,10 @@ pub(crate) mod tests {
             let ks_90 = [2.2, 4.4, 2.9];
             let residuals = Residuals::new(&data, &options, &params, &ks_90).unwrap();
             assert_eq!(residuals.layout.len(), expected, "{model} {roughness}");
-            let inverse = inverse_if_identifiable(&residuals.sums(false).hessian).unwrap();
+            let inverse = square(&inverse_if_identifiable(&residuals.sums(false).hessian).unwrap());
+            let columns = residuals.columns();
             let total: f64 = (0..samples.len())
-                .map(|p| residuals.term(p).leverage(&square(&inverse)))
+                .map(|p| residuals.term(p, &columns).leverage(&inverse, &columns))
                 .sum();
             assert!(
                 (total - expected as f64).abs() < 1e-8,
