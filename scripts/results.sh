@@ -186,13 +186,13 @@ verdicts_section() {
         cargo test --locked -p gonio-tests --test choice_family -- --nocapture
 }
 
-# The multi-angle colour's validation over the example scenes and 20 random materials
+# The multi-angle colour's validation over the example scenes and 200 random materials
 # (GONIO_COLOUR_SCANS overrides it), each example and four random materials scanned
-# three times more (about 10 min on two cores): its figures and the command.
+# three times more (about 4 min on two cores): its figures and the command.
 colour_validation_section() {
     local out=docs/results/colour-validation
     mkdir -p "$out"
-    local scans=${GONIO_COLOUR_SCANS:-20}
+    local scans=${GONIO_COLOUR_SCANS:-200}
     echo "== multi-angle colour validation: 4 example scenes and $scans random materials"
     echo "GONIO_COLOUR_SCANS=$scans GONIO_BIN=${gonio#"$PWD"/} cargo test -p gonio-tests --test colour_validation full -- --ignored --nocapture" \
         > "$out/command.txt"

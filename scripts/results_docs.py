@@ -632,6 +632,24 @@ def beyond_data_rows(beyond):
     ]
 
 
+def by_material_rows(by_material):
+    """The coverage's 95 % intervals resampling whole materials, all and per kind."""
+    if not by_material:
+        return []
+
+    def interval(i):
+        lo, hi = i["interval_95"]
+        return f"{100 * lo:.1f}–{100 * hi:.1f} % ({i['materials']} materials)"
+
+    return [
+        ["… 95 % interval resampling whole materials", "", interval(by_material["all"]), ""],
+        *[
+            [f"… … {k['kind']}", "", interval(k["interval"]), ""]
+            for k in by_material["by_kind"]
+        ],
+    ]
+
+
 def colour_validation_table():
     """The multi-angle colour against the emulator's spectral truth
     (tests/tests/colour_validation.rs): coverage of the expanded intervals, the ΔE00 to
@@ -663,6 +681,7 @@ def colour_validation_table():
         ["… from the data", "", rate(origin["data"]), ""],
         ["… from the model", "", rate(origin["model"]), ""],
         *[[f"… {k['kind']}", "", rate(k["count"]), ""] for k in f["coverage_by_kind"]],
+        *by_material_rows(f.get("coverage_by_material")),
         *breakdown_rows(f.get("coverage_breakdown", [])),
         *beyond_data_rows(f.get("beyond_data")),
         ["ΔE00 to the spectral truth", "reported", spread(f["delta_e00"]), ""],
