@@ -194,6 +194,9 @@ pub(crate) struct SetupFrame {
     pub camera: [f64; 3],
     /// Unit direction of the cylinder axis.
     pub axis: [f64; 3],
+    /// The camera's component ⊥ the axis, and its position along it (mm).
+    camera_perp: [f64; 3],
+    camera_along: f64,
     /// Unit vectors ⊥ the axis from which φ is measured: φ = atan2(n·ey, n·ex).
     ex: [f64; 3],
     ey: [f64; 3],
@@ -258,12 +261,11 @@ impl SetupFrame {
     }
 
     /// The ray's closest approach to the axis, in the plane ⊥ the axis: the point Q
-    /// (component ⊥ axis) and the unit direction of the ray's ⊥ component. Computed
-    /// with cross products, so a distant camera loses no precision. `None` for a ray
-    /// parallel to the axis.
-    fn closest_approach(&self, d: [f64; 3]) -> Option<([f64; 3], [f64; 3])> {
+    /// (component ⊥ axis), the unit direction of the ray's ⊥ component and that
+    /// component itself. Computed with cross products, so a distant camera loses no
+    /// precision. `None` for a ray parallel to the axis.
+    fn closest_approach(&self, d: [f64; 3]) -> Option<([f64; 3], [f64; 3], [f64; 3])> {
         let a = self.axis;
-        let c_perp = sub(self.camera, scale(a, dot(self.camera, a)));
         let d_perp = sub(d, scale(a, dot(d, a)));
         let len = dot(d_perp, d_perp).sqrt();
         if !(len.is_finite() && len > 0.0) {
@@ -271,14 +273,14 @@ impl SetupFrame {
         }
         let dh = scale(d_perp, 1.0 / len);
         // (d̂ × C) × d̂ = C − (C·d̂)d̂.
-        Some((cross(cross(dh, c_perp), dh), dh))
+        Some((cross(cross(dh, self.camera_perp), dh), dh, d_perp))
     }
 
     /// Signed distance of the ray through (u, v) from the axis (mm): positive when the
     /// ray passes the axis on the +y side (toward larger φ as seen from the camera).
     pub fn signed_axis_distance(&self, u: f64, v: f64) -> f64 {
         match self.closest_approach(self.ray(u, v)) {
-            Some((q, dh)) => dot(cross(q, dh), self.axis).signum() * dot(q, q).sqrt(),
+            Some((q, dh, _)) => dot(cross(q, dh), self.axis).signum() * dot(q, q).sqrt(),
             None => f64::NAN,
         }
     }
@@ -286,7 +288,7 @@ impl SetupFrame {
     /// Where the ray through (u, v) first meets the cylinder, if it does (not grazing).
     pub fn hit(&self, u: f64, v: f64) -> Option<Hit> {
         let d = self.ray(u, v);
-        let (q, dh) = self.closest_approach(d)?;
+        let (q, dh, d_perp) = self.closest_approach(d)?;
         let half_chord_sq = self.radius * self.radius - dot(q, q);
         if !(half_chord_sq.is_finite() && half_chord_sq > 0.0) {
             return None;
@@ -295,14 +297,13 @@ impl SetupFrame {
         let a = self.axis;
         let p_perp = sub(q, scale(dh, half_chord));
         // Distance along d̂⊥ from the camera's ⊥ component to the hit, then along d.
-        let c_perp = sub(self.camera, scale(a, dot(self.camera, a)));
-        let along = dot(sub(p_perp, c_perp), dh);
-        let d_perp_len = dot(sub(d, scale(a, dot(d, a))), dh);
+        let along = dot(sub(p_perp, self.camera_perp), dh);
+        let d_perp_len = dot(d_perp, dh);
         let s = along / d_perp_len;
         if !(s.is_finite() && s > 0.0) {
             return None;
         }
-        let axial = dot(self.camera, a) + s * dot(d, a);
+        let axial = self.camera_along + s * dot(d, a);
         Some(Hit {
             point: [
                 p_perp[0] + axial * a[0],
@@ -450,11 +451,7 @@ impl Setup {
                 max: crate::setup_uncertainty::MAX_UNCERTAINTY,
             });
         }
-        let frame = self.frame();
-        let camera_perp = sub(
-            frame.camera,
-            scale(frame.axis, dot(frame.camera, frame.axis)),
-        );
+        let camera_perp = self.frame().camera_perp;
         for (what, distance) in [
             ("camera", dot(camera_perp, camera_perp).sqrt()),
             ("light", self.light_distance_mm),
@@ -531,9 +528,13 @@ impl Setup {
         // roll then turns right and up about the optical axis.
         let (right, up) = ([-sin_y, cos_y, 0.0], [0.0, 0.0, 1.0]);
         let f = self.focal_length_mm;
+        let camera = [self.camera_distance_mm, self.camera_offset_mm, 0.0];
+        let camera_along = dot(camera, axis);
         SetupFrame {
-            camera: [self.camera_distance_mm, self.camera_offset_mm, 0.0],
+            camera,
             axis,
+            camera_perp: sub(camera, scale(axis, camera_along)),
+            camera_along,
             ex,
             ey: cross(axis, ex),
             radius: self.cylinder_radius_mm,
