@@ -154,23 +154,32 @@ real_section() {
 # over 400 scans with no uncertainty block, their setup off by what gonio's defaults
 # state (six θL, binned 4×4; about 30 min on two cores), and 400 more whose camera is
 # also turned and whose white is not Lambertian (about an hour on a shared machine).
+# The figures are written before the targets are asserted: a missed target is recorded
+# (the tables show it) and the run goes on to the next case.
 coverage_section() {
     local out=docs/results/uncertainty
     mkdir -p "$out"
+    rm -f "$out"/coverage.json "$out"/coverage-defaults.json "$out"/coverage-lab.json
     echo "== uncertainty budget: coverage over 600 scans"
     GONIO_COVERAGE_SCANS=600 GONIO_COVERAGE_OUT="$PWD/$out/coverage.json" \
         cargo test --locked --workspace --test budget_coverage -- --nocapture \
-        expanded_intervals_hold_the_truth_of_scans_whose_setup_is_off
+        expanded_intervals_hold_the_truth_of_scans_whose_setup_is_off \
+        || echo "coverage: a target was missed (see the table)"
     echo "== uncertainty budget: coverage on the default uncertainties over 400 scans"
     GONIO_COVERAGE_JOBS=2 GONIO_COVERAGE_DEFAULTS_SCANS=400 \
         GONIO_COVERAGE_DEFAULTS_OUT="$PWD/$out/coverage-defaults.json" \
         cargo test --locked --workspace --test budget_coverage -- --nocapture \
-        expanded_intervals_hold_the_truth_on_the_default_uncertainties
+        expanded_intervals_hold_the_truth_on_the_default_uncertainties \
+        || echo "coverage on the defaults: a target was missed (see the table)"
     echo "== uncertainty budget: coverage with a turned camera and a white that is not Lambertian over 400 scans"
     GONIO_COVERAGE_JOBS=2 GONIO_COVERAGE_LAB_SCANS=400 \
         GONIO_COVERAGE_LAB_OUT="$PWD/$out/coverage-lab.json" \
         cargo test --locked --workspace --test budget_coverage -- --nocapture \
-        expanded_intervals_hold_the_truth_with_a_turned_camera_and_a_real_white
+        expanded_intervals_hold_the_truth_with_a_turned_camera_and_a_real_white \
+        || echo "coverage with a turned camera: a target was missed (see the table)"
+    for f in coverage coverage-defaults coverage-lab; do
+        [ -s "$out/$f.json" ]
+    done
 }
 
 # The verdicts of --model auto over 60 family scans and 3 noise seeds of each RGL file
