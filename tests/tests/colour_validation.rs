@@ -322,11 +322,10 @@ fn term(source: &str) -> usize {
 }
 
 /// One coordinate against its truth: its material (an index over the run's materials,
-/// the same for every scan of it), kind, coordinate (L*, a*, b*), origin, whether the
-/// truth lies inside U, the error and the variance of each class of its lines ([`TERMS`]).
+/// the same for every scan of it), coordinate (L*, a*, b*), origin, whether the truth
+/// lies inside U, the error and the variance of each class of its lines ([`TERMS`]).
 struct Judged {
     material: usize,
-    kind: usize,
     coordinate: usize,
     origin: usize,
     hit: bool,
@@ -335,6 +334,11 @@ struct Judged {
 }
 
 impl Judged {
+    /// Its material's kind ([`kind`]).
+    fn kind(&self) -> usize {
+        kind(self.material)
+    }
+
     /// Inside k·u with the classes `keep` (by [`TERMS`] index) counted.
     fn inside(&self, keep: [bool; 3]) -> bool {
         let v: f64 = (0..3).filter(|&t| keep[t]).map(|t| self.variance[t]).sum();
@@ -374,7 +378,6 @@ impl Accuracy {
                 }
                 self.judged.push(Judged {
                     material,
-                    kind,
                     coordinate: k,
                     origin,
                     hit,
@@ -403,11 +406,9 @@ impl Accuracy {
 }
 
 impl Accuracy {
-    /// The 95 % interval of the coverage of the coordinates `keep` chooses, resampling
-    /// whole materials (2,000 seeded draws, percentiles 2.5 and 97.5): a material's
-    /// coordinates share its spectrum's transform error, its lobe's fit and, between its
-    /// scans, its white, so they are far from independent trials, and the Wilson interval
-    /// over coordinates is too narrow.
+    /// The 95 % interval of the coverage of the coordinates `keep` chooses, resampling whole
+    /// materials (2,000 seeded draws): a material's coordinates share its spectrum's
+    /// transform error and its white, so the Wilson interval over coordinates is too narrow.
     fn by_material(&self, keep: &dyn Fn(&Judged) -> bool) -> serde_json::Value {
         let mut per: std::collections::BTreeMap<usize, (usize, usize)> = Default::default();
         for j in self.judged.iter().filter(|j| keep(j)) {
@@ -467,7 +468,7 @@ impl Accuracy {
         };
         let mut out = Vec::new();
         for (k, kind) in KINDS.iter().enumerate() {
-            let of_kind = |j: &Judged| j.kind == k;
+            let of_kind = |j: &Judged| j.kind() == k;
             let by_coordinate: Vec<_> = ["L", "a", "b"]
                 .iter()
                 .enumerate()
@@ -701,7 +702,7 @@ fn validate(plan: &Plan, strict: bool) {
             "coverage_by_origin": {"data": accuracy.by_origin[0].json(), "model": accuracy.by_origin[1].json()},
             "coverage_by_material": {
                 "all": accuracy.by_material(&|_| true),
-                "by_kind": KINDS.iter().enumerate().map(|(k, name)| json!({"kind": name, "interval": accuracy.by_material(&|j: &Judged| j.kind == k)})).collect::<Vec<_>>(),
+                "by_kind": KINDS.iter().enumerate().map(|(k, name)| json!({"kind": name, "interval": accuracy.by_material(&|j: &Judged| j.kind() == k)})).collect::<Vec<_>>(),
             },
             "coverage_by_kind": KINDS.iter().zip(&accuracy.by_kind).map(|(k, c)| json!({"kind": k, "count": c.json()})).collect::<Vec<_>>(),
             "coverage_breakdown": accuracy.breakdown(),
