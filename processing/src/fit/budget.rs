@@ -239,17 +239,17 @@ struct Refit<'a> {
 impl Refit<'_> {
     /// θ of the fit to the measured values `moved` (one per sample).
     fn fit(&self, moved: &[[f64; 3]]) -> Result<Vec<f64>, FitError> {
-        self.fit_from(moved, self.near.as_ref())
+        self.fit_from(moved.to_vec(), self.near.as_ref())
     }
 
     /// θ of the fit to the measured values `moved`, started from `near` as
     /// [`Refit::solve_from`] starts.
     fn fit_from(
         &self,
-        moved: &[[f64; 3]],
+        moved: Vec<[f64; 3]>,
         near: Option<&(Params, [f64; 3])>,
     ) -> Result<Vec<f64>, FitError> {
-        let (params, ks_90) = self.solve_from(&self.data.with_measured(moved.to_vec()), near)?;
+        let (params, ks_90) = self.solve_from(&self.data.with_measured(moved), near)?;
         let m = &params.m[..self.options.roughness.count()];
         let ks_90 = self.fresnel.then_some(ks_90);
         Ok(vector(params.kd, params.ks, ks_90, m))
@@ -339,7 +339,7 @@ impl Refit<'_> {
             if moved == self.data.y {
                 Ok(base.to_vec())
             } else {
-                self.fit_from(&moved, near)
+                self.fit_from(moved, near)
             }
         };
         let plus = refit(h, self.near.as_ref())?;

@@ -131,21 +131,24 @@ pub(crate) fn estimate(
         .map(|&s| (s, None))
         .collect();
     columns.extend(theta_l.iter().map(|&t| (Source::ArmAngle, Some(t))));
-    let index = |s: Source| Source::ALL.iter().position(|&a| a == s).unwrap_or(0);
-    let change = |sample: &Sample, &(source, at): &(Source, Option<f64>)| -> [f64; 3] {
+    // Each column's place in a sample's `sources`.
+    let places: Vec<usize> = columns
+        .iter()
+        .map(|&(source, _)| Source::ALL.iter().position(|&a| a == source).unwrap_or(0))
+        .collect();
+    let change = |sample: &Sample, j: usize| -> [f64; 3] {
         let Some(u) = &sample.uncertainty else {
             return [0.0; 3];
         };
-        match at {
+        match columns[j].1 {
             Some(t) if (sample.theta_l - t).abs() > THETA_L_TOLERANCE => [0.0; 3],
-            _ => u.sources[index(source)],
+            _ => u.sources[places[j]],
         }
     };
-    let jacobian = jacobian(data, params, ks_90, fresnel, shared);
+    let (estimates, jacobian) = jacobian(data, params, ks_90, fresnel, shared);
     let (n_z, n_g) = (columns.len(), jacobian.len());
     let size = n_z + n_g;
 
-    let estimates = data.estimates(params, ks_90);
     let keep = |p: usize, c: usize| data.keep.as_ref().is_none_or(|k| k[p][c] > 0.0);
     let mean = data.zero_loss / data.y.len().max(1) as f64;
     let floor = 1e-6 * mean + f64::MIN_POSITIVE;
@@ -159,8 +162,8 @@ pub(crate) fn estimate(
         for (i, sample) in block.iter().enumerate() {
             let p = k * NORMAL_BLOCK + i;
             let noise = sample.uncertainty.as_ref().map_or([0.0; 3], |u| u.noise);
-            for (d, col) in changes.iter_mut().zip(&columns) {
-                *d = change(sample, col);
+            for (j, d) in changes.iter_mut().enumerate() {
+                *d = change(sample, j);
             }
             for c in (0..3).filter(|&c| keep(p, c)) {
                 for (v, d) in row.iter_mut().zip(
@@ -214,8 +217,8 @@ pub(crate) fn estimate(
         .enumerate()
         .map(|(p, sample)| {
             let mut y = data.y[p];
-            for (col, zj) in columns.iter().zip(&z) {
-                let d = change(sample, col);
+            for (j, zj) in z.iter().enumerate() {
+                let d = change(sample, j);
                 for c in (0..3).filter(|&c| keep(p, c)) {
                     y[c] -= zj * d[c];
                 }
@@ -247,6 +250,8 @@ struct Normal {
     rhs: Vec<f64>,
     squares: f64,
     rows: usize,
+    /// The columns of the row being added whose entry is not 0 (kept from row to row).
+    nonzero: Vec<usize>,
 }
 
 impl Normal {
@@ -257,17 +262,23 @@ impl Normal {
             rhs: vec![0.0; size],
             squares: 0.0,
             rows: 0,
+            nonzero: Vec::with_capacity(size),
         }
     }
 
+    /// Adds one row. A zero entry adds nothing to any sum (most of a row's are zero: the
+    /// arm's angle of the other θL, the model's columns of the other channels), so only
+    /// the products of nonzero entries are added, each sum's in the order of the rows.
     fn add(&mut self, row: &[f64], r: f64, w: f64) {
-        // A zero entry adds nothing to its line (the arm's angle of the other θL).
-        for (a, &ra) in row.iter().enumerate().filter(|&(_, &ra)| ra != 0.0) {
-            let wa = w * ra;
+        self.nonzero.clear();
+        self.nonzero
+            .extend((0..row.len()).filter(|&a| row[a] != 0.0));
+        for (k, &a) in self.nonzero.iter().enumerate() {
+            let wa = w * row[a];
             self.rhs[a] += wa * r;
             let line = &mut self.matrix[a * self.size..(a + 1) * self.size];
-            for (v, &rb) in line[a..].iter_mut().zip(&row[a..]) {
-                *v += wa * rb;
+            for &b in &self.nonzero[k..] {
+                line[b] += wa * row[b];
             }
         }
         self.squares += w * r * r;
@@ -337,15 +348,16 @@ fn solve_active(
     Ok((found.0, found.1, scatter2))
 }
 
-/// The model's Jacobian at (`params`, `ks_90`): per parameter (Kd, Ks, Ks_90 when
-/// `fresnel`, ln m shared or per channel), the change of every point's β.
+/// The model's β at (`params`, `ks_90`) at every point ([`Data::estimates`]), and its
+/// Jacobian there: per parameter (Kd, Ks, Ks_90 when `fresnel`, ln m shared or per
+/// channel), the change of every point's β.
 fn jacobian(
     data: &Data,
     params: &Params,
     ks_90: &[f64; 3],
     fresnel: bool,
     shared: bool,
-) -> Vec<Vec<[f64; 3]>> {
+) -> (Vec<[f64; 3]>, Vec<Vec<[f64; 3]>>) {
     // Each column as the difference of two evaluations at every point, (upper, lower
     // or the fit's own when `None`, step): found in parallel.
     type Point = (Params, [f64; 3]);
@@ -382,7 +394,7 @@ fn jacobian(
         differences.push(((up, *ks_90), Some((down, *ks_90)), 2.0 * LN_M_STEP));
     }
     let base_estimates = data.estimates(params, ks_90);
-    differences
+    let columns = differences
         .par_iter()
         .map(|((p, k), lower, scale)| {
             let upper = data.estimates(p, k);
@@ -394,7 +406,8 @@ fn jacobian(
                 .map(|(a, b)| std::array::from_fn(|c| (a[c] - b[c]) / scale))
                 .collect()
         })
-        .collect()
+        .collect();
+    (base_estimates, columns)
 }
 
 /// x of `normal`·x = `rhs` and the diagonal of `normal`'s inverse (the posterior
