@@ -62,6 +62,11 @@ impl Source {
     /// Number of sources.
     pub const COUNT: usize = Self::ALL.len();
 
+    /// This source's place in [`Source::ALL`] (the order the enum declares).
+    pub fn index(self) -> usize {
+        self as usize
+    }
+
     /// The key of this source in setup.json's `uncertainty` block.
     pub fn key(self) -> &'static str {
         match self {
@@ -283,6 +288,13 @@ impl SetupUncertainty {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn each_source_s_index_is_its_place_in_all() {
+        for (i, source) in Source::ALL.iter().enumerate() {
+            assert_eq!(source.index(), i, "{source:?}");
+        }
+    }
 
     #[test]
     fn absent_values_take_their_defaults_and_say_so() {

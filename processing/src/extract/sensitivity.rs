@@ -226,7 +226,6 @@ pub(super) fn add_sensitivities(
     let angular = setup.white_angular();
     let places: Vec<Place> = stated.columns.iter().map(|&x| knots.place(x)).collect();
     let stated_samples: &[Sample] = samples;
-    let position = |source| Source::ALL.iter().position(|&s| s == source).unwrap_or(0);
     let changes: Vec<(usize, Vec<[f64; 3]>)> = inputs
         .par_iter()
         .enumerate()
@@ -290,7 +289,7 @@ pub(super) fn add_sensitivities(
         .collect();
     // Source::ALL begins with the white reference.
     let white = inputs[0].u;
-    let falloff = position(Source::WhiteFalloff);
+    let falloff = Source::WhiteFalloff.index();
     for (i, sample) in samples.iter_mut().enumerate() {
         let rgb = sample.rgb;
         let dropped = sample.dropped;

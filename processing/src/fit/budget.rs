@@ -533,10 +533,7 @@ pub fn budget(samples: &[Sample], result: &FitResult) -> Result<Budget, FitError
         .filter(|&j| Source::ALL[j] != Source::ArmAngle)
         .map(|j| (j, None))
         .collect();
-    let angle = Source::ALL
-        .iter()
-        .position(|&s| s == Source::ArmAngle)
-        .expect("the arm's angle is a source");
+    let angle = Source::ArmAngle.index();
     jobs.extend(theta_l.iter().map(|&t| (angle, Some(t))));
     let (state, state_base) = match (&measured, measured_base) {
         (Some(measured), Some(fit)) => (measured, fit),
@@ -712,10 +709,7 @@ pub fn monte_carlo(
             }
         }
     };
-    let angle = Source::ALL
-        .iter()
-        .position(|&s| s == Source::ArmAngle)
-        .expect("the arm's angle is a source");
+    let angle = Source::ArmAngle.index();
     let fits: Vec<Vec<f64>> = (0..draws)
         .into_par_iter()
         .map(|d| {

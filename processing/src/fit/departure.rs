@@ -131,18 +131,13 @@ pub(crate) fn estimate(
         .map(|&s| (s, None))
         .collect();
     columns.extend(theta_l.iter().map(|&t| (Source::ArmAngle, Some(t))));
-    // Each column's place in a sample's `sources`.
-    let places: Vec<usize> = columns
-        .iter()
-        .map(|&(source, _)| Source::ALL.iter().position(|&a| a == source).unwrap_or(0))
-        .collect();
-    let change = |sample: &Sample, j: usize| -> [f64; 3] {
+    let change = |sample: &Sample, &(source, at): &(Source, Option<f64>)| -> [f64; 3] {
         let Some(u) = &sample.uncertainty else {
             return [0.0; 3];
         };
-        match columns[j].1 {
+        match at {
             Some(t) if (sample.theta_l - t).abs() > THETA_L_TOLERANCE => [0.0; 3],
-            _ => u.sources[places[j]],
+            _ => u.sources[source.index()],
         }
     };
     let (estimates, jacobian) = jacobian(data, params, ks_90, fresnel, shared);
@@ -162,8 +157,8 @@ pub(crate) fn estimate(
         for (i, sample) in block.iter().enumerate() {
             let p = k * NORMAL_BLOCK + i;
             let noise = sample.uncertainty.as_ref().map_or([0.0; 3], |u| u.noise);
-            for (j, d) in changes.iter_mut().enumerate() {
-                *d = change(sample, j);
+            for (d, col) in changes.iter_mut().zip(&columns) {
+                *d = change(sample, col);
             }
             for c in (0..3).filter(|&c| keep(p, c)) {
                 for (v, d) in row.iter_mut().zip(
@@ -217,8 +212,8 @@ pub(crate) fn estimate(
         .enumerate()
         .map(|(p, sample)| {
             let mut y = data.y[p];
-            for (j, zj) in z.iter().enumerate() {
-                let d = change(sample, j);
+            for (col, zj) in columns.iter().zip(&z) {
+                let d = change(sample, col);
                 for c in (0..3).filter(|&c| keep(p, c)) {
                     y[c] -= zj * d[c];
                 }
