@@ -2,6 +2,8 @@
 //! the log response g(z) recovered per channel ([`response`]), and the reading of level
 //! z the exposure e^g(z); radiance on the scale fixed by g(128) = 0.
 
+use rayon::prelude::*;
+
 use super::error::HdrError;
 use super::image::{channel_mask, map_rows, Rows, SATURATED, UNDEREXPOSED};
 use super::options::MergeOptions;
@@ -9,15 +11,18 @@ use super::response::{self, Observations, LEVELS};
 use super::weighting::{Run, RUN};
 use crate::capture::Frame;
 
-/// Per-frame table from count to the quantised level 0..=255 of its normalised signal.
-fn level_table(frame: &Frame) -> Vec<u8> {
+/// Per-frame table from count to the quantised level 0..=255 of its normalised signal:
+/// one entry per count, so that a lookup needs no bounds check.
+type LevelTable = Box<[u8; 1 << 16]>;
+
+fn level_table(frame: &Frame) -> LevelTable {
     let range = frame.white_level - frame.black_level;
-    (0..=u16::MAX)
-        .map(|count| {
-            let s = (f64::from(count) - frame.black_level) / range;
-            (s.clamp(0.0, 1.0) * (LEVELS - 1) as f64).round() as u8
-        })
-        .collect()
+    let mut table = Box::new([0u8; 1 << 16]);
+    for (count, level) in (0..=u16::MAX).zip(table.iter_mut()) {
+        let s = (f64::from(count) - frame.black_level) / range;
+        *level = (s.clamp(0.0, 1.0) * (LEVELS - 1) as f64).round() as u8;
+    }
+    table
 }
 
 pub(super) fn merge_debevec_malik(
@@ -31,7 +36,7 @@ pub(super) fn merge_debevec_malik(
     if distinct.len() < 2 {
         return Err(HdrError::SingleExposure);
     }
-    let tables: Vec<Vec<u8>> = frames.iter().map(level_table).collect();
+    let tables: Vec<LevelTable> = frames.iter().map(level_table).collect();
     let level = |j: usize, index: usize| usize::from(tables[j][usize::from(frames[j].data[index])]);
     let observations = Observations {
         level: &level,
@@ -39,7 +44,10 @@ pub(super) fn merge_debevec_malik(
         pixels: frames[0].width * frames[0].height,
         ln_h: &ln_h,
     };
-    let curves: Vec<response::Curve> = (0..3)
+    // The channels' curves are recovered side by side; the first channel that fails is
+    // the one named.
+    let recovered: Vec<Option<response::Curve>> = (0..3)
+        .into_par_iter()
         .map(|c| {
             response::recover(
                 &observations,
@@ -47,7 +55,13 @@ pub(super) fn merge_debevec_malik(
                 options.response_samples,
                 options.smoothness,
             )
-            .ok_or_else(|| HdrError::Response(format!("channel {c}: degenerate bracket")))
+        })
+        .collect();
+    let curves: Vec<response::Curve> = recovered
+        .into_iter()
+        .enumerate()
+        .map(|(c, curve)| {
+            curve.ok_or_else(|| HdrError::Response(format!("channel {c}: degenerate bracket")))
         })
         .collect::<Result<_, _>>()?;
     // Longest exposure first: the first usable reading is the reference estimate, and
@@ -69,7 +83,7 @@ pub(super) fn merge_debevec_malik(
 /// A bracket's frames with their level tables and recovered curves.
 struct DebevecMalik<'a> {
     frames: &'a [Frame],
-    tables: &'a [Vec<u8>],
+    tables: &'a [LevelTable],
     /// One per channel.
     curves: &'a [response::Curve],
     ln_h: &'a [f64],
@@ -82,9 +96,6 @@ impl Rows for DebevecMalik<'_> {
     #[inline(always)]
     fn row(&self, run: &mut Run, y: usize, row_rgb: &mut [f32], row_mask: &mut [u8]) {
         let width = self.frames[0].width;
-        let level = |j: usize, index: usize| {
-            usize::from(self.tables[j][usize::from(self.frames[j].data[index])])
-        };
         // A run holds one channel's values, read through its curve.
         for (c, curve) in self.curves.iter().enumerate() {
             for x0 in (0..width).step_by(RUN) {
@@ -92,8 +103,11 @@ impl Rows for DebevecMalik<'_> {
                 let index = 3 * (width * y + x0) + c;
                 run.start(&self.exposures, len);
                 for (k, &j) in self.order.iter().enumerate() {
+                    // The run's counts of this channel, and the frame's levels.
+                    let counts = &self.frames[j].data[index..index + 3 * (len - 1) + 1];
+                    let table: &[u8; 1 << 16] = &self.tables[j];
                     run.frame(k, |i| {
-                        let z = level(j, index + 3 * i);
+                        let z = usize::from(table[usize::from(counts[3 * i])]);
                         (
                             curve.exposure[z],
                             z == LEVELS - 1,
@@ -114,7 +128,7 @@ impl Rows for DebevecMalik<'_> {
                 });
                 let means = run.means(
                     |predicted| curve.in_range(predicted),
-                    |_, predicted| curve.variance(predicted),
+                    |_, predicted, variance| curve.variances(predicted, variance),
                 );
                 for (i, estimate) in means {
                     row_rgb[3 * (x0 + i) + c] = estimate.max(0.0) as f32;

@@ -78,7 +78,12 @@ impl Rows for Linear<'_> {
             });
             let means = run.means(
                 |predicted| (predicted >= lo) & (predicted <= hi),
-                |j, predicted| self.sorted[j].shot * predicted + self.read_var,
+                |j, predicted, variance| {
+                    let shot = self.sorted[j].shot;
+                    for (variance, &predicted) in variance.iter_mut().zip(predicted) {
+                        *variance = shot * predicted + self.read_var;
+                    }
+                },
             );
             for (k, estimate) in means {
                 rgb[k] = estimate.max(0.0) as f32;

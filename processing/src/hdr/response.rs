@@ -56,7 +56,8 @@ pub(super) struct Curve {
     quantisation: [f64; LEVELS],
     /// The quantisation of the level an exposure in range reads as, by [`bin`] from
     /// that of exposure[1] (`first_bin`): one lookup instead of a search through
-    /// `exposure`.
+    /// `exposure`. Its last entry, level 255's, stands for every bin above: a lookup
+    /// clamped to the table has no branch, and the merge's loop stays in vector registers.
     quantisation_of_bin: Vec<f64>,
     first_bin: u64,
 }
@@ -89,6 +90,7 @@ impl Curve {
                 let z = exposure.partition_point(|&v| v < lowest.max(exposure[1]));
                 quantisation[z.min(TOP)]
             })
+            .chain([quantisation[TOP]])
             .collect();
         Self {
             g,
@@ -103,17 +105,28 @@ impl Curve {
 
     /// Whether a noiseless exposure x reads between levels 1 and 254.
     pub fn in_range(&self, x: f64) -> bool {
-        x > 0.0 && x >= self.exposure[1] && x <= self.exposure[TOP - 1]
+        (x > 0.0) & (x >= self.exposure[1]) & (x <= self.exposure[TOP - 1])
     }
 
-    /// Variance of the exposure read for a noiseless exposure x (in range):
-    /// a·x + b + x²·g′(z)²/12 with z the level x reads as (to within a level).
-    pub fn variance(&self, x: f64) -> f64 {
-        let quantisation = usize::try_from(bin(x).saturating_sub(self.first_bin))
-            .ok()
-            .and_then(|i| self.quantisation_of_bin.get(i))
-            .map_or(self.quantisation[TOP], |&q| q);
-        self.shot * x + self.read + x * x * quantisation
+    /// Variance of the exposure read for each noiseless exposure x (in range) of `x`,
+    /// into `variance`: a·x + b + x²·g′(z)²/12 with z the level x reads as (to within a
+    /// level).
+    #[inline(always)]
+    pub fn variances(&self, x: &[f64], variance: &mut [f64]) {
+        let table = self.quantisation_of_bin.as_slice();
+        let Some(last) = table.len().checked_sub(1) else {
+            return;
+        };
+        let (shot, read, first_bin) = (self.shot, self.read, self.first_bin);
+        // Two passes, so that the second stays in vector registers: each x's
+        // quantisation (below exposure[1]: the first bin's; above the table: level
+        // 255's), then its variance.
+        for (quantisation, &x) in variance.iter_mut().zip(x) {
+            *quantisation = table[bin(x).saturating_sub(first_bin).min(last as u64) as usize];
+        }
+        for (variance, &x) in variance.iter_mut().zip(x) {
+            *variance = shot * x + read + x * x * *variance;
+        }
     }
 }
 
@@ -402,7 +415,8 @@ mod tests {
         for z in 1..TOP {
             for x in [curve.exposure[z], curve.exposure[z] * 1.001] {
                 if curve.in_range(x) {
-                    let v = curve.variance(x);
+                    let mut v = 0.0;
+                    curve.variances(&[x], std::slice::from_mut(&mut v));
                     assert!(v.is_finite() && v > 0.0, "level {z}: {v}");
                 }
             }

@@ -30,6 +30,9 @@ pub(super) struct Run {
     last_clipped: Vec<u32>,
     /// Per value: the estimate (0 for one no frame reads in range), the weighted sums.
     estimate: Vec<f64>,
+    /// Per value, for the frame being weighed: the predicted reading and its variance.
+    predicted: Vec<f64>,
+    variance: Vec<f64>,
     next: Vec<f64>,
     sum: Vec<f64>,
     weights: Vec<f64>,
@@ -99,34 +102,42 @@ impl Run {
 
     /// The merge of each value some frame reads in range: the mean of reading / exposure
     /// over the frames whose reading is not clipped and whose reading predicted from an
-    /// estimate (estimate × exposure) is `usable`, each weighted by exposure² /
-    /// `variance(frame, predicted reading)`. Predicted first from the reference, then
-    /// again from that first mean; an estimate that leaves no frame is kept. Yields each
-    /// value's place in the run and its merge. Every value of the run is merged side by
-    /// side; those no frame reads in range are left out of what is yielded.
+    /// estimate (estimate × exposure) is `usable`, each weighted by exposure² over the
+    /// variance of the predicted reading (`variances(frame, predicted, variance)` fills
+    /// a run's at once, so that a merge can look them up in vector registers).
+    /// Predicted first from the reference, then again from that first mean; an
+    /// estimate that leaves no frame is kept. Yields each value's place in the run and
+    /// its merge. Every value of the run is merged side by side; those no frame reads in
+    /// range are left out of what is yielded.
     #[inline(always)]
     pub fn means(
         &mut self,
         usable: impl Fn(f64) -> bool,
-        variance: impl Fn(usize, f64) -> f64,
+        variances: impl Fn(usize, &[f64], &mut [f64]),
     ) -> impl Iterator<Item = (usize, f64)> + '_ {
         let m = self.len;
         self.next.resize(m, 0.0);
+        self.predicted.resize(m, 0.0);
+        self.variance.resize(m, 0.0);
         for _ in 0..2 {
             self.sum.clear();
             self.sum.resize(m, 0.0);
             self.weights.clear();
             self.weights.resize(m, 0.0);
             for (j, &h) in self.exposure.iter().enumerate() {
+                for (predicted, &estimate) in self.predicted.iter_mut().zip(&self.estimate) {
+                    *predicted = estimate * h;
+                }
+                variances(j, &self.predicted, &mut self.variance);
                 let readings = self.reading[j * RUN..j * RUN + m]
                     .iter()
                     .zip(&self.clipped[j * RUN..j * RUN + m]);
                 let sums = self.sum.iter_mut().zip(&mut self.weights);
-                for ((sum, weights), (&estimate, (&value, &clipped))) in
-                    sums.zip(self.estimate.iter().zip(readings))
+                let predictions = self.predicted.iter().zip(&self.variance);
+                for ((sum, weights), ((&predicted, &variance), (&value, &clipped))) in
+                    sums.zip(predictions.zip(readings))
                 {
-                    let predicted = estimate * h;
-                    let inv_var = 1.0 / variance(j, predicted);
+                    let inv_var = 1.0 / variance;
                     let inv_var = if usable(predicted) & !clipped {
                         inv_var
                     } else {
@@ -175,7 +186,7 @@ mod tests {
         }
         run.references(|_, _| panic!("no frame in range"));
         let means: Vec<(usize, f64)> = run
-            .means(|p| (0.01..=0.9).contains(&p), |_, _| 1e-4)
+            .means(|p| (0.01..=0.9).contains(&p), |_, _, v| v.fill(1e-4))
             .collect();
         assert_eq!(means.len(), 1);
         means[0].1
@@ -221,7 +232,7 @@ mod tests {
         run.references(|k, clipped| unread.push((k, clipped)));
         assert_eq!(unread, [(0, Some(1)), (1, None)]);
         let means: Vec<(usize, f64)> = run
-            .means(|p| (0.01..=0.9).contains(&p), |_, _| 1e-4)
+            .means(|p| (0.01..=0.9).contains(&p), |_, _, v| v.fill(1e-4))
             .collect();
         assert_eq!(means, [(2, 0.5)]);
     }
