@@ -21,6 +21,7 @@
 
 use std::io::{self, BufReader, BufWriter, Read};
 use std::ops::Range;
+use std::os::fd::AsFd;
 use std::os::unix::process::ExitStatusExt;
 use std::path::Path;
 use std::process::{Child, ChildStdin, ChildStdout, Command, Stdio};
@@ -311,7 +312,10 @@ pub fn serve(limits: Limits) -> anyhow::Result<()> {
         }
     }
     let abort_on = std::env::var_os(ABORT_ON_ENV);
-    let output = BufWriter::with_capacity(1 << 20, io::stdout().lock());
+    // Frames are binary: written to the descriptor itself, past stdout's line
+    // buffering, which would search every write (tens of megabytes) for a newline.
+    let stdout = std::fs::File::from(io::stdout().as_fd().try_clone_to_owned()?);
+    let output = BufWriter::with_capacity(1 << 20, stdout);
     wire::serve(io::stdin().lock(), output, |path| {
         if abort_on
             .as_deref()
