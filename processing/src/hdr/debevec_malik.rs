@@ -126,10 +126,7 @@ impl Rows for DebevecMalik<'_> {
                     row_rgb[3 * (x0 + i) + c] = radiance as f32;
                     row_mask[x0 + i] |= channel_mask(flag, c);
                 });
-                let means = run.means(
-                    |predicted| curve.in_range(predicted),
-                    |_, predicted, variance| curve.variances(predicted, variance),
-                );
+                let means = run.means(curve);
                 for (i, estimate) in means {
                     row_rgb[3 * (x0 + i) + c] = estimate.max(0.0) as f32;
                 }

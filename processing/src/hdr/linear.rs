@@ -4,7 +4,7 @@
 
 use super::image::{channel_mask, map_rows, Rows, SATURATED, UNDEREXPOSED};
 use super::options::MergeOptions;
-use super::weighting::{Run, RUN};
+use super::weighting::{Run, Weighing, RUN};
 use crate::capture::Frame;
 
 /// Per-frame constants of the linear merge.
@@ -57,7 +57,7 @@ pub(super) fn merge_linear(frames: &[Frame], options: &MergeOptions) -> (Vec<f32
 impl Rows for Linear<'_> {
     #[inline(always)]
     fn row(&self, run: &mut Run, y: usize, row_rgb: &mut [f32], row_mask: &mut [u8]) {
-        let (lo, hi, exposures) = (self.lo, self.hi, &self.exposures);
+        let (hi, exposures) = (self.hi, &self.exposures);
         for (r, rgb) in row_rgb.chunks_mut(RUN).enumerate() {
             let (start, index) = (r * RUN, 3 * self.width * y + r * RUN);
             run.start(exposures, rgb.len());
@@ -65,7 +65,7 @@ impl Rows for Linear<'_> {
                 let counts = &f.data[index..index + rgb.len()];
                 run.frame(j, |k| {
                     let s = (f64::from(counts[k]) - f.black) * f.inv_range;
-                    (s, s > hi, (s >= lo) & (s <= hi))
+                    (s, s > hi, self.usable(s))
                 });
             }
             run.references(|k, clipped| {
@@ -76,18 +76,23 @@ impl Rows for Linear<'_> {
                 rgb[k] = radiance as f32;
                 row_mask[(start + k) / 3] |= channel_mask(flag, (start + k) % 3);
             });
-            let means = run.means(
-                |predicted| (predicted >= lo) & (predicted <= hi),
-                |j, predicted, variance| {
-                    let shot = self.sorted[j].shot;
-                    for (variance, &predicted) in variance.iter_mut().zip(predicted) {
-                        *variance = shot * predicted + self.read_var;
-                    }
-                },
-            );
+            let means = run.means(self);
             for (k, estimate) in means {
                 rgb[k] = estimate.max(0.0) as f32;
             }
         }
+    }
+}
+
+/// Readings usable between `min_signal` and `max_signal`; shot plus read noise.
+impl Weighing for Linear<'_> {
+    #[inline(always)]
+    fn usable(&self, x: f64) -> bool {
+        (x >= self.lo) & (x <= self.hi)
+    }
+
+    #[inline(always)]
+    fn variance(&self, j: usize, x: f64, _: f64) -> f64 {
+        self.sorted[j].shot * x + self.read_var
     }
 }

@@ -21,6 +21,8 @@
 
 use nalgebra::{DMatrix, DVector};
 
+use super::weighting::Weighing;
+
 /// Levels of the response table.
 pub(super) const LEVELS: usize = 256;
 /// The level fixed at g = 0.
@@ -102,30 +104,32 @@ impl Curve {
             first_bin,
         }
     }
+}
 
-    /// Whether a noiseless exposure x reads between levels 1 and 254.
-    pub fn in_range(&self, x: f64) -> bool {
+/// Readings usable between levels 1 and 254; their variance a·x + b + x²·g′(z)²/12 for
+/// noiseless exposure x, z the level x reads as (to within a level), g′(z)²/12 looked up.
+impl Weighing for Curve {
+    #[inline(always)]
+    fn usable(&self, x: f64) -> bool {
         (x > 0.0) & (x >= self.exposure[1]) & (x <= self.exposure[TOP - 1])
     }
 
-    /// Variance of the exposure read for each noiseless exposure x (in range) of `x`,
-    /// into `variance`: a·x + b + x²·g′(z)²/12 with z the level x reads as (to within a
-    /// level).
     #[inline(always)]
-    pub fn variances(&self, x: &[f64], variance: &mut [f64]) {
+    fn variance(&self, _: usize, x: f64, quantisation: f64) -> f64 {
+        self.shot * x + self.read + x * x * quantisation
+    }
+
+    /// The quantisation of each exposure x = estimate × h by its [`bin`]: below
+    /// exposure[1] the first bin's, above the table level 255's.
+    #[inline(always)]
+    fn look_up(&self, _: usize, h: f64, estimate: &[f64], quantisation: &mut [f64]) {
         let table = self.quantisation_of_bin.as_slice();
         let Some(last) = table.len().checked_sub(1) else {
             return;
         };
-        let (shot, read, first_bin) = (self.shot, self.read, self.first_bin);
-        // Two passes, so that the second stays in vector registers: each x's
-        // quantisation (below exposure[1]: the first bin's; above the table: level
-        // 255's), then its variance.
-        for (quantisation, &x) in variance.iter_mut().zip(x) {
-            *quantisation = table[bin(x).saturating_sub(first_bin).min(last as u64) as usize];
-        }
-        for (variance, &x) in variance.iter_mut().zip(x) {
-            *variance = shot * x + read + x * x * *variance;
+        for (quantisation, &estimate) in quantisation.iter_mut().zip(estimate) {
+            let i = bin(estimate * h).saturating_sub(self.first_bin);
+            *quantisation = table[i.min(last as u64) as usize];
         }
     }
 }
@@ -411,12 +415,13 @@ mod tests {
         let flat = g[50];
         g[40..60].fill(flat);
         let curve = Curve::new(g, [0.0, 0.0]);
-        assert!(!curve.in_range(0.0));
+        assert!(!curve.usable(0.0));
         for z in 1..TOP {
             for x in [curve.exposure[z], curve.exposure[z] * 1.001] {
-                if curve.in_range(x) {
-                    let mut v = 0.0;
-                    curve.variances(&[x], std::slice::from_mut(&mut v));
+                if curve.usable(x) {
+                    let mut quantisation = 0.0;
+                    curve.look_up(0, 1.0, &[x], std::slice::from_mut(&mut quantisation));
+                    let v = curve.variance(0, x, quantisation);
                     assert!(v.is_finite() && v > 0.0, "level {z}: {v}");
                 }
             }

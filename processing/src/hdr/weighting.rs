@@ -15,6 +15,21 @@ pub(super) const RUN: usize = 256;
 /// Marks a value that no frame reads in range, or that none clips.
 const NONE: u32 = u32::MAX;
 
+/// How a merge weighs a frame's reading predicted from an estimate (estimate × the
+/// frame's exposure).
+pub(super) trait Weighing {
+    /// Whether a predicted reading `x` is usable.
+    fn usable(&self, x: f64) -> bool;
+    /// The variance of predicted reading `x` in frame `j`, given what
+    /// [`look_up`](Self::look_up) found for it.
+    fn variance(&self, j: usize, x: f64, looked_up: f64) -> f64;
+    /// Whatever the variance of frame `j`'s readings predicted from `estimate` (exposure
+    /// `h`) takes from a table, into `looked_up`: a pass of its own, so that the
+    /// weighing itself stays in vector registers. Nothing by default.
+    #[inline(always)]
+    fn look_up(&self, _j: usize, _h: f64, _estimate: &[f64], _looked_up: &mut [f64]) {}
+}
+
 /// A run of values being merged, and its buffers (kept from run to run).
 #[derive(Default)]
 pub(super) struct Run {
@@ -30,9 +45,8 @@ pub(super) struct Run {
     last_clipped: Vec<u32>,
     /// Per value: the estimate (0 for one no frame reads in range), the weighted sums.
     estimate: Vec<f64>,
-    /// Per value, for the frame being weighed: the predicted reading and its variance.
-    predicted: Vec<f64>,
-    variance: Vec<f64>,
+    /// Per value, for the frame being weighed: what [`Weighing::look_up`] found.
+    looked_up: Vec<f64>,
     next: Vec<f64>,
     sum: Vec<f64>,
     weights: Vec<f64>,
@@ -102,43 +116,35 @@ impl Run {
 
     /// The merge of each value some frame reads in range: the mean of reading / exposure
     /// over the frames whose reading is not clipped and whose reading predicted from an
-    /// estimate (estimate × exposure) is `usable`, each weighted by exposure² over the
-    /// variance of the predicted reading (`variances(frame, predicted, variance)` fills
-    /// a run's at once, so that a merge can look them up in vector registers).
-    /// Predicted first from the reference, then again from that first mean; an
-    /// estimate that leaves no frame is kept. Yields each value's place in the run and
-    /// its merge. Every value of the run is merged side by side; those no frame reads in
-    /// range are left out of what is yielded.
+    /// estimate (estimate × exposure) is usable, each weighted by exposure² over the
+    /// variance of the predicted reading (both as `weighing` says). Predicted first from
+    /// the reference, then again from that first mean; an estimate that leaves no frame
+    /// is kept. Yields each value's place in the run and its merge. Every value of the
+    /// run is merged side by side; those no frame reads in range are left out of what is
+    /// yielded.
     #[inline(always)]
-    pub fn means(
-        &mut self,
-        usable: impl Fn(f64) -> bool,
-        variances: impl Fn(usize, &[f64], &mut [f64]),
-    ) -> impl Iterator<Item = (usize, f64)> + '_ {
+    pub fn means(&mut self, weighing: &impl Weighing) -> impl Iterator<Item = (usize, f64)> + '_ {
         let m = self.len;
         self.next.resize(m, 0.0);
-        self.predicted.resize(m, 0.0);
-        self.variance.resize(m, 0.0);
+        self.looked_up.resize(m, 0.0);
         for _ in 0..2 {
             self.sum.clear();
             self.sum.resize(m, 0.0);
             self.weights.clear();
             self.weights.resize(m, 0.0);
             for (j, &h) in self.exposure.iter().enumerate() {
-                for (predicted, &estimate) in self.predicted.iter_mut().zip(&self.estimate) {
-                    *predicted = estimate * h;
-                }
-                variances(j, &self.predicted, &mut self.variance);
+                weighing.look_up(j, h, &self.estimate, &mut self.looked_up);
                 let readings = self.reading[j * RUN..j * RUN + m]
                     .iter()
                     .zip(&self.clipped[j * RUN..j * RUN + m]);
                 let sums = self.sum.iter_mut().zip(&mut self.weights);
-                let predictions = self.predicted.iter().zip(&self.variance);
-                for ((sum, weights), ((&predicted, &variance), (&value, &clipped))) in
-                    sums.zip(predictions.zip(readings))
+                let estimates = self.estimate.iter().zip(&self.looked_up);
+                for ((sum, weights), ((&estimate, &looked_up), (&value, &clipped))) in
+                    sums.zip(estimates.zip(readings))
                 {
-                    let inv_var = 1.0 / variance;
-                    let inv_var = if usable(predicted) & !clipped {
+                    let predicted = estimate * h;
+                    let inv_var = 1.0 / weighing.variance(j, predicted, looked_up);
+                    let inv_var = if weighing.usable(predicted) & !clipped {
                         inv_var
                     } else {
                         0.0
@@ -174,6 +180,18 @@ impl Run {
 mod tests {
     use super::*;
 
+    /// Constant variance, readings usable from 0.01 to 0.9.
+    struct Constant;
+
+    impl Weighing for Constant {
+        fn usable(&self, x: f64) -> bool {
+            (0.01..=0.9).contains(&x)
+        }
+        fn variance(&self, _: usize, _: f64, _: f64) -> f64 {
+            1e-4
+        }
+    }
+
     /// Constant variance, readings usable from 0.01 to 0.9 (`None`: clipped).
     fn mean(exposures: &[f64], readings: &[Option<f64>]) -> f64 {
         let mut run = Run::default();
@@ -185,9 +203,7 @@ mod tests {
             });
         }
         run.references(|_, _| panic!("no frame in range"));
-        let means: Vec<(usize, f64)> = run
-            .means(|p| (0.01..=0.9).contains(&p), |_, _, v| v.fill(1e-4))
-            .collect();
+        let means: Vec<(usize, f64)> = run.means(&Constant).collect();
         assert_eq!(means.len(), 1);
         means[0].1
     }
@@ -231,9 +247,7 @@ mod tests {
         let mut unread = Vec::new();
         run.references(|k, clipped| unread.push((k, clipped)));
         assert_eq!(unread, [(0, Some(1)), (1, None)]);
-        let means: Vec<(usize, f64)> = run
-            .means(|p| (0.01..=0.9).contains(&p), |_, _, v| v.fill(1e-4))
-            .collect();
+        let means: Vec<(usize, f64)> = run.means(&Constant).collect();
         assert_eq!(means, [(2, 0.5)]);
     }
 }
