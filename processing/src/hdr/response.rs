@@ -124,6 +124,8 @@ impl Weighing for Curve {
     #[inline(always)]
     fn look_up(&self, _: usize, h: f64, estimate: &[f64], quantisation: &mut [f64]) {
         let table = self.quantisation_of_bin.as_slice();
+        // Never empty (it ends with level 255's): checked here, the loop needs no bounds
+        // check.
         let Some(last) = table.len().checked_sub(1) else {
             return;
         };
