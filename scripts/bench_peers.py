@@ -204,6 +204,29 @@ def run_process(command):
     return seconds, usage.ru_maxrss * 1024
 
 
+def tiff_counts(path):
+    """(pixels, bytes of its decoded counts) of a TIFF's first image, from its header:
+    width × height, × samples per pixel × bytes per sample."""
+    import struct
+
+    with open(path, "rb") as f:
+        head = f.read(8)
+        order = {b"II": "<", b"MM": ">"}[head[:2]]
+        f.seek(struct.unpack(order + "I", head[4:8])[0])
+        (count,) = struct.unpack(order + "H", f.read(2))
+        entries = [struct.unpack(order + "HHI4s", f.read(12)) for _ in range(count)]
+        tags = {}
+        for tag, kind, n, value in entries:
+            code, size = ("H", 2) if kind == 3 else ("I", 4)
+            if n * size > 4:
+                # The values lie elsewhere; the first is enough (BitsPerSample per sample).
+                f.seek(struct.unpack(order + "I", value)[0])
+                value = f.read(size)
+            tags[tag] = struct.unpack(order + code, value[:size])[0]
+    pixels = tags[256] * tags[257]
+    return pixels, pixels * tags.get(277, 1) * ((tags.get(258, 1) + 7) // 8)
+
+
 def hdr(args):
     out = tempfile.mkdtemp()
     gonio = [args.gonio, "hdr", "--out", os.path.join(out, "gonio.exr"), *args.frames]
@@ -233,9 +256,23 @@ def hdr(args):
         }
         for name, r in runs.items()
     }
+    # What gonio's process moves at least: the files read, their counts decoded, the map
+    # (three f32 and a mask byte per pixel) written.
+    counts = [tiff_counts(path) for path in args.frames]
+    moved = {
+        "file_bytes": sum(os.path.getsize(path) for path in args.frames),
+        "decoded_bytes": sum(b for _, b in counts),
+        "map_pixels": max(p for p, _ in counts),
+    }
     print(
         json.dumps(
-            {"frames": len(args.frames), "runs": args.runs, "opencv_version": version, **summary}
+            {
+                "frames": len(args.frames),
+                "runs": args.runs,
+                "opencv_version": version,
+                **summary,
+                **moved,
+            }
         )
     )
 

@@ -5,7 +5,8 @@ measured: criterion's medians under target/criterion and the JSON lines the othe
 benchmarks and the peers appended to the results file. Every row names the command that
 measures it; a row whose measurement is missing says so instead of keeping an old number.
 Each row stands against its floor, what this machine allows (`--bench floors`): a fit's
-loss evaluations × its points × the measured cost of one point, over every core; a
+(or a budget's refits') passes over its points × the measured cost of one point of the
+loss, over every core; a
 merge's, decode's or render's bytes at the measured memory bandwidth; a scan's hardware
 time. A row whose work is not counted says so in its floor column.
 It refuses to write the table (exit status 1, the README left as it was) when a
@@ -169,9 +170,17 @@ class Table:
             **self.results.get("fit_1000_work", {}).get("fits", {}),
             **self.results.get("fit_samples", {}).get("fits", {}),
         }.get(full_id)
-        if not f or not work or work["model"] not in f["point_s"]:
+        if not work:
             return None
-        return work["evaluations"] * work["points"] * f["point_s"][work["model"]] / f["cores"]
+        return self.work_floor(work["evaluations"], work["points"], work["model"])
+
+    def work_floor(self, evaluations, points, model):
+        """`evaluations` passes over `points` points × one point of `model`'s loss, shared
+        over every core."""
+        f = self.floors()
+        if not f or evaluations is None or points is None or model not in f["point_s"]:
+            return None
+        return evaluations * points * f["point_s"][model] / f["cores"]
 
     def fit_floors(self, *full_ids):
         return [(self.median(i), self.fit_floor(i)) for i in full_ids]
@@ -368,7 +377,17 @@ def hdr_rows(t):
             ],
             "OpenCV ≥ 5×",
             PEERS_HDR,
-            "not modelled: 8-bit frames of another size",
+            # gonio's process: the files read, their counts decoded, the map written.
+            [
+                (
+                    g["seconds"],
+                    t.bytes_floor(
+                        peer["file_bytes"] + peer["decoded_bytes"] + peer["map_pixels"] * MAP_BYTES
+                    ),
+                )
+            ]
+            if "file_bytes" in peer
+            else None,
         )
     cmd = t.results.get("hdr_command")
     t.row(
@@ -417,7 +436,7 @@ def budget_rows(t):
         t.row(
             f"uncertainty budget of the full-size `gold` scan, {label}: samples' sensitivities "
             "(extraction with / without them) + propagation to the fit = total; the "
-            "Cook–Torrance fit with its propagation ÷ without",
+            "Cook–Torrance fit with its propagation ÷ without; floor: the propagation's",
             [
                 f"{duration(extra)} ({duration(with_u)} / {duration(without)}) + "
                 f"{duration(propagation)} = **{duration(total)}**; "
@@ -427,7 +446,7 @@ def budget_rows(t):
             ],
             "≤ 2 s; ≤ 2",
             EXTRACT + "; " + FIT_SAMPLES,
-            "not modelled: the refits' evaluations are not counted",
+            [(propagation, t.fit_floor(f"fit_samples/{model}/robust/shared/budget"))],
         )
     mc = t.results.get("budget_monte_carlo")
     t.row(
@@ -450,7 +469,9 @@ def budget_rows(t):
         else None,
         "1,000 draws ≤ 5 s",
         FIT_SAMPLES,
-        "not modelled: the draws' refits are not counted",
+        [(r["seconds"], t.work_floor(r.get("evaluations"), r.get("points"), "cook-torrance")) for r in mc["runs"]]
+        if mc
+        else None,
     )
 
 
@@ -515,7 +536,8 @@ def floors_note(results):
     points = ", ".join(f"{m} {s * 1e9:.1f} ns" for m, s in f["point_s"].items())
     return (
         "Floor: what this machine allows (`cargo bench -p gonio-processing --bench floors`): "
-        f"a fit's loss evaluations × its points × one point of the loss ({points} on one "
+        f"a fit's loss evaluations (a budget's: its refits' loss evaluations and "
+        f"Gauss–Newton passes) × its points × one point of the loss ({points} on one "
         f"core) over {f['cores']} cores; a merge's, decode's or render's bytes at "
         f"{f['copy_bytes_per_s'] / 1e9:.1f} GB/s (copy: read plus written; reading alone "
         f"{f['read_bytes_per_s'] / 1e9:.1f} GB/s); a scan's hardware time. ÷ floor: the "

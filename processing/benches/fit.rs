@@ -115,17 +115,30 @@ fn bench_samples_file(c: &mut Criterion) {
     let nelder_mead_fit = fit(&data, &nelder_mead).expect("Nelder–Mead fit");
     let camera = CameraModel::builtin();
     let auto = fit_auto(&data, &AUTO_CANDIDATES, &camera).expect("fit");
+    let mut fits = serde_json::json!({
+        "fit_samples/cook-torrance/robust/shared": work(&robust_fit, data.len()),
+        "fit_samples/cook-torrance/nelder-mead/shared": work(&nelder_mead_fit, data.len()),
+        "fit_samples/auto": work(&auto, data.len()),
+    });
+    // The budgets' work: their refits' passes over the points.
+    if data.iter().all(|s| s.uncertainty.is_some()) {
+        for model in [Model::CookTorrance, Model::CookTorranceFresnel] {
+            let result = fit(&data, &FitOptions::new(model)).expect("fit");
+            let budget = budget(&data, &result).expect("budget");
+            fits[format!("fit_samples/{model}/robust/shared/budget")] = serde_json::json!({
+                "evaluations": budget.evaluations,
+                "points": data.len(),
+                "model": model.to_string(),
+            });
+        }
+    }
     println!(
         "{}",
         serde_json::json!({
             "bench": "fit_samples",
             "samples": data.len(),
             "robust_loss": robust_fit.loss,
-            "fits": {
-                "fit_samples/cook-torrance/robust/shared": work(&robust_fit, data.len()),
-                "fit_samples/cook-torrance/nelder-mead/shared": work(&nelder_mead_fit, data.len()),
-                "fit_samples/auto": work(&auto, data.len()),
-            },
+            "fits": fits,
         })
     );
     let mut group = c.benchmark_group("fit_samples");
@@ -169,9 +182,11 @@ fn monte_carlo_convergence(data: &[Sample]) {
         runs.push(serde_json::json!({
             "draws": draws,
             "seconds": start.elapsed().as_secs_f64(),
-            "ks_g_std": mc.ks[1].std,
-            "m_std": mc.m[0].std,
-            "m_interval": mc.m[0].interval,
+            "ks_g_std": mc.parameters.ks[1].std,
+            "m_std": mc.parameters.m[0].std,
+            "m_interval": mc.parameters.m[0].interval,
+            "evaluations": mc.evaluations,
+            "points": data.len(),
         }));
     }
     println!(

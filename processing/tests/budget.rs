@@ -6,7 +6,7 @@
 
 use gonio_processing::brdf::{Model, Params};
 use gonio_processing::fit::agreement::{compare, Holds};
-use gonio_processing::fit::budget::{budget, monte_carlo, Draw, MonteCarlo};
+use gonio_processing::fit::budget::{budget, monte_carlo, Draw};
 use gonio_processing::fit::{fit, FitOptions, FitResult};
 use gonio_processing::samples::{Sample, SampleUncertainty};
 use gonio_processing::setup_uncertainty::Source;
@@ -209,8 +209,10 @@ fn the_law_of_propagation_agrees_with_the_monte_carlo() {
     let samples = scan(17);
     let result = cook_torrance(&samples);
     let b = budget(&samples, &result).unwrap();
+    // Two refits a source, each at least one pass over the points.
+    assert!(b.evaluations >= 2 * Source::COUNT as u64, "{}", b.evaluations);
     let mc = monte_carlo(&samples, &result, 400, Draw::Sources, 99).unwrap();
-    for ((name, p), d) in b.named().into_iter().zip(mc.flat()) {
+    for ((name, p), d) in b.named().into_iter().zip(mc.parameters.flat()) {
         let sources: f64 = p
             .contributions
             .iter()
@@ -234,12 +236,11 @@ fn the_monte_carlo_and_the_budget_intervals_agree_where_both_apply() {
     let samples = scan(23);
     let result = cook_torrance(&samples);
     let mut b = budget(&samples, &result).unwrap();
-    let parameters = monte_carlo(&samples, &result, 400, Draw::All, 5).unwrap();
-    let mc = MonteCarlo {
-        draws: 400,
-        parameters,
-        agreement: Vec::new(),
-    };
+    let mc = monte_carlo(&samples, &result, 400, Draw::All, 5).unwrap();
+    assert_eq!(mc.draws, 400);
+    assert!(mc.agreement.is_empty());
+    // Each draw's refit passes over the points at least once.
+    assert!(mc.evaluations >= 400, "{}", mc.evaluations);
     let agreement = compare(&b, &mc);
     assert_eq!(agreement.len(), b.named().len());
     for a in &agreement {

@@ -28,6 +28,16 @@ fn results(scan_spread: f64, steal: f64) -> String {
         ),
         r#"{"bench": "hdr_command", "whole_s": 1.0, "merge_s": 0.5, "spread": 0.1,
             "file_bytes": 1000000000, "decoded_bytes": 2000000000, "map_pixels": 100000000}"#,
+        r#"{"bench": "fit_samples", "samples": 8000, "robust_loss": 1.0, "fits": {
+            "fit_samples/cook-torrance/robust/shared/budget":
+            {"evaluations": 300, "points": 8000, "model": "cook-torrance"}}}"#,
+        r#"{"bench": "budget_monte_carlo", "ks_g_combined": 1.0, "m_combined": 0.01, "runs": [
+            {"draws": 250, "seconds": 0.3, "ks_g_std": 0.9, "m_std": 0.008,
+             "evaluations": 1500, "points": 8000}]}"#,
+        r#"{"bench": "peers_hdr", "frames": 7, "runs": 3, "opencv_version": "5.1.0",
+            "gonio": {"seconds": 1.52, "peak_bytes": 100000000},
+            "opencv": {"seconds": 4.0, "peak_bytes": 200000000},
+            "file_bytes": 1000000000, "decoded_bytes": 1500000000, "map_pixels": 100000000}"#,
     ]
     .map(|line| line.replace('\n', " "))
     .join("\n")
@@ -88,6 +98,12 @@ fn every_row_stands_against_its_floor() {
         2e6,
         0.02,
     );
+    criterion(
+        &dir.join("criterion"),
+        "fit_samples/cook-torrance/robust/shared/budget",
+        24e6,
+        0.02,
+    );
     let (output, readme) = run(&dir, 0.05, 0.012);
     assert!(output.status.success(), "{output:?}");
     assert!(
@@ -106,6 +122,21 @@ fn every_row_stands_against_its_floor() {
     // `gonio hdr`: 1 GB read + 2 GB decoded + 1.3 GB of map at 5 GB/s = 0.86 s.
     let hdr = row(&readme, "`gonio hdr`, 4 Deflate TIFFs");
     assert_eq!(hdr[2..4], ["860 ms", "1.16"], "{hdr:?}");
+    // A budget's floor: its refits' 300 passes × 8,000 points × 5 ns over 2 cores = 6 ms,
+    // against the propagation's 24 ms.
+    let budget = row(
+        &readme,
+        "uncertainty budget of the full-size `gold` scan, Cook–Torrance:",
+    );
+    assert_eq!(budget[2..4], ["6 ms", "4"], "{budget:?}");
+    // The Monte Carlo's: 1,500 passes × 8,000 points × 5 ns over 2 cores = 30 ms, against
+    // 300 ms.
+    let mc = row(&readme, "Monte Carlo of the Cook–Torrance budget");
+    assert_eq!(mc[2..4], ["30 ms", "10"], "{mc:?}");
+    // `gonio hdr` beside OpenCV: 1 GB read + 1.5 GB decoded + 1.3 GB of map at 5 GB/s =
+    // 0.76 s, against 1.52 s.
+    let peers = row(&readme, "`gonio hdr` / OpenCV 5.1.0");
+    assert_eq!(peers[2..4], ["760 ms", "2"], "{peers:?}");
     // Auto against one fit, both scans in one row.
     let auto = row(
         &readme,

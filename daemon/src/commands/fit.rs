@@ -149,7 +149,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(mut budget) = budget.context("the uncertainty budget")? {
         if let Some(draws) = args.monte_carlo {
             let spinner = progress::spinner(format!("Monte Carlo, {draws} draws"));
-            let distribution = fit::budget::monte_carlo(
+            let mc = fit::budget::monte_carlo(
                 &selected,
                 &result,
                 draws,
@@ -157,11 +157,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 MONTE_CARLO_SEED,
             );
             spinner.finish_and_clear();
-            let mut mc = fit::budget::MonteCarlo {
-                draws,
-                parameters: distribution.context("the Monte Carlo budget")?,
-                agreement: Vec::new(),
-            };
+            let mut mc = mc.context("the Monte Carlo budget")?;
             mc.agreement = fit::agreement::compare(&budget, &mc);
             budget.monte_carlo = Some(mc);
         }

@@ -25,6 +25,9 @@
 //! at once, the fit repeated per draw.
 #![doc = include_str!("budget.md")]
 
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -149,6 +152,10 @@ pub struct Budget {
     /// The same propagation by Monte Carlo, when asked for.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub monte_carlo: Option<MonteCarlo>,
+    /// The refits' passes over the points (loss evaluations and Gauss–Newton passes):
+    /// the budget's work (older files lack it).
+    #[serde(default)]
+    pub evaluations: u64,
 }
 
 /// One source's departure from the stated setup, as the residuals suggest it.
@@ -176,6 +183,9 @@ pub struct MonteCarlo {
     /// ([`super::agreement::compare`]; older files lack it).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub agreement: Vec<super::agreement::Agreement>,
+    /// The draws' refits' passes over the points, as [`Budget::evaluations`] counts them.
+    #[serde(default)]
+    pub evaluations: u64,
 }
 
 impl Budget {
@@ -234,6 +244,8 @@ struct Refit<'a> {
     /// where they give up by the search along ln m.
     tolerance: newton::Tolerance,
     precision: Precision,
+    /// Passes over the points of every solve by this refitter and its clones.
+    work: Arc<AtomicU64>,
 }
 
 impl Refit<'_> {
@@ -301,6 +313,7 @@ impl Refit<'_> {
             }
             None => robust::fit(data, &self.options)?,
         };
+        self.work.fetch_add(found.evaluations, Ordering::Relaxed);
         Ok((found.params, ks_90))
     }
 
@@ -424,6 +437,7 @@ fn refitter<'a>(samples: &'a [Sample], result: &FitResult) -> Result<Refit<'a>, 
         near: None,
         tolerance: newton::Tolerance::FINE,
         precision: Precision::FINE,
+        work: Arc::default(),
     })
 }
 
@@ -647,6 +661,7 @@ pub fn budget(samples: &[Sample], result: &FitResult) -> Result<Budget, FitError
             m: (n_colour..value.len()).map(parameter).collect(),
         },
         monte_carlo: None,
+        evaluations: refit.work.load(Ordering::Relaxed),
     };
     let finite = budget
         .named()
@@ -671,14 +686,15 @@ pub enum Draw {
 /// The distribution of every parameter of `result` (a fit of `samples`) over `draws`
 /// Monte Carlo draws of the measurement model, reproducible from `seed`: in each draw
 /// every common source, each θL's arm angle and (with [`Draw::All`]) each value's noise
-/// are drawn from their normal distributions and the fit is repeated.
+/// are drawn from their normal distributions and the fit is repeated. Its `agreement` is
+/// left to the caller ([`super::agreement::compare`] with the budget).
 pub fn monte_carlo(
     samples: &[Sample],
     result: &FitResult,
     draws: usize,
     what: Draw,
     seed: u64,
-) -> Result<ParameterSet<Distribution>, FitError> {
+) -> Result<MonteCarlo, FitError> {
     if draws < 2 {
         return Err(FitError::InvalidOptions(format!(
             "a Monte Carlo needs 2 draws or more, got {draws}"
@@ -764,10 +780,16 @@ pub fn monte_carlo(
         Distribution::of(values)
     };
     let n_colour = if fresnel { 9 } else { 6 };
-    Ok(ParameterSet {
+    let parameters = ParameterSet {
         kd: std::array::from_fn(distribution),
         ks: std::array::from_fn(|c| distribution(3 + c)),
         ks_90: fresnel.then(|| std::array::from_fn(|c| distribution(6 + c))),
         m: (n_colour..n_colour + m_count).map(distribution).collect(),
+    };
+    Ok(MonteCarlo {
+        draws,
+        parameters,
+        agreement: Vec::new(),
+        evaluations: refit.work.load(Ordering::Relaxed),
     })
 }
