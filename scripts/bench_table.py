@@ -8,7 +8,7 @@ Each row stands against its floor, what this machine allows (`--bench floors`): 
 (or a budget's refits') passes over its points × the measured cost of one point of the
 loss, over every core; a
 merge's, decode's or render's bytes at the measured memory bandwidth; a scan's hardware
-time. A row whose work is not counted says so in its floor column.
+time. A peer's row names the row whose floor it shares.
 It refuses to write the table (exit status 1, the README left as it was) when a
 measurement it uses was too unsteady to stand for the code: a criterion median whose 95 %
 confidence interval is wider than MAX_CI_WIDTH of it, or a whole-process benchmark whose
@@ -163,8 +163,9 @@ class Table:
         return self.results.get("floors")
 
     def fit_floor(self, full_id):
-        """A fit's floor: its loss evaluations × its points × one point of its model's
-        loss, shared over every core."""
+        """A fit's floor: its loss evaluations × its points (a model choice's: and the
+        evaluations × points of the fits that judged the candidates) × one point of its
+        model's loss, shared over every core."""
         f = self.floors()
         work = {
             **self.results.get("fit_1000_work", {}).get("fits", {}),
@@ -172,7 +173,9 @@ class Table:
         }.get(full_id)
         if not work:
             return None
-        return self.work_floor(work["evaluations"], work["points"], work["model"])
+        points = work["points"]
+        evaluations = work["evaluations"] + work.get("point_evaluations", 0) / points
+        return self.work_floor(evaluations, points, work["model"])
 
     def work_floor(self, evaluations, points, model):
         """`evaluations` passes over `points` points × one point of `model`'s loss, shared
@@ -251,7 +254,8 @@ def auto_rows(t):
     p = t.results.get("fit_auto_command")
     t.row(
         "`gonio fit --model auto` / `--model cook-torrance` as whole processes (samples read, "
-        "fit, uncertainty budget, JSON written): full-size `gold` scan; binned 4 × 4",
+        "fit, uncertainty budget, JSON written): full-size `gold` scan; binned 4 × 4; floor: "
+        "the auto process's",
         [
             f"{ratio(p[k]['auto_s'], p[k]['cook_torrance_s'])} "
             f"({duration(p[k]['auto_s'])} / {duration(p[k]['cook_torrance_s'])})"
@@ -261,7 +265,17 @@ def auto_rows(t):
         ],
         "≤ 2",
         "`cargo bench -p gonio-daemon --bench fit_auto_command`",
-        "not modelled: a process's reading, budget and writing are not counted in evaluations",
+        # The auto process's: its fit's, choice's and budget's passes over the points
+        # (reading and writing uncounted), at one point of Cook–Torrance's loss.
+        [
+            (
+                p[k]["auto_s"],
+                t.work_floor(p[k]["auto_point_evaluations"] / p[k]["points"], p[k]["points"], "cook-torrance"),
+            )
+            for k in ("full", "binning_4")
+        ]
+        if p and "points" in p["full"]
+        else None,
     )
 
 
@@ -309,10 +323,10 @@ def peer_fit_rows(t):
     )
 
 
-def study_floor(t, name):
-    """A study's floor: Σ over its fits of loss evaluations × points, at the mean cost of
-    one point of its three models' losses, shared over every core."""
-    f, work = t.floors(), t.results.get("study_work", {}).get("studies", {}).get(name)
+def study_floor(t, work):
+    """A study's floor: Σ over its fits of loss evaluations × points (`work`), at the mean
+    cost of one point of its three models' losses, shared over every core."""
+    f = t.floors()
     if not f or work is None:
         return None
     point = sum(f["point_s"].values()) / len(f["point_s"])
@@ -327,7 +341,12 @@ def study_rows(t):
             [duration(t.median("study/" + name.format(stride)))],
             "",
             STUDY if stride == 1 else "same",
-            [(t.median("study/" + name.format(stride)), study_floor(t, name.format(stride)))],
+            [
+                (
+                    t.median("study/" + name.format(stride)),
+                    study_floor(t, t.results.get("study_work", {}).get("studies", {}).get(name.format(stride))),
+                )
+            ],
         )
     s = t.results.get("study_command")
     t.row(
@@ -336,7 +355,8 @@ def study_rows(t):
         [f"{duration(s['wall_s'])} / {duration(s['cpu_s'])}" if s else None],
         "≤ 4 s wall",
         "`cargo bench -p gonio-daemon --bench study_command`",
-        "not modelled: `gonio study` does not write its fits' evaluations",
+        # Its fits' work, from its study.json (the Nelder–Mead comparison's included).
+        [(s["wall_s"], study_floor(t, s.get("point_evaluations")))] if s else None,
     )
 
 

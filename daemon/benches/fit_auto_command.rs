@@ -5,7 +5,10 @@
 //! `--runs` times (default 7), so a load that comes and goes weighs on both alike, each
 //! run timing five processes in a row.
 //! Prints each median wall time and their ratio (target ≤ 2), then the result as JSON
-//! (`{"bench": "fit_auto_command", ...}`), which scripts/bench.sh keeps.
+//! (`{"bench": "fit_auto_command", ...}`), which scripts/bench.sh keeps, with each
+//! process's work from the fit JSON it writes: its passes over the points (the fit's
+//! loss evaluations and its budget's refits', each × the points, plus the model choice's
+//! `point_evaluations`).
 //!
 //!     cargo bench -p gonio-daemon --bench fit_auto_command [-- --runs N]
 
@@ -38,6 +41,22 @@ fn compare(gonio: &str, samples: &str, runs: usize, dir: &Path) -> (f64, f64, f6
     (stats::median(&times[0]), stats::median(&times[1]), spread)
 }
 
+/// The loss evaluations × points of `gonio fit --model MODEL` on `samples` (of `points`
+/// points), read from the fit JSON it writes.
+fn point_evaluations(gonio: &str, samples: &str, model: &str, points: u64, dir: &Path) -> u64 {
+    let out = format!("work-{model}.json");
+    common::run(
+        gonio,
+        &["fit", samples, "--model", model, "--out", &out],
+        dir,
+    );
+    let text = std::fs::read_to_string(dir.join(&out)).expect("the fit JSON");
+    let fit: serde_json::Value = serde_json::from_str(&text).expect("fit JSON");
+    let count = |v: &serde_json::Value| v.as_u64().unwrap_or(0);
+    (count(&fit["evaluations"]) + count(&fit["budget"]["evaluations"])) * points
+        + count(&fit["selection"]["point_evaluations"])
+}
+
 fn main() {
     let runs = common::runs(7);
     let gonio = env!("CARGO_BIN_EXE_gonio");
@@ -59,6 +78,9 @@ fn main() {
         common::run(gonio, &["extract", &scan, "--out", &samples], dir.path());
         let (auto, cook_torrance, spread) = compare(gonio, &samples, runs, dir.path());
         let ratio = auto / cook_torrance;
+        let csv = std::fs::read_to_string(dir.path().join(&samples)).expect("samples");
+        let points = csv.lines().skip(1).filter(|l| !l.trim().is_empty()).count() as u64;
+        let work = |model| point_evaluations(gonio, &samples, model, points, dir.path());
         println!(
             "gonio fit, gold scan ({name}), median of {runs}: --model auto {auto:.3} s, \
              --model cook-torrance {cook_torrance:.3} s, ratio {ratio:.2} (target ≤ 2)"
@@ -70,6 +92,9 @@ fn main() {
                 "cook_torrance_s": cook_torrance,
                 "ratio": ratio,
                 "spread": spread,
+                "points": points,
+                "auto_point_evaluations": work("auto"),
+                "cook_torrance_point_evaluations": work("cook-torrance"),
             }),
         );
     }

@@ -5,7 +5,8 @@
 //! Prints the median wall time (target ≤ 4 s on the 2-core machine, idle) and the
 //! median CPU time of the process (user + system, which a loaded machine disturbs less),
 //! then the result as JSON (`{"bench": "study_command", ...}`), which scripts/bench.sh
-//! keeps.
+//! keeps, with the study's work from its `study.json` (`point_evaluations`: its fits'
+//! loss evaluations × their points).
 //!
 //!     cargo bench -p gonio-daemon --bench study_command [-- --runs N]
 
@@ -59,6 +60,8 @@ fn main() {
     }
     let spread = stats::spread(&wall);
     let (wall_s, cpu_s) = (stats::median(&wall), stats::median(&cpu));
+    let summary = std::fs::read_to_string(dir.path().join("study/study.json")).expect("study.json");
+    let summary: serde_json::Value = serde_json::from_str(&summary).expect("study.json is JSON");
     println!("gonio study, full-size gold scan, 3 models, Nelder–Mead compared, median of {runs}:");
     println!("  wall {wall_s:.2} s (target ≤ 4 s), CPU {cpu_s:.2} s");
     println!(
@@ -68,6 +71,7 @@ fn main() {
             "wall_s": wall_s,
             "cpu_s": cpu_s,
             "spread": spread,
+            "point_evaluations": summary["point_evaluations"],
         })
     );
 }

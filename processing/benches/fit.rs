@@ -88,12 +88,14 @@ fn bench_fits(c: &mut Criterion) {
 }
 
 /// One fit's work for the floor column of README's cost table: its loss evaluations
-/// (each one pass of the model over every point), its points and its model.
+/// (each one pass of the model over every point), its points and its model; a model
+/// choice's also the evaluations × points of the fits that judged the candidates.
 fn work(result: &FitResult, points: usize) -> serde_json::Value {
     serde_json::json!({
         "evaluations": result.evaluations,
         "points": points,
         "model": result.model.to_string(),
+        "point_evaluations": result.selection.as_ref().map_or(0, |s| s.point_evaluations),
     })
 }
 
@@ -147,7 +149,7 @@ fn bench_samples_file(c: &mut Criterion) {
         b.iter(|| fit(black_box(&data), &robust).expect("fit"))
     });
     group.bench_function("cook-torrance/nelder-mead/shared", |b| {
-        b.iter(|| loss_reached(black_box(&data), &nelder_mead).expect("fit"))
+        b.iter(|| loss_reached(black_box(&data), &nelder_mead).expect("fit").0)
     });
     group.bench_function("auto", |b| {
         b.iter(|| fit_auto(black_box(&data), &AUTO_CANDIDATES, &camera).expect("fit"))

@@ -69,35 +69,21 @@ fn reference(params: &Params, camera: &CameraModel) -> Reference {
 }
 
 /// The fits' work of one run of the studies, for the floor column of README's cost
-/// table: Σ over every fit of its loss evaluations × its points (each θL's points taken
-/// every `stride`th).
+/// table: Σ over every fit of its loss evaluations × its points (`Scores::point_evaluations`).
 fn study_work(
     inputs: &[(Vec<Sample>, Reference)],
     camera: &CameraModel,
     options: &StudyOptions,
 ) -> f64 {
-    let mut point_evaluations = 0.0;
+    let mut point_evaluations = 0;
     for (samples, reference) in inputs {
         let report = run_study(samples, reference, camera, options).expect("study runs");
-        for combination in &report.results {
-            let Ok(scores) = &combination.outcome else {
-                continue;
-            };
-            let points: usize = combination
-                .theta_l
-                .iter()
-                .map(|t| {
-                    samples
-                        .iter()
-                        .filter(|s| s.theta_l == *t)
-                        .count()
-                        .div_ceil(options.stride)
-                })
-                .sum();
-            point_evaluations += scores.fit.evaluations as f64 * points as f64;
-        }
+        point_evaluations += (report.results.iter())
+            .filter_map(|c| c.outcome.as_ref().ok())
+            .map(|scores| scores.point_evaluations)
+            .sum::<u64>();
     }
-    point_evaluations
+    point_evaluations as f64
 }
 
 fn study(c: &mut Criterion) {

@@ -370,8 +370,8 @@ fn minimise(
 
 /// The eq. 10 loss `options.method` ends at on `samples`: the fit alone, without its
 /// metrics, uncertainty or check against the global minimum (what a comparison of
-/// methods keeps).
-pub fn loss_reached(samples: &[Sample], options: &FitOptions) -> Result<f64, FitError> {
+/// methods keeps); with its loss evaluations.
+pub fn loss_reached(samples: &[Sample], options: &FitOptions) -> Result<(f64, u64), FitError> {
     let Minimised {
         data, found, ks_90, ..
     } = minimise(samples, options, None, None)?;
@@ -379,7 +379,7 @@ pub fn loss_reached(samples: &[Sample], options: &FitOptions) -> Result<f64, Fit
     if !loss.is_finite() {
         return Err(FitError::Overflow("loss"));
     }
-    Ok(loss)
+    Ok((loss, found.evaluations))
 }
 
 /// Fits `options.model` to `samples`.
@@ -391,12 +391,12 @@ pub fn fit(samples: &[Sample], options: &FitOptions) -> Result<FitResult, FitErr
 /// samples near these start from ([`fit_from`]). From `near` when given (a minimum of
 /// the same samples with fewer free parameters: a shared roughness, or a constant
 /// specular colour) by Gauss–Newton steps to the minimum within reach of it ([`newton`]),
-/// by the full search where they give up or without it.
+/// by the full search where they give up or without it; with its loss evaluations.
 pub(crate) fn robust_minimum_near(
     samples: &[Sample],
     options: &FitOptions,
     near: Option<&Start>,
-) -> Result<Start, FitError> {
+) -> Result<(Start, u64), FitError> {
     let data = Data::new(
         samples,
         options.model,
@@ -408,7 +408,7 @@ pub(crate) fn robust_minimum_near(
         Some(found) => found,
         None => robust::fit(&data, options)?,
     };
-    Ok((found.params, ks_90))
+    Ok(((found.params, ks_90), found.evaluations))
 }
 
 /// [`fit`] of samples near those whose robust minimum is `start` (a subset of them): by

@@ -208,13 +208,14 @@ struct SharedFits {
 
 impl SharedFits {
     /// The robust fit of `variant` to `subset`, sharing Cook–Torrance's between the two
-    /// variants that need it when both are in `variants`.
+    /// variants that need it when both are in `variants`; with the loss evaluations it
+    /// made itself (Cook–Torrance–Fresnel's without those of the fit it took).
     fn robust(
         &self,
         subset: &[Sample],
         variant: Variant,
         variants: &[Variant],
-    ) -> Result<FitResult, String> {
+    ) -> Result<(FitResult, u64), String> {
         let options = |model| FitOptions {
             roughness: variant.roughness,
             ..FitOptions::new(model)
@@ -227,13 +228,19 @@ impl SharedFits {
             })
         };
         let both = present(Model::CookTorrance) && present(Model::CookTorranceFresnel);
+        let own = |f: FitResult| {
+            let evaluations = f.evaluations;
+            (f, evaluations)
+        };
         let fitted = match variant.model {
-            Model::CookTorrance if both => return cook_torrance().clone(),
+            Model::CookTorrance if both => return cook_torrance().clone().map(own),
             Model::CookTorranceFresnel if both => match cook_torrance() {
-                Ok(tied) => fit::fit_fresnel_given(subset, &options(variant.model), tied),
-                Err(_) => fit::fit(subset, &options(variant.model)),
+                Ok(tied) => fit::fit_fresnel_given(subset, &options(variant.model), tied)
+                    .map(|f| (f.evaluations.saturating_sub(tied.evaluations), f))
+                    .map(|(evaluations, f)| (f, evaluations)),
+                Err(_) => fit::fit(subset, &options(variant.model)).map(own),
             },
-            model => fit::fit(subset, &options(model)),
+            model => fit::fit(subset, &options(model)).map(own),
         };
         fitted.map_err(|e| e.to_string())
     }
@@ -272,7 +279,7 @@ fn score_combination(
         roughness: variant.roughness,
         ..FitOptions::new(variant.model)
     };
-    let (robust, nelder_mead_loss) = rayon::join(
+    let (robust, compared) = rayon::join(
         || shared.robust(&subset, variant, &options.variants),
         || {
             compare
@@ -280,7 +287,7 @@ fn score_combination(
                 .flatten()
         },
     );
-    let robust = robust?;
+    let (robust, evaluations) = robust?;
     let estimated: Vec<[f64; 3]> = points
         .iter()
         .map(|p| robust.predict(p.theta_i, p.theta_r))
@@ -293,12 +300,14 @@ fn score_combination(
     })
     .ok()
     .filter(|e| e.points > 0);
+    let point_evaluations = (evaluations + compared.map_or(0, |(_, e)| e)) * subset.len() as u64;
     Ok(Scores {
         fit: robust,
         err_p: all.err_p,
         delta_e_uv: all.delta_e_uv,
         held_out,
-        nelder_mead_loss,
+        nelder_mead_loss: compared.map(|(loss, _)| loss),
+        point_evaluations,
     })
 }
 

@@ -210,7 +210,11 @@ fn the_law_of_propagation_agrees_with_the_monte_carlo() {
     let result = cook_torrance(&samples);
     let b = budget(&samples, &result).unwrap();
     // Two refits a source, each at least one pass over the points.
-    assert!(b.evaluations >= 2 * Source::COUNT as u64, "{}", b.evaluations);
+    assert!(
+        b.evaluations >= 2 * Source::COUNT as u64,
+        "{}",
+        b.evaluations
+    );
     let mc = monte_carlo(&samples, &result, 400, Draw::Sources, 99).unwrap();
     for ((name, p), d) in b.named().into_iter().zip(mc.parameters.flat()) {
         let sources: f64 = p

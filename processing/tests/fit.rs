@@ -365,7 +365,8 @@ fn nelder_mead_above_the_global_minimum_says_so() {
         .unwrap()
         .get("global_minimum")
         .is_none());
-    assert_eq!(loss_reached(&samples, &nelder_mead).unwrap(), nm.loss);
+    let (loss, evaluations) = loss_reached(&samples, &nelder_mead).unwrap();
+    assert_eq!((loss, evaluations), (nm.loss, nm.evaluations));
 }
 
 #[test]

@@ -17,23 +17,31 @@ fn results(scan_spread: f64, steal: f64) -> String {
         r#"{"bench": "floors", "cores": 2, "read_bytes_per_s": 4e9, "copy_bytes_per_s": 5e9,
             "point_s": {"cook-torrance": 5e-9, "ward": 4e-9, "cook-torrance-fresnel": 6e-9}}"#,
         r#"{"bench": "fit_1000_work", "fits": {"fit_1000/cook-torrance/robust/shared":
-            {"evaluations": 200, "points": 1000, "model": "cook-torrance"}}}"#,
+            {"evaluations": 200, "points": 1000, "model": "cook-torrance"},
+            "fit_1000/auto": {"evaluations": 30, "points": 1000, "model": "cook-torrance",
+            "point_evaluations": 170000}}}"#,
         &format!(
             r#"{{"bench": "scan", "ratio": 1.2, "wall_s": 12.0, "hardware_s": 10.0, "spread": {scan_spread}}}"#
         ),
         &format!(
             r#"{{"bench": "fit_auto_command",
-                "full": {{"auto_s": 1.4, "cook_torrance_s": 1.0, "ratio": 1.4, "spread": {scan_spread}}},
-                "binning_4": {{"auto_s": 0.5, "cook_torrance_s": 0.25, "ratio": 2.0, "spread": 0.05}}}}"#
+                "full": {{"auto_s": 1.4, "cook_torrance_s": 1.0, "ratio": 1.4, "spread": {scan_spread},
+                    "points": 8000, "auto_point_evaluations": 20000000}},
+                "binning_4": {{"auto_s": 0.5, "cook_torrance_s": 0.25, "ratio": 2.0, "spread": 0.05,
+                    "points": 2000, "auto_point_evaluations": 4000000}}}}"#
         ),
         r#"{"bench": "hdr_command", "whole_s": 1.0, "merge_s": 0.5, "spread": 0.1,
             "file_bytes": 1000000000, "decoded_bytes": 2000000000, "map_pixels": 100000000}"#,
         r#"{"bench": "fit_samples", "samples": 8000, "robust_loss": 1.0, "fits": {
             "fit_samples/cook-torrance/robust/shared/budget":
-            {"evaluations": 300, "points": 8000, "model": "cook-torrance"}}}"#,
+            {"evaluations": 300, "points": 8000, "model": "cook-torrance"},
+            "fit_samples/auto": {"evaluations": 40, "points": 8000, "model": "cook-torrance",
+            "point_evaluations": 1600000}}}"#,
         r#"{"bench": "budget_monte_carlo", "ks_g_combined": 1.0, "m_combined": 0.01, "runs": [
             {"draws": 250, "seconds": 0.3, "ks_g_std": 0.9, "m_std": 0.008,
              "evaluations": 1500, "points": 8000}]}"#,
+        r#"{"bench": "study_command", "wall_s": 3.0, "cpu_s": 5.5, "spread": 0.05,
+            "point_evaluations": 120000000}"#,
         r#"{"bench": "peers_hdr", "frames": 7, "runs": 3, "opencv_version": "5.1.0",
             "gonio": {"seconds": 1.52, "peak_bytes": 100000000},
             "opencv": {"seconds": 4.0, "peak_bytes": 200000000},
@@ -98,12 +106,14 @@ fn every_row_stands_against_its_floor() {
         2e6,
         0.02,
     );
-    criterion(
-        &dir.join("criterion"),
-        "fit_samples/cook-torrance/robust/shared/budget",
-        24e6,
-        0.02,
-    );
+    for (id, median_ns) in [
+        ("fit_samples/cook-torrance/robust/shared/budget", 24e6),
+        ("fit_samples/cook-torrance/robust/shared", 4e6),
+        ("fit_samples/auto", 9.6e6),
+        ("fit_1000/auto", 5e6),
+    ] {
+        criterion(&dir.join("criterion"), id, median_ns, 0.02);
+    }
     let (output, readme) = run(&dir, 0.05, 0.012);
     assert!(output.status.success(), "{output:?}");
     assert!(
@@ -137,6 +147,13 @@ fn every_row_stands_against_its_floor() {
     // 0.76 s, against 1.52 s.
     let peers = row(&readme, "`gonio hdr` / OpenCV 5.1.0");
     assert_eq!(peers[2..4], ["760 ms", "2"], "{peers:?}");
+    // `gonio study`'s: 1.2e8 passes × the three models' mean 5 ns over 2 cores = 300 ms.
+    let study = row(&readme, "`gonio study` of the full-size `gold` scan");
+    assert_eq!(study[2..4], ["300 ms", "10"], "{study:?}");
+    // A model choice's floor counts the fits that judged the candidates: (40 × 8,000 +
+    // 1.6e6) × 5 ns over 2 cores = 4.8 ms; (30 × 1,000 + 170,000) × 5 ns / 2 = 500 µs.
+    let choice = row(&readme, "fit --model auto / one Cook–Torrance fit");
+    assert_eq!(choice[2..4], ["4.8 ms / 500 µs", "2 / 10"], "{choice:?}");
     // Auto against one fit, both scans in one row.
     let auto = row(
         &readme,
@@ -146,6 +163,9 @@ fn every_row_stands_against_its_floor() {
         auto[1], "1.40 (1.40 s / 1.00 s) / 2.00 (500 ms / 250 ms)",
         "{auto:?}"
     );
+    // Its floor, the auto process's passes over the points: 2e7 × 5 ns / 2 = 50 ms;
+    // 4e6 × 5 ns / 2 = 10 ms.
+    assert_eq!(auto[2..4], ["50 ms / 10 ms", "28 / 50"], "{auto:?}");
     // A row this run did not measure says so rather than keeping an old number.
     let ward = row(&readme, "robust Ward fit");
     assert_eq!(

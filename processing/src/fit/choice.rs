@@ -130,6 +130,10 @@ pub struct Selection {
     pub judged_stride: Option<usize>,
     /// Why the chosen one won, in words.
     pub reason: String,
+    /// The loss evaluations × points of the fits made to judge the candidates, beyond
+    /// the chosen fit's own (`evaluations`): the choice's work (older files lack it).
+    #[serde(default)]
+    pub point_evaluations: u64,
 }
 
 /// u′v′ distance between the specular colours of `result` at the smallest and largest
@@ -332,7 +336,15 @@ pub fn fit_auto(
             }
         })
         .collect();
-    choose(samples, Criterion::Bic, candidates, fits, &[], None, camera)
+    choose(
+        samples,
+        Criterion::Bic,
+        candidates,
+        fits,
+        (&[], 0),
+        None,
+        camera,
+    )
 }
 
 /// The choice among variants already judged by leave-one-θL-out (`held`, from
@@ -348,27 +360,29 @@ pub fn choose_held_out(
     let values = table.as_ref().map_or(0, Table::values);
     let candidates = held.iter().map(|h| held_out_candidate(h, values)).collect();
     let starts: Vec<Option<Start>> = held.iter().map(|h| h.start).collect();
+    let judging = held.iter().map(|h| h.point_evaluations).sum();
     choose(
         samples,
         Criterion::LeaveOneThetaLOut,
         candidates,
         Vec::new(),
-        &starts,
+        (&starts, judging),
         table,
         camera,
     )
 }
 
 /// The best of `candidates` (fitted to every sample in `fits` when already done, else
-/// from its robust minimum in `starts` on samples near these when given) with the choice
-/// recorded in its `selection`. When the table (`table`, of every sample) wins, the
-/// result is the best parametric candidate's fit predicting with it.
+/// from its robust minimum in `starts` on samples near these when given; `judging`: the
+/// loss evaluations × points that judged them) with the choice recorded in its
+/// `selection`. When the table (`table`, of every sample) wins, the result is the best
+/// parametric candidate's fit predicting with it.
 fn choose(
     samples: &[Sample],
     criterion: Criterion,
     candidates: Vec<Candidate>,
     fits: Vec<Option<Result<FitResult, FitError>>>,
-    starts: &[Option<Start>],
+    (starts, judging): (&[Option<Start>], u64),
     table: Option<Table>,
     camera: &CameraModel,
 ) -> Result<FitResult, FitError> {
@@ -391,6 +405,12 @@ fn choose(
             "no parametric candidate model could be scored ({why})"
         )));
     };
+    // The fits of every sample made beside the chosen one.
+    let beside: u64 = (fits.iter().enumerate())
+        .filter(|&(i, _)| i != parametric)
+        .filter_map(|(_, f)| f.as_ref()?.as_ref().ok())
+        .map(|f| f.evaluations * samples.len() as u64)
+        .sum();
     let mut result = match (
         fits.into_iter().nth(parametric).flatten(),
         candidates[parametric].form,
@@ -442,6 +462,7 @@ fn choose(
         specular_uv_change: change,
         judged_stride: None,
         reason,
+        point_evaluations: judging + beside,
     });
     Ok(result)
 }

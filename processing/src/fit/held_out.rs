@@ -14,7 +14,7 @@
 //! parametric candidate fitted without that θL.
 #![doc = include_str!("held_out.md")]
 
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Mutex, OnceLock};
 
 use rayon::prelude::*;
@@ -146,6 +146,9 @@ pub struct HeldOut {
     /// start from and where its fit to every sample starts from ([`super::fit_from`]);
     /// `None` where that search failed.
     pub(crate) start: Option<Start>,
+    /// A parametric variant only: its fits' loss evaluations × their points (its minimum
+    /// and every fold's fit), the work of judging it.
+    pub point_evaluations: u64,
 }
 
 /// The median of `values` (mean of the middle two for an even count); `None` if empty.
@@ -271,7 +274,8 @@ impl Split {
 /// The variants `group` of `variants` (see [`fit_groups`]) fitted without θL `theta_l`
 /// (to `split.others`) and scored there, each with its fit's shape; each fit starts from
 /// the variant's robust minimum on every θL (`starts`, [`fit_from`]; none where that
-/// failed).
+/// failed); with each fit's loss evaluations × its points (a Cook–Torrance–Fresnel fit
+/// that takes the group's Cook–Torrance fit as its tied form counts only its own).
 fn fold_group(
     split: &Split,
     variants: &[Variant],
@@ -279,7 +283,7 @@ fn fold_group(
     group: &[usize],
     theta_l: f64,
     camera: &CameraModel,
-) -> Vec<(usize, FoldOutcome)> {
+) -> Vec<(usize, FoldOutcome, u64)> {
     let mut tied: Option<FitResult> = None;
     group
         .iter()
@@ -290,13 +294,16 @@ fn fold_group(
                 .as_ref()
                 .filter(|_| options.model == Model::CookTorranceFresnel);
             let fitted = fit_from(&split.others, &options, starts[v].as_ref(), tied_form);
+            let evaluations = fitted.as_ref().map_or(0, |f| {
+                f.evaluations - tied_form.map_or(0, |t| t.evaluations.min(f.evaluations))
+            });
             if options.model == Model::CookTorrance {
                 tied = fitted.as_ref().ok().cloned();
             }
             let outcome = fitted
                 .map_err(|e| e.to_string())
                 .and_then(|f| scored(&split.held, &f, theta_l, camera));
-            (v, outcome)
+            (v, outcome, evaluations * split.others.len() as u64)
         })
         .collect()
 }
@@ -470,6 +477,7 @@ fn table_folds(
         one_specular_colour_lobe_uv: None,
         shapes: Vec::new(),
         start: None,
+        point_evaluations: 0,
     };
     let table = Table::new(samples, window).map_err(|e| e.to_string());
     let outcomes: Vec<(f64, Result<Fold, String>)> = distinct_theta_l(samples)
@@ -553,6 +561,8 @@ struct Graph<'a> {
     splits: Vec<OnceLock<Split>>,
     /// Each fold's variant, θL (its index in `theta_l`) and outcome, as they end.
     outcomes: Mutex<Vec<(usize, usize, FoldOutcome)>>,
+    /// Per variant, its fits' loss evaluations × their points so far.
+    work: Vec<AtomicU64>,
 }
 
 impl<'a> Graph<'a> {
@@ -574,11 +584,13 @@ impl<'a> Graph<'a> {
             starts: variants.iter().map(|_| OnceLock::new()).collect(),
             splits: theta_l.iter().map(|_| OnceLock::new()).collect(),
             outcomes: Mutex::new(Vec::new()),
+            work: variants.iter().map(|_| AtomicU64::new(0)).collect(),
         }
     }
 
-    /// Runs every task; returns the minima and each variant's fold outcomes in θL order.
-    fn run(self) -> (Vec<Option<Start>>, Vec<Folds>) {
+    /// Runs every task; returns the minima, each variant's fold outcomes in θL order and
+    /// its fits' loss evaluations × their points.
+    fn run(self) -> (Vec<Option<Start>>, Vec<Folds>, Vec<u64>) {
         rayon::scope(|scope| {
             for v in (0..self.variants.len()).filter(|&v| self.near[v].is_none()) {
                 let graph = &self;
@@ -595,7 +607,8 @@ impl<'a> Graph<'a> {
         for (v, k, outcome) in outcomes {
             by_variant[v].push((self.theta_l[k], outcome));
         }
-        (starts, by_variant)
+        let work = self.work.into_iter().map(AtomicU64::into_inner).collect();
+        (starts, by_variant, work)
     }
 
     /// Every variant's minimum found so far (`None` where not yet, or where it failed).
@@ -609,8 +622,12 @@ impl<'a> Graph<'a> {
     /// Seeks variant `v`'s minimum, then starts what waited for it.
     fn search<'s>(&'s self, scope: &rayon::Scope<'s>, v: usize) {
         let from = self.near[v].and_then(|b| self.starts[b].get().copied().flatten());
-        let start =
-            robust_minimum_near(self.samples, &self.variants[v].options(), from.as_ref()).ok();
+        let found = robust_minimum_near(self.samples, &self.variants[v].options(), from.as_ref());
+        let start = found.ok().map(|(start, evaluations)| {
+            let points = evaluations * self.samples.len() as u64;
+            self.work[v].fetch_add(points, Ordering::Relaxed);
+            start
+        });
         let _ = self.starts[v].set(start);
         for w in (0..self.variants.len()).filter(|&w| self.near[w] == Some(v)) {
             scope.spawn(move |scope| self.search(scope, w));
@@ -630,7 +647,10 @@ impl<'a> Graph<'a> {
         let split = self.splits[k].get_or_init(|| Split::of(self.samples, t));
         let done = fold_group(split, self.variants, &self.starts(), group, t, self.camera);
         let mut outcomes = self.outcomes.lock().unwrap_or_else(|e| e.into_inner());
-        outcomes.extend(done.into_iter().map(|(v, outcome)| (v, k, outcome)));
+        for (v, outcome, work) in done {
+            self.work[v].fetch_add(work, Ordering::Relaxed);
+            outcomes.push((v, k, outcome));
+        }
     }
 }
 
@@ -656,7 +676,7 @@ pub fn leave_one_theta_l_out(
     }
     // Each fold's fit starts from the variant's minimum on every θL, which it differs
     // from by one θL of several.
-    let (starts, outcomes) = Graph::new(samples, variants, &theta_l, camera).run();
+    let (starts, outcomes, work) = Graph::new(samples, variants, &theta_l, camera).run();
     Ok(variants
         .iter()
         .zip(outcomes)
@@ -670,6 +690,7 @@ pub fn leave_one_theta_l_out(
                 one_specular_colour_lobe_uv: None,
                 shapes: Vec::new(),
                 start: starts[v],
+                point_evaluations: work[v],
             };
             for (t, outcome) in outcomes {
                 match outcome {
@@ -686,108 +707,4 @@ pub fn leave_one_theta_l_out(
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_table_predicts_a_brdf_of_the_half_angle_alone() {
-        // β depends on signed θh only: every θL, interior or at an end of the θd range,
-        // is predicted from the others to the accuracy of linear interpolation along θh.
-        let beta = |h: f64| {
-            let lobe = 50.0 * (-(h / 0.08).powi(2)).exp();
-            [2.0 + lobe, 3.0 + 0.8 * lobe, 1.0 + 0.5 * lobe]
-        };
-        let mut samples = Vec::new();
-        for theta_l in [-20.0, -25.0, -30.0, -35.0, -40.0, -45.0] {
-            // Every θL covers the lobe's θh (|θh| ≤ 17.5°): no extrapolation along θh.
-            for k in 0..=320 {
-                let theta_i = -40.0 + 0.25 * f64::from(k);
-                let theta_r = theta_l - theta_i;
-                let h = ((theta_i - theta_r) / 2.0f64).to_radians();
-                samples.push(Sample::in_plane(theta_l, theta_i, theta_r, beta(h)));
-            }
-        }
-        let held = table_held_out(&samples, None, &CameraModel::builtin());
-        assert_eq!((held.folds.len(), held.failed.len()), (6, 0));
-        for fold in held.folds {
-            assert!(fold.all.err_p.iter().all(|&e| e < 1e-3), "{fold:?}");
-            assert!(fold.lobe.is_some(), "{fold:?}");
-        }
-    }
-
-    /// Samples of β(θh) per θL (θh in degrees), in-plane, no noise.
-    fn scan(beta: impl Fn(f64, f64) -> [f64; 3]) -> Vec<Sample> {
-        let mut samples = Vec::new();
-        for theta_l in [-20.0, -30.0, -40.0] {
-            for k in 0..=160 {
-                let theta_i = -40.0 + 0.5 * f64::from(k);
-                let theta_r = theta_l - theta_i;
-                samples.push(Sample::in_plane(
-                    theta_l,
-                    theta_i,
-                    theta_r,
-                    beta((theta_i - theta_r) / 2.0, theta_l),
-                ));
-            }
-        }
-        samples
-    }
-
-    #[test]
-    fn one_specular_colour_keeps_a_colourless_specular_and_changes_a_changing_one() {
-        let peak_at = |h: f64| 40.0 / (1.0 + (h / 3.0).powi(2));
-        // A white lobe whose brightness changes with θL over an orange diffuse: its lobe
-        // is kept.
-        let white = Table::new(
-            &scan(|h, t| [8.0, 4.0, 1.5].map(|d| d + peak_at(h) * (1.0 - 0.01 * t))),
-            0.0,
-        )
-        .unwrap();
-        let kept = one_specular_colour(&white);
-        for (a, b) in white.columns().iter().zip(kept.columns()) {
-            let values: Vec<[f64; 3]> = a.points.iter().map(|p| [p[1], p[2], p[3]]).collect();
-            let on = lobe(&values);
-            assert!(on.iter().filter(|&&l| l).count() > 10);
-            for ((p, q), _) in a.points.iter().zip(&b.points).zip(&on).filter(|(_, &l)| l) {
-                assert!(
-                    (0..4).all(|c| (p[c] - q[c]).abs() < 1e-9 * p[c].abs().max(1.0)),
-                    "{p:?} {q:?}"
-                );
-            }
-        }
-        // A lobe red at one θL, green at another and blue at the third: each becomes the
-        // one colour they share, far from its own.
-        let changing = Table::new(
-            &scan(|h, t| {
-                let k = ((-t - 20.0) / 10.0).round() as usize;
-                std::array::from_fn(|c| 2.0 + if c == k { peak_at(h) } else { 0.0 })
-            }),
-            0.0,
-        )
-        .unwrap();
-        let one = one_specular_colour(&changing);
-        let peak = |t: &Table, c: usize| {
-            t.columns()[c]
-                .points
-                .iter()
-                .max_by(|a, b| (a[1] + a[2] + a[3]).total_cmp(&(b[1] + b[2] + b[3])))
-                .copied()
-                .unwrap()
-        };
-        for c in 0..3 {
-            let (own, shared) = (peak(&changing, c), peak(&one, c));
-            let share = |p: [f64; 4]| p[1 + c] / (p[1] + p[2] + p[3]);
-            assert!(
-                share(own) > 0.9 && share(shared) < 0.5,
-                "{own:?} {shared:?}"
-            );
-        }
-    }
-
-    #[test]
-    fn medians_skip_non_finite_values() {
-        assert_eq!(median(&[3.0, 1.0, 2.0]), Some(2.0));
-        assert_eq!(median(&[4.0, 1.0, f64::NAN, 2.0, 3.0]), Some(2.5));
-        assert_eq!(median(&[]), None);
-    }
-}
+mod tests;

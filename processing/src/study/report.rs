@@ -66,6 +66,9 @@ pub struct Scores {
     pub held_out: Option<Errors>,
     /// Loss of the Nelder–Mead fit on the same samples (when compared and it succeeded).
     pub nelder_mead_loss: Option<f64>,
+    /// The loss evaluations × points of the fits made for it (the robust fit's own,
+    /// and Nelder–Mead's when compared): its work.
+    pub point_evaluations: u64,
 }
 
 /// One (θL combination, variant) of a study.

@@ -9,8 +9,9 @@
 //!   min, quartiles, max, whiskers, outliers (`;`-joined).
 //! - `local_minima.csv`: per variant and number of θL, Nelder–Mead fits compared and how
 //!   many ended above the robust loss.
-//! - `study.json`: totals, timing, and per variant the medians of the held-out errors over
-//!   every combination that left some θL out.
+//! - `study.json`: totals (`point_evaluations`: the fits' loss evaluations × their
+//!   points, the study's work), timing, and per variant the medians of the held-out
+//!   errors over every combination that left some θL out.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -262,6 +263,12 @@ fn summary_json(report: &StudyReport) -> String {
         "evaluation_points": report.points.len(),
         "combinations": report.results.len() / report.options.variants.len().max(1),
         "fits": report.results.len(),
+        "point_evaluations": report
+            .results
+            .iter()
+            .filter_map(|r| r.outcome.as_ref().ok())
+            .map(|s| s.point_evaluations)
+            .sum::<u64>(),
         "seconds": report.seconds,
         "local_minimum_margin": report.options.local_minimum_margin,
         "variants": variants,
