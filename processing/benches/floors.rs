@@ -6,10 +6,10 @@
 //!   buffer) and copying (bytes read plus bytes written), the best of 5 passes. A merge
 //!   or a decode can go no faster than reading its input and writing its output at it.
 //! - **One point of the loss** (eq. 10), seconds: the model at a prepared point and its
-//!   distance to the measured value, the fits' inner loop (`Basis::evaluate_prepared`
-//!   and `metrics::point_loss`), on one core over 100,000 points, the median of 21
-//!   passes. A fit can go no faster than its loss evaluations × its points × this,
-//!   shared over every core.
+//!   distance to the measured value, as the fits evaluate it (`fit::PreparedLoss`: a
+//!   shared roughness and one specular colour through the columns' loop, the fastest),
+//!   on one core over 100,000 points, the median of 21 passes. A fit can go no faster
+//!   than its loss evaluations × its points × this, shared over every core.
 //!
 //!     cargo bench -p gonio-processing --bench floors
 //!
@@ -19,8 +19,9 @@
 use std::hint::black_box;
 use std::time::Instant;
 
-use gonio_processing::brdf::{Model, Params, Prepared};
-use gonio_processing::metrics::point_loss;
+use gonio_processing::brdf::{Model, Params};
+use gonio_processing::fit::PreparedLoss;
+use gonio_processing::samples::Sample;
 use rayon::prelude::*;
 
 /// Size of the buffer the bandwidth is measured on: far beyond any cache.
@@ -63,7 +64,8 @@ fn bandwidth() -> (f64, f64) {
     (bytes / read_s, 2.0 * bytes / copy_s)
 }
 
-/// Median seconds of one point of `model`'s loss, on one core.
+/// Median seconds of one point of `model`'s loss, on one core, evaluated as the fits
+/// evaluate it ([`PreparedLoss`]).
 fn point_seconds(model: Model) -> f64 {
     let params = Params::shared([8.0, 6.0, 3.0], [4.0, 3.5, 2.0], 0.12);
     // A specular colour that changes with angle for the model that fits one.
@@ -71,23 +73,21 @@ fn point_seconds(model: Model) -> f64 {
         Model::CookTorranceFresnel => [5.0, 3.0, 2.5],
         _ => params.ks,
     };
-    let points: Vec<_> = (0..POINTS)
+    let samples: Vec<Sample> = (0..POINTS)
         .map(|k| {
             let phi = -60.0 + 120.0 * k as f64 / POINTS as f64;
             let (theta_i, theta_r) = (-30.0 - phi, phi);
-            let basis = model.basis(theta_i, theta_r);
-            (basis, model.evaluate(&params, theta_i, theta_r))
+            let beta = model
+                .basis(theta_i, theta_r)
+                .evaluate_fresnel(&params, &ks_90);
+            Sample::in_plane(-30.0, theta_i, theta_r, beta)
         })
         .collect();
-    let prepared = Prepared::new(&params, &ks_90);
+    let loss = PreparedLoss::new(&samples, model).expect("enough points");
     let mut passes: Vec<f64> = (0..21)
         .map(|_| {
             let started = Instant::now();
-            let loss: f64 = black_box(&points)
-                .iter()
-                .map(|(b, y)| point_loss(y, &b.evaluate_prepared(&prepared)))
-                .sum();
-            black_box(loss);
+            black_box(black_box(&loss).at(&params, &ks_90));
             started.elapsed().as_secs_f64()
         })
         .collect();

@@ -289,6 +289,23 @@ fn test_colour_shift(
     Ok((tested, reused_seconds))
 }
 
+/// The eq. 10 loss of a model on samples, prepared once and evaluated at any parameters
+/// the way the fits evaluate it (a shared roughness and one specular colour through the
+/// columns' loop): what one evaluation costs, for the cost table's floors.
+pub struct PreparedLoss(Data);
+
+impl PreparedLoss {
+    /// `model` on `samples` (more of them than its parameters with a shared roughness).
+    pub fn new(samples: &[Sample], model: Model) -> Result<Self, FitError> {
+        Data::new(samples, model, parameter_count(model, Roughness::Shared)).map(PreparedLoss)
+    }
+
+    /// Σ_p ‖y_p − β_p‖ at `params` and the specular colour at 90° `ks_90`.
+    pub fn at(&self, params: &Params, ks_90: &[f64; 3]) -> f64 {
+        self.0.loss_fresnel(params, ks_90)
+    }
+}
+
 /// Number of fitted parameters of `model` with `roughness`.
 pub fn parameter_count(model: Model, roughness: Roughness) -> usize {
     let colours = if model.has_fresnel_colour() { 9 } else { 6 };

@@ -7,7 +7,7 @@
 use gonio_processing::brdf::{Model, Params, Roughness};
 use gonio_processing::fit::{
     fit, loss_reached, solve_at_roughness, FitError, FitMethod, FitResult, FittedRoughness,
-    LOCAL_MINIMUM_MARGIN,
+    PreparedLoss, LOCAL_MINIMUM_MARGIN,
 };
 use gonio_processing::metrics;
 use gonio_processing::samples::Sample;
@@ -367,6 +367,16 @@ fn nelder_mead_above_the_global_minimum_says_so() {
         .is_none());
     let (loss, evaluations) = loss_reached(&samples, &nelder_mead).unwrap();
     assert_eq!((loss, evaluations), (nm.loss, nm.evaluations));
+    // The loss the cost table's floor times is the one the fits minimise.
+    let prepared = PreparedLoss::new(&samples, model).unwrap();
+    for result in [&robust, &nm] {
+        let at = prepared.at(&result.params(), &result.specular_90());
+        assert!(
+            (at - result.loss).abs() <= 1e-12 * result.loss,
+            "{at} vs {}",
+            result.loss
+        );
+    }
 }
 
 #[test]
