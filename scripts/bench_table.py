@@ -531,6 +531,15 @@ def scan_rows(t):
         # The hardware's own time.
         [(scan["wall_s"], scan["hardware_s"])] if scan else None,
     )
+    real = t.results.get("scan_time_scale_1")
+    t.row(
+        "same scan at the hardware's own speeds (the emulators' time scale 1, not 0.1), one "
+        "run: wall time / time in hardware steps",
+        [f"{real['ratio']:.3f} ({real['wall_s']:.2f} s / {real['hardware_s']:.2f} s)"] if real else None,
+        "≤ 1.02",
+        "`cargo bench -p gonio-daemon --bench scan -- --runs 1 --time-scale 1`",
+        [(real["wall_s"], real["hardware_s"])] if real else None,
+    )
 
 
 def conditions(results):

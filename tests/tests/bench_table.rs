@@ -40,6 +40,8 @@ fn results(scan_spread: f64, steal: f64) -> String {
         r#"{"bench": "budget_monte_carlo", "ks_g_combined": 1.0, "m_combined": 0.01, "runs": [
             {"draws": 250, "seconds": 0.3, "ks_g_std": 0.9, "m_std": 0.008,
              "evaluations": 1500, "points": 8000}]}"#,
+        r#"{"bench": "scan_time_scale_1", "ratio": 1.01, "wall_s": 101.0, "hardware_s": 100.0,
+            "spread": 0.0}"#,
         r#"{"bench": "study_command", "wall_s": 3.0, "cpu_s": 5.5, "spread": 0.05,
             "point_evaluations": 120000000}"#,
         r#"{"bench": "peers_hdr", "frames": 7, "runs": 3, "opencv_version": "5.1.0",
@@ -129,6 +131,9 @@ fn every_row_stands_against_its_floor() {
     // The scan's floor is its hardware time.
     let scan = row(&readme, "6-θL `gold` scan through `gonio serve`");
     assert_eq!(scan[2..4], ["10.00 s", "1.2"], "{scan:?}");
+    // And at the hardware's own speeds.
+    let real = row(&readme, "same scan at the hardware's own speeds");
+    assert_eq!(real[1..4], ["1.010 (101.00 s / 100.00 s)", "100.00 s", "1.01"], "{real:?}");
     // `gonio hdr`: 1 GB read + 2 GB decoded + 1.3 GB of map at 5 GB/s = 0.86 s.
     let hdr = row(&readme, "`gonio hdr`, 4 Deflate TIFFs");
     assert_eq!(hdr[2..4], ["860 ms", "1.16"], "{hdr:?}");
