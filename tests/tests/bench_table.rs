@@ -133,7 +133,11 @@ fn every_row_stands_against_its_floor() {
     assert_eq!(scan[2..4], ["10.00 s", "1.2"], "{scan:?}");
     // And at the hardware's own speeds.
     let real = row(&readme, "same scan at the hardware's own speeds");
-    assert_eq!(real[1..4], ["1.010 (101.00 s / 100.00 s)", "100.00 s", "1.01"], "{real:?}");
+    assert_eq!(
+        real[1..4],
+        ["1.010 (101.00 s / 100.00 s)", "100.00 s", "1.01"],
+        "{real:?}"
+    );
     // `gonio hdr`: 1 GB read + 2 GB decoded + 1.3 GB of map at 5 GB/s = 0.86 s.
     let hdr = row(&readme, "`gonio hdr`, 4 Deflate TIFFs");
     assert_eq!(hdr[2..4], ["860 ms", "1.16"], "{hdr:?}");
