@@ -521,26 +521,27 @@ def scan_rows(t):
         # Writing the frame's counts.
         [(t.median(f"render 3872x2592/{label}"), t.bytes_floor(FRAME_PIXELS * COUNT_BYTES)) for label in labels],
     )
-    scan = t.results.get("scan")
-    t.row(
-        "6-θL `gold` scan through `gonio serve` on the emulators, auto bracket: wall time / "
-        "time in hardware steps",
-        [f"{scan['ratio']:.3f} ({scan['wall_s']:.2f} s / {scan['hardware_s']:.2f} s)"] if scan else None,
-        "≤ 1.02",
-        "`cargo bench -p gonio-daemon --bench scan -- --runs 5`",
-        # The hardware's own time.
-        [(scan["wall_s"], scan["hardware_s"])] if scan else None,
-    )
-    real = t.results.get("scan_time_scale_1")
-    t.row(
-        "same scan at the hardware's own speeds (the emulators' time scale 1, not 0.1), one "
-        "run: wall time / time in hardware steps",
-        [f"{real['ratio']:.3f} ({real['wall_s']:.2f} s / {real['hardware_s']:.2f} s)"] if real else None,
-        "≤ 1.02",
-        "`cargo bench -p gonio-daemon --bench scan -- --runs 1 --time-scale 1`",
-        [(real["wall_s"], real["hardware_s"])] if real else None,
-    )
-
+    for key, what, command in (
+        (
+            "scan",
+            "6-θL `gold` scan through `gonio serve` on the emulators, auto bracket",
+            "`cargo bench -p gonio-daemon --bench scan -- --runs 5`",
+        ),
+        (
+            "scan_time_scale_1",
+            "same scan at the hardware's own speeds (the emulators' time scale 1, not 0.1), one run",
+            "`cargo bench -p gonio-daemon --bench scan -- --runs 1 --time-scale 1`",
+        ),
+    ):
+        scan = t.results.get(key)
+        t.row(
+            what + ": wall time / time in hardware steps",
+            [f"{scan['ratio']:.3f} ({scan['wall_s']:.2f} s / {scan['hardware_s']:.2f} s)"] if scan else None,
+            "≤ 1.02",
+            command,
+            # The hardware's own time.
+            [(scan["wall_s"], scan["hardware_s"])] if scan else None,
+        )
 
 def conditions(results):
     c = results.get("conditions")
