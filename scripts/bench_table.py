@@ -166,24 +166,23 @@ class Table:
         """A fit's floor: its loss evaluations × its points (a model choice's: and the
         evaluations × points of the fits that judged the candidates) × one point of its
         model's loss, shared over every core."""
-        f = self.floors()
         work = {
             **self.results.get("fit_1000_work", {}).get("fits", {}),
             **self.results.get("fit_samples", {}).get("fits", {}),
         }.get(full_id)
         if not work:
             return None
-        points = work["points"]
-        evaluations = work["evaluations"] + work.get("point_evaluations", 0) / points
-        return self.work_floor(evaluations, points, work["model"])
+        point_evaluations = work["evaluations"] * work["points"] + work.get("point_evaluations", 0)
+        return self.work_floor(point_evaluations, work["model"])
 
-    def work_floor(self, evaluations, points, model):
-        """`evaluations` passes over `points` points × one point of `model`'s loss, shared
-        over every core."""
+    def work_floor(self, point_evaluations, model=None):
+        """`point_evaluations` points of `model`'s loss (None: at the mean cost of one
+        point of the three models'), shared over every core."""
         f = self.floors()
-        if not f or evaluations is None or points is None or model not in f["point_s"]:
+        if not f or point_evaluations is None or (model is not None and model not in f["point_s"]):
             return None
-        return evaluations * points * f["point_s"][model] / f["cores"]
+        point = f["point_s"][model] if model else sum(f["point_s"].values()) / len(f["point_s"])
+        return point_evaluations * point / f["cores"]
 
     def fit_floors(self, *full_ids):
         return [(self.median(i), self.fit_floor(i)) for i in full_ids]
@@ -270,11 +269,11 @@ def auto_rows(t):
         [
             (
                 p[k]["auto_s"],
-                t.work_floor(p[k]["auto_point_evaluations"] / p[k]["points"], p[k]["points"], "cook-torrance"),
+                t.work_floor(p[k]["auto_point_evaluations"], "cook-torrance"),
             )
             for k in ("full", "binning_4")
         ]
-        if p and "points" in p["full"]
+        if p and "auto_point_evaluations" in p["full"]
         else None,
     )
 
@@ -323,16 +322,6 @@ def peer_fit_rows(t):
     )
 
 
-def study_floor(t, work):
-    """A study's floor: Σ over its fits of loss evaluations × points (`work`), at the mean
-    cost of one point of its three models' losses, shared over every core."""
-    f = t.floors()
-    if not f or work is None:
-        return None
-    point = sum(f["point_s"].values()) / len(f["point_s"])
-    return work * point / f["cores"]
-
-
 def study_rows(t):
     name = "3_samples_x_63_combinations_x_3_models_robust_stride_{}"
     for stride, what in ((1, "study: 3 samples × 63 θL combinations × 3 models, robust, every column (~1,370 per θL)"), (4, "same, every 4th column")):
@@ -344,7 +333,8 @@ def study_rows(t):
             [
                 (
                     t.median("study/" + name.format(stride)),
-                    study_floor(t, t.results.get("study_work", {}).get("studies", {}).get(name.format(stride))),
+                    # Its fits' loss evaluations × points, of its three models.
+                    t.work_floor(t.results.get("study_work", {}).get("studies", {}).get(name.format(stride))),
                 )
             ],
         )
@@ -356,7 +346,7 @@ def study_rows(t):
         "≤ 4 s wall",
         "`cargo bench -p gonio-daemon --bench study_command`",
         # Its fits' work, from its study.json (the Nelder–Mead comparison's included).
-        [(s["wall_s"], study_floor(t, s.get("point_evaluations")))] if s else None,
+        [(s["wall_s"], t.work_floor(s.get("point_evaluations")))] if s else None,
     )
 
 
@@ -489,7 +479,10 @@ def budget_rows(t):
         else None,
         "1,000 draws ≤ 5 s",
         FIT_SAMPLES,
-        [(r["seconds"], t.work_floor(r.get("evaluations"), r.get("points"), "cook-torrance")) for r in mc["runs"]]
+        [
+            (r["seconds"], t.work_floor(r["evaluations"] * r["points"] if "points" in r else None, "cook-torrance"))
+            for r in mc["runs"]
+        ]
         if mc
         else None,
     )

@@ -91,11 +91,23 @@ fn bench_fits(c: &mut Criterion) {
 /// (each one pass of the model over every point), its points and its model; a model
 /// choice's also the evaluations × points of the fits that judged the candidates.
 fn work(result: &FitResult, points: usize) -> serde_json::Value {
+    let judging = result.selection.as_ref().map_or(0, |s| s.point_evaluations);
+    passes(result.evaluations, points, result.model, judging)
+}
+
+/// `evaluations` passes of `model`'s loss over `points` points, and `point_evaluations`
+/// more points of it, as scripts/bench_table.py reads a work.
+fn passes(
+    evaluations: u64,
+    points: usize,
+    model: Model,
+    point_evaluations: u64,
+) -> serde_json::Value {
     serde_json::json!({
-        "evaluations": result.evaluations,
+        "evaluations": evaluations,
         "points": points,
-        "model": result.model.to_string(),
-        "point_evaluations": result.selection.as_ref().map_or(0, |s| s.point_evaluations),
+        "model": model.to_string(),
+        "point_evaluations": point_evaluations,
     })
 }
 
@@ -127,11 +139,8 @@ fn bench_samples_file(c: &mut Criterion) {
         for model in [Model::CookTorrance, Model::CookTorranceFresnel] {
             let result = fit(&data, &FitOptions::new(model)).expect("fit");
             let budget = budget(&data, &result).expect("budget");
-            fits[format!("fit_samples/{model}/robust/shared/budget")] = serde_json::json!({
-                "evaluations": budget.evaluations,
-                "points": data.len(),
-                "model": model.to_string(),
-            });
+            fits[format!("fit_samples/{model}/robust/shared/budget")] =
+                passes(budget.evaluations, data.len(), model, 0);
         }
     }
     println!(

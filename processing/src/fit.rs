@@ -169,6 +169,13 @@ impl FitResult {
     pub fn above_global_minimum(&self) -> bool {
         self.global_minimum.is_some_and(|g| !g.reached)
     }
+
+    /// Its loss evaluations beyond those of `given`, the fit it was given as its tied
+    /// form ([`fit_fresnel_given`] counts that fit's in its own); all of them without.
+    pub(crate) fn evaluations_beyond(&self, given: Option<&FitResult>) -> u64 {
+        self.evaluations
+            .saturating_sub(given.map_or(0, |g| g.evaluations))
+    }
 }
 
 impl FitResult {

@@ -228,19 +228,20 @@ impl SharedFits {
             })
         };
         let both = present(Model::CookTorrance) && present(Model::CookTorranceFresnel);
-        let own = |f: FitResult| {
-            let evaluations = f.evaluations;
+        let own = |f: FitResult, given: Option<&FitResult>| {
+            let evaluations = f.evaluations_beyond(given);
             (f, evaluations)
         };
         let fitted = match variant.model {
-            Model::CookTorrance if both => return cook_torrance().clone().map(own),
+            Model::CookTorrance if both => {
+                return cook_torrance().clone().map(|f| own(f, None));
+            }
             Model::CookTorranceFresnel if both => match cook_torrance() {
                 Ok(tied) => fit::fit_fresnel_given(subset, &options(variant.model), tied)
-                    .map(|f| (f.evaluations.saturating_sub(tied.evaluations), f))
-                    .map(|(evaluations, f)| (f, evaluations)),
-                Err(_) => fit::fit(subset, &options(variant.model)).map(own),
+                    .map(|f| own(f, Some(tied))),
+                Err(_) => fit::fit(subset, &options(variant.model)).map(|f| own(f, None)),
             },
-            model => fit::fit(subset, &options(model)).map(own),
+            model => fit::fit(subset, &options(model)).map(|f| own(f, None)),
         };
         fitted.map_err(|e| e.to_string())
     }

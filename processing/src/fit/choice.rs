@@ -336,15 +336,7 @@ pub fn fit_auto(
             }
         })
         .collect();
-    choose(
-        samples,
-        Criterion::Bic,
-        candidates,
-        fits,
-        (&[], 0),
-        None,
-        camera,
-    )
+    choose(samples, Criterion::Bic, candidates, fits, &[], None, camera)
 }
 
 /// The choice among variants already judged by leave-one-θL-out (`held`, from
@@ -360,29 +352,33 @@ pub fn choose_held_out(
     let values = table.as_ref().map_or(0, Table::values);
     let candidates = held.iter().map(|h| held_out_candidate(h, values)).collect();
     let starts: Vec<Option<Start>> = held.iter().map(|h| h.start).collect();
-    let judging = held.iter().map(|h| h.point_evaluations).sum();
-    choose(
+    let mut result = choose(
         samples,
         Criterion::LeaveOneThetaLOut,
         candidates,
         Vec::new(),
-        (&starts, judging),
+        &starts,
         table,
         camera,
-    )
+    )?;
+    // The fits that judged the variants.
+    if let Some(selection) = result.selection.as_mut() {
+        selection.point_evaluations += held.iter().map(|h| h.point_evaluations).sum::<u64>();
+    }
+    Ok(result)
 }
 
 /// The best of `candidates` (fitted to every sample in `fits` when already done, else
-/// from its robust minimum in `starts` on samples near these when given; `judging`: the
-/// loss evaluations × points that judged them) with the choice recorded in its
-/// `selection`. When the table (`table`, of every sample) wins, the result is the best
-/// parametric candidate's fit predicting with it.
+/// from its robust minimum in `starts` on samples near these when given) with the choice
+/// recorded in its `selection` (its `point_evaluations`: those of the other `fits`).
+/// When the table (`table`, of every sample) wins, the result is the best parametric
+/// candidate's fit predicting with it.
 fn choose(
     samples: &[Sample],
     criterion: Criterion,
     candidates: Vec<Candidate>,
     fits: Vec<Option<Result<FitResult, FitError>>>,
-    (starts, judging): (&[Option<Start>], u64),
+    starts: &[Option<Start>],
     table: Option<Table>,
     camera: &CameraModel,
 ) -> Result<FitResult, FitError> {
@@ -462,7 +458,7 @@ fn choose(
         specular_uv_change: change,
         judged_stride: None,
         reason,
-        point_evaluations: judging + beside,
+        point_evaluations: beside,
     });
     Ok(result)
 }

@@ -294,9 +294,9 @@ fn fold_group(
                 .as_ref()
                 .filter(|_| options.model == Model::CookTorranceFresnel);
             let fitted = fit_from(&split.others, &options, starts[v].as_ref(), tied_form);
-            let evaluations = fitted.as_ref().map_or(0, |f| {
-                f.evaluations - tied_form.map_or(0, |t| t.evaluations.min(f.evaluations))
-            });
+            let evaluations = fitted
+                .as_ref()
+                .map_or(0, |f| f.evaluations_beyond(tied_form));
             if options.model == Model::CookTorrance {
                 tied = fitted.as_ref().ok().cloned();
             }
