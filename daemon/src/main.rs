@@ -49,6 +49,9 @@ enum Command {
     /// CIELAB at the standard aspecular angles (45° illumination), with uncertainties.
     Colour(commands::colour::Args),
     /// Judge a batch against its standard: ΔL*, ΔC*, ΔH*, ΔE00, flop index per angle.
+    ///
+    /// The verdict is printed (`overall: pass` or `fail`) and written with `--out`; the
+    /// exit status is 0 whatever it is (non-zero only when the comparison cannot be made).
     Compare(commands::compare::Args),
     /// Decode captures asked for on stdin (a child of the other commands).
     #[command(hide = true)]
@@ -104,7 +107,7 @@ fn main() {
             std::process::exit(EXIT_STDOUT_CLOSED);
         }
         // One line, whatever a cause's message holds.
-        eprintln!("error: {}", guard::one_line(&format!("{err:#}")));
+        eprintln!("error: {}", guard::one_line(&with_causes(&err)));
         std::process::exit(1);
     }
 }
@@ -113,6 +116,23 @@ fn main() {
 /// what a shell reports for a process ended by SIGPIPE (128 + 13). The command stops
 /// there, quietly; outputs it wrote before are whole (each is written atomically).
 const EXIT_STDOUT_CLOSED: i32 = 141;
+
+/// `err` and its causes, joined by `: `, a cause left out where the text before it says
+/// it already (an error whose message includes its source's).
+fn with_causes(err: &anyhow::Error) -> String {
+    let mut text = String::new();
+    for cause in err.chain() {
+        let said = cause.to_string();
+        if text.contains(&said) {
+            continue;
+        }
+        if !text.is_empty() {
+            text.push_str(": ");
+        }
+        text.push_str(&said);
+    }
+    text
+}
 
 /// Whether `err` is, or was caused by, a write to a pipe with no reader.
 fn is_broken_pipe(err: &anyhow::Error) -> bool {

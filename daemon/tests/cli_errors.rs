@@ -58,6 +58,12 @@ fn missing_inputs_are_named_once_with_their_cause_once() {
             "ref.csv",
         ),
         (&["extract", "nowhere", "--out", "s.csv"], "nowhere"),
+        (
+            &[
+                "tradeoff", "--scene", "gold", "--scan", "nowhere", "--out", "t",
+            ],
+            "nowhere",
+        ),
     ];
     for (args, path) in cases {
         let stderr = failing(dir.path(), args);
@@ -66,6 +72,11 @@ fn missing_inputs_are_named_once_with_their_cause_once() {
         assert_once(&stderr, NOT_FOUND);
         assert_once(&stderr, path);
     }
+    let stderr = failing(dir.path(), &["report", "nowhere", "--out", "r.html"]);
+    assert!(
+        stderr.contains("nowhere: no such scan directory"),
+        "{stderr}"
+    );
     // The message the chain used to repeat.
     let stderr = failing(dir.path(), &["simulate", "--scene", "silver", "--out", "x"]);
     assert!(

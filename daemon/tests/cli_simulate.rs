@@ -174,6 +174,37 @@ fn bad_scenes_fail_with_a_clear_message() {
         stderr.contains("silver") && stderr.contains("gold, red, blue-green"),
         "{stderr}"
     );
+
+    // Two θL in one directory (named to 0.1°) would overwrite each other's captures.
+    let result = gonio(&[
+        "--scene",
+        "gold",
+        "--binning",
+        "8",
+        "--theta-l=-30,-30.02",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!result.status.success());
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert!(stderr.contains("-30.02 is listed twice"), "{stderr}");
+    // A binning too coarse for the scene's strips names the binning, not a scene key
+    // the user never wrote.
+    let result = gonio(&[
+        "--scene",
+        "gold",
+        "--binning",
+        "32",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!result.status.success());
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert!(
+        stderr.contains("32 is too coarse for this scene"),
+        "{stderr}"
+    );
+    assert!(!out.exists());
 }
 
 #[test]

@@ -85,6 +85,49 @@ pub(crate) fn check_kind(meta: &fs::Metadata) -> io::Result<()> {
     ))
 }
 
+/// A reader of text whose line ends are all `\n`: `\r\n` and a lone `\r` each become
+/// one `\n`. A CSV reader counts a Windows file's lines as a Unix file's through it (the
+/// `csv` crate's positions fall one line short after a `\r\n`).
+pub struct UnixLineEnds<R> {
+    inner: R,
+    /// The last byte read was a `\r` (already given as `\n`): a `\n` next is dropped.
+    after_cr: bool,
+}
+
+impl<R: Read> UnixLineEnds<R> {
+    pub fn new(inner: R) -> Self {
+        UnixLineEnds {
+            inner,
+            after_cr: false,
+        }
+    }
+}
+
+impl<R: Read> Read for UnixLineEnds<R> {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        loop {
+            let n = self.inner.read(buf)?;
+            if n == 0 {
+                return Ok(0);
+            }
+            let mut kept = 0;
+            for i in 0..n {
+                let byte = buf[i];
+                let dropped = byte == b'\n' && self.after_cr;
+                self.after_cr = byte == b'\r';
+                if !dropped {
+                    buf[kept] = if byte == b'\r' { b'\n' } else { byte };
+                    kept += 1;
+                }
+            }
+            // A read that was one dropped `\n` is not the end: read on.
+            if kept > 0 {
+                return Ok(kept);
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -129,5 +172,33 @@ mod tests {
         fs::write(&path, [0xff, 0xfe]).unwrap();
         let err = read_input_to_string(&path, 9).unwrap_err();
         assert_eq!(err.kind(), io::ErrorKind::InvalidData);
+    }
+
+    #[test]
+    fn windows_and_old_mac_line_ends_read_as_unix_ones() {
+        // Read a byte at a time too, so that a `\r\n` split between reads is seen.
+        let text = b"a,b\r\n1,2\r\n\r\n3\r4\n";
+        for chunk in [1, 3, 64] {
+            let mut reader = UnixLineEnds::new(ChunkedReader { text, at: 0, chunk });
+            let mut out = Vec::new();
+            reader.read_to_end(&mut out).unwrap();
+            assert_eq!(out, b"a,b\n1,2\n\n3\n4\n", "chunks of {chunk}");
+        }
+    }
+
+    /// Gives `text` at most `chunk` bytes a read.
+    struct ChunkedReader {
+        text: &'static [u8],
+        at: usize,
+        chunk: usize,
+    }
+
+    impl Read for ChunkedReader {
+        fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+            let n = self.chunk.min(buf.len()).min(self.text.len() - self.at);
+            buf[..n].copy_from_slice(&self.text[self.at..self.at + n]);
+            self.at += n;
+            Ok(n)
+        }
     }
 }

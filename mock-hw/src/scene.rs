@@ -156,20 +156,7 @@ impl Scene {
             message: crate::toml_error::one_line(text, &e),
         })?;
         file.setup.validate()?;
-        if file.scan.theta_l_deg.is_empty() {
-            return Err(invalid("scan.theta_l_deg", "must not be empty"));
-        }
-        if let Some(t) = file
-            .scan
-            .theta_l_deg
-            .iter()
-            .find(|t| !(t.is_finite() && (-90.0..=90.0).contains(*t)))
-        {
-            return Err(invalid(
-                "scan.theta_l_deg",
-                format!("{t} must be in [-90, 90]"),
-            ));
-        }
+        check_theta_l(&file.scan.theta_l_deg)?;
         if file.scan.bracket_s.is_empty() {
             return Err(invalid("scan.bracket_s", "must not be empty"));
         }
@@ -357,7 +344,16 @@ impl Scene {
             white_rows: s.white_rows.map(|r| r / factor),
             ..s.clone()
         };
-        setup.validate()?;
+        // The scene was valid unbinned: what fails now is the binning's.
+        setup.validate().map_err(|e| {
+            invalid(
+                "binning factor",
+                format!(
+                    "{factor} is too coarse for this scene (binned {}×{}: {e})",
+                    setup.image_width, setup.image_height
+                ),
+            )
+        })?;
         Ok(Scene {
             setup,
             ..self.clone()
@@ -374,18 +370,7 @@ impl Scene {
     /// Replaces the light angles of the scan (a misalignment's `arm_angle_errors_deg`,
     /// if any, must have one value per new angle).
     pub fn set_theta_l_deg(&mut self, theta_l_deg: Vec<f64>) -> Result<(), SceneError> {
-        if theta_l_deg.is_empty() {
-            return Err(invalid("scan.theta_l_deg", "must not be empty"));
-        }
-        if let Some(t) = theta_l_deg
-            .iter()
-            .find(|t| !(t.is_finite() && (-90.0..=90.0).contains(*t)))
-        {
-            return Err(invalid(
-                "scan.theta_l_deg",
-                format!("{t} must be in [-90, 90]"),
-            ));
-        }
+        check_theta_l(&theta_l_deg)?;
         self.effects
             .validate(&self.setup, self.white_reflectance, &theta_l_deg)?;
         self.theta_l_deg = theta_l_deg;
@@ -478,4 +463,32 @@ fn spectral_lobe(
     put("m", serde_json::json!([m]));
     put("ks_scale", serde_json::json!(ks_scale));
     put(key, mechanism);
+}
+/// The light angles of a scan: some, each within [−90°, 90°], no two in one θL
+/// directory (named to 0.1°: `theta_l_-30.0`).
+fn check_theta_l(theta_l_deg: &[f64]) -> Result<(), SceneError> {
+    if theta_l_deg.is_empty() {
+        return Err(invalid("scan.theta_l_deg", "must not be empty"));
+    }
+    // Compared as numbers to 0.1° and as the directories are named (`{:.1}` rounds
+    // −1.25 to −1.2, as it does −1.2).
+    let one_directory = |a: f64, b: f64| {
+        (a * 10.0).round() + 0.0 == (b * 10.0).round() + 0.0
+            || format!("{a:.1}") == format!("{b:.1}")
+    };
+    for (i, &t) in theta_l_deg.iter().enumerate() {
+        if !(t.is_finite() && (-90.0..=90.0).contains(&t)) {
+            return Err(invalid(
+                "scan.theta_l_deg",
+                format!("{t} must be in [-90, 90]"),
+            ));
+        }
+        if let Some(same) = theta_l_deg[..i].iter().find(|s| one_directory(**s, t)) {
+            return Err(invalid(
+                "scan.theta_l_deg",
+                format!("{t} is listed twice (as {same} before, to 0.1°)"),
+            ));
+        }
+    }
+    Ok(())
 }

@@ -59,7 +59,7 @@ pub enum CalibrateError {
     #[error("θL {theta_l}°: {source}")]
     Hdr { theta_l: f64, source: HdrError },
     #[error(
-        "θL {theta_l}°: {found} lit band(s) of rows, but the sample and white strips make two"
+        "θL {theta_l}°: {found} lit band(s) of rows; the sample and white strips need two, each the nearest to its row of the prior setup (sample_row, white_row)"
     )]
     Strips { theta_l: f64, found: usize },
     #[error("nothing to fit the geometry to: {0}")]

@@ -163,6 +163,22 @@ fn leading_exponent(a: f64) -> i32 {
     }
 }
 
+/// A value in a message: as `Display` writes it where that is short (0, or
+/// 1e-4 ≤ |v| < 1e7), else in scientific notation (`2.2250738585072014e-308`, not 308
+/// digits).
+pub struct Brief(pub f64);
+
+impl std::fmt::Display for Brief {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let v = self.0;
+        if !v.is_finite() || v == 0.0 || (1e-4..1e7).contains(&v.abs()) {
+            write!(f, "{v}")
+        } else {
+            write!(f, "{v:e}")
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -284,5 +300,17 @@ mod tests {
             let digits = text.trim_start_matches(['-', '0', '.']).replace('.', "");
             assert!(digits.trim_end_matches('0').len() <= 6, "{v} {text}");
         }
+    }
+
+    #[test]
+    fn values_in_messages_stay_short() {
+        assert_eq!(
+            Brief(f64::MIN_POSITIVE).to_string(),
+            "2.2250738585072014e-308"
+        );
+        assert_eq!(Brief(1e308).to_string(), "1e308");
+        assert_eq!(Brief(0.01).to_string(), "0.01");
+        assert_eq!(Brief(-250.5).to_string(), "-250.5");
+        assert_eq!(Brief(0.0).to_string(), "0");
     }
 }

@@ -17,6 +17,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::brdf::Cosines;
+use crate::decimal::Brief;
 use crate::setup_uncertainty::{Input, SetupUncertainty, Source};
 use crate::white_angular::{
     WhiteAngular, WhiteAngularError, WhiteTable, DEFAULT_FALLOFF, MAX_FALLOFF,
@@ -125,11 +126,11 @@ pub(crate) struct Lighting {
 /// Why a [`Setup`] cannot be used.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum GeometryError {
-    #[error("setup field `{field}` must be finite and positive, got {value}")]
+    #[error("setup field `{field}` must be finite and positive, got {}", Brief(*.value))]
     NotPositive { field: &'static str, value: f64 },
-    #[error("setup field `{field}` must be finite, got {value}")]
+    #[error("setup field `{field}` must be finite, got {}", Brief(*.value))]
     NotFinite { field: &'static str, value: f64 },
-    #[error("setup field `{field}` is {value}, outside [{min}, {max}]")]
+    #[error("setup field `{field}` is {}, outside [{}, {}]", Brief(*.value), Brief(*.min), Brief(*.max))]
     OutOfRange {
         field: &'static str,
         value: f64,

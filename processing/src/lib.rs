@@ -11,6 +11,8 @@
 mod decimal;
 mod simd;
 
+pub use decimal::Brief;
+
 pub mod brdf;
 pub mod fit;
 pub mod geometry;

@@ -240,7 +240,7 @@ pub fn read_csv_from<R: Read>(reader: R) -> Result<Vec<Sample>, SamplesError> {
     let mut csv = csv::ReaderBuilder::new()
         .has_headers(true)
         .flexible(true)
-        .from_reader(reader);
+        .from_reader(gonio_files::input::UnixLineEnds::new(reader));
     let header: Vec<String> = csv
         .headers()
         .map_err(SamplesError::Csv)?
@@ -379,6 +379,16 @@ impl Columns {
                 *value = parse_field(text, line, column)?;
             }
         }
+        // θL as a sidecar may state it; θi and θr in front of the surface.
+        for (i, limit) in [(0, 180.0), (1, 90.0), (2, 90.0)] {
+            if values[i].abs() > limit {
+                return Err(SamplesError::Field {
+                    line,
+                    column: HEADER[i],
+                    message: format!("{}° is outside [−{limit}°, {limit}°]", values[i]),
+                });
+            }
+        }
         let cosines = match &self.cosine {
             None => None,
             Some(index) => {
@@ -392,6 +402,13 @@ impl Columns {
                         });
                     }
                     *value = parse_field(field(i), line, column)?;
+                    if value.abs() > 1.0 {
+                        return Err(SamplesError::Field {
+                            line,
+                            column,
+                            message: format!("{value} is not a cosine (outside [−1, 1])"),
+                        });
+                    }
                 }
                 Some(Cosines {
                     n_dot_l: c[0],

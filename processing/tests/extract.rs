@@ -430,6 +430,20 @@ fn captures_of_another_size_than_the_setup_are_refused() {
         extract::extract_scan(dir.path(), &ExtractOptions::default()),
         Err(ExtractError::RowOutside { which: "white", .. })
     ));
+    // The white strip on the sample's rows: the sample would be measured against itself.
+    let mut overlapping = setup();
+    overlapping.white_row = overlapping.sample_row + 2;
+    fs::write(
+        dir.path().join("setup.json"),
+        serde_json::to_string(&overlapping).unwrap(),
+    )
+    .unwrap();
+    let err = extract::extract_scan(dir.path(), &ExtractOptions::default()).unwrap_err();
+    assert!(
+        matches!(err, ExtractError::StripsOverlap { rows: 5, .. })
+            && err.to_string().contains("overlap"),
+        "{err}"
+    );
 }
 
 #[test]

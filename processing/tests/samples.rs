@@ -62,6 +62,59 @@ fn malformed_rows_name_their_line() {
 }
 
 #[test]
+fn angles_and_cosines_out_of_their_range_are_refused() {
+    let header = "theta_l,theta_i,theta_r,r,g,b";
+    let cosines = "theta_l,theta_i,theta_r,r,g,b,n_dot_l,n_dot_v,n_dot_h,v_dot_h";
+    for (text, needle) in [
+        (
+            format!("{header}\n-20,-25,5,1,2,3\n-20,120,5,1,2,3\n"),
+            "line 3, column `theta_i`",
+        ),
+        (
+            format!("{header}\n-20,-25,-95,1,2,3\n"),
+            "line 2, column `theta_r`",
+        ),
+        (
+            format!("{header}\n-200,-25,5,1,2,3\n"),
+            "line 2, column `theta_l`",
+        ),
+        // With cosine columns the angles are still checked, and the cosines too.
+        (
+            format!("{cosines}\n-20,120,5,1,2,3,0.9,0.9,1,0.9\n"),
+            "column `theta_i`",
+        ),
+        (
+            format!("{cosines}\n-20,-25,5,1,2,3,5,0.9,1,0.9\n"),
+            "column `n_dot_l`: 5 is not a cosine",
+        ),
+        (
+            format!("{cosines}\n-20,-25,5,1,2,3,0.9,0.9,1,-1.5\n"),
+            "column `v_dot_h`",
+        ),
+    ] {
+        let message = read_csv_from(text.as_bytes()).unwrap_err().to_string();
+        assert!(message.contains(needle), "{needle}: {message}");
+    }
+    // The ends of the ranges are values, and a negative cosine within [−1, 1] is read
+    // (a fit then calls that direction grazing).
+    let ends = format!("{cosines}\n-180,-90,90,1,2,3,-1,1,1,0\n");
+    assert_eq!(read_csv_from(ends.as_bytes()).unwrap().len(), 1);
+}
+
+#[test]
+fn windows_line_ends_count_as_lines() {
+    // A spreadsheet's export: every line ends in \r\n.
+    let text = "theta_l,theta_i,theta_r,r,g,b\r\n-20,-25,5,1,2,3\r\n-20,-25,5,1,2,3\r\n-20,-26,x,1,2,3\r\n";
+    let message = read_csv_from(text.as_bytes()).unwrap_err().to_string();
+    assert!(
+        message.contains("line 4,") && message.contains("theta_r"),
+        "{message}"
+    );
+    let good = "theta_l,theta_i,theta_r,r,g,b\r\n-20,-25,5,1,2,3\r\n";
+    assert_eq!(read_csv_from(good.as_bytes()).unwrap().len(), 1);
+}
+
+#[test]
 fn non_finite_values_are_rejected() {
     let text = "theta_l,theta_i,theta_r,r,g,b\n-20,-25,5,NaN,2,3\n";
     let message = read_csv_from(text.as_bytes()).unwrap_err().to_string();

@@ -33,7 +33,7 @@ pub struct Options {
     /// With a fit JSON: the samples CSV it was fitted to, whose table gives the colour
     /// inside the measured (θh, θd) range.
     #[arg(long)]
-    samples: Option<PathBuf>,
+    pub(super) samples: Option<PathBuf>,
 }
 
 /// Arguments of `gonio colour`.
@@ -52,6 +52,13 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    let mut inputs = super::output::scan_results(&args.input);
+    inputs.push(args.input.clone());
+    inputs.extend(args.options.samples.clone());
+    let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
+    for out in std::iter::once(&args.out).chain(&args.csv) {
+        super::output::refuse_overwriting(out, &inputs, &[])?;
+    }
     let report = report(&args.input, &args.options)?;
     let is_csv = args.out.extension().is_some_and(|e| e == "csv");
     let text = if is_csv {

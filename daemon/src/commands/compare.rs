@@ -35,6 +35,15 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if let Some(out) = &args.out {
+        let mut inputs = super::output::scan_results(&args.standard);
+        inputs.extend(super::output::scan_results(&args.batch));
+        inputs.extend([args.standard.clone(), args.batch.clone()]);
+        inputs.extend(args.tolerances.clone());
+        inputs.extend(args.options.samples.clone());
+        let inputs: Vec<&std::path::Path> = inputs.iter().map(PathBuf::as_path).collect();
+        super::output::refuse_overwriting(out, &inputs, &[])?;
+    }
     let tolerances = match &args.tolerances {
         Some(path) => {
             let text = read_input_to_string(path, MAX_SMALL_FILE_BYTES)

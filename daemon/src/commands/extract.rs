@@ -8,7 +8,7 @@ use gonio_processing::samples;
 
 use crate::progress;
 
-use super::output::write_output;
+use super::output::{refuse_overwriting, write_output};
 
 /// Arguments of `gonio extract`.
 #[derive(clap::Args)]
@@ -47,6 +47,8 @@ pub struct Args {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     gonio_processing::capture::set_max_pixels(args.max_frame_pixels);
+    let setup: Vec<&std::path::Path> = args.setup.iter().map(PathBuf::as_path).collect();
+    refuse_overwriting(&args.out, &setup, &[&args.dir])?;
     super::plan_check::require_whole(&args.dir, args.allow_missing)?;
     let setup_name = args.setup.as_ref().map_or_else(
         || "setup.json".to_owned(),

@@ -89,9 +89,12 @@ fn select_theta_l(all: Vec<Sample>, wanted: &[f64]) -> anyhow::Result<Vec<Sample
             present.push(s.theta_l);
         }
     }
-    for &w in wanted {
+    for (i, &w) in wanted.iter().enumerate() {
         if !w.is_finite() {
             bail!("--theta-l {w} is not a finite angle");
+        }
+        if let Some(twice) = wanted[..i].iter().find(|&&v| same(v, w)) {
+            bail!("--theta-l lists θL {w} twice (as {twice} before)");
         }
         if !present.iter().any(|&p| same(p, w)) {
             let list: Vec<String> = present.iter().map(|p| p.to_string()).collect();
@@ -108,6 +111,7 @@ fn select_theta_l(all: Vec<Sample>, wanted: &[f64]) -> anyhow::Result<Vec<Sample
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    super::output::refuse_overwriting(&args.out, &[&args.samples], &[])?;
     let all = samples::read_csv(&args.samples)?;
     let selected = select_theta_l(all, &args.theta_l)?;
     let model = match args.model {
@@ -207,6 +211,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         rgb(&result.ks, 3),
         rgb(&m[..result.roughness.count()], 4)
     );
+    // The robust method searches m within a range: at its end, the data lie beyond it.
+    let range = fit::RobustOptions::default();
+    let at_end = |m: f64| {
+        [range.m_min, range.m_max]
+            .into_iter()
+            .any(|end| (m / end).ln().abs() < 0.005)
+    };
+    if result.method == FitMethod::Robust
+        && m[..result.roughness.count()].iter().any(|&m| at_end(m))
+    {
+        println!(
+            "  note: m is at an end of the range searched, [{}, {}]: the samples favour a \
+             roughness beyond it; Kd, Ks and the intervals are the fit's at that end",
+            range.m_min, range.m_max
+        );
+    }
     if let Some(ks_90) = &result.ks_90 {
         println!("  Ks at 90° between light and camera {}", rgb(ks_90, 3));
     }
@@ -215,6 +235,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "  ρd {}  (diffuse albedo on one scale: Kd/100 for Cook–Torrance, Kd/(100π) for Ward)",
         rgb(&albedo, 4)
     );
+    if albedo.iter().any(|&a| a > 1.0) {
+        println!(
+            "  note: a diffuse albedo above 1 reflects more than it receives: the samples \
+             do not determine the diffuse term (too few angles, or a white reference that \
+             does not match setup.json's reflectance)"
+        );
+    }
     if let Some(ci) = &result.ci95 {
         let interval =
             |[lo, hi]: [f64; 2], digits: usize| format!("[{lo:.digits$}, {hi:.digits$}]");
@@ -231,7 +258,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Some(budget) => print_budget(budget),
         None if !has_uncertainty => println!(
             "  no uncertainty budget: the samples have no uncertainty columns (gonio extract \
-             writes them); the intervals above are the noise's alone"
+             writes them); {}",
+            if result.ci95.is_some() {
+                "the intervals above are the noise's alone"
+            } else {
+                "nor intervals: the fit's standard uncertainties are not defined (too few \
+                 points, or parameters the samples do not determine)"
+            }
         ),
         None => {}
     }

@@ -1,11 +1,11 @@
 //! `gonio hdr`: merge a bracket of exposures into an OpenEXR radiance map.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
-use gonio_processing::capture::Frame;
+use gonio_processing::capture::{sidecar_path, Frame};
 use gonio_processing::hdr::{self, MergeMethod, MergeOptions, SATURATED, UNDEREXPOSED};
 
-use super::output::write_output;
+use super::output::{refuse_overwriting, write_output};
 use crate::progress;
 
 /// Merge method on the command line.
@@ -38,6 +38,14 @@ pub struct Args {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     gonio_processing::capture::set_max_pixels(args.max_frame_pixels);
+    let sidecars: Vec<PathBuf> = args.frames.iter().map(|f| sidecar_path(f)).collect();
+    let inputs: Vec<&Path> = args
+        .frames
+        .iter()
+        .chain(&sidecars)
+        .map(PathBuf::as_path)
+        .collect();
+    refuse_overwriting(&args.out, &inputs, &[])?;
     let spinner = progress::spinner(format!("decoding {} frames", args.frames.len()));
     // Decoding is the slow part of reading: the frames are decoded in parallel.
     let frames = Frame::read_all(&args.frames)?;

@@ -4,12 +4,13 @@
 //! a FIFO is written in place, a directory is refused; on failure only the temporary is
 //! removed. A command that writes a directory of results through a writer it does not
 //! control (`gonio study`) writes them into a temporary directory first, then each file
-//! into place as above.
+//! into place as above. No command writes over a file it reads ([`refuse_overwriting`]).
 
 use std::fs;
-use std::path::{Path, PathBuf};
+use std::os::unix::fs::MetadataExt;
+use std::path::{Component, Path, PathBuf};
 
-use anyhow::{anyhow, Context};
+use anyhow::{anyhow, bail, Context};
 use gonio_files::output::{write_atomically_with, AtomicWriteError};
 
 use crate::interrupt::RemoveOnInterrupt;
@@ -60,4 +61,77 @@ pub fn write_output_files(
             Ok(target)
         })
         .collect()
+}
+
+/// The files of a scan directory that the commands reading the scan read: these at its
+/// top, and everything in its θL directories (`theta_l_<θL>/`: frames and sidecars).
+const SCAN_FILES: [&str; 4] = ["setup.json", "plan.json", "truth.json", "reference.csv"];
+
+/// The (device, inode) of an existing file, following links.
+fn identity(path: &Path) -> Option<(u64, u64)> {
+    fs::metadata(path).ok().map(|m| (m.dev(), m.ino()))
+}
+
+/// Whether `path` (existing) is a file that a command reading scan directory `dir` reads.
+fn read_from_scan(path: &Path, dir: &Path) -> bool {
+    let (Ok(path), Ok(dir)) = (path.canonicalize(), dir.canonicalize()) else {
+        return false;
+    };
+    let Ok(inside) = path.strip_prefix(&dir) else {
+        return false;
+    };
+    let parts: Vec<&std::ffi::OsStr> = inside
+        .components()
+        .filter_map(|c| match c {
+            Component::Normal(name) => Some(name),
+            _ => None,
+        })
+        .collect();
+    match parts.as_slice() {
+        [name] => SCAN_FILES.iter().any(|f| name == f),
+        [first, ..] => first.to_string_lossy().starts_with("theta_l_"),
+        [] => false,
+    }
+}
+
+/// The results of a scan directory that `report` and `colour` read: samples.csv and the
+/// fit JSONs (`fit-*.json`) at its top.
+pub fn scan_results(dir: &Path) -> Vec<PathBuf> {
+    let Ok(entries) = fs::read_dir(dir) else {
+        return Vec::new();
+    };
+    entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.file_name().and_then(|n| n.to_str()).is_some_and(|n| {
+                n == "samples.csv" || (n.starts_with("fit-") && n.ends_with(".json"))
+            })
+        })
+        .collect()
+}
+
+/// Refuses to write `out` when it is one of the command's input `files` (the same file
+/// by any name) or a file of one of its input scan directories `scans`
+/// ([`SCAN_FILES`], anything in a θL directory): the result would replace what it was
+/// made from.
+pub fn refuse_overwriting(out: &Path, files: &[&Path], scans: &[&Path]) -> anyhow::Result<()> {
+    let Some(target) = identity(out) else {
+        // Nothing there yet: nothing to lose.
+        return Ok(());
+    };
+    if let Some(input) = files.iter().find(|f| identity(f) == Some(target)) {
+        bail!(
+            "--out {} is the input {}: writing it would replace the input (choose another output path)",
+            out.display(),
+            input.display()
+        );
+    }
+    if let Some(scan) = scans.iter().find(|dir| read_from_scan(out, dir)) {
+        bail!(
+            "--out {} is a file of the scan {} (its setup, plan, truth, reference or captures): writing it would replace the scan's data (choose another output path)",
+            out.display(),
+            scan.display()
+        );
+    }
+    Ok(())
 }

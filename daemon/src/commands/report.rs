@@ -23,6 +23,12 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if !args.dir.is_dir() {
+        anyhow::bail!("{}: no such scan directory", args.dir.display());
+    }
+    let results = super::output::scan_results(&args.dir);
+    let inputs: Vec<&std::path::Path> = results.iter().map(PathBuf::as_path).collect();
+    super::output::refuse_overwriting(&args.out, &inputs, &[&args.dir])?;
     let facts = ScanFacts {
         sample: args.sample,
         notes: args.notes,

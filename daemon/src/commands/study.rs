@@ -44,7 +44,8 @@ impl RoughnessChoice {
 pub struct Args {
     /// Samples CSV (`theta_l,theta_i,theta_r,r,g,b`).
     pub samples: PathBuf,
-    /// Reference CSV (`theta_i,theta_r,390,...,730` spectral radiance factor).
+    /// Reference CSV (`theta_i,theta_r,390,...,730` spectral radiance factor); required
+    /// unless `--held-out`.
     #[arg(long, required_unless_present = "held_out")]
     pub reference: Option<PathBuf>,
     /// Instead of every combination against a reference: leave each θL out in turn, fit

@@ -8,6 +8,7 @@ use gonio_files::input::{read_input_to_string, MAX_SMALL_FILE_BYTES};
 use serde::{Deserialize, Serialize};
 
 use super::error::CaptureError;
+use crate::decimal::Brief;
 
 /// How pixel counts relate to exposure.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -89,7 +90,7 @@ impl Sidecar {
                 "shutter_s",
                 format!(
                     "{} is not an exposure time in [{shortest:e}, {longest}] s",
-                    self.shutter_s
+                    Brief(self.shutter_s)
                 ),
             ));
         }
@@ -98,14 +99,20 @@ impl Sidecar {
             if !(iso.is_finite() && (lowest..=highest).contains(&iso)) {
                 return Err(bad(
                     "iso",
-                    format!("{iso} is not an ISO speed in [{lowest}, {highest}]"),
+                    format!(
+                        "{} is not an ISO speed in [{lowest}, {highest}]",
+                        Brief(iso)
+                    ),
                 ));
             }
         }
         if !(self.theta_l.is_finite() && self.theta_l.abs() <= 180.0) {
             return Err(bad(
                 "theta_l",
-                format!("{} is not an angle in [-180, 180] degrees", self.theta_l),
+                format!(
+                    "{} is not an angle in [-180, 180] degrees",
+                    Brief(self.theta_l)
+                ),
             ));
         }
         if let Some((dir, theta_l)) = theta_l_directory(image) {
@@ -121,7 +128,7 @@ impl Sidecar {
             if !(n.is_finite() && (widest..=narrowest).contains(&n)) {
                 return Err(bad(
                     "aperture",
-                    format!("{n} is not an f-number in [{widest}, {narrowest}]"),
+                    format!("{} is not an f-number in [{widest}, {narrowest}]", Brief(n)),
                 ));
             }
         }
@@ -141,7 +148,7 @@ impl Sidecar {
                 if !(v.is_finite() && (0.0..=MAX_COUNT).contains(&v)) {
                     return Err(bad(
                         field,
-                        format!("{v} is not a count in [0, {MAX_COUNT}]"),
+                        format!("{} is not a count in [0, {MAX_COUNT}]", Brief(v)),
                     ));
                 }
             }

@@ -46,6 +46,12 @@ pub enum ExtractError {
         row: usize,
         height: usize,
     },
+    #[error("sample row {sample} and white row {white} (setup's sample_row, white_row in capture rows) are closer than the {rows} rows a strip spans: the strips overlap")]
+    StripsOverlap {
+        sample: usize,
+        white: usize,
+        rows: usize,
+    },
     #[error("invalid extraction option: {0}")]
     Options(String),
 }

@@ -69,6 +69,13 @@ impl StripLayout {
             row("sample", setup.sample_row)?,
             row("white", setup.white_row)?,
         );
+        if sample_row.abs_diff(white_row) < STRIP_ROWS {
+            return Err(ExtractError::StripsOverlap {
+                sample: sample_row,
+                white: white_row,
+                rows: STRIP_ROWS,
+            });
+        }
         Ok(Self {
             scale,
             sample_row,

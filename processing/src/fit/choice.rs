@@ -45,11 +45,12 @@
 use serde::{Deserialize, Serialize};
 
 use super::colour_change::{lobe_colour_change, LobeColourChange, MIN_UV_CHANGE};
+use super::data::Data;
 use super::held_out::{leave_one_theta_l_out, table_held_out, Form, HeldOut};
 use super::stride::judged;
 use super::table::Table;
 use super::{fit, fit_from, parameter_count, FitError, FitResult, Start};
-use crate::brdf::Roughness;
+use crate::brdf::{Model, Roughness};
 use crate::color::CameraModel;
 use crate::samples::{distinct_theta_l, Sample};
 
@@ -392,6 +393,8 @@ fn choose(
     let (Some(chosen), Some(parametric)) =
         (best(&scores, &judged), best(&parametric_scores, &judged))
     else {
+        // What is wrong with the samples themselves is said once, not per candidate.
+        Data::new(samples, Model::CookTorrance, 0)?;
         let why = candidates
             .iter()
             .filter_map(|c| Some(format!("{}: {}", c.form.label(), c.error.as_ref()?)))

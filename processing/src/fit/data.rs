@@ -56,12 +56,15 @@ impl Data {
             if let Some(field) = s.non_finite_field() {
                 return Err(FitError::NonFinite { index, field });
             }
-            let basis = model.basis_at(&s.cosines());
+            let cosines = s.cosines();
+            let basis = model.basis_at(&cosines);
             if basis.diffuse == 0.0 {
                 return Err(FitError::Grazing {
                     index,
                     theta_i: s.theta_i,
                     theta_r: s.theta_r,
+                    n_dot_l: cosines.n_dot_l,
+                    n_dot_v: cosines.n_dot_v,
                 });
             }
             bases.push(basis);
@@ -77,6 +80,9 @@ impl Data {
                 .collect()
         });
         for (c, channel) in ['R', 'G', 'B'].into_iter().enumerate() {
+            if samples.iter().all(|s| s.dropped[c]) {
+                return Err(FitError::AllDropped { channel });
+            }
             if y.iter().map(|v| v[c]).sum::<f64>() <= 0.0 {
                 return Err(FitError::NoSignal { channel });
             }
