@@ -1,7 +1,6 @@
 //! What every HTTP handler shares: the error answer (`{"error": "...", "field": ...}`
 //! with its status), the database off the async workers, and loading a scan.
 
-use std::path::Path as FsPath;
 use std::sync::Arc;
 
 use axum::body::Bytes;
@@ -13,6 +12,7 @@ use serde::Serialize;
 use serde_json::Value;
 use utoipa::ToSchema;
 
+pub use super::files::without_server_paths;
 use super::shared::Shared;
 use super::store::{ScanRecord, Store, StoreError};
 use super::sync::lock;
@@ -97,16 +97,6 @@ impl From<FieldError> for ApiError {
     }
 }
 
-/// `message` with every path under `dirs` (most specific first) made relative to it,
-/// so that an answer shows no path of the server (`theta_l_-20.0/exp_00.json`, not
-/// `/srv/gonio-data/scans/3/theta_l_-20.0/exp_00.json`).
-pub fn without_server_paths(message: &str, dirs: &[&FsPath]) -> String {
-    dirs.iter().fold(message.to_owned(), |message, dir| {
-        let dir = dir.display().to_string();
-        message.replace(&format!("{dir}/"), "").replace(&dir, ".")
-    })
-}
-
 /// `message` with every absolute path in it (a word starting with `/`, up to a space,
 /// a quote, a colon or a comma) cut to its file name: `scene red.toml`, not `scene
 /// /etc/gonio/red.toml`.
@@ -176,17 +166,6 @@ pub fn parse_json(body: &Bytes) -> ApiResult<Value> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn answers_show_paths_relative_to_the_scan_or_data_directory() {
-        let (scan, data) = (FsPath::new("/srv/data/scans/3"), FsPath::new("/srv/data"));
-        let message = "/srv/data/scans/3/theta_l_-20.0/exp_00.json: sidecar field 'iso'; \
-                       writing /srv/data/setup.json; reading /srv/data/scans/3";
-        assert_eq!(
-            without_server_paths(message, &[scan, data]),
-            "theta_l_-20.0/exp_00.json: sidecar field 'iso'; writing setup.json; reading ."
-        );
-    }
 
     #[test]
     fn absolute_paths_are_cut_to_their_file_names() {

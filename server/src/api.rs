@@ -116,7 +116,10 @@ pub fn router(shared: Arc<Shared>) -> Router {
         Access::Read if !reads_need_token => routes,
         Access::Read | Access::Token => routes.route_layer(token()),
         Access::TokenJson => routes
-            .route_layer(middleware::from_fn(guards::require_json))
+            .route_layer(middleware::from_fn_with_state(
+                shared.clone(),
+                guards::require_json,
+            ))
             .route_layer(token()),
     })
     .split_for_parts();
@@ -298,14 +301,20 @@ async fn pause_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<J
     params(("id" = i64, Path, description = "The scan's id")),
     responses(super::schemas::ControlAnswers))]
 async fn resume_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
-    control(
-        shared,
+    let answer = control(
+        Arc::clone(&shared),
         id,
         applies_to("resume"),
         ScanState::Queued,
         "resume",
     )
-    .await
+    .await?;
+    // The operator goes on: an emergency stop's hold ends.
+    shared
+        .halted
+        .store(false, std::sync::atomic::Ordering::Release);
+    shared.wake();
+    Ok(answer)
 }
 
 #[utoipa::path(post, path = "/api/scans/{id}/cancel",
@@ -522,15 +531,24 @@ static EVENT_STREAMS: Slots = Slots::new();
     params(("id" = i64, Path, description = "The scan's id")),
     responses(
         (status = 200, description = "Plot data", body = Object),
-        (status = 404, description = "No such scan, or no samples yet", body = ErrorBody),
+        (status = 404, description = "No such scan", body = ErrorBody),
+        (status = 409, description = "The scan has no samples yet", body = ErrorBody),
+        (status = 500, description = "A file of the scan could not be read", body = ErrorBody),
     ))]
 async fn plot(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<Json<Value>> {
     load_scan(&shared, id).await?;
     let dir = shared.scan_dir(id);
-    let plot = tokio::task::spawn_blocking(move || preview::plot_data(&dir))
+    if !dir.join("samples.csv").is_file() {
+        return Err(ApiError::new(
+            StatusCode::CONFLICT,
+            format!("scan {id} has no samples to plot yet"),
+        ));
+    }
+    let read = dir.clone();
+    let plot = tokio::task::spawn_blocking(move || preview::plot_data(&read))
         .await
         .map_err(internal)?
-        .map_err(|e| ApiError::not_found(format!("plot data: {e}")))?;
+        .map_err(|e| internal(without_server_paths(&format!("plot data: {e}"), &[&dir])))?;
     Ok(Json(plot))
 }
 

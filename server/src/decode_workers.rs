@@ -174,7 +174,14 @@ impl Decoder for Workers {
 
 impl Worker {
     fn spawn(limits: Limits) -> io::Result<Worker> {
-        let exe = std::env::current_exe()?;
+        // The program this process runs, also once its file was replaced or removed
+        // (an install while the daemon runs): /proc/self/exe opens the running image.
+        let running = Path::new("/proc/self/exe");
+        let exe = if running.exists() {
+            running.to_path_buf()
+        } else {
+            std::env::current_exe()?
+        };
         let mut child = Command::new(exe)
             .arg("decode-worker")
             .arg("--memory-bytes")

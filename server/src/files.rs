@@ -161,6 +161,16 @@ pub fn is_safe_name(name: &str) -> bool {
             .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
 }
 
+/// `message` with every path under `dirs` (most specific first) made relative to it,
+/// so that an answer shows no path of the server (`theta_l_-20.0/exp_00.json`, not
+/// `/srv/gonio-data/scans/3/theta_l_-20.0/exp_00.json`).
+pub fn without_server_paths(message: &str, dirs: &[&Path]) -> String {
+    dirs.iter().fold(message.to_owned(), |message, dir| {
+        let dir = dir.display().to_string();
+        message.replace(&format!("{dir}/"), "").replace(&dir, ".")
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -304,5 +314,15 @@ mod tests {
         let mut expected = vec![name(running), "exp_00.tiff".to_owned()];
         expected.sort();
         assert_eq!(left(), expected);
+    }
+    #[test]
+    fn messages_show_paths_relative_to_the_scan_or_data_directory() {
+        let (scan, data) = (Path::new("/srv/data/scans/3"), Path::new("/srv/data"));
+        let message = "/srv/data/scans/3/theta_l_-20.0/exp_00.json: sidecar field 'iso'; \
+                       writing /srv/data/setup.json; reading /srv/data/scans/3";
+        assert_eq!(
+            without_server_paths(message, &[scan, data]),
+            "theta_l_-20.0/exp_00.json: sidecar field 'iso'; writing setup.json; reading ."
+        );
     }
 }

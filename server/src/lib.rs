@@ -170,6 +170,7 @@ where
         estop: Mutex::new(None),
         arm_angle: Mutex::new(None),
         stops: AtomicU64::new(0),
+        halted: AtomicBool::new(false),
         arm_position: Mutex::new(None),
         home_requested: AtomicBool::new(false),
         arm_reconnect: AtomicBool::new(false),

@@ -49,7 +49,7 @@ const REST_OF_PATH: &str = "x-rest-of-path";
 const BEARER: &str = "bearer";
 
 /// The shared answers, by name (`#/components/responses/<name>`), and what they say.
-const SHARED_ANSWERS: [(&str, &str); 6] = [
+const SHARED_ANSWERS: [(&str, &str); 7] = [
     (
         "MisdirectedRequest",
         "The Host header is not the bind address, localhost or a name of allowed_hosts \
@@ -58,6 +58,11 @@ const SHARED_ANSWERS: [(&str, &str); 6] = [
     (
         "UnsupportedMediaType",
         "The body's Content-Type is not application/json; nothing changed",
+    ),
+    (
+        "BodyTimeout",
+        "The body did not arrive whole within header_timeout_s (the connection closes \
+         after the answer); nothing changed",
     ),
     (
         "Unauthorized",
@@ -88,6 +93,7 @@ pub fn describe_access(access: Access, api: &mut OpenApi) {
         Access::TokenJson => &[
             ("401", "Unauthorized"),
             ("413", "BodyTooLarge"),
+            ("408", "BodyTimeout"),
             ("415", "UnsupportedMediaType"),
             ("500", "Internal"),
         ],

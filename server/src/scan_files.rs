@@ -380,10 +380,15 @@ pub async fn scan_archive(State(shared): AppState, Path(id): Path<i64>) -> ApiRe
             FeedWriter { feed, runtime },
         ));
         let name = |relative: &[u8]| [root.as_bytes(), b"/", relative].concat();
-        let written = servable_files(&dir, &mut |relative, mut file, meta| {
+        let walked = servable_files(&dir, &mut |relative, mut file, meta| {
             let name = name(relative.as_os_str().as_bytes());
             tar.append(&name, meta.len(), mtime(&meta), &mut file)
-        })
+        });
+        let written = match walked {
+            // A scan not started yet has no directory: its archive is its log alone.
+            Err(e) if e.kind() == io::ErrorKind::NotFound && !dir.exists() => Ok(()),
+            other => other,
+        }
         .and_then(|()| {
             let now = std::time::SystemTime::now()
                 .duration_since(std::time::UNIX_EPOCH)

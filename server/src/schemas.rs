@@ -17,8 +17,9 @@ pub struct ScanRequest {
     /// The sample's name: letters, digits, `.`, `-`, `_`, at most 64.
     #[schema(pattern = "^[A-Za-z0-9_-][A-Za-z0-9._-]{0,63}$")]
     pub sample: String,
-    /// Light angles θL in degrees, inside the soft limits, distinct.
-    #[schema(min_items = 1)]
+    /// Light angles θL in degrees (1 to 181), inside the soft limits, distinct (to 0.1°,
+    /// as their directories are named).
+    #[schema(min_items = 1, max_items = 181)]
     pub theta_l: Vec<f64>,
     /// The exposures at each θL (default: the configured bracket).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -46,8 +47,8 @@ pub enum Metered {
 #[derive(Debug, Clone, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct GivenBracket {
-    /// Seconds, within the camera's range.
-    #[schema(min_items = 1)]
+    /// Seconds (1 to 32), within the camera's range.
+    #[schema(min_items = 1, max_items = 32)]
     pub shutter_s: Vec<f64>,
 }
 
@@ -61,9 +62,9 @@ pub struct SweepRequest {
     /// Each set of light angles θL (degrees) every sample is scanned at.
     #[schema(min_items = 1)]
     pub theta_l_sets: Vec<Vec<f64>>,
-    /// How often each scan is repeated (default 1).
+    /// How often each scan is repeated (default 1; at most 1000, and 1000 scans in all).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    #[schema(minimum = 1)]
+    #[schema(minimum = 1, maximum = 1000)]
     pub repeats: Option<u32>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub bracket: Option<Bracket>,
@@ -152,8 +153,9 @@ pub struct FrameView {
 pub struct ChoiceView {
     /// The model chosen (`cook-torrance`, `ward`, `cook-torrance-fresnel`, `table`).
     pub model: String,
-    /// Its roughness form (`shared` or `per-channel`), as the fit JSON writes it.
-    #[schema(value_type = Object)]
+    /// Its roughness form (`shared` or `per-channel`), as the fit JSON writes it (null
+    /// where a fit JSON has none).
+    #[schema(value_type = Option<String>)]
     pub roughness: serde_json::Value,
     /// Whether a colour shift of the highlight is reported.
     pub colour_shift: Option<bool>,
@@ -290,7 +292,7 @@ pub struct PlannedWaitView {
 #[serde(deny_unknown_fields)]
 pub struct SweepSchedule {
     /// RFC 3339; null: start now.
-    #[schema(format = DateTime)]
+    #[schema(format = DateTime, required = true)]
     pub start_at: Option<String>,
 }
 

@@ -125,6 +125,10 @@ pub struct Shared {
     /// Emergency stops so far: an arm operation that fails after this changed does
     /// not retry.
     pub stops: AtomicU64,
+    /// An emergency stop holds the instrument (`POST /api/arm/stop`): the hardware lane
+    /// starts no scan and moves nothing until the operator homes the arm, declares its
+    /// position or resumes a scan (or the daemon starts again).
+    pub halted: AtomicBool,
     /// A declared arm position waiting for the hardware lane (one at a time).
     pub arm_position: Mutex<Option<PositionRequest>>,
     /// The operator asked to home the arm (`POST /api/arm/home`); the hardware lane

@@ -1,11 +1,12 @@
 //! Validation of scan and sweep requests. Every invalid field is reported by name
 //! (`theta_l[2]`, `bracket.shutter_s`, ...) and nothing is queued.
 
+use gonio_processing::Brief;
 use serde_json::{Map, Value};
 
 use super::config::Limits;
 use super::files::is_safe_name;
-use super::plan::ScanPlan;
+use super::plan::{theta_dir_name, ScanPlan};
 
 /// The first invalid field of a request.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -110,15 +111,20 @@ fn theta_list(field: &str, value: Option<&Value>, limits: Limits) -> Result<Vec<
             return Err(invalid(
                 &f,
                 format!(
-                    "{theta} is outside the soft limits [{}, {}]",
-                    limits.min_deg, limits.max_deg
+                    "{} is outside the soft limits [{}, {}]",
+                    Brief(theta),
+                    limits.min_deg,
+                    limits.max_deg
                 ),
             ));
         }
         // Directories are named with one decimal: angles must differ there, compared
-        // as numbers (0 and -0.0, or 0.04 and -0.04, are one angle).
+        // as numbers (0 and -0.0, or 0.04 and -0.04, are one angle) and as the names
+        // (`{:.1}` rounds a half to even: -1.25 and -1.2 are both `theta_l_-1.2`).
         let tenths = |t: f64| (t * 10.0).round() + 0.0;
-        if let Some(same) = out.iter().find(|t| tenths(**t) == tenths(theta)) {
+        let one_directory =
+            |a: f64, b: f64| tenths(a) == tenths(b) || theta_dir_name(a) == theta_dir_name(b);
+        if let Some(same) = out.iter().find(|t| one_directory(**t, theta)) {
             return Err(invalid(
                 &f,
                 format!("{theta} is listed twice (as {same} before, to 0.1°)"),
@@ -162,7 +168,10 @@ fn bracket(value: Option<&Value>, bounds: &Bounds) -> Result<(Vec<f64>, bool), F
                 if s < min * (1.0 - 1e-9) || s > max * (1.0 + 1e-9) {
                     return Err(invalid(
                         &f,
-                        format!("{s} s is outside the camera's range [{min}, {max}] s"),
+                        format!(
+                            "{} s is outside the camera's range [{min}, {max}] s",
+                            Brief(s)
+                        ),
                     ));
                 }
                 if out.contains(&s) {
@@ -284,12 +293,16 @@ pub fn sweep_request(body: &Value, bounds: &Bounds) -> Result<SweepPlan, FieldEr
         .map(|(i, v)| theta_list(&format!("theta_l_sets[{i}]"), Some(v), bounds.limits))
         .collect::<Result<Vec<_>, _>>()?;
     let repeats = match map.get("repeats") {
-        None => 1,
+        None | Some(Value::Null) => 1,
         Some(v) => v
             .as_u64()
             .filter(|r| (1..=MAX_SWEEP_SCANS as u64).contains(r))
-            .ok_or_else(|| invalid("repeats", "must be a whole number from 1"))?
-            as usize,
+            .ok_or_else(|| {
+                invalid(
+                    "repeats",
+                    format!("must be a whole number from 1 to {MAX_SWEEP_SCANS}"),
+                )
+            })? as usize,
     };
     let (shutter_s, auto_bracket) = bracket(map.get("bracket"), bounds)?;
     // Checked before anything is expanded: the field named is the one whose size made
@@ -438,6 +451,11 @@ mod tests {
         );
         assert_eq!(
             field_of(json!({"sample": "g", "theta_l": [-0.04, 0.04]})),
+            "theta_l[1]"
+        );
+        // And as the directories are named: -1.25 and -1.2 are both theta_l_-1.2.
+        assert_eq!(
+            field_of(json!({"sample": "g", "theta_l": [-1.25, -1.2]})),
             "theta_l[1]"
         );
         let bracket = |b: Value| field_of(json!({"sample": "g", "theta_l": [-20], "bracket": b}));

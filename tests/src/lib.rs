@@ -238,12 +238,28 @@ impl Daemon {
         Self::spawn(dir, &dir.join("gonio.toml"), None, &[])
     }
 
+    /// As [`Daemon::start`], running the program at `bin` (a copy of [`gonio_bin`]).
+    pub fn start_from(bin: &Path, dir: &Path, config: &str) -> Daemon {
+        let config_path = Self::write_config(dir, config);
+        Self::spawn_program(bin, dir, &config_path, None, &[])
+    }
+
     /// The address the daemon listens on, e.g. `127.0.0.1:40123`.
     pub fn addr(&self) -> &str {
         self.url.trim_start_matches("http://")
     }
 
     fn spawn(dir: &Path, config: &Path, fd_limit: Option<u64>, env: &[(&str, &str)]) -> Daemon {
+        Self::spawn_program(gonio_bin(), dir, config, fd_limit, env)
+    }
+
+    fn spawn_program(
+        bin: &Path,
+        dir: &Path,
+        config: &Path,
+        fd_limit: Option<u64>,
+        env: &[(&str, &str)],
+    ) -> Daemon {
         let data = dir.join("data");
         let log_path = dir.join(format!(
             "daemon-{}.log",
@@ -253,7 +269,7 @@ impl Daemon {
                 .unwrap_or(0)
         ));
         let log = std::fs::File::create(&log_path).expect("creating the daemon log");
-        let mut command = Command::new(gonio_bin());
+        let mut command = Command::new(bin);
         if let Some(limit) = fd_limit {
             use std::os::unix::process::CommandExt;
             // SAFETY: setrlimit is async-signal-safe and touches only this child.

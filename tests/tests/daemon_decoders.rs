@@ -141,3 +141,25 @@ fn a_decoder_that_aborts_fails_its_step_and_the_daemon_stays() {
     );
     std::fs::remove_dir_all(dir).ok();
 }
+
+/// The program's file replaced while the daemon runs (an install or a build over it):
+/// decoders are started from the running image, not from the path, so scans go on.
+#[test]
+fn decoders_start_after_the_program_file_is_replaced() {
+    let dir = temp_dir("decoders-replaced");
+    let bin = dir.join("gonio");
+    if std::fs::hard_link(gonio_tests::gonio_bin(), &bin).is_err() {
+        std::fs::copy(gonio_tests::gonio_bin(), &bin).expect("copying gonio");
+    }
+    let daemon = Daemon::start_from(&bin, &dir, &emulator_config_scaled(0.01, 0.01));
+    // Replaced as installers do: a new file renamed over the old name, which leaves
+    // the running image without a path (/proc/<pid>/exe says "(deleted)").
+    let new = dir.join("gonio.new");
+    std::fs::copy(&bin, &new).expect("copying gonio");
+    std::fs::rename(&new, &bin).expect("replacing gonio");
+    let id = daemon.post_gold_scan(&[-20.0, -30.0, -40.0], &[0.1, 0.01]);
+    let scan = daemon.wait_state(id, &["done", "failed"], Duration::from_secs(120));
+    assert_eq!(scan["state"], "done", "{scan}");
+    drop(daemon);
+    std::fs::remove_dir_all(dir).ok();
+}

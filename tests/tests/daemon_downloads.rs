@@ -15,7 +15,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use gonio_tests::{allow_open_files, emulator_config, memory_kib, temp_dir, Daemon};
-use serde_json::Value;
+use serde_json::{json, Value};
 
 /// A daemon with one finished scan of one frame: the scan's id and directory.
 fn daemon_with_a_scan(dir: &Path, config: &str) -> (Daemon, i64, PathBuf) {
@@ -147,6 +147,28 @@ fn the_archive_holds_exactly_what_the_files_route_serves_with_every_name() {
             assert_eq!(data, &std::fs::read(scan.join(rel)).unwrap(), "{rel:?}");
         }
     }
+
+    // A scan not started yet (its start ahead) has no directory: its archive is a
+    // whole tar of its log alone, as its files are an empty list.
+    let ahead = daemon.post(
+        "/api/sweeps",
+        &json!({"samples": ["gold"], "theta_l_sets": [[-20]], "bracket": {"shutter_s": [0.1]},
+                "start_at": "2999-01-01T00:00:00Z"}),
+    );
+    assert_eq!(ahead.status, 201, "{:?}", ahead.json);
+    let later = gonio_tests::sweep_scans(&ahead.json)[0];
+    assert_eq!(
+        daemon.get(&format!("/api/scans/{later}/files")).json,
+        json!([])
+    );
+    let archive = daemon.get(&format!("/api/scans/{later}/archive"));
+    assert_eq!(archive.status, 200);
+    let files = untar(&dir, "not-started", &archive.bytes);
+    let names: Vec<String> = files
+        .iter()
+        .map(|(name, _)| String::from_utf8_lossy(name).into_owned())
+        .collect();
+    assert_eq!(names, [format!("{later}-gold/log.json")]);
     std::fs::remove_dir_all(dir).ok();
 }
 

@@ -198,14 +198,23 @@ fn camera_unplugged_mid_scan_interrupts_and_the_scan_completes_once_it_is_back()
 }
 
 #[test]
-fn emergency_stop_pauses_mid_move_and_resume_finishes() {
+fn emergency_stop_pauses_mid_move_holds_the_queue_and_resume_finishes() {
     let dir = temp_dir("fault-stop");
     let daemon = Daemon::start(&dir, &emulator_config(0.4));
     let id = daemon.post_gold_scan(&[-50.0], &[0.1, 0.01]);
+    let next = daemon.post_gold_scan(&[-20.0], &[0.1, 0.01]);
     wait_mid_move(&daemon);
     let stopped = daemon.post("/api/arm/stop", &json!({}));
     assert_eq!(stopped.status, 200, "{:?}", stopped.json);
     assert_eq!(stopped.json["paused"], json!([id]));
+    let last_id = |log: &Value| {
+        log.as_array()
+            .unwrap()
+            .iter()
+            .filter_map(|e| e["id"].as_i64())
+            .max()
+    };
+    let stopped_at = last_id(&daemon.get("/api/hardware/log").json).unwrap_or(0);
     // The reset lost the position: the controller reports the arm at rest, and no
     // angle is shown until it is homed again.
     std::thread::sleep(Duration::from_millis(600));
@@ -222,11 +231,29 @@ fn emergency_stop_pauses_mid_move_and_resume_finishes() {
     let scan = daemon.get(&format!("/api/scans/{id}")).json;
     assert_eq!(scan["state"], "paused", "{scan}");
     assert!(scan["error"].as_str().unwrap().contains("emergency stop"));
+    // The instrument holds: the next scan does not start, nothing moves.
+    std::thread::sleep(Duration::from_secs(2));
+    assert!(hardware_halted(&daemon));
+    let queued = daemon.get(&format!("/api/scans/{next}")).json;
+    assert_eq!(queued["state"], "queued", "{queued}");
+    let log = daemon
+        .get(&format!("/api/hardware/log?after={stopped_at}"))
+        .json;
+    let moved: Vec<&Value> = log
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|e| ["home", "move", "capture"].contains(&e["action"].as_str().unwrap_or("")))
+        .collect();
+    assert!(moved.is_empty(), "moved after the stop: {moved:?}");
 
     let resumed = daemon.post(&format!("/api/scans/{id}/resume"), &json!({}));
     assert_eq!(resumed.status, 200, "{:?}", resumed.json);
-    let scan = daemon.wait_state(id, &["done", "failed"], Duration::from_secs(90));
-    assert_eq!(scan["state"], "done", "{scan}");
+    assert!(!hardware_halted(&daemon));
+    for id in [id, next] {
+        let scan = daemon.wait_state(id, &["done", "failed"], Duration::from_secs(90));
+        assert_eq!(scan["state"], "done", "{scan}");
+    }
     std::fs::remove_dir_all(dir).ok();
 }
 
@@ -273,4 +300,10 @@ fn busy_or_timing_out_camera_is_retried_then_fails_clearly() {
     assert_eq!(scan["state"], "done", "{scan}");
     assert_eq!(scan["error"], Value::Null);
     std::fs::remove_dir_all(dir).ok();
+}
+
+/// Whether `GET /api/hardware` says an emergency stop holds the instrument.
+fn hardware_halted(daemon: &Daemon) -> bool {
+    let hardware = daemon.get("/api/hardware").json;
+    hardware["halted"].as_bool().expect("halted")
 }

@@ -539,7 +539,7 @@ fn host_content_type_error_shape_and_scheme() {
     let dir = temp_dir("harden-http");
     // θL up to 0 allowed, so that 0 and -0.0 can be asked for.
     let config = format!(
-        "{}\n[limits]\nmin_deg = -90.0\nmax_deg = 0.0\n",
+        "header_timeout_s = 2.0\n{}\n[limits]\nmin_deg = -90.0\nmax_deg = 0.0\n",
         emulator_config(0.01)
     );
     let daemon = Daemon::start(&dir, &config);
@@ -608,6 +608,37 @@ fn host_content_type_error_shape_and_scheme() {
     );
     assert_eq!(status, 413, "{body}");
     assert!(serde_json::from_str::<Value>(&body).is_ok(), "{body}");
+    // A method a JSON route does not serve is 405, whatever its Content-Type.
+    let (status, body) = request(
+        &format!("DELETE /api/sweeps/1 HTTP/1.1\r\nHost: {addr}\r\nAuthorization: Bearer {TOKEN}"),
+        "",
+    );
+    assert_eq!(status, 405, "{body}");
+    // A body that stops coming: 408 once header_timeout_s has passed, not a wait
+    // without end.
+    {
+        use std::io::{Read, Write};
+        let mut socket = TcpStream::connect(addr).unwrap();
+        socket
+            .set_read_timeout(Some(Duration::from_secs(30)))
+            .unwrap();
+        let started = Instant::now();
+        write!(
+            socket,
+            "POST /api/scans HTTP/1.1\r\nHost: {addr}\r\nAuthorization: Bearer {TOKEN}\r\n\
+             Content-Type: application/json\r\nContent-Length: 100\r\n\r\n{{\"sample\":"
+        )
+        .unwrap();
+        let mut answer = String::new();
+        socket.read_to_string(&mut answer).unwrap();
+        assert!(answer.starts_with("HTTP/1.1 408"), "{answer}");
+        assert!(answer.contains("header_timeout_s"), "{answer}");
+        assert!(
+            started.elapsed().as_secs_f64() < 20.0,
+            "{:?}",
+            started.elapsed()
+        );
+    }
 
     let answer = daemon.post("/api/scans", &json!({"sample": "g", "theta_l": [0, -0.0]}));
     assert_eq!(answer.status, 422);

@@ -557,6 +557,13 @@ fn page_tells_the_truth_in_every_state() {
         Duration::from_secs(30),
     );
     assert_eq!(stopped, "note");
+    // The instrument holds, and the note says until when.
+    let held = page.wait_for(
+        "the hold's note",
+        "document.getElementById('stopmsg').textContent.includes('nothing runs until the arm is homed') && document.getElementById('stopmsg').textContent",
+        Duration::from_secs(30),
+    );
+    assert!(held.as_str().unwrap().starts_with("arm stopped"), "{held}");
     let arm = page.wait_for(
         "the arm's unknown position",
         "!document.getElementById('home').hidden && document.getElementById('arm').textContent",
@@ -582,6 +589,13 @@ fn page_tells_the_truth_in_every_state() {
         Duration::from_secs(60),
     );
     assert!(arm.as_str().unwrap().starts_with("arm: idle at"), "{arm}");
+    // Homing ended the hold: its note is gone.
+    let note = page.wait_for(
+        "the hold's end",
+        "!document.getElementById('stopmsg').textContent.includes('nothing runs') && 'gone'",
+        Duration::from_secs(30),
+    );
+    assert_eq!(note, "gone");
     // Nothing says the arm is homing once it is idle.
     let note = page.eval("document.querySelector('header').textContent");
     assert!(!note.as_str().unwrap().contains("homing"), "{note}");

@@ -108,6 +108,16 @@ export function showOverview(scans, sweeps, hw) {
     `<td class="muted">${escapeHtml(w.start_at ? localTime(w.start_at) : "now")}</td></tr>`).join("");
   const a = hw.arm;
   $("arm").textContent = armLine(a);
+  // After STOP ARM nothing runs until the operator homes the arm or resumes a scan:
+  // the stop's note says so on every page that polls, and goes once the hold ends.
+  const held = "nothing runs until the arm is homed or a scan resumed";
+  const note = $("stopmsg");
+  if (hw.halted && !note.textContent.includes(held)) {
+    note.textContent = (note.textContent || "arm stopped") + "; " + held;
+    note.className = "note";
+  } else if (!hw.halted && note.textContent.includes(held)) {
+    note.textContent = "";
+  }
   $("armpos").hidden = a.state !== "needs_position";
   $("home").hidden = !["needs_homing", "alarm", "hold"].includes(a.state);
   const c = hw.camera;

@@ -41,15 +41,17 @@ pub(super) struct Stopped {
     paused: Vec<i64>,
 }
 
-/// Stops the arm at once (feed hold, then reset) and pauses the running scan.
+/// Stops the arm at once (feed hold, then reset), pauses the running scan and holds the
+/// instrument ([`Shared::halted`]).
 #[utoipa::path(post, path = "/api/arm/stop",
-    summary = "Stop the arm at once (feed hold, then reset) and pause the running scan; always allowed",
+    summary = "Stop the arm at once (feed hold, then reset) and pause the running scan; always allowed. The instrument then holds: no other scan starts and the arm does not move until the operator homes the arm (POST /api/arm/home), declares its position (POST /api/arm/position) or resumes a scan; /api/hardware shows `halted`",
     responses(
         (status = 200, description = "Stopped", body = Stopped),
         (status = 503, description = "Arm not connected (the running scan is paused all the same), or the disk is full", body = ErrorBody),
     ))]
 pub(super) async fn stop_arm(State(shared): AppState) -> ApiResult<Json<Stopped>> {
     shared.stops.fetch_add(1, Ordering::AcqRel);
+    shared.halted.store(true, Ordering::Release);
     let estop = lock(&shared.estop).clone();
     let stopped = match estop {
         Some(estop) => tokio::task::spawn_blocking(move || estop.stop())
@@ -128,6 +130,7 @@ pub(super) async fn home_arm(State(shared): AppState) -> ApiResult<impl IntoResp
         _ => {}
     }
     let clears_alarm = arm.state == ArmState::Alarm;
+    shared.halted.store(false, Ordering::Release);
     shared.home_requested.store(true, Ordering::Release);
     shared.hardware_wake.post(|wake| *wake = true);
     tracing::info!("homing asked by the operator");
@@ -246,6 +249,9 @@ pub(super) async fn declare_arm_position(
     match answered {
         Ok(Ok(())) => {
             tracing::info!("arm position declared: {angle}°");
+            // The operator goes on: an emergency stop's hold ends.
+            shared.halted.store(false, Ordering::Release);
+            shared.wake();
             Ok(Json(Declared {
                 angle,
                 declared: true,
@@ -282,6 +288,9 @@ pub(super) struct HardwareView {
     emulated: bool,
     /// The daemon's start counter.
     boot: i64,
+    /// An emergency stop holds the instrument: no scan starts and the arm does not move
+    /// until the operator homes the arm, declares its position or resumes a scan.
+    halted: bool,
 }
 
 #[utoipa::path(get, path = "/api/hardware",
@@ -297,6 +306,7 @@ pub(super) async fn hardware(State(shared): AppState) -> Json<HardwareView> {
         camera: status.camera,
         emulated: shared.emulators.is_some(),
         boot: shared.boot,
+        halted: shared.halted.load(Ordering::Acquire),
     })
 }
 

@@ -1,10 +1,13 @@
 //! The checks every request passes before its handler (docs/ARCHITECTURE.md, "HTTP
 //! API"): the Host (421), a body's size (413), the bearer token (401), a JSON body's
-//! `Content-Type` (415), and every error answer in the API's JSON shape. Each check's
+//! `Content-Type` (415) and its arrival in time (408), and every error answer in the API's JSON shape. Each check's
 //! answer is described once, for the routes behind it, in `openapi`.
 
+use std::time::Duration;
+
+use axum::body::Body;
 use axum::extract::{Request, State};
-use axum::http::{header, HeaderValue, StatusCode};
+use axum::http::{header, HeaderValue, Method, StatusCode};
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 
@@ -93,22 +96,61 @@ pub(super) async fn check_host(State(shared): AppState, request: Request, next: 
     .into_response()
 }
 
-/// 415 unless the request says its body is JSON.
-pub(super) async fn require_json(request: Request, next: Next) -> Response {
+/// 415 unless the request says its body is JSON: for the methods that send one (POST
+/// and PATCH, what these routes serve); another method goes on to the routes' own
+/// answer (405 with the methods allowed). The body must then arrive whole within
+/// `header_timeout_s`: a client that stops sending gets 408 and the connection closes
+/// (a handler never waits on a body without end).
+pub(super) async fn require_json(
+    State(shared): AppState,
+    request: Request,
+    next: Next,
+) -> Response {
+    if !matches!(*request.method(), Method::POST | Method::PATCH) {
+        return next.run(request).await;
+    }
     let content_type = request
         .headers()
         .get(header::CONTENT_TYPE)
         .and_then(|v| v.to_str().ok())
         .unwrap_or("");
     let essence = content_type.split(';').next().unwrap_or("").trim();
-    if essence.eq_ignore_ascii_case("application/json") {
-        return next.run(request).await;
+    if !essence.eq_ignore_ascii_case("application/json") {
+        return ApiError::new(
+            StatusCode::UNSUPPORTED_MEDIA_TYPE,
+            format!("Content-Type must be application/json, got {content_type:?}"),
+        )
+        .into_response();
     }
-    ApiError::new(
-        StatusCode::UNSUPPORTED_MEDIA_TYPE,
-        format!("Content-Type must be application/json, got {content_type:?}"),
-    )
-    .into_response()
+    let (parts, body) = request.into_parts();
+    let (limit, wait) = (
+        shared.config.max_body_bytes,
+        Duration::from_secs_f64(shared.config.header_timeout_s),
+    );
+    let closing = |status, message: String| {
+        let mut answer = ApiError::new(status, message).into_response();
+        answer
+            .headers_mut()
+            .insert(header::CONNECTION, HeaderValue::from_static("close"));
+        answer
+    };
+    match tokio::time::timeout(wait, axum::body::to_bytes(body, limit)).await {
+        Ok(Ok(bytes)) => {
+            next.run(Request::from_parts(parts, Body::from(bytes)))
+                .await
+        }
+        Ok(Err(_)) => closing(
+            StatusCode::PAYLOAD_TOO_LARGE,
+            format!("request body over max_body_bytes ({limit}), or cut short"),
+        ),
+        Err(_) => closing(
+            StatusCode::REQUEST_TIMEOUT,
+            format!(
+                "the request body did not arrive within header_timeout_s ({} s)",
+                shared.config.header_timeout_s
+            ),
+        ),
+    }
 }
 
 /// Gives every error answer the API's JSON shape: axum's rejections (a bad path

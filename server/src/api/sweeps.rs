@@ -324,8 +324,9 @@ pub(super) async fn reschedule_sweep(
             return Err(ApiError::new(
                 StatusCode::CONFLICT,
                 format!(
-                    "sweep {id} is not scheduled (its start time has come, or a scan of it \
-                     has started): its start time can no longer change"
+                    "sweep {id} is not scheduled (its start time has come, a scan of it has \
+                     started, or none of its scans is queued: a paused sweep is resumed \
+                     first): its start time cannot change now"
                 ),
             ))
         }

@@ -8,6 +8,7 @@
 //! of its devices and the waits of the scans it cannot go on with are in submodules.
 
 use std::path::Path;
+use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -161,6 +162,12 @@ impl HardwareLane {
                 self.shared.changed(id);
             }
         }
+        if self.shared.halted.load(Ordering::Acquire) {
+            // An emergency stop holds the instrument until the operator goes on.
+            self.refresh_arm_status();
+            self.idle();
+            return Ok(());
+        }
         if self.store.waiting_for_sample()?.is_some() {
             // The operator is changing the sample: nothing moves meanwhile.
             self.refresh_arm_status();
@@ -222,7 +229,10 @@ impl HardwareLane {
                 }
                 return Ok(());
             }
-            let reason = format!("preparing {}: {err}", dir.display());
+            let reason = crate::files::without_server_paths(
+                &format!("preparing {}: {err}", dir.display()),
+                &[&self.shared.config.data_dir],
+            );
             self.store
                 .transition(id, RUNNING, ScanState::Failed, Some(&reason))?;
             self.shared.changed(id);

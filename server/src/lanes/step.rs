@@ -5,6 +5,7 @@
 
 use serde_json::Value;
 
+use crate::files::without_server_paths;
 use crate::plan::Step;
 use crate::shared::Shared;
 use crate::store::{now_rfc3339, ScanState, Store, StoreError};
@@ -92,18 +93,24 @@ pub fn stop(
     from: &[ScanState],
     err: StepError,
 ) -> Result<Flow, StoreError> {
+    // What is stored is shown to clients: no path of the server in it.
+    let (scan_dir, data_dir) = (shared.scan_dir(id), shared.config.data_dir.clone());
+    let relative = |reason: String| without_server_paths(&reason, &[&scan_dir, &data_dir]);
     match err {
         StepError::Halted => {}
         StepError::Interrupted(reason) => {
+            let reason = relative(reason);
             tracing::warn!("scan {id} interrupted: {reason}");
             store.transition(id, from, ScanState::Interrupted, Some(&reason))?;
         }
         StepError::Waiting(reason) => {
+            let reason = relative(reason);
             tracing::warn!("scan {id} waiting: {reason}");
             store.log(shared.boot, Some(id), "wait", &reason)?;
             store.transition(id, from, ScanState::Waiting, Some(&reason))?;
         }
         StepError::Failed(reason) => {
+            let reason = relative(reason);
             tracing::error!("scan {id} failed: {reason}");
             store.transition(id, from, ScanState::Failed, Some(&reason))?;
         }
