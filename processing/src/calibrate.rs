@@ -27,10 +27,15 @@ use thiserror::Error;
 use crate::capture::Frame;
 use crate::extract::{self, ExtractError};
 use crate::geometry::{GeometryError, Setup};
-use crate::hdr::{self, HdrError, MergeOptions};
+use crate::hdr::{self, HdrError, MergeOptions, SATURATED, UNDEREXPOSED};
 use crate::setup_uncertainty::{SetupUncertainty, Source, MAX_UNCERTAINTY};
 use observe::{Band, Side};
 use solve::{Limb, Observations, Parameter, PeakRow, Prior, TerminatorRow};
+
+/// Largest share of the white strip's lit pixels (in the rows measured) that may be
+/// clipped in every frame: a scan exposed for it has none (the bracket's shortest
+/// exposure reads the white), an overexposed one most.
+const MAX_SATURATED_SHARE: f64 = 0.25;
 
 /// Options of [`calibrate_scan`].
 #[derive(Debug, Clone, PartialEq)]
@@ -62,6 +67,8 @@ pub enum CalibrateError {
         "θL {theta_l}°: {found} lit band(s) of rows; the sample and white strips need two, each the nearest to its row of the prior setup (sample_row, white_row)"
     )]
     Strips { theta_l: f64, found: usize },
+    #[error("θL {theta_l}°: {percent:.0} % of the white strip's lit pixels are saturated in every frame: its edges cannot be measured (shorten the bracket's exposures)")]
+    Saturated { theta_l: f64, percent: f64 },
     #[error("nothing to fit the geometry to: {0}")]
     Underdetermined(String),
 }
@@ -190,6 +197,22 @@ fn measure(
     })?;
     let at = |i: f64| observe::sensor(i, scale);
     let white_rows = white.core_rows(options.rows_per_strip);
+    // A white clipped in every frame has no edge to find: its limbs would be the
+    // clipping's, not the cylinder's.
+    let (mut lit, mut clipped) = (0usize, 0usize);
+    for &y in &white_rows {
+        for x in 0..map.width {
+            let flags = map.flags(x, y);
+            lit += usize::from(flags & UNDEREXPOSED == 0);
+            clipped += usize::from(flags & SATURATED != 0);
+        }
+    }
+    if lit > 0 && clipped as f64 > MAX_SATURATED_SHARE * lit as f64 {
+        return Err(CalibrateError::Saturated {
+            theta_l,
+            percent: 100.0 * clipped as f64 / lit as f64,
+        });
+    }
     let mut measured = Measured {
         sample_centre: at(sample.centre()),
         white_centre: at(white.centre()),

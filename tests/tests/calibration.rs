@@ -313,3 +313,40 @@ fn a_rolled_camera_is_estimated_as_far_as_the_target_tells_it_from_a_tilt() {
         "yaw {yaw} ± {yaw_u}"
     );
 }
+
+/// A white strip clipped in every frame has no edge to measure: calibrate refuses the
+/// scan, naming the θL and the share clipped, rather than stating an offset the clipping
+/// made (the gold scene 1,000× brighter, its bracket unchanged).
+#[test]
+fn an_overexposed_white_is_refused_not_measured() {
+    let dir = temp_dir("calibration-overexposed");
+    let scene = dir.join("scene.toml");
+    std::fs::write(
+        &scene,
+        GOLD.replace("intensity = 6000.0", "intensity = 6000000.0"),
+    )
+    .unwrap();
+    let s = |p: &Path| p.to_str().unwrap().to_owned();
+    let scan = dir.join("scan");
+    gonio(&[
+        "simulate",
+        "--scene",
+        &s(&scene),
+        "--binning",
+        "8",
+        "--theta-l=-20,-30",
+        "--out",
+        &s(&scan),
+    ]);
+    let output = std::process::Command::new(gonio_tests::gonio_bin())
+        .args(["calibrate", &s(&scan), "--out", &s(&dir.join("c.json"))])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!output.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("of the white strip's lit pixels are saturated in every frame"),
+        "{stderr}"
+    );
+    assert!(!dir.join("c.json").exists());
+}

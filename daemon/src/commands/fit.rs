@@ -266,7 +266,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                  points, or parameters the samples do not determine)"
             }
         ),
-        None => {}
+        // Samples with uncertainty, yet no budget: the fit has no standard uncertainties.
+        None => println!(
+            "  note: no uncertainty: the fit's standard uncertainties are not defined, so \
+             the samples do not determine every parameter (a highlight dropped at every θL, \
+             saturated or dark, leaves Ks and m unmeasured); the values above are not a \
+             measurement of them"
+        ),
     }
     if let Some(global) = result.global_minimum {
         let times = result.loss / global.loss;

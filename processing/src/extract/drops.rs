@@ -35,9 +35,11 @@ impl DropCounts {
         self.saturated[c] + self.underexposed[c] + self.dark_white[c]
     }
 
-    /// The reason most columns were dropped for, with its count (`None` if none was).
-    /// Columns with no usable channel are named for the reason most of their values
-    /// were dropped for.
+    /// The reason most columns were dropped for, with its count (`None` if none was):
+    /// among the columns on the cylinder (grazing, no usable channel) when some were,
+    /// else off the cylinder (the background beside the strips is always dropped, so
+    /// it explains nothing when columns of the cylinder were seen). Columns with no
+    /// usable channel are named for the reason most of their values were dropped for.
     pub fn dominant(&self) -> Option<(&'static str, usize)> {
         let sum = |v: [usize; 3]| v.iter().sum::<usize>();
         let no_channel = [
@@ -54,14 +56,11 @@ impl DropCounts {
         .into_iter()
         .max_by_key(|(_, n)| *n)
         .map_or("no usable channel", |(reason, _)| reason);
-        [
-            ("off the cylinder or unlit", self.off_cylinder),
-            ("grazing", self.grazing),
-            (no_channel, self.no_channel),
-        ]
-        .into_iter()
-        .filter(|(_, n)| *n > 0)
-        .max_by_key(|(_, n)| *n)
+        [("grazing", self.grazing), (no_channel, self.no_channel)]
+            .into_iter()
+            .filter(|(_, n)| *n > 0)
+            .max_by_key(|(_, n)| *n)
+            .or(Some(("off the cylinder or unlit", self.off_cylinder)).filter(|(_, n)| *n > 0))
     }
 
     /// Why an extraction gave no sample: the dominant reason and every count.
@@ -69,13 +68,13 @@ impl DropCounts {
         let rgb = |v: [usize; 3]| format!("{}/{}/{}", v[0], v[1], v[2]);
         match self.dominant() {
             Some((reason, n)) => format!(
-                "no samples: all {} columns were dropped, most ({n}) as {reason} \
-                 ({} off the cylinder or unlit, {} grazing, {} with no usable channel; \
+                "no samples: all {} columns were dropped, {n} as {reason} \
+                 ({} grazing, {} with no usable channel, {} off the cylinder or unlit; \
                  values dropped R/G/B: {} saturated, {} underexposed, {} dark white)",
                 self.total(),
-                self.off_cylinder,
                 self.grazing,
                 self.no_channel,
+                self.off_cylinder,
                 rgb(self.saturated),
                 rgb(self.underexposed),
                 rgb(self.dark_white),
