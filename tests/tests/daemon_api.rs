@@ -50,12 +50,7 @@ fn mutating_routes_need_the_token_and_change_nothing_without_it() {
         assert_eq!(answer.status, 401, "token {token:?}: {:?}", answer.json);
         assert!(answer.json["error"].as_str().unwrap().contains("token"));
     }
-    for path in [
-        "/api/sweeps",
-        "/api/arm/stop",
-        "/api/scans/1/cancel",
-        "/api/emulator/fault",
-    ] {
+    for path in ["/api/sweeps", "/api/scans/1/cancel", "/api/emulator/fault"] {
         assert_eq!(daemon.post_raw(path, None, "{}").status, 401, "{path}");
     }
     assert_eq!(
@@ -68,8 +63,12 @@ fn mutating_routes_need_the_token_and_change_nothing_without_it() {
         json!([]),
         "nothing may be queued without the token"
     );
-    // Reads are open.
+    // Reads are open, and so is the emergency stop: anyone at the instrument can stop
+    // it; homing it again (which ends the hold) needs the token.
     assert_eq!(daemon.get("/api/hardware").status, 200);
+    assert_eq!(daemon.post_raw("/api/arm/stop", None, "").status, 200);
+    assert_eq!(daemon.get("/api/hardware").json["halted"], true);
+    assert_eq!(daemon.post_raw("/api/arm/home", None, "").status, 401);
     std::fs::remove_dir_all(dir).ok();
 }
 

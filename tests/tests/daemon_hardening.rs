@@ -644,6 +644,21 @@ fn host_content_type_error_shape_and_scheme() {
     assert_eq!(answer.status, 422);
     assert_eq!(answer.json["field"], "theta_l[1]");
 
+    // The emergency stop needs no token, but a browser's page of another site cannot
+    // make it (its Origin is not the daemon's); the daemon's own page can.
+    let (status, body) = request(
+        &format!("POST /api/arm/stop HTTP/1.1\r\nHost: {addr}\r\nOrigin: http://evil.example"),
+        "",
+    );
+    assert_eq!(status, 403, "{body}");
+    assert_eq!(daemon.get("/api/hardware").json["halted"], false);
+    let (status, body) = request(
+        &format!("POST /api/arm/stop HTTP/1.1\r\nHost: {addr}\r\nOrigin: http://{addr}"),
+        "",
+    );
+    assert_eq!(status, 200, "{body}");
+    assert_eq!(daemon.get("/api/hardware").json["halted"], true);
+
     // The API's description lists these answers where they apply.
     let paths = &daemon.get("/api/openapi.json").json["paths"];
     for (path, method, code) in [

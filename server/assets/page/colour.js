@@ -40,7 +40,9 @@ function comparisonTable(k) {
   const flop = k.flop_index ? `<p class="fitparams">flop index ${k.flop_index.standard.toFixed(2)} → ` +
     `${k.flop_index.batch.toFixed(2)}: Δ ${pm(k.flop_index.delta, 2)}</p>` : "";
   return `<p id="overall"><b>scan ${k.batch} against scan ${k.standard}: <span class="verdict-${k.overall}">${escapeHtml(k.overall)}</span></b>` +
-    ` <span class="muted">(undecided: the interval straddles the tolerance; lines both scans share cancel)</span></p>` +
+    (k.angles.some((a) => a.verdict === "undecided")
+      ? ` <span class="muted">(an angle undecided: its interval straddles the tolerance)</span>` : "") +
+    ` <span class="muted">(lines both scans share cancel)</span></p>` +
     `<div class="scroll"><table id="comparetable" class="params"><thead><tr><th>aspecular</th><th>ΔL*</th><th>ΔC*</th>` +
     `<th>ΔH*</th><th>ΔE00</th><th>tolerance</th><th>verdict</th></tr></thead><tbody>${rows}</tbody></table></div>` + flop;
 }

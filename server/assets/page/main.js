@@ -188,20 +188,29 @@ $("scans").addEventListener("click", (e) => {
 initSweeps(select, refresh);
 
 // Links to results and files download through fetch when a token is entered, under
-// the name the daemon gives them (Content-Disposition).
+// the name the daemon gives them (Content-Disposition); a link meant for a new tab (the
+// report) opens there, its tab opened at the click so that no popup blocker stops it.
 for (const box of ["results", "files"]) {
   $(box).addEventListener("click", async (e) => {
     const a = e.target.closest("a");
     if (!a || !a.getAttribute("href").startsWith("/api/") || !hasToken()) return;
     e.preventDefault();
+    const tab = a.target === "_blank" ? window.open("", "_blank") : null;
     try {
       const file = await fetchFile(a.getAttribute("href"));
-      const link = document.createElement("a");
-      link.href = file.url;
-      link.download = file.name;
-      link.click();
+      if (tab) {
+        tab.location = file.url;
+      } else {
+        const link = document.createElement("a");
+        link.href = file.url;
+        link.download = file.name;
+        link.click();
+      }
       setTimeout(() => URL.revokeObjectURL(file.url), 60000);
-    } catch (err) { $("actmsg").textContent = err.message; }
+    } catch (err) {
+      if (tab) tab.close();
+      $("actmsg").textContent = err.message;
+    }
   });
 }
 

@@ -78,6 +78,13 @@ function rowNote(s) {
   return "";
 }
 
+// A queue row's note kept to a line: its first clause, up to 80 characters (the whole
+// note is the cell's title and the detail's).
+function brief(note) {
+  const clause = note.split(" (")[0];
+  return clause.length > 80 ? clause.slice(0, 79) + "…" : clause;
+}
+
 // The arm's line: its state in words, its angle while known, and its fault without
 // what the state already says (after a stop the fault "arm position unknown: the
 // controller reset or reconnected: home the arm" adds only its cause).
@@ -101,7 +108,7 @@ export function showOverview(scans, sweeps, hw) {
   $("scans").innerHTML = scans.slice().reverse().map((s) =>
     `<tr data-id="${s.id}" class="${s.id === page.selected ? "sel" : ""}"><td>${s.id}</td><td>${escapeHtml(s.sample)}</td>` +
     `<td class="state-${s.state}">${stateLabel(s)}</td><td>${bar(s.progress.done, s.progress.total)}</td>` +
-    `<td class="muted">${escapeHtml(rowNote(s))}<span class="left" data-id="${s.id}"></span></td></tr>`).join("");
+    `<td class="muted" title="${escapeHtml(rowNote(s))}">${escapeHtml(brief(rowNote(s)))}<span class="left" data-id="${s.id}"></span></td></tr>`).join("");
   $("sweeps").innerHTML = sweeps.slice().reverse().map((w) =>
     `<tr data-sweep="${w.id}" class="${w.id === page.sweep ? "sel" : ""}" title="open its scans"><td>${w.id}</td>` +
     `<td class="state-${w.state}">${w.state}</td><td>${bar(w.progress.done, w.progress.total)}</td>` +
@@ -171,9 +178,11 @@ export function show(s) {
   const perTheta = (s.bracket.by_theta_l || []).map((m) => `θL ${m.theta_l}°: ${m.shutter_s.map(formatShutter).join(", ")}`).join("\n");
   // Work under way: the hardware step only while running, the processing step until
   // the scan has ended.
+  const current = s.state === "running" && s.current_step ? s.current_step : "";
   const work = [
-    s.state === "running" && s.current_step ? s.current_step : "",
-    !ended && s.processing_step ? "processing: " + s.processing_step : "",
+    current,
+    // Once the hardware is done the current step is the processing's: said once.
+    !ended && s.processing_step && s.processing_step !== current ? "processing: " + s.processing_step : "",
   ].filter((w) => w).join(" · ");
   const why = s.state === "waiting" ? s.reason || s.error : s.error;
   $("dstate").innerHTML = `<span class="state-${s.state}">${stateLabel(s)}</span> ${p.done}/${p.total}` +

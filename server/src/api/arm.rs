@@ -47,9 +47,19 @@ pub(super) struct Stopped {
     summary = "Stop the arm at once (feed hold, then reset) and pause the running scan; always allowed. The instrument then holds: no other scan starts and the arm does not move until the operator homes the arm (POST /api/arm/home), declares its position (POST /api/arm/position) or resumes a scan; /api/hardware shows `halted`",
     responses(
         (status = 200, description = "Stopped", body = Stopped),
+        (status = 403, description = "Sent by a browser from a page of another site (its `Origin` is not a host the daemon answers to); nothing changed", body = ErrorBody),
         (status = 503, description = "Arm not connected (the running scan is paused all the same), or the disk is full", body = ErrorBody),
     ))]
-pub(super) async fn stop_arm(State(shared): AppState) -> ApiResult<Json<Stopped>> {
+pub(super) async fn stop_arm(
+    State(shared): AppState,
+    headers: axum::http::HeaderMap,
+) -> ApiResult<Json<Stopped>> {
+    if !super::guards::from_own_page(&shared.config, &headers) {
+        return Err(ApiError::new(
+            StatusCode::FORBIDDEN,
+            "a page of another site cannot stop the arm (its Origin is not this daemon's)",
+        ));
+    }
     shared.stops.fetch_add(1, Ordering::AcqRel);
     shared.halted.store(true, Ordering::Release);
     let estop = lock(&shared.estop).clone();

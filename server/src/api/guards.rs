@@ -75,6 +75,25 @@ fn host_allowed(config: &Config, host: &str) -> bool {
         .is_ok_and(|ip| ip == bind || ip.is_loopback() || bind.is_unspecified())
 }
 
+/// Whether a request may come from a browser's page of another site: it has no
+/// `Origin` (curl, scripts), or its `Origin` is a host the daemon answers to (its own
+/// page). For the one change that needs no token (the emergency stop), so that no page
+/// of another site can make it.
+pub(super) fn from_own_page(config: &Config, headers: &axum::http::HeaderMap) -> bool {
+    let Some(origin) = headers.get(header::ORIGIN) else {
+        return true;
+    };
+    let authority = origin
+        .to_str()
+        .ok()
+        .and_then(|o| {
+            o.strip_prefix("http://")
+                .or_else(|| o.strip_prefix("https://"))
+        })
+        .map(|rest| rest.split('/').next().unwrap_or(""));
+    authority.is_some_and(|a| !a.is_empty() && host_allowed(config, a))
+}
+
 /// 421 for a request whose Host the daemon does not answer to (DNS rebinding).
 pub(super) async fn check_host(State(shared): AppState, request: Request, next: Next) -> Response {
     let host = request
