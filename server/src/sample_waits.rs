@@ -28,9 +28,11 @@ pub struct PlannedWait {
     pub sweep_id: Option<i64>,
     /// The sample to mount.
     pub sample: String,
-    /// When the wait is expected to begin (Unix seconds); now for a scan already
-    /// waiting.
+    /// When the wait is expected to begin (Unix seconds); for a scan already waiting,
+    /// when it began.
     pub at: i64,
+    /// The scan waits already.
+    pub waiting: bool,
 }
 
 /// The waits for a sample change the queue will make, in order, from `now`.
@@ -80,11 +82,15 @@ fn waits(
     let mut waits = Vec::new();
     for scan in &first {
         if scan.waits_for_sample() {
+            let since = store.waiting_since(scan.id)?.and_then(|t| {
+                OffsetDateTime::parse(&t, &time::format_description::well_known::Rfc3339).ok()
+            });
             waits.push(PlannedWait {
                 scan_id: scan.id,
                 sweep_id: scan.sweep_id,
                 sample: scan.plan.sample.clone(),
-                at: now.unix_timestamp(),
+                at: since.unwrap_or(now).unix_timestamp(),
+                waiting: true,
             });
         }
         on_cylinder = Some(scan.plan.sample.clone());
@@ -114,6 +120,7 @@ fn waits(
                 sweep_id: next.sweep_id,
                 sample: sample.clone(),
                 at: at.round() as i64,
+                waiting: false,
             });
         }
         on_cylinder = Some(sample.clone());

@@ -281,10 +281,12 @@ pub struct PlannedWaitView {
     pub scan_id: i64,
     /// The sample to mount.
     pub sample: String,
-    /// When the wait is expected to begin (UTC, RFC 3339); now for a scan already
-    /// waiting.
+    /// When the wait is expected to begin (UTC, RFC 3339); for a scan already waiting,
+    /// when it began.
     #[schema(format = DateTime)]
     pub at: String,
+    /// The scan waits already (since `at`).
+    pub waiting: bool,
 }
 
 /// `PATCH /api/sweeps/{id}`: the sweep's new start time.

@@ -271,6 +271,13 @@ fn a_sample_wait_is_announced_takes_only_confirm_or_cancel_and_calls_a_person() 
     let view = daemon.get(&format!("/api/sweeps/{sweep}")).json;
     assert_eq!(strings(&view["actions"]), ["cancel"], "{view}");
     assert_eq!(view["waits"][0]["scan_id"], red, "{view}");
+    // A wait under way is told with its start, which stays put from poll to poll.
+    assert_eq!(view["waits"][0]["waiting"], true, "{view}");
+    let since = time_of(&view["waits"][0]["at"]);
+    assert!(since <= began + 1, "began {began}, since {since}");
+    std::thread::sleep(Duration::from_millis(2100));
+    let later = daemon.get(&format!("/api/sweeps/{sweep}")).json;
+    assert_eq!(time_of(&later["waits"][0]["at"]), since, "{later}");
     std::thread::sleep(Duration::from_millis(1000));
     let still = daemon.get(&format!("/api/scans/{red}")).json;
     assert_eq!(still["state"], "waiting", "{still}");

@@ -102,11 +102,13 @@ $("armpos").addEventListener("submit", async (ev) => {
 document.querySelectorAll("#detail button[data-act]").forEach((btn) => {
   btn.addEventListener("click", async () => {
     if (page.selected === null) return;
+    const id = page.selected, act = btn.dataset.act;
     try {
-      await post(`/api/scans/${page.selected}/${btn.dataset.act}`);
-      $("actmsg").textContent = "";
+      const s = await post(`/api/scans/${id}/${act}`);
+      // Said at once: a retried step may fail again before the next poll shows it ran.
+      say($("actmsg"), `scan ${id}: ${act} sent, now ${s.state}`, false);
       refresh();
-    } catch (err) { $("actmsg").textContent = err.message; }
+    } catch (err) { say($("actmsg"), err.message, true); }
   });
 });
 

@@ -10,8 +10,9 @@ import { bar, stateLabel } from "./render.js";
 // when (the daemon's estimate, assuming each change is confirmed at once).
 export function waitsText(waits) {
   if (!waits || !waits.length) return "";
-  return "a person is needed: " + waits.map((w) =>
-    `mount ${w.sample} for scan ${w.scan_id} at about ${localTime(w.at)}`).join("; ") + " (local time)";
+  return "a person is needed: " + waits.map((w) => w.waiting
+    ? `mount ${w.sample} for scan ${w.scan_id}: waiting since ${localTime(w.at)}`
+    : `mount ${w.sample} for scan ${w.scan_id} at about ${localTime(w.at)}`).join("; ") + " (local time)";
 }
 
 // Draws the panel of the sweep selected, from the polled sweeps.

@@ -44,6 +44,7 @@ fn waits_of(waits: &[PlannedWait], id: i64) -> Vec<PlannedWaitView> {
             scan_id: w.scan_id,
             sample: w.sample.clone(),
             at: rfc3339(w.at).unwrap_or_default(),
+            waiting: w.waiting,
         })
         .collect()
 }

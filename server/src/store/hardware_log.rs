@@ -26,6 +26,16 @@ impl Store {
     }
 
     /// The hardware log entries after `after_id`, oldest first.
+    /// When scan `id` last began to wait (its last `wait` entry), RFC 3339.
+    pub fn waiting_since(&self, id: i64) -> Result<Option<String>, StoreError> {
+        let mut stmt = self.conn.prepare(
+            "SELECT time FROM hardware_log WHERE scan_id = ?1 AND action = 'wait'
+             ORDER BY id DESC LIMIT 1",
+        )?;
+        let mut rows = stmt.query_map([id], |r| r.get::<_, String>(0))?;
+        Ok(rows.next().transpose()?)
+    }
+
     pub fn hardware_log(&self, after_id: i64) -> Result<Vec<LogEntry>, StoreError> {
         let mut stmt = self.conn.prepare(
             "SELECT id, boot, time, scan_id, action, detail FROM hardware_log
