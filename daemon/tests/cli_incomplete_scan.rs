@@ -7,27 +7,10 @@ mod common;
 
 use std::path::Path;
 
-use common::{gonio, gonio_ok, text};
+use common::{gonio, gonio_ok, small_scan, text};
 
 fn path(p: &Path) -> &str {
     p.to_str().unwrap()
-}
-
-/// A small emulated scan of `gold` (binning 8, three θL) in `dir/scan`.
-fn scan(dir: &Path) -> std::path::PathBuf {
-    let scan = dir.join("scan");
-    gonio_ok(&[
-        "simulate",
-        "--scene",
-        "gold",
-        "--binning",
-        "8",
-        "--theta-l",
-        "-20,-30,-40",
-        "--out",
-        path(&scan),
-    ]);
-    scan
 }
 
 /// Runs `gonio args`, expects failure; returns stderr.
@@ -40,7 +23,7 @@ fn refused(args: &[&str]) -> String {
 #[test]
 fn simulate_writes_its_plan_and_a_whole_scan_extracts() {
     let dir = tempfile::tempdir().unwrap();
-    let scan = scan(dir.path());
+    let scan = small_scan(dir.path());
     let plan: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(scan.join("plan.json")).unwrap()).unwrap();
     assert_eq!(plan["theta_l"], serde_json::json!([-20.0, -30.0, -40.0]));
@@ -53,7 +36,7 @@ fn simulate_writes_its_plan_and_a_whole_scan_extracts() {
 #[test]
 fn a_missing_theta_l_or_frame_is_named_and_allow_missing_goes_on() {
     let dir = tempfile::tempdir().unwrap();
-    let scan = scan(dir.path());
+    let scan = small_scan(dir.path());
     let samples = dir.path().join("s.csv");
 
     // A frame deleted, its sidecar left behind.
@@ -99,7 +82,7 @@ fn a_missing_theta_l_or_frame_is_named_and_allow_missing_goes_on() {
 #[test]
 fn study_of_a_scan_folders_samples_refuses_a_planned_theta_l_they_lack() {
     let dir = tempfile::tempdir().unwrap();
-    let scan = scan(dir.path());
+    let scan = small_scan(dir.path());
     std::fs::remove_dir_all(scan.join("theta_l_-40.0")).unwrap();
     let samples = scan.join("samples.csv");
     gonio_ok(&[
@@ -129,7 +112,7 @@ fn study_of_a_scan_folders_samples_refuses_a_planned_theta_l_they_lack() {
 #[test]
 fn extract_names_the_setup_it_read_and_states_uncertainties_to_three_digits() {
     let dir = tempfile::tempdir().unwrap();
-    let scan = scan(dir.path());
+    let scan = small_scan(dir.path());
     let mut setup: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(scan.join("setup.json")).unwrap()).unwrap();
     setup["uncertainty"] = serde_json::json!({"camera_offset_mm": 0.031234567890123});

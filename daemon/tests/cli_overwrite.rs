@@ -8,7 +8,7 @@ mod common;
 use std::fs;
 use std::path::Path;
 
-use common::{gonio, gonio_ok, text};
+use common::{gonio, gonio_ok, small_scan, text};
 
 /// `gonio args` fails naming what it would have replaced, and `kept` is unchanged.
 fn refused(args: &[&str], kept: &Path) {
@@ -27,18 +27,13 @@ fn refused(args: &[&str], kept: &Path) {
 fn an_output_over_an_input_is_refused_and_the_input_kept() {
     let dir = tempfile::tempdir().unwrap();
     let path = |name: &str| dir.path().join(name).to_str().unwrap().to_owned();
-    let scan = path("scan");
-    gonio_ok(&[
-        "simulate",
-        "--scene",
-        "gold",
-        "--binning",
-        "8",
-        "--theta-l",
-        "-20,-30,-40",
-        "--out",
-        &scan,
-    ]);
+    let scan = path(
+        small_scan(dir.path())
+            .file_name()
+            .unwrap()
+            .to_str()
+            .unwrap(),
+    );
     let theta = format!("{scan}/theta_l_-20.0");
     let (frame, sidecar) = (
         format!("{theta}/exp_00.tiff"),

@@ -2,6 +2,7 @@
 //! the ones it needs.
 #![allow(dead_code)]
 
+use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 /// Runs the built `gonio` with `args` and returns its status and output.
@@ -27,4 +28,21 @@ pub fn gonio_ok(args: &[&str]) -> String {
         text(&out.stderr)
     );
     text(&out.stdout)
+}
+
+/// A small emulated scan of `gold` (binning 8, three θL) in `dir/scan`.
+pub fn small_scan(dir: &Path) -> PathBuf {
+    let scan = dir.join("scan");
+    gonio_ok(&[
+        "simulate",
+        "--scene",
+        "gold",
+        "--binning",
+        "8",
+        "--theta-l",
+        "-20,-30,-40",
+        "--out",
+        scan.to_str().unwrap(),
+    ]);
+    scan
 }
