@@ -154,18 +154,90 @@ pub async fn load_scan(shared: &Arc<Shared>, id: i64) -> ApiResult<ScanRecord> {
 }
 
 /// A request body parsed as JSON; 400 naming what is wrong otherwise.
+/// A key given twice in one object is refused too (JSON leaves it open; serde_json
+/// would keep the last, so `{"sample":"gold","sample":"red"}` would queue red).
 pub fn parse_json(body: &Bytes) -> ApiResult<Value> {
-    serde_json::from_slice(body).map_err(|e| {
+    let invalid = |e: serde_json::Error| {
         ApiError::new(
             StatusCode::BAD_REQUEST,
             format!("body is not valid JSON: {e}"),
         )
-    })
+    };
+    serde_json::from_slice::<UniqueKeys>(body).map_err(invalid)?;
+    serde_json::from_slice(body).map_err(invalid)
+}
+
+/// A JSON document read only to find a key given twice in one of its objects.
+struct UniqueKeys;
+
+impl<'de> serde::Deserialize<'de> for UniqueKeys {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        d.deserialize_any(UniqueKeys)
+    }
+}
+
+impl<'de> serde::de::Visitor<'de> for UniqueKeys {
+    type Value = UniqueKeys;
+
+    fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        f.write_str("a JSON value")
+    }
+    fn visit_bool<E>(self, _: bool) -> Result<Self, E> {
+        Ok(self)
+    }
+    fn visit_i64<E>(self, _: i64) -> Result<Self, E> {
+        Ok(self)
+    }
+    fn visit_u64<E>(self, _: u64) -> Result<Self, E> {
+        Ok(self)
+    }
+    fn visit_f64<E>(self, _: f64) -> Result<Self, E> {
+        Ok(self)
+    }
+    fn visit_str<E>(self, _: &str) -> Result<Self, E> {
+        Ok(self)
+    }
+    fn visit_unit<E>(self) -> Result<Self, E> {
+        Ok(self)
+    }
+    fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<Self, A::Error> {
+        while seq.next_element::<UniqueKeys>()?.is_some() {}
+        Ok(self)
+    }
+    fn visit_map<A: serde::de::MapAccess<'de>>(self, mut map: A) -> Result<Self, A::Error> {
+        let mut keys = std::collections::HashSet::new();
+        while let Some(key) = map.next_key::<String>()? {
+            if !keys.insert(key.clone()) {
+                return Err(serde::de::Error::custom(format!("key `{key}` given twice")));
+            }
+            map.next_value::<UniqueKeys>()?;
+        }
+        Ok(self)
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_key_given_twice_is_refused_at_any_depth() {
+        let parsed = |text: &'static str| parse_json(&Bytes::from_static(text.as_bytes()));
+        for text in [
+            r#"{"sample":"gold","sample":"red"}"#,
+            r#"{"bracket":{"shutter_s":[1],"shutter_s":[2]}}"#,
+            r#"[{"a":1},{"b":2,"b":3}]"#,
+        ] {
+            let err = parsed(text).unwrap_err();
+            assert!(
+                err.message.contains("given twice"),
+                "{text}: {}",
+                err.message
+            );
+        }
+        let value = parsed(r#"{"a":{"x":1},"b":{"x":[1,"x",null,true,-2.5]}}"#);
+        assert!(value.is_ok_and(|v| v["b"]["x"][3] == true));
+    }
 
     #[test]
     fn absolute_paths_are_cut_to_their_file_names() {
