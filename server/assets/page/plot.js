@@ -4,8 +4,8 @@
 //
 // Drawn here as SVG by hand rather than through a vendored plotting library (uPlot was
 // the candidate): the browser tests read the figure's own elements (the axis lines,
-// tick texts, `circle.marker`, `path.fit-<model>` and the legend box inside the plot
-// area), which a canvas library does not have, and the figure needs nothing a library
+// tick texts, `circle.marker`, `path.fit-<model>` and the legend box, inside the plot
+// area, below it on a narrow screen), which a canvas library does not have, and the figure needs nothing a library
 // would add but values under the pointer. Those are here: moving over (or tapping) the
 // plot rings the nearest measured point and writes its θL, θr, measured β and every
 // model's fitted β at that point below the figure.
@@ -80,7 +80,7 @@ function drawPlot() {
   const colour = (theta, c) => channels.length > 1 ? CHANNEL_COLORS[c] : THETA_COLORS[thetas.indexOf(theta) % THETA_COLORS.length];
   // Drawn at the width it is shown at (at most 640 px), so that its text keeps its
   // CSS size on a narrow screen instead of being scaled down with the figure.
-  const W = drawnWidth(), L = 62, R = 10, T = 10, B = 300, H = B + 40;
+  const W = drawnWidth(), L = 62, R = 10, T = 10, B = 300;
   const xs = pts.map((p) => p.theta_r);
   const xmin = Math.min(...xs), xmax = Math.max(...xs);
   const values = channels.flatMap((c) => [...pts.map((p) => p.rgb[c]), ...fits.flatMap(([, f]) => f.predicted.map((q) => q[c]))]);
@@ -105,6 +105,22 @@ function drawPlot() {
     yTicks = ticks.map((t) => [t, String(t)]);
   }
   label = `β ${log ? "(log scale)" : ""} — % of a perfect white's green`;
+  // The legend: colours, then line styles; inside the plot area, in the top corner
+  // (right, else left) that hides fewer of the drawn values, or below the figure on a
+  // narrow screen, where it would cover much of it.
+  const entries = (channels.length > 1
+    ? channels.map((c) => ({ swatch: "marker", col: CHANNEL_COLORS[c], text: CHANNEL_NAMES[c] }))
+    : thetas.map((t) => ({ swatch: "marker", col: colour(t, channels[0]), text: `θL ${t}°` })))
+    .concat([{ swatch: "marker", col: "#444", text: "measured" }])
+    .concat(fits.map(([m]) => ({ swatch: "line", col: "#444", dash: (MODEL_STYLES[m] || {}).dash || "", text: (MODEL_STYLES[m] || { name: m }).name })));
+  const below = W < 480;
+  const lw = 170, lh = 14 * entries.length + 8, ly = below ? B + 44 : T + 4;
+  const H = below ? ly + lh + 4 : B + 40;
+  const drawn = channels.flatMap((c) => pts.flatMap((p, i) => [[p.theta_r, p.rgb[c]], ...fits.map(([, f]) => [p.theta_r, f.predicted[i][c]])]))
+    .filter(([, v]) => !log || v > 0).map(([x, v]) => [X(x), Y(v)]);
+  const under = (lx) => drawn.filter(([x, y]) => x >= lx && x <= lx + lw && y >= ly && y <= ly + lh).length;
+  const right = W - R - lw - 4, left = L + 4;
+  const lx = below ? L : under(left) < under(right) ? left : right;
   let svg = `<svg viewBox="0 0 ${W} ${H}" role="img" aria-label="measured and fitted β against θr">`;
   svg += `<line x1="${L}" y1="${B}" x2="${W - R}" y2="${B}" stroke="#888"/><line x1="${L}" y1="${T}" x2="${L}" y2="${B}" stroke="#888"/>`;
   for (const [v, text] of yTicks) {
@@ -142,13 +158,6 @@ function drawPlot() {
     }
   }
   svg += `<defs>${clip}</defs><g clip-path="url(#plotarea)">${markers}${fits.map(([m]) => lines[m]).join("")}</g>`;
-  // The legend inside the plot area, top right: colours, then line styles.
-  const entries = (channels.length > 1
-    ? channels.map((c) => ({ swatch: "marker", col: CHANNEL_COLORS[c], text: CHANNEL_NAMES[c] }))
-    : thetas.map((t) => ({ swatch: "marker", col: colour(t, channels[0]), text: `θL ${t}°` })))
-    .concat([{ swatch: "marker", col: "#444", text: "measured" }])
-    .concat(fits.map(([m]) => ({ swatch: "line", col: "#444", dash: (MODEL_STYLES[m] || {}).dash || "", text: (MODEL_STYLES[m] || { name: m }).name })));
-  const lw = 170, lh = 14 * entries.length + 8, lx = W - R - lw - 4, ly = T + 4;
   svg += `<g class="legend-box"><rect x="${lx}" y="${ly}" width="${lw}" height="${lh}" fill="#fff" fill-opacity="0.85" stroke="#ccc"/>`;
   entries.forEach((e, i) => {
     const y = ly + 14 + 14 * i;
