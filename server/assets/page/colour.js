@@ -77,6 +77,12 @@ async function judge(id) {
   }
 }
 
+// Shows no scan's colour (another scan was selected): the next view fetches its own.
+export function clearColour() {
+  shown.key = null;
+  $("colour").innerHTML = "";
+}
+
 // Shows scan view `s`'s colour once it has ended with a fit (fetched once per scan end).
 export async function showColour(s) {
   const box = $("colour");

@@ -7,6 +7,7 @@ import { $, page, hasToken, post, overview, fetchFile, watch } from "./state.js"
 import { escapeHtml, localTime } from "./text.js";
 import { show, showOverview, clearFrame, setupTable, paintTimeLeft } from "./render.js";
 import { showSweep, initSweeps, waitsText } from "./sweeps.js";
+import { clearColour } from "./colour.js";
 
 // Numbers written comma separated.
 function numbers(text) {
@@ -169,6 +170,9 @@ function select(id) {
   page.lastDone = -1;
   page.lastScan = null;
   $("detail").hidden = false;
+  // Nothing of the scan shown before stays while the new one loads.
+  $("dtitle").textContent = `Scan ${id}`;
+  clearColour();
   $("plot").innerHTML = "";
   $("files").hidden = true;
   $("calbox").hidden = true;

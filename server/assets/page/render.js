@@ -109,10 +109,16 @@ export function showOverview(scans, sweeps, hw) {
     `<tr data-id="${s.id}" class="${s.id === page.selected ? "sel" : ""}"><td>${s.id}</td><td>${escapeHtml(s.sample)}</td>` +
     `<td class="state-${s.state}">${stateLabel(s)}</td><td>${bar(s.progress.done, s.progress.total)}</td>` +
     `<td class="muted" title="${escapeHtml(rowNote(s))}">${escapeHtml(brief(rowNote(s)))}<span class="left" data-id="${s.id}"></span></td></tr>`).join("");
-  $("sweeps").innerHTML = sweeps.slice().reverse().map((w) =>
-    `<tr data-sweep="${w.id}" class="${w.id === page.sweep ? "sel" : ""}" title="open its scans"><td>${w.id}</td>` +
-    `<td class="state-${w.state}">${w.state}</td><td>${bar(w.progress.done, w.progress.total)}</td>` +
-    `<td class="muted">${escapeHtml(w.start_at ? localTime(w.start_at) : "now")}</td></tr>`).join("");
+  // A sweep is coloured as waiting only while a scan of it waits for a person (else
+  // its scans are merely queued behind another's); its start is "now" only while it
+  // has not begun.
+  $("sweeps").innerHTML = sweeps.slice().reverse().map((w) => {
+    const person = (w.waits || []).some((x) => x.waiting);
+    const start = w.start_at ? localTime(w.start_at) : w.progress.done ? "" : "now";
+    return `<tr data-sweep="${w.id}" class="${w.id === page.sweep ? "sel" : ""}" title="open its scans"><td>${w.id}</td>` +
+      `<td class="${w.state !== "waiting" || person ? "state-" + w.state : ""}">${w.state}</td><td>${bar(w.progress.done, w.progress.total)}</td>` +
+      `<td class="muted">${escapeHtml(start)}</td></tr>`;
+  }).join("");
   const a = hw.arm;
   $("arm").textContent = armLine(a);
   // After STOP ARM nothing runs until the operator homes the arm or resumes a scan:
@@ -173,7 +179,8 @@ export function show(s) {
   remember(s);
   const p = s.progress;
   const ended = FINAL.includes(s.state);
-  const angles = p.theta_l ? ` · θL ${p.theta_l.captured}/${p.theta_l.total} captured, ${p.theta_l.processed} processed` : "";
+  // Under the bar (a block of its own): no separator before it.
+  const angles = p.theta_l ? `θL ${p.theta_l.captured}/${p.theta_l.total} captured, ${p.theta_l.processed} processed` : "";
   $("dtitle").textContent = `Scan ${s.id}: ${s.sample}`;
   const perTheta = (s.bracket.by_theta_l || []).map((m) => `θL ${m.theta_l}°: ${m.shutter_s.map(formatShutter).join(", ")}`).join("\n");
   // Work under way: the hardware step only while running, the processing step until
