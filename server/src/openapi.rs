@@ -17,7 +17,7 @@
 //! tagged enums, `Option` as `null`) without a second trait such as `JsonSchema`.
 
 use utoipa::openapi::extensions::ExtensionsBuilder;
-use utoipa::openapi::path::Operation;
+use utoipa::openapi::path::{Operation, ParameterIn};
 use utoipa::openapi::response::{Response, ResponseBuilder};
 use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityRequirement, SecurityScheme};
 use utoipa::openapi::{
@@ -49,7 +49,12 @@ const REST_OF_PATH: &str = "x-rest-of-path";
 const BEARER: &str = "bearer";
 
 /// The shared answers, by name (`#/components/responses/<name>`), and what they say.
-const SHARED_ANSWERS: [(&str, &str); 7] = [
+const SHARED_ANSWERS: [(&str, &str); 8] = [
+    (
+        "BadParameter",
+        "A path or query parameter is not of its type (an id that is not a whole number, \
+         a number that does not parse); nothing changed",
+    ),
     (
         "MisdirectedRequest",
         "The Host header is not the bind address, localhost or a name of allowed_hosts \
@@ -142,6 +147,19 @@ pub fn finish(mut api: OpenApi) -> OpenApi {
     api.paths.paths = std::mem::take(&mut api.paths.paths)
         .into_iter()
         .map(|(path, mut item)| {
+            // A parameter of the wrong type is axum's 400, before the handler.
+            let typed = path.contains("{id}")
+                || operations(&mut item).any(|o| {
+                    o.parameters
+                        .iter()
+                        .flatten()
+                        .any(|p| p.parameter_in == ParameterIn::Query)
+                });
+            if typed {
+                for operation in operations(&mut item) {
+                    add_answers(operation, &[("400", "BadParameter")]);
+                }
+            }
             if let Some((_, rest)) = path.split_once("{*") {
                 let name = rest.trim_end_matches('}');
                 item.extensions = Some(ExtensionsBuilder::new().add(REST_OF_PATH, name).build());
