@@ -6,10 +6,12 @@
 //!   what is not a regular file.
 //! - [`beneath`]: opening a file below a directory by handle, following no link.
 //! - [`walk`]: every regular file below a directory, visited by handle.
+//! - [`scan_layout`]: the naming of a scan directory's θL directories.
 
 pub mod beneath;
 pub mod input;
 pub mod output;
+pub mod scan_layout;
 pub mod walk;
 
 /// Makes a FIFO at `path`, for tests.

@@ -20,6 +20,7 @@ mod uncertainty;
 
 use std::path::Path;
 
+use gonio_files::scan_layout::same_theta_dir;
 use serde::Deserialize;
 
 use effects::MAX_WHITE_FALLOFF;
@@ -464,18 +465,13 @@ fn spectral_lobe(
     put("ks_scale", serde_json::json!(ks_scale));
     put(key, mechanism);
 }
+
 /// The light angles of a scan: some, each within [−90°, 90°], no two in one θL
 /// directory (named to 0.1°: `theta_l_-30.0`).
 fn check_theta_l(theta_l_deg: &[f64]) -> Result<(), SceneError> {
     if theta_l_deg.is_empty() {
         return Err(invalid("scan.theta_l_deg", "must not be empty"));
     }
-    // Compared as numbers to 0.1° and as the directories are named (`{:.1}` rounds
-    // −1.25 to −1.2, as it does −1.2).
-    let one_directory = |a: f64, b: f64| {
-        (a * 10.0).round() + 0.0 == (b * 10.0).round() + 0.0
-            || format!("{a:.1}") == format!("{b:.1}")
-    };
     for (i, &t) in theta_l_deg.iter().enumerate() {
         if !(t.is_finite() && (-90.0..=90.0).contains(&t)) {
             return Err(invalid(
@@ -483,7 +479,7 @@ fn check_theta_l(theta_l_deg: &[f64]) -> Result<(), SceneError> {
                 format!("{t} must be in [-90, 90]"),
             ));
         }
-        if let Some(same) = theta_l_deg[..i].iter().find(|s| one_directory(**s, t)) {
+        if let Some(same) = theta_l_deg[..i].iter().find(|s| same_theta_dir(**s, t)) {
             return Err(invalid(
                 "scan.theta_l_deg",
                 format!("{t} is listed twice (as {same} before, to 0.1°)"),

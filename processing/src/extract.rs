@@ -35,6 +35,7 @@ use std::collections::BTreeMap;
 use std::fs;
 use std::path::{Path, PathBuf};
 
+use gonio_files::scan_layout::theta_dir_name;
 use rayon::prelude::*;
 
 use crate::capture::{self, Frame};
@@ -207,7 +208,7 @@ pub fn extract_scan_with_progress(
         let map = hdr::merge(&frames, &options.merge)
             .map_err(|error| ExtractError::Hdr { theta_l, error })?;
         if let Some(hdr_dir) = &options.hdr_dir {
-            map.write_exr(&hdr_dir.join(format!("theta_l_{theta_l:.1}.exr")))
+            map.write_exr(&hdr_dir.join(format!("{}.exr", theta_dir_name(theta_l))))
                 .map_err(|error| ExtractError::Hdr { theta_l, error })?;
         }
         let ThetaSamples {

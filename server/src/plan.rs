@@ -170,10 +170,7 @@ pub fn mount_reason(sample: &str) -> String {
     format!("mount sample {sample}")
 }
 
-/// Directory of the captures of one θL inside a scan directory.
-pub fn theta_dir_name(theta_l: f64) -> String {
-    format!("theta_l_{theta_l:.1}")
-}
+pub use gonio_files::scan_layout::theta_dir_name;
 
 /// Samples file of one θL inside a scan directory (the rows of `samples.csv` at θL).
 pub fn theta_samples_path(theta_l: f64) -> String {

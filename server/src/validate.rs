@@ -6,7 +6,8 @@ use serde_json::{Map, Value};
 
 use super::config::Limits;
 use super::files::is_safe_name;
-use super::plan::{theta_dir_name, ScanPlan};
+use super::plan::ScanPlan;
+use gonio_files::scan_layout::same_theta_dir;
 
 /// The first invalid field of a request.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -118,13 +119,8 @@ fn theta_list(field: &str, value: Option<&Value>, limits: Limits) -> Result<Vec<
                 ),
             ));
         }
-        // Directories are named with one decimal: angles must differ there, compared
-        // as numbers (0 and -0.0, or 0.04 and -0.04, are one angle) and as the names
-        // (`{:.1}` rounds a half to even: -1.25 and -1.2 are both `theta_l_-1.2`).
-        let tenths = |t: f64| (t * 10.0).round() + 0.0;
-        let one_directory =
-            |a: f64, b: f64| tenths(a) == tenths(b) || theta_dir_name(a) == theta_dir_name(b);
-        if let Some(same) = out.iter().find(|t| one_directory(**t, theta)) {
+        // Directories are named with one decimal: angles must differ there.
+        if let Some(same) = out.iter().find(|t| same_theta_dir(**t, theta)) {
             return Err(invalid(
                 &f,
                 format!("{theta} is listed twice (as {same} before, to 0.1°)"),

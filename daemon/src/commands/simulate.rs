@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use gonio_drivers::camera_choice::format_shutter;
 use gonio_files::output::write_atomically;
+use gonio_files::scan_layout::theta_dir_name;
 use gonio_mock_hw::render::{self, reference};
 use gonio_processing::geometry::Setup;
 use gonio_processing::scan_plan::{self, ScanPlan};
@@ -85,7 +86,7 @@ pub fn render_scan(args: Args) -> anyhow::Result<(usize, String)> {
     let total = scene.theta_l_deg().len() * scene.bracket_s().len();
     let bar = progress::bar(total as u64, "captures");
     for &theta_l in scene.theta_l_deg() {
-        let dir = out.join(format!("theta_l_{theta_l:.1}"));
+        let dir = out.join(theta_dir_name(theta_l));
         std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
         for (index, &shutter_s) in scene.bracket_s().iter().enumerate() {
             bar.set_message(format!("θL {theta_l:.1}°, {}", format_shutter(shutter_s)));
