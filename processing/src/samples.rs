@@ -22,7 +22,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::brdf::Cosines;
-use crate::decimal;
+use crate::decimal::{self, Brief};
 use crate::setup_uncertainty::Source;
 
 /// One measured surface point: angles in degrees, β per camera channel.
@@ -385,7 +385,7 @@ impl Columns {
                 return Err(SamplesError::Field {
                     line,
                     column: HEADER[i],
-                    message: format!("{}° is outside [−{limit}°, {limit}°]", values[i]),
+                    message: format!("{}° is outside [−{limit}°, {limit}°]", Brief(values[i])),
                 });
             }
         }
@@ -406,7 +406,7 @@ impl Columns {
                         return Err(SamplesError::Field {
                             line,
                             column,
-                            message: format!("{value} is not a cosine (outside [−1, 1])"),
+                            message: format!("{} is not a cosine (outside [−1, 1])", Brief(*value)),
                         });
                     }
                 }

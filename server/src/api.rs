@@ -311,11 +311,7 @@ async fn resume_scan(State(shared): AppState, Path(id): Path<i64>) -> ApiResult<
         "resume",
     )
     .await?;
-    // The operator goes on: an emergency stop's hold ends.
-    shared
-        .halted
-        .store(false, std::sync::atomic::Ordering::Release);
-    shared.wake();
+    shared.end_hold();
     Ok(answer)
 }
 

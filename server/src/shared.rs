@@ -185,6 +185,14 @@ impl Shared {
         }
     }
 
+    /// The operator goes on after an emergency stop (homes the arm, declares its
+    /// position, resumes a scan): the hold ends and the lanes look again.
+    pub fn end_hold(&self) {
+        self.halted
+            .store(false, std::sync::atomic::Ordering::Release);
+        self.wake();
+    }
+
     /// Announces that scan `id` changed: its view is published to event subscribers.
     pub fn changed(&self, id: i64) {
         self.changed.post(|ids| {

@@ -34,8 +34,7 @@ fn show(name: &str, estimate: Option<Estimate>, prior: f64, unit: &str) -> Strin
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let setup: Vec<&Path> = args.setup.iter().map(PathBuf::as_path).collect();
-    super::output::refuse_overwriting(&args.out, &setup, &[&args.dir])?;
+    super::output::refuse_overwriting(&args.out, args.setup.as_slice(), &[&args.dir])?;
     super::plan_check::require_whole(&args.dir, args.allow_missing)?;
     let prior_path = args.setup.unwrap_or_else(|| args.dir.join("setup.json"));
     let prior = read_setup(&prior_path)?;

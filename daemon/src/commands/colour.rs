@@ -33,7 +33,7 @@ pub struct Options {
     /// With a fit JSON: the samples CSV it was fitted to, whose table gives the colour
     /// inside the measured (θh, θd) range.
     #[arg(long)]
-    pub(super) samples: Option<PathBuf>,
+    samples: Option<PathBuf>,
 }
 
 /// Arguments of `gonio colour`.
@@ -51,11 +51,17 @@ pub struct Args {
     csv: Option<PathBuf>,
 }
 
+/// The files the colour of `input` is read from: `input` itself, a scan directory's
+/// samples.csv and fit JSONs, and `--samples`.
+pub(super) fn inputs_of(input: &Path, options: &Options) -> Vec<PathBuf> {
+    let mut inputs = super::output::scan_results(input);
+    inputs.push(input.to_path_buf());
+    inputs.extend(options.samples.clone());
+    inputs
+}
+
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let mut inputs = super::output::scan_results(&args.input);
-    inputs.push(args.input.clone());
-    inputs.extend(args.options.samples.clone());
-    let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
+    let inputs = inputs_of(&args.input, &args.options);
     for out in std::iter::once(&args.out).chain(&args.csv) {
         super::output::refuse_overwriting(out, &inputs, &[])?;
     }

@@ -11,7 +11,7 @@ use gonio_files::input::{read_input_to_string, MAX_SMALL_FILE_BYTES};
 use gonio_files::output::write_atomically;
 use gonio_processing::multi_angle::compare::{compare, Comparison, Mounting, Tolerances};
 
-use super::colour::{report, Options};
+use super::colour::{inputs_of, report, Options};
 
 /// Arguments of `gonio compare`.
 #[derive(clap::Args)]
@@ -36,12 +36,9 @@ pub struct Args {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(out) = &args.out {
-        let mut inputs = super::output::scan_results(&args.standard);
-        inputs.extend(super::output::scan_results(&args.batch));
-        inputs.extend([args.standard.clone(), args.batch.clone()]);
+        let mut inputs = inputs_of(&args.standard, &args.options);
+        inputs.extend(inputs_of(&args.batch, &args.options));
         inputs.extend(args.tolerances.clone());
-        inputs.extend(args.options.samples.clone());
-        let inputs: Vec<&std::path::Path> = inputs.iter().map(PathBuf::as_path).collect();
         super::output::refuse_overwriting(out, &inputs, &[])?;
     }
     let tolerances = match &args.tolerances {

@@ -39,7 +39,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    super::output::refuse_overwriting(&args.out, &[&args.fit], &[])?;
+    super::output::refuse_overwriting(&args.out, std::slice::from_ref(&args.fit), &[])?;
     let text = read_input_to_string(&args.fit, MAX_SMALL_FILE_BYTES)
         .with_context(|| format!("reading {}", args.fit.display()))?;
     let fit: FitResult = serde_json::from_str(&text)

@@ -47,8 +47,7 @@ pub struct Args {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     gonio_processing::capture::set_max_pixels(args.max_frame_pixels);
-    let setup: Vec<&std::path::Path> = args.setup.iter().map(PathBuf::as_path).collect();
-    refuse_overwriting(&args.out, &setup, &[&args.dir])?;
+    refuse_overwriting(&args.out, args.setup.as_slice(), &[&args.dir])?;
     super::plan_check::require_whole(&args.dir, args.allow_missing)?;
     let setup_name = args.setup.as_ref().map_or_else(
         || "setup.json".to_owned(),

@@ -111,7 +111,7 @@ fn select_theta_l(all: Vec<Sample>, wanted: &[f64]) -> anyhow::Result<Vec<Sample
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    super::output::refuse_overwriting(&args.out, &[&args.samples], &[])?;
+    super::output::refuse_overwriting(&args.out, std::slice::from_ref(&args.samples), &[])?;
     let all = samples::read_csv(&args.samples)?;
     let selected = select_theta_l(all, &args.theta_l)?;
     let model = match args.model {

@@ -1,6 +1,6 @@
 //! `gonio hdr`: merge a bracket of exposures into an OpenEXR radiance map.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use gonio_processing::capture::{sidecar_path, Frame};
 use gonio_processing::hdr::{self, MergeMethod, MergeOptions, SATURATED, UNDEREXPOSED};
@@ -38,12 +38,9 @@ pub struct Args {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     gonio_processing::capture::set_max_pixels(args.max_frame_pixels);
-    let sidecars: Vec<PathBuf> = args.frames.iter().map(|f| sidecar_path(f)).collect();
-    let inputs: Vec<&Path> = args
-        .frames
-        .iter()
-        .chain(&sidecars)
-        .map(PathBuf::as_path)
+    // The frames and their sidecars.
+    let inputs: Vec<PathBuf> = (args.frames.iter().cloned())
+        .chain(args.frames.iter().map(|f| sidecar_path(f)))
         .collect();
     refuse_overwriting(&args.out, &inputs, &[])?;
     let spinner = progress::spinner(format!("decoding {} frames", args.frames.len()));

@@ -114,7 +114,7 @@ pub fn scan_results(dir: &Path) -> Vec<PathBuf> {
 /// by any name) or a file of one of its input scan directories `scans`
 /// ([`SCAN_FILES`], anything in a θL directory): the result would replace what it was
 /// made from.
-pub fn refuse_overwriting(out: &Path, files: &[&Path], scans: &[&Path]) -> anyhow::Result<()> {
+pub fn refuse_overwriting(out: &Path, files: &[PathBuf], scans: &[&Path]) -> anyhow::Result<()> {
     let Some(target) = identity(out) else {
         // Nothing there yet: nothing to lose.
         return Ok(());

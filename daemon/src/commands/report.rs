@@ -27,8 +27,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         anyhow::bail!("{}: no such scan directory", args.dir.display());
     }
     let results = super::output::scan_results(&args.dir);
-    let inputs: Vec<&std::path::Path> = results.iter().map(PathBuf::as_path).collect();
-    super::output::refuse_overwriting(&args.out, &inputs, &[&args.dir])?;
+    super::output::refuse_overwriting(&args.out, &results, &[&args.dir])?;
     let facts = ScanFacts {
         sample: args.sample,
         notes: args.notes,

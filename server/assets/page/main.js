@@ -215,7 +215,7 @@ for (const box of ["results", "files"]) {
       setTimeout(() => URL.revokeObjectURL(file.url), 60000);
     } catch (err) {
       if (tab) tab.close();
-      $("actmsg").textContent = err.message;
+      say($("actmsg"), err.message, true);
     }
   });
 }

@@ -5,10 +5,10 @@
 // Drawn here as SVG by hand rather than through a vendored plotting library (uPlot was
 // the candidate): the browser tests read the figure's own elements (the axis lines,
 // tick texts, `circle.marker`, `path.fit-<model>` and the legend box, inside the plot
-// area, below it on a narrow screen), which a canvas library does not have, and the figure needs nothing a library
-// would add but values under the pointer. Those are here: moving over (or tapping) the
-// plot rings the nearest measured point and writes its θL, θr, measured β and every
-// model's fitted β at that point below the figure.
+// area, below it on a narrow screen), which a canvas library does not have, and the
+// figure needs nothing a library would add but values under the pointer. Those are
+// here: moving over (or tapping) the plot rings the nearest measured point and writes
+// its θL, θr, measured β and every model's fitted β at that point below the figure.
 
 import { $, get, page } from "./state.js";
 import { escapeHtml } from "./text.js";

@@ -140,9 +140,8 @@ pub(super) async fn home_arm(State(shared): AppState) -> ApiResult<impl IntoResp
         _ => {}
     }
     let clears_alarm = arm.state == ArmState::Alarm;
-    shared.halted.store(false, Ordering::Release);
     shared.home_requested.store(true, Ordering::Release);
-    shared.hardware_wake.post(|wake| *wake = true);
+    shared.end_hold();
     tracing::info!("homing asked by the operator");
     Ok((
         StatusCode::ACCEPTED,
@@ -259,9 +258,7 @@ pub(super) async fn declare_arm_position(
     match answered {
         Ok(Ok(())) => {
             tracing::info!("arm position declared: {angle}°");
-            // The operator goes on: an emergency stop's hold ends.
-            shared.halted.store(false, Ordering::Release);
-            shared.wake();
+            shared.end_hold();
             Ok(Json(Declared {
                 angle,
                 declared: true,
