@@ -126,8 +126,9 @@ pub struct Shared {
     /// not retry.
     pub stops: AtomicU64,
     /// An emergency stop holds the instrument (`POST /api/arm/stop`): the hardware lane
-    /// starts no scan and moves nothing until the operator homes the arm, declares its
-    /// position or resumes a scan (or the daemon starts again).
+    /// starts no scan and moves nothing until the operator homes the arm (the lane ends
+    /// the hold once homed), declares its position or resumes a scan (or the daemon
+    /// starts again).
     pub halted: AtomicBool,
     /// A declared arm position waiting for the hardware lane (one at a time).
     pub arm_position: Mutex<Option<PositionRequest>>,

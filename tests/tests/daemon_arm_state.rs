@@ -7,7 +7,8 @@
 //! - a position is declared only while the arm is at rest (409 during a scan's move);
 //! - Home clears an alarm (after an emergency stop during a move) with a soft reset,
 //!   then homes, and says so in the hardware log; it answers 409 with the reason on a
-//!   refused board and on a controller that does not home;
+//!   refused board and on a controller that does not home; once homed, an emergency
+//!   stop's hold ends, and a stop right after Home stops the homing, the hold staying;
 //! - a scan waiting on the arm (a failed homing) holds the rest of its sweep;
 //! - concurrent confirmations of the same scan mount its sample once.
 
@@ -179,6 +180,7 @@ fn home_clears_the_alarm_of_an_emergency_stop_and_says_so() {
     daemon.wait_for("/api/hardware", Duration::from_secs(10), |h| {
         h["arm"]["state"] == "alarm"
     });
+    assert_eq!(daemon.get("/api/hardware").json["halted"], true);
     let home = daemon.post("/api/arm/home", &json!({}));
     assert_eq!(home.status, 202, "{:?}", home.json);
     assert_eq!(home.json["clears_alarm"], true, "{:?}", home.json);
@@ -204,6 +206,8 @@ fn home_clears_the_alarm_of_an_emergency_stop_and_says_so() {
     let hardware = daemon.get("/api/hardware").json;
     assert_eq!(hardware["arm"]["state"], "idle", "{hardware}");
     assert_eq!(hardware["arm"]["homed"], true, "{hardware}");
+    // Homed, the hold is over.
+    assert_eq!(hardware["halted"], false, "{hardware}");
     assert_eq!(
         daemon
             .post(&format!("/api/scans/{id}/resume"), &json!({}))
@@ -211,6 +215,53 @@ fn home_clears_the_alarm_of_an_emergency_stop_and_says_so() {
         200
     );
     let done = daemon.wait_state(id, &["done", "failed"], Duration::from_secs(120));
+    assert_eq!(done["state"], "done", "{done}");
+}
+
+#[test]
+fn a_stop_right_after_home_stops_the_homing_and_the_hold_stays() {
+    let dir = temp_dir("arm-state-stop-homing");
+    let daemon = Daemon::start(&dir, &emulator_config_scaled(0.5, 0.01));
+    let id = daemon.post_gold_scan(&[-80.0], &[0.05]);
+    daemon.wait_for("/api/hardware", Duration::from_secs(60), |h| {
+        h["arm"]["state"] == "moving"
+    });
+    assert_eq!(daemon.post("/api/arm/stop", &json!({})).status, 200);
+    daemon.wait_state(id, &["paused"], Duration::from_secs(30));
+    daemon.wait_for("/api/hardware", Duration::from_secs(10), |h| {
+        h["arm"]["state"] == "alarm"
+    });
+    let next = daemon.post_gold_scan(&[-20.0], &[0.05]);
+    // Home, and STOP ARM at once, as an operator changing their mind: the homing is
+    // dropped or abandoned, the hold stays, nothing moves.
+    assert_eq!(daemon.post("/api/arm/home", &json!({})).status, 202);
+    std::thread::sleep(Duration::from_millis(50));
+    assert_eq!(daemon.post("/api/arm/stop", &json!({})).status, 200);
+    let stopped_at = Instant::now();
+    while stopped_at.elapsed() < Duration::from_secs(3) {
+        let hardware = daemon.get("/api/hardware").json;
+        assert_eq!(hardware["halted"], true, "{hardware}");
+        assert_ne!(hardware["arm"]["homed"], true, "{hardware}");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let homed: Vec<Value> = log_entries(&daemon, "home")
+        .into_iter()
+        .filter(|e| {
+            e["detail"]
+                .as_str()
+                .unwrap_or("")
+                .contains("asked by the operator")
+        })
+        .collect();
+    assert!(homed.is_empty(), "homed after the stop: {homed:?}");
+    let queued = daemon.get(&format!("/api/scans/{next}")).json;
+    assert_eq!(queued["state"], "queued", "{queued}");
+    // Home again, left to finish: the hold ends and the queue goes on.
+    assert_eq!(daemon.post("/api/arm/home", &json!({})).status, 202);
+    daemon.wait_for("/api/hardware", Duration::from_secs(60), |h| {
+        h["halted"] == false && h["arm"]["homed"] == true
+    });
+    let done = daemon.wait_state(next, &["done", "failed"], Duration::from_secs(120));
     assert_eq!(done["state"], "done", "{done}");
 }
 

@@ -62,6 +62,8 @@ pub(super) async fn stop_arm(
     }
     shared.stops.fetch_add(1, Ordering::AcqRel);
     shared.halted.store(true, Ordering::Release);
+    // A homing asked for and not begun is dropped; one under way is abandoned.
+    shared.home_requested.store(false, Ordering::Release);
     let estop = lock(&shared.estop).clone();
     let stopped = match estop {
         Some(estop) => tokio::task::spawn_blocking(move || estop.stop())
@@ -99,7 +101,7 @@ pub(super) async fn stop_arm(
 /// 409 with the reason where it cannot (a scan runs, the board was refused, the
 /// controller does not home), 503 without an arm.
 #[utoipa::path(post, path = "/api/arm/home",
-    summary = "Home the arm (after STOP ARM, a reset or a failed homing): answered at once, the arm homes before anything else runs, an alarm first cleared with a soft reset; /api/hardware shows `homing`, then `idle` at its angle; the hardware log says what was done (`home`: `asked by the operator: alarm cleared (soft reset), then $H`). With a carousel, the next capture turns it back to its slot first",
+    summary = "Home the arm (after STOP ARM, a reset or a failed homing): answered at once, the arm homes before anything else runs, an alarm first cleared with a soft reset; /api/hardware shows `homing`, then `idle` at its angle; the hardware log says what was done (`home`: `asked by the operator: alarm cleared (soft reset), then $H`). An emergency stop's hold ends once the arm is homed; a STOP ARM before then drops the homing, or abandons it under way (`home abandoned`). With a carousel, the next capture turns it back to its slot first",
     responses(
         (status = 202, description = "Homing", body = Homing),
         (status = 409, description = "Home cannot run, with the reason: a scan is running (pause or cancel it first), the arm homes already, the board was refused (its settings differ: change them, then POST /api/arm/reconnect), or the controller does not home (homing = \"off\" or $22=0: declare its position, POST /api/arm/position)", body = ErrorBody),
@@ -141,7 +143,9 @@ pub(super) async fn home_arm(State(shared): AppState) -> ApiResult<impl IntoResp
     }
     let clears_alarm = arm.state == ArmState::Alarm;
     shared.home_requested.store(true, Ordering::Release);
-    shared.end_hold();
+    // The hardware lane homes even in an emergency stop's hold, and ends the hold
+    // once the arm is homed.
+    shared.wake();
     tracing::info!("homing asked by the operator");
     Ok((
         StatusCode::ACCEPTED,

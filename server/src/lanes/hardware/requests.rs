@@ -50,10 +50,14 @@ impl HardwareLane {
     /// between scans, so no scan's step is under way. An alarm (after an emergency stop
     /// or a failed homing) is cleared first with a soft reset; the hardware log says what
     /// was done (`home`: `asked by the operator: alarm cleared (soft reset), then $H`).
+    /// A homing that succeeds ends an emergency stop's hold; an emergency stop meanwhile
+    /// abandons it, before any command it has not sent yet.
     pub(super) fn answer_home_request(&mut self) -> Result<(), StoreError> {
         if !self.shared.home_requested.swap(false, Ordering::AcqRel) {
             return Ok(());
         }
+        let stops = self.shared.stops.load(Ordering::Acquire);
+        let stopped = || self.shared.stops.load(Ordering::Acquire) != stops;
         let Some(arm) = self.arm.as_mut() else {
             return self.log(None, "home refused", "arm not connected");
         };
@@ -65,16 +69,17 @@ impl HardwareLane {
         }
         let mut done = Vec::new();
         let mut result = Ok(());
-        if in_alarm {
+        if in_alarm && !stopped() {
             result = arm.clear_fault();
             done.push("alarm cleared (soft reset)");
         }
-        if result.is_ok() {
+        if result.is_ok() && !stopped() {
             result = arm.home();
             if matches!(
                 result,
                 Err(DeviceError::Alarm { .. } | DeviceError::HomingFailed { .. })
             ) && !in_alarm
+                && !stopped()
             {
                 // An alarm the status did not show yet: clear it and home once more.
                 result = arm.clear_fault().and_then(|()| arm.home());
@@ -82,13 +87,22 @@ impl HardwareLane {
             }
             done.push("$H");
         }
+        let abandoned = stopped();
         self.at_deg = None;
         // The homing cycle (and a soft reset) move the carousel.
         self.shared.carousel_moved();
         let what = format!("asked by the operator: {}", done.join(", then "));
         match result {
+            // The stop's reset may have cut the cycle short: the position is not known.
+            _ if abandoned => {
+                tracing::warn!("homing asked by the operator: abandoned, emergency stop");
+                self.homed = false;
+                self.log(None, "home abandoned", &format!("{what}: emergency stop"))?;
+                self.refresh_arm_status();
+            }
             Ok(()) => {
                 self.homed = true;
+                self.shared.end_hold();
                 self.log(None, "home", &what)?;
                 self.note_arm(None);
                 self.requeue_waiting("arm homed")?;
