@@ -121,6 +121,7 @@ pub struct Config {
     /// File descriptors kept free of connections, for the devices, database and files.
     pub reserved_fds: u64,
     pub arm: ArmConfig,
+    #[serde(deserialize_with = "camera_of_any_kind")]
     pub camera: CameraConfig,
     /// A sample carousel on a spare axis of the arm's board, if there is one.
     pub carousel: Option<CarouselConfig>,
@@ -276,6 +277,17 @@ pub enum CameraConfig {
         #[serde(default = "default_time_scale")]
         time_scale: f64,
     },
+}
+
+/// A `[camera]` table; without `kind`, the emulator's (every key is optional).
+fn camera_of_any_kind<'de, D: serde::Deserializer<'de>>(d: D) -> Result<CameraConfig, D::Error> {
+    let mut table = toml::Table::deserialize(d)?;
+    table
+        .entry("kind")
+        .or_insert_with(|| toml::Value::String("emulator".to_owned()));
+    toml::Value::Table(table)
+        .try_into()
+        .map_err(|e: toml::de::Error| serde::de::Error::custom(e.message()))
 }
 
 impl Default for CameraConfig {

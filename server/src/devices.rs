@@ -347,38 +347,40 @@ fn open_gphoto2(model: Option<&str>, port: Option<&str>) -> anyhow::Result<Box<d
     )))
 }
 
-/// A fault the test hook injects into an emulator.
+/// A fault the test hook injects into an emulator. Each variant is a struct, so that a
+/// field it does not take is refused (serde lets a unit variant of a tagged enum ignore
+/// them).
 #[derive(Debug, Clone, serde::Deserialize, utoipa::ToSchema)]
-#[serde(rename_all = "snake_case", tag = "fault")]
+#[serde(rename_all = "snake_case", tag = "fault", deny_unknown_fields)]
 pub enum InjectedFault {
     /// Pull the emulated serial cable.
-    Unplug,
+    Unplug {},
     /// Plug it back in.
-    Reconnect,
+    Reconnect {},
     /// The board resets by itself (as when DTR toggles): it greets again and has lost
     /// its position.
-    ArmReset,
+    ArmReset {},
     /// The camera reports busy for the next `count` captures.
     CameraBusy { count: u32 },
     /// The next `count` captures never complete (time out).
     CameraTimeout { count: u32 },
     /// Pull the camera's USB cable: every camera call fails until it is plugged back.
-    CameraUnplug,
+    CameraUnplug {},
     /// Plug the camera back in.
-    CameraReplug,
+    CameraReplug {},
     /// The next capture aborts the daemon (a crashing camera library).
-    CameraAbort,
+    CameraAbort {},
 }
 
 impl Emulators {
     /// Applies a fault to the emulated devices.
     pub fn inject(&self, fault: &InjectedFault) -> anyhow::Result<()> {
         match fault {
-            InjectedFault::Unplug => lock(&self.grbl).inject(Fault::Unplug),
-            InjectedFault::Reconnect => lock(&self.grbl)
+            InjectedFault::Unplug {} => lock(&self.grbl).inject(Fault::Unplug),
+            InjectedFault::Reconnect {} => lock(&self.grbl)
                 .reconnect()
                 .context("reconnecting the GRBL emulator")?,
-            InjectedFault::ArmReset => lock(&self.grbl).inject(Fault::ResetBanner),
+            InjectedFault::ArmReset {} => lock(&self.grbl).inject(Fault::ResetBanner),
             InjectedFault::CameraBusy { count } => {
                 self.camera_faults
                     .inject(CameraFault::Busy { captures: *count });
@@ -388,10 +390,39 @@ impl Emulators {
                     self.camera_faults.inject(CameraFault::Timeout);
                 }
             }
-            InjectedFault::CameraUnplug => self.camera_faults.unplug(),
-            InjectedFault::CameraReplug => self.camera_faults.replug(),
-            InjectedFault::CameraAbort => self.camera_faults.inject(CameraFault::Abort),
+            InjectedFault::CameraUnplug {} => self.camera_faults.unplug(),
+            InjectedFault::CameraReplug {} => self.camera_faults.replug(),
+            InjectedFault::CameraAbort {} => self.camera_faults.inject(CameraFault::Abort),
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::InjectedFault;
+
+    #[test]
+    fn a_fault_with_a_field_it_does_not_take_is_refused() {
+        let parse = |text: &str| serde_json::from_str::<InjectedFault>(text);
+        assert!(matches!(
+            parse(r#"{"fault": "camera_busy", "count": 2}"#),
+            Ok(InjectedFault::CameraBusy { count: 2 })
+        ));
+        assert!(matches!(
+            parse(r#"{"fault": "unplug"}"#),
+            Ok(InjectedFault::Unplug {})
+        ));
+        for text in [
+            r#"{"fault": "camera_busy", "count": 2, "times": 3}"#,
+            r#"{"fault": "unplug", "count": 1}"#,
+            r#"{"fault": "camera_busy"}"#,
+        ] {
+            let error = parse(text).expect_err(text).to_string();
+            assert!(
+                error.contains("times") || error.contains("count"),
+                "{text}: {error}"
+            );
+        }
     }
 }

@@ -1,7 +1,8 @@
 //! Which changes call a person (server/src/daemon.md, "Notifications"): a scan that
 //! starts waiting for its sample to be mounted, a scan that fails, a sweep whose scans
 //! have all ended. The publisher shows each changed scan here; each of these is
-//! noticed once, when it happens in this daemon run (what was so at start is not).
+//! noticed once, when it happens in this daemon run (what was so at start is not); a
+//! sweep that ends again after one of its scans was resumed, again.
 
 use std::collections::{BTreeSet, HashMap};
 
@@ -64,9 +65,14 @@ impl Notices {
                 reason: scan.error.clone().unwrap_or_default(),
             });
         }
-        let Some(sweep_id) = scan.sweep_id.filter(|_| scan.state.is_final()) else {
+        let Some(sweep_id) = scan.sweep_id else {
             return Ok(());
         };
+        if !scan.state.is_final() {
+            // A scan of an ended sweep resumed: the sweep's next end is noticed again.
+            self.ended.remove(&sweep_id);
+            return Ok(());
+        }
         if self.ended.contains(&sweep_id) {
             return Ok(());
         }

@@ -124,9 +124,15 @@ impl Notifier {
     }
 }
 
-/// Runs the command for `notice`, killed with its process group after the timeout.
-fn run(config: &NotifyConfig, notice: &Notice) -> Result<(), String> {
-    let mut child = Command::new("sh")
+/// The daemon's token may come from this variable (`gonio serve`'s environment); a
+/// notification command has no need of it.
+const TOKEN_VARIABLE: &str = "GONIO_TOKEN";
+
+/// The command for `notice`: `sh -c`, the notice in its environment, in a process
+/// group of its own.
+fn command(config: &NotifyConfig, notice: &Notice) -> Command {
+    let mut command = Command::new("sh");
+    command
         .arg("-c")
         .arg(&config.command)
         .env("GONIO_EVENT", notice.event)
@@ -138,10 +144,18 @@ fn run(config: &NotifyConfig, notice: &Notice) -> Result<(), String> {
         .env("GONIO_SAMPLE", &notice.sample)
         .env("GONIO_STATE", &notice.state)
         .env("GONIO_REASON", &notice.reason)
+        // The rest of the daemon's environment, but not its bearer token.
+        .env_remove(TOKEN_VARIABLE)
         .stdin(Stdio::null())
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
-        .process_group(0)
+        .process_group(0);
+    command
+}
+
+/// Runs the command for `notice`, killed with its process group after the timeout.
+fn run(config: &NotifyConfig, notice: &Notice) -> Result<(), String> {
+    let mut child = command(config, notice)
         .spawn()
         .map_err(|e| format!("cannot start sh: {e}"))?;
     // The standard error is read beside the wait, so that a talkative command never
@@ -225,6 +239,15 @@ mod tests {
             "GONIO_EVENT=scan-failed\nGONIO_REASON=camera: it's \"gone\"; $HOME\n\
              GONIO_SAMPLE=gold\nGONIO_SCAN_ID=7\nGONIO_STATE=failed\nGONIO_SWEEP_ID=\n"
         );
+    }
+
+    #[test]
+    fn the_daemon_s_token_is_not_passed_on() {
+        let command = command(&config("true".into(), 5.0), &notice());
+        let token = command
+            .get_envs()
+            .find(|(name, _)| *name == std::ffi::OsStr::new(TOKEN_VARIABLE));
+        assert_eq!(token, Some((std::ffi::OsStr::new(TOKEN_VARIABLE), None)));
     }
 
     #[test]

@@ -10,6 +10,16 @@ fn empty_config_runs_on_emulators() {
 }
 
 #[test]
+fn a_camera_table_without_its_kind_is_the_emulator_s() {
+    let config = Config::from_toml_str("[camera]\nscene = \"red\"\nsample = \"red\"\n").unwrap();
+    assert!(matches!(config.camera, CameraConfig::Emulator { ref scene, .. } if scene == "red"));
+    let err = Config::from_toml_str("[camera]\nscene = \"red\"\nsceen = 1\n").unwrap_err();
+    assert!(format!("{err:#}").contains("sceen"), "{err:#}");
+    let err = Config::from_toml_str("[camera]\nkind = \"nikon\"\n").unwrap_err();
+    assert!(format!("{err:#}").contains("nikon"), "{err:#}");
+}
+
+#[test]
 fn the_example_s_notify_section_parses_once_uncommented() {
     let example = include_str!("../../assets/gonio.example.toml");
     let notify: String = example
