@@ -38,14 +38,14 @@ pub fn install(command: String) {
             let signal = runtime.block_on(wait_for_signal());
             INTERRUPTED.store(true, Ordering::SeqCst);
             let removed = remove_registered();
-            eprintln!(
+            crate::progress::say(format_args!(
                 "\ngonio {command}: interrupted by {signal}; stopped before finishing{}",
                 if removed > 0 {
                     format!(" ({removed} temporary directories removed)")
                 } else {
                     String::new()
                 }
-            );
+            ));
             std::process::exit(EXIT_INTERRUPTED);
         });
     // Failing to start the watcher leaves the default signal action: acceptable.

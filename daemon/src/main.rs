@@ -107,7 +107,10 @@ fn main() {
             std::process::exit(EXIT_STDOUT_CLOSED);
         }
         // One line, whatever a cause's message holds.
-        eprintln!("error: {}", guard::one_line(&with_causes(&err)));
+        progress::say(format_args!(
+            "error: {}",
+            guard::one_line(&with_causes(&err))
+        ));
         std::process::exit(1);
     }
 }

@@ -1,8 +1,15 @@
 //! Progress of the offline commands on stderr: bars on a terminal, nothing at all when
 //! stderr is a pipe or a file (indicatif hides its bars there), so logs and CI output
-//! stay clean.
+//! stay clean; and the lines a command tells on stderr ([`say`]).
 
 use indicatif::{ProgressBar, ProgressStyle};
+
+/// Writes `line` and a newline to stderr. A reader that has gone (`2> >(head -1)`)
+/// loses the line, never the command's work: `eprintln!` would panic there.
+pub fn say(line: std::fmt::Arguments) {
+    use std::io::Write;
+    let _ = writeln!(std::io::stderr(), "{line}");
+}
 
 /// A bar of `total` items named `unit` (`captures`, `fits`, …), with the time elapsed
 /// and an estimate of the time left; the message says what is being done.

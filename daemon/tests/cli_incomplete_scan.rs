@@ -1,6 +1,7 @@
 //! A scan directory that lacks a θL or a frame its plan.json names, or holds half a
 //! frame, is refused by `extract`, `calibrate` and `study` in one line naming what is
-//! missing; `--allow-missing` goes on and says so. And the small outputs an operator
+//! missing; `--allow-missing` goes on and says so; without a plan, `extract` says it
+//! could not check. And the small outputs an operator
 //! reads: the setup's source, `hdr` of a file that is not a capture, `export`'s summary.
 
 mod common;
@@ -77,6 +78,36 @@ fn a_missing_theta_l_or_frame_is_named_and_allow_missing_goes_on() {
     assert!(warning.contains("going on without θL -30.0°"), "{warning}");
     assert!(warning.contains("θL -40.0° (no capture)"), "{warning}");
     assert!(text(&out.stdout).contains("from 2 θL"));
+
+    // With its stderr's reader gone, the warning is lost, not the work.
+    std::fs::remove_file(&samples).unwrap();
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_gonio"))
+        .args([
+            "extract",
+            path(&scan),
+            "--out",
+            path(&samples),
+            "--allow-missing",
+        ])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stderr.take());
+    let status = child.wait().unwrap();
+    assert!(status.success(), "{status}");
+    assert!(samples.is_file());
+
+    // Without its plan the scan cannot be checked, and the command says so once done.
+    std::fs::remove_file(scan.join("theta_l_-30.0/exp_01.json")).unwrap();
+    std::fs::remove_file(scan.join("plan.json")).unwrap();
+    let out = gonio(&["extract", path(&scan), "--out", path(&samples)]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let warning = text(&out.stderr);
+    assert!(
+        warning.contains("no plan.json: whether every θL and frame was here is not checked"),
+        "{warning}"
+    );
 }
 
 #[test]

@@ -29,27 +29,6 @@ pub fn parse_shutter(choice: &str) -> Option<ShutterChoice> {
     (seconds.is_finite() && seconds > 0.0).then_some(ShutterChoice::Seconds(seconds))
 }
 
-/// Shorter times than this are written as fractions (`1/4 s`), longer ones as decimals
-/// (`0.3 s`), as camera bodies and photographers do.
-const FRACTION_BELOW_S: f64 = 0.3;
-
-/// A shutter time as photographers write it: `1/30 s`, `1/8000 s`, `0.5 s`, `1.3 s`,
-/// `2 s`, `30 s` (fractions below 0.3 s, one decimal below 10 s, whole seconds above).
-pub fn format_shutter(seconds: f64) -> String {
-    if !(seconds.is_finite() && seconds > 0.0) {
-        return format!("{seconds} s");
-    }
-    if seconds < FRACTION_BELOW_S {
-        return format!("1/{} s", (1.0 / seconds).round());
-    }
-    let text = if seconds < 10.0 {
-        format!("{seconds:.1}")
-    } else {
-        format!("{seconds:.0}")
-    };
-    format!("{} s", text.strip_suffix(".0").unwrap_or(&text))
-}
-
 /// The fixed shutter times among `choices`, seconds, ascending, without duplicates.
 pub fn shutter_times<S: AsRef<str>>(choices: &[S]) -> Vec<f64> {
     let mut times: Vec<f64> = choices
@@ -109,6 +88,7 @@ fn nearest_by_log<S: AsRef<str>>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use gonio_files::scan_layout::format_shutter;
 
     fn secs(s: &str) -> f64 {
         match parse_shutter(s) {
@@ -118,22 +98,7 @@ mod tests {
     }
 
     #[test]
-    fn shutter_times_are_written_as_photographers_do() {
-        let cases = [
-            (1.0 / 8000.0, "1/8000 s"),
-            (1.0 / 60.0, "1/60 s"),
-            (1.0 / 30.0, "1/30 s"),
-            (0.25, "1/4 s"),
-            (1.0 / 3.0, "0.3 s"),
-            (0.5, "0.5 s"),
-            (1.3, "1.3 s"),
-            (2.0, "2 s"),
-            (30.0, "30 s"),
-            (0.0, "0 s"),
-        ];
-        for (seconds, text) in cases {
-            assert_eq!(format_shutter(seconds), text, "{seconds}");
-        }
+    fn shutter_times_as_written_read_back() {
         // What is written reads back as (nearly) the same time.
         for seconds in [1.0 / 8000.0, 1.0 / 30.0, 0.25, 0.5, 1.3, 2.0, 30.0] {
             let back = secs(&format_shutter(seconds));

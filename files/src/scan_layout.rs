@@ -1,5 +1,6 @@
 //! The one naming of a scan directory that every writer and checker of one shares: the
-//! captures of each light angle θL in a directory `theta_l_<θL>` named to 0.1°.
+//! captures of each light angle θL in a directory `theta_l_<θL>` named to 0.1°, and
+//! their exposures' shutter times as photographers write them.
 
 /// The directory of the captures of light angle `theta_l` (degrees) in a scan directory.
 pub fn theta_dir_name(theta_l: f64) -> String {
@@ -15,9 +16,49 @@ pub fn same_theta_dir(a: f64, b: f64) -> bool {
     tenths(a) == tenths(b) || theta_dir_name(a) == theta_dir_name(b)
 }
 
+/// Shorter times than this are written as fractions (`1/4 s`), longer ones as decimals
+/// (`0.3 s`), as camera bodies and photographers do.
+const FRACTION_BELOW_S: f64 = 0.3;
+
+/// A shutter time as photographers write it: `1/30 s`, `1/8000 s`, `0.5 s`, `1.3 s`,
+/// `2 s`, `30 s` (fractions below 0.3 s, one decimal below 10 s, whole seconds above).
+pub fn format_shutter(seconds: f64) -> String {
+    if !(seconds.is_finite() && seconds > 0.0) {
+        return format!("{seconds} s");
+    }
+    if seconds < FRACTION_BELOW_S {
+        return format!("1/{} s", (1.0 / seconds).round());
+    }
+    let text = if seconds < 10.0 {
+        format!("{seconds:.1}")
+    } else {
+        format!("{seconds:.0}")
+    };
+    format!("{} s", text.strip_suffix(".0").unwrap_or(&text))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn shutter_times_are_written_as_photographers_do() {
+        let cases = [
+            (1.0 / 8000.0, "1/8000 s"),
+            (1.0 / 60.0, "1/60 s"),
+            (1.0 / 30.0, "1/30 s"),
+            (0.25, "1/4 s"),
+            (1.0 / 3.0, "0.3 s"),
+            (0.5, "0.5 s"),
+            (1.3, "1.3 s"),
+            (2.0, "2 s"),
+            (30.0, "30 s"),
+            (0.0, "0 s"),
+        ];
+        for (seconds, text) in cases {
+            assert_eq!(format_shutter(seconds), text, "{seconds}");
+        }
+    }
 
     #[test]
     fn angles_one_directory_holds_are_the_same() {

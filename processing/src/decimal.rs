@@ -163,18 +163,30 @@ fn leading_exponent(a: f64) -> i32 {
     }
 }
 
-/// A value in a message: as `Display` writes it where that is short (0, or
-/// 1e-4 ≤ |v| < 1e7), else in scientific notation (`2.2250738585072014e-308`, not 308
-/// digits).
+/// A value in a message, to at most [`BRIEF_DIGITS`] significant digits: plain where that
+/// is short (0, or 1e-4 ≤ |v| < 1e7), else in scientific notation (`2.22507e-308`, not
+/// 308 digits or 17). A value a user wrote with fewer digits reads as written.
 pub struct Brief(pub f64);
+
+/// Significant digits of a [`Brief`] value.
+pub const BRIEF_DIGITS: usize = 6;
 
 impl std::fmt::Display for Brief {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let v = self.0;
-        if !v.is_finite() || v == 0.0 || (1e-4..1e7).contains(&v.abs()) {
-            write!(f, "{v}")
+        if !v.is_finite() || v == 0.0 {
+            return write!(f, "{v}");
+        }
+        // Scientific to the digits kept, trailing zeros of the mantissa dropped.
+        let scientific = format!("{:.*e}", BRIEF_DIGITS - 1, v);
+        let (mantissa, exponent) = scientific.split_once('e').unwrap_or((&scientific, "0"));
+        let mantissa = mantissa.trim_end_matches('0').trim_end_matches('.');
+        if (1e-4..1e7).contains(&v.abs()) {
+            // The same digits, plain: parsed back and written shortest.
+            let plain: f64 = format!("{mantissa}e{exponent}").parse().unwrap_or(v);
+            write!(f, "{plain}")
         } else {
-            write!(f, "{v:e}")
+            write!(f, "{mantissa}e{exponent}")
         }
     }
 }
@@ -304,11 +316,12 @@ mod tests {
 
     #[test]
     fn values_in_messages_stay_short() {
-        assert_eq!(
-            Brief(f64::MIN_POSITIVE).to_string(),
-            "2.2250738585072014e-308"
-        );
+        assert_eq!(Brief(f64::MIN_POSITIVE).to_string(), "2.22507e-308");
         assert_eq!(Brief(1e308).to_string(), "1e308");
+        assert_eq!(Brief(1e300 / 3.0).to_string(), "3.33333e299");
+        assert_eq!(Brief(1.0 / 30.0).to_string(), "0.0333333");
+        assert_eq!(Brief(95.123456789).to_string(), "95.1235");
+        assert_eq!(Brief(5.0).to_string(), "5");
         assert_eq!(Brief(0.01).to_string(), "0.01");
         assert_eq!(Brief(-250.5).to_string(), "-250.5");
         assert_eq!(Brief(0.0).to_string(), "0");

@@ -185,26 +185,42 @@ pub fn extract_scan_with_progress(
     for (done, (theta_l, paths)) in groups.into_iter().enumerate() {
         // Without a map to write, only the strip rows are kept and merged.
         let keep_full = options.hdr_dir.is_some();
-        let frames: Vec<(Frame, StripLayout)> = paths
+        // Each frame, its strips' layout, and its whole size (width, height).
+        let frames: Vec<(Frame, StripLayout, (usize, usize))> = paths
             .par_iter()
             .map(|path| {
                 if keep_full {
                     let frame = Frame::read(path)?;
                     let layout = StripLayout::new(&setup, frame.width, frame.height, theta_l)?;
-                    return Ok((frame, layout));
+                    let size = (frame.width, frame.height);
+                    return Ok((frame, layout, size));
                 }
                 let mut layout = None;
                 let frame = Frame::read_rows(path, |width, height| {
                     let full = StripLayout::new(&setup, width, height, theta_l)?;
-                    layout = Some(full);
+                    layout = Some((full, (width, height)));
                     Ok::<_, ExtractError>(full.bands())
                 })?;
-                let layout = layout.expect("the row selector ran").strips_only();
-                Ok((frame, layout))
+                let (layout, size) = layout.expect("the row selector ran");
+                Ok((frame, layout.strips_only(), size))
             })
             .collect::<Result<_, ExtractError>>()?;
-        let layout = frames[0].1;
-        let frames: Vec<Frame> = frames.into_iter().map(|(frame, _)| frame).collect();
+        // Frames of two sizes (a full one and a half-size one both fit the setup) are
+        // named by their whole sizes, not by the strip rows read of them.
+        let (layout, size) = (frames[0].1, frames[0].2);
+        if let Some((frame, _, found)) = frames.iter().find(|f| f.2 != size) {
+            return Err(ExtractError::Hdr {
+                theta_l,
+                error: hdr::HdrError::SizeMismatch {
+                    path: frame.path.clone(),
+                    width: size.0,
+                    height: size.1,
+                    found_w: found.0,
+                    found_h: found.1,
+                },
+            });
+        }
+        let frames: Vec<Frame> = frames.into_iter().map(|(frame, _, _)| frame).collect();
         let map = hdr::merge(&frames, &options.merge)
             .map_err(|error| ExtractError::Hdr { theta_l, error })?;
         if let Some(hdr_dir) = &options.hdr_dir {

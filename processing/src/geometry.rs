@@ -123,6 +123,16 @@ pub(crate) struct Lighting {
     pub irradiance: f64,
 }
 
+/// A range of a setup field as a message writes it: `[min, max]`, or `(0, max]` for the
+/// positive values up to `max` (a lower bound of the least positive number).
+fn range_text(min: f64, max: f64) -> String {
+    if min == f64::MIN_POSITIVE {
+        format!("(0, {}]", Brief(max))
+    } else {
+        format!("[{}, {}]", Brief(min), Brief(max))
+    }
+}
+
 /// Why a [`Setup`] cannot be used.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum GeometryError {
@@ -130,14 +140,14 @@ pub enum GeometryError {
     NotPositive { field: &'static str, value: f64 },
     #[error("setup field `{field}` must be finite, got {}", Brief(*.value))]
     NotFinite { field: &'static str, value: f64 },
-    #[error("setup field `{field}` is {}, outside [{}, {}]", Brief(*.value), Brief(*.min), Brief(*.max))]
+    #[error("setup field `{field}` is {}, outside {}", Brief(*.value), range_text(*.min, *.max))]
     OutOfRange {
         field: &'static str,
         value: f64,
         min: f64,
         max: f64,
     },
-    #[error("the {what} ({distance} mm from the axis) must lie outside the cylinder of radius {radius} mm")]
+    #[error("the {what} ({} mm from the axis) must lie outside the cylinder of radius {} mm", Brief(*.distance), Brief(*.radius))]
     InsideCylinder {
         what: &'static str,
         distance: f64,

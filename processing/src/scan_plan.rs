@@ -11,6 +11,7 @@ use std::collections::BTreeMap;
 use std::fmt;
 use std::path::{Path, PathBuf};
 
+use gonio_files::scan_layout::format_shutter;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
@@ -151,7 +152,11 @@ impl fmt::Display for Gap {
         match self {
             Gap::ThetaL(t) => write!(f, "θL {t:.1}° (no capture)"),
             Gap::Exposure { theta_l, shutter_s } => {
-                write!(f, "θL {theta_l:.1}°: the {shutter_s} s exposure")
+                write!(
+                    f,
+                    "θL {theta_l:.1}°: the {} exposure",
+                    format_shutter(*shutter_s)
+                )
             }
             Gap::Numbering { theta_l, missing } => write!(f, "θL {theta_l:.1}°: {missing}"),
             Gap::SidecarMissing(p) => write!(f, "{}: no .json sidecar", p.display()),
@@ -349,7 +354,7 @@ mod tests {
                 Gap::ImageMissing(d.join("theta_l_-30.0/exp_01.json")),
             ]
         );
-        assert!(describe(&found).contains("θL -30.0°: the 0.1 s exposure"));
+        assert!(describe(&found).contains("θL -30.0°: the 1/10 s exposure"));
 
         std::fs::remove_dir_all(d.join("theta_l_-20.0")).unwrap();
         assert_eq!(gaps(d).unwrap()[0], Gap::ThetaL(-20.0));

@@ -2,7 +2,7 @@
 //! stored before anything moves. Each step belongs to one lane (docs/ARCHITECTURE.md,
 //! "Daemon"): the hardware lane moves and captures, the processing lane computes.
 
-use gonio_drivers::camera_choice::format_shutter;
+use gonio_files::scan_layout::format_shutter;
 use serde::{Deserialize, Serialize};
 
 /// What a scan measures, after validation ("auto" bracket already resolved).

@@ -45,6 +45,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     write_atomically(&args.out, text.as_bytes())
         .with_context(|| format!("writing {}", args.out.display()))?;
     print_summary(&calibration, &prior, &args.out);
+    super::plan_check::say_if_unplanned(&args.dir);
     Ok(())
 }
 

@@ -9,7 +9,7 @@ use gonio_files::input::{read_input_to_string, MAX_SMALL_FILE_BYTES};
 use gonio_mock_hw::grbl::{GrblConfig, GrblEmulator};
 use gonio_mock_hw::world::World;
 
-use crate::interrupt;
+use crate::{interrupt, progress};
 
 /// Where the emulated arm starts: 10° below its home switch (θ = 0).
 const START_DEG: f64 = -10.0;
@@ -56,9 +56,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .context("starting the signal handler")?;
     let signal = runtime.block_on(interrupt::wait_for_signal());
     drop(emulator);
-    eprintln!(
+    progress::say(format_args!(
         "gonio emulate-arm: stopped by {signal}; {} removed",
         args.link.display()
-    );
+    ));
     Ok(())
 }

@@ -115,5 +115,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             listed.join(", ")
         );
     }
+    super::plan_check::say_if_unplanned(&args.dir);
     Ok(())
 }

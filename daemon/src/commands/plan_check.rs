@@ -5,9 +5,12 @@ use std::path::Path;
 
 use gonio_processing::scan_plan;
 
+use crate::progress;
+
 /// Refuses `dir` when it lacks a planned θL or frame, or holds half a frame (an image
 /// without its sidecar, a sidecar without its image); with `allow_missing`, says what is
-/// missing on stderr and goes on.
+/// missing on stderr and goes on. A directory without a plan is checked for half frames
+/// only ([`say_if_unplanned`]).
 pub fn require_whole(dir: &Path, allow_missing: bool) -> anyhow::Result<()> {
     let gaps = scan_plan::gaps(dir)?;
     if gaps.is_empty() {
@@ -15,13 +18,28 @@ pub fn require_whole(dir: &Path, allow_missing: bool) -> anyhow::Result<()> {
     }
     let what = scan_plan::describe(&gaps);
     if allow_missing {
-        eprintln!("warning: {}: going on without {what}", dir.display());
+        progress::say(format_args!(
+            "warning: {}: going on without {what}",
+            dir.display()
+        ));
         return Ok(());
     }
     anyhow::bail!(
         "{}: incomplete scan: {what} (--allow-missing to go on without)",
         dir.display()
     )
+}
+
+/// Says on stderr, once a command's work is done, that `dir` has no plan, so that
+/// whether it held every θL and frame was not checked.
+pub fn say_if_unplanned(dir: &Path) {
+    if matches!(scan_plan::ScanPlan::read(dir), Ok(None)) {
+        progress::say(format_args!(
+            "warning: {}: no {}: whether every θL and frame was here is not checked",
+            dir.display(),
+            scan_plan::PLAN_FILE
+        ));
+    }
 }
 
 /// For samples of a scan directory (`DIR/samples.csv` beside `DIR/plan.json`): the θL
@@ -51,7 +69,10 @@ pub fn require_planned_theta_l(
         dir.join(scan_plan::PLAN_FILE).display()
     );
     if allow_missing {
-        eprintln!("warning: {}: going on without {what}", samples.display());
+        progress::say(format_args!(
+            "warning: {}: going on without {what}",
+            samples.display()
+        ));
         return Ok(());
     }
     anyhow::bail!(

@@ -5,8 +5,8 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use gonio_drivers::camera_choice::format_shutter;
 use gonio_files::output::write_atomically;
+use gonio_files::scan_layout::format_shutter;
 use gonio_files::scan_layout::theta_dir_name;
 use gonio_mock_hw::render::{self, reference};
 use gonio_processing::geometry::Setup;

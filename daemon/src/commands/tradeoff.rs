@@ -190,7 +190,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 binning: args.binning,
             })?;
             // The scan is deleted at the end: its path is not worth printing.
-            eprintln!("rendered {count} captures of scene `{}`", args.scene);
+            progress::say(format_args!(
+                "rendered {count} captures of scene `{}`",
+                args.scene
+            ));
             rendered = (dir, guard);
             rendered.0.path().to_path_buf()
         }
@@ -234,7 +237,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             spinner.finish_and_clear();
             let fit = fit.context("choosing the model")?;
             if let Some(selection) = &fit.selection {
-                eprintln!("model: {}", selection.reason);
+                progress::say(format_args!("model: {}", selection.reason));
             }
             Some((fit.model, fit.roughness))
         }
@@ -259,7 +262,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .filter(|&m| !(model.has_fresnel_colour() && m == FitMethod::NelderMead))
         .collect();
     if methods.len() < args.methods.len() {
-        eprintln!("nelder-mead skipped: {model} is fitted by the robust method only");
+        progress::say(format_args!(
+            "nelder-mead skipped: {model} is fitted by the robust method only"
+        ));
     }
     if methods.is_empty() {
         anyhow::bail!("--methods: {model} is fitted by the robust method only");
@@ -429,11 +434,11 @@ fn extract_all(
             bar.inc(1);
         }
         bar.suspend(|| {
-            eprintln!(
+            progress::say(format_args!(
                 "extracted {} θL with {b} of {bracket_len} exposures in {:.2} s",
                 positions.len(),
                 row.iter().map(|e| e.seconds).sum::<f64>()
-            )
+            ))
         });
         all.push(row);
     }
