@@ -200,7 +200,12 @@ impl Calibration {
 
     /// Measured over prior seconds of `step`'s kind, if measured.
     pub(super) fn ratio(&self, step: &Step) -> Option<f64> {
-        match self.sums.get(&Kind::of(step)) {
+        self.ratio_of(Kind::of(step))
+    }
+
+    /// Measured over prior seconds of the steps of `kind`, if measured.
+    pub(super) fn ratio_of(&self, kind: Kind) -> Option<f64> {
+        match self.sums.get(&kind) {
             Some(&(measured, prior)) if prior > 0.0 => Some(measured / prior),
             _ => None,
         }

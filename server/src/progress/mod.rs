@@ -6,7 +6,9 @@
 //! place in the scan (its bracket's frames, its θL's rank, the θL count), scaled by how
 //! long the steps of its kind already done in this scan took against their priors (a
 //! kind this scan has not measured yet, such as the fits at its end, by what it took in
-//! the previous scan that ended done); a metering step not done brings the bracket the
+//! the previous scan that ended done, else, for a processing kind, as far off its prior
+//! as this scan's θL processing is: every processing prior is the same probe's measure
+//! of this machine); a metering step not done brings the bracket the
 //! scan last metered (or a typical one). Each model's fit is a kind of its own, the
 //! automatic choice another, a θL's samples and HDR merge a third. A processing step
 //! is measured by the time it would have taken with the cores to itself: the steps
@@ -28,7 +30,7 @@ use time::OffsetDateTime;
 use crate::plan::{Lane, Step};
 use crate::store::{StepRecord, StepState};
 use crate::timing::{Timing, EXPECTED_BRACKET_S};
-use calibration::{Calibration, CoreRuns};
+use calibration::{Calibration, CoreRuns, Kind};
 pub use journal::metered_bracket;
 use journal::{arm_angles, elapsed_s, parse_time, places};
 use play::{play, Rules, Work};
@@ -79,9 +81,17 @@ pub fn progress(
         Calibration::of(steps, timing, &runs),
         Calibration::of(earlier, timing, &CoreRuns::of(earlier, timing, now)),
     );
+    // A processing kind measured neither in this scan nor in the one before (the fits
+    // of a new data directory's first scan) is off its prior as this scan's θL
+    // processing is: both priors are the timing probe's measures on this machine.
     let scale = |step: &Step, prior_s: f64| {
         own.ratio(step)
             .or_else(|| before.ratio(step))
+            .or_else(|| {
+                (step.lane() == Lane::Processing)
+                    .then(|| own.ratio_of(Kind::Theta))
+                    .flatten()
+            })
             .map_or(prior_s, |ratio| prior_s * ratio)
     };
     let work = work_ahead(steps, timing, now, &runs, &scale);

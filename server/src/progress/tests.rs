@@ -392,28 +392,13 @@ fn metered_brackets_and_live_fits_come_from_step_results() {
 /// how many recordings meet each target.
 #[test]
 fn recorded_first_scans_are_estimated_within_the_targets() {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/time-left");
-    let mut files: Vec<_> = std::fs::read_dir(&dir)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .collect();
-    files.sort();
-    assert!(files.len() >= 10, "{}", dir.display());
     // Recordings meeting the target before the first θL is processed, and after.
     let mut met = [0_usize; 2];
-    for file in &files {
-        let (polls, hdr) = replay(&std::fs::read_to_string(file).unwrap());
-        let name = file.file_name().unwrap().to_string_lossy().into_owned();
-        let mut worst = [0.0_f64; 3];
+    let recordings = recordings("time-left");
+    assert!(recordings.len() >= 10);
+    for (name, text) in &recordings {
+        let (polls, hdr) = replay(text);
         for poll in &polls {
-            let floor = |s: f64| s.max(10.0);
-            let error = (poll.eta_s - poll.left_s).abs() / floor(poll.left_s);
-            let phase = if poll.processed >= 1 {
-                2
-            } else {
-                usize::from(poll.metered)
-            };
-            worst[phase] = worst[phase].max(error);
             let ratio = floor(poll.eta_s) / floor(poll.left_s);
             assert!(
                 (1.0 / 3.0..=3.0).contains(&ratio),
@@ -423,6 +408,7 @@ fn recorded_first_scans_are_estimated_within_the_targets() {
                 poll.left_s
             );
         }
+        let worst = worst_errors(&polls);
         eprintln!(
             "{name}: worst error {:.0} % before metering, {:.0} % before the first θL is \
              processed, {:.0} % after; HDR merges at {:.2}–{:.2}× their prior",
@@ -435,7 +421,7 @@ fn recorded_first_scans_are_estimated_within_the_targets() {
         met[0] += usize::from(worst[0].max(worst[1]) <= 0.35);
         met[1] += usize::from(worst[2] <= 0.15);
     }
-    let n = files.len();
+    let n = recordings.len();
     eprintln!(
         "within 35 % before the first θL is processed: {} of {n} recordings; within 15 % \
          after: {} of {n}",
@@ -443,6 +429,72 @@ fn recorded_first_scans_are_estimated_within_the_targets() {
     );
     let least = (TARGET_MET_SHARE * n as f64).ceil() as usize;
     assert!(met[0] >= least && met[1] >= least, "{met:?} of {n}");
+}
+
+/// First scans whose timing probe ran on a busy machine (tests/data/time-left-busy-probe:
+/// README's scan with the release build, the probe run while other processes kept a
+/// load of 7–9 on 2 cores, which made its costs several times what the scan then
+/// took): the kinds a scan measures last (gathering, the fits) are scaled as its θL
+/// processing is, so that once the first θL is processed the estimate is within half
+/// of the time left (with each kind's own probe cost it was off by more than that).
+/// Printed: each recording's worst poll in each phase.
+#[test]
+fn a_probe_run_on_a_busy_machine_is_corrected_once_a_theta_is_processed() {
+    let recordings = recordings("time-left-busy-probe");
+    assert_eq!(recordings.len(), 3);
+    for (name, text) in &recordings {
+        let (polls, _) = replay(text);
+        let worst = worst_errors(&polls);
+        eprintln!(
+            "{name}: worst error {:.0} % before metering, {:.0} % before the first θL is \
+             processed, {:.0} % after",
+            100.0 * worst[0],
+            100.0 * worst[1],
+            100.0 * worst[2],
+        );
+        assert!(worst[2] <= 0.5, "{name}: {:.0} % after", 100.0 * worst[2]);
+    }
+}
+
+/// The recordings of `tests/data/<dir>`: file name and text, by name.
+fn recordings(dir: &str) -> Vec<(String, String)> {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(dir);
+    let mut files: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    files.sort();
+    files
+        .iter()
+        .map(|f| {
+            let name = f.file_name().unwrap().to_string_lossy().into_owned();
+            (name, std::fs::read_to_string(f).unwrap())
+        })
+        .collect()
+}
+
+/// Seconds counted no smaller than 10 s: in a scan's last seconds a relative error
+/// says nothing.
+fn floor(seconds: f64) -> f64 {
+    seconds.max(10.0)
+}
+
+/// The worst error of `polls` before the first metering, before the first θL is
+/// processed, and after, each against the time actually left ([`floor`]ed).
+fn worst_errors(polls: &[Poll]) -> [f64; 3] {
+    let mut worst = [0.0_f64; 3];
+    for poll in polls {
+        let error = (poll.eta_s - poll.left_s).abs() / floor(poll.left_s);
+        let phase = if poll.processed >= 1 {
+            2
+        } else {
+            usize::from(poll.metered)
+        };
+        worst[phase] = worst[phase].max(error);
+    }
+    worst
 }
 
 /// The share of recordings that meet each target, at least.
