@@ -9,6 +9,8 @@
 //!   then homes, and says so in the hardware log; it answers 409 with the reason on a
 //!   refused board and on a controller that does not home; once homed, an emergency
 //!   stop's hold ends, and a stop right after Home stops the homing, the hold staying;
+//! - a board that resets during a bracket is homed and placed again before its next
+//!   capture;
 //! - a scan waiting on the arm (a failed homing) holds the rest of its sweep;
 //! - concurrent confirmations of the same scan mount its sample once.
 
@@ -162,10 +164,10 @@ fn a_position_is_declared_only_at_rest() {
     assert_eq!(log_entries(&daemon, "declare").len(), 1);
 }
 
-#[test]
-fn home_clears_the_alarm_of_an_emergency_stop_and_says_so() {
-    let dir = temp_dir("arm-state-home-alarm");
-    let daemon = Daemon::start(&dir, &emulator_config_scaled(0.5, 0.01));
+/// A daemon whose scan (its id) was paused by STOP ARM during a long move: the stop
+/// reset the board, which reports an alarm.
+fn stopped_mid_move(dir: &Path) -> (Daemon, i64) {
+    let daemon = Daemon::start(dir, &emulator_config_scaled(0.5, 0.01));
     let id = daemon.post_gold_scan(&[-80.0], &[0.05]);
     daemon.wait_for("/api/hardware", Duration::from_secs(60), |h| {
         h["arm"]["state"] == "moving"
@@ -176,10 +178,16 @@ fn home_clears_the_alarm_of_an_emergency_stop_and_says_so() {
         paused["reason"], "emergency stop by the operator",
         "{paused}"
     );
-    // The stop reset the board during the move: it reports an alarm.
     daemon.wait_for("/api/hardware", Duration::from_secs(10), |h| {
         h["arm"]["state"] == "alarm"
     });
+    (daemon, id)
+}
+
+#[test]
+fn home_clears_the_alarm_of_an_emergency_stop_and_says_so() {
+    let dir = temp_dir("arm-state-home-alarm");
+    let (daemon, id) = stopped_mid_move(&dir);
     assert_eq!(daemon.get("/api/hardware").json["halted"], true);
     let home = daemon.post("/api/arm/home", &json!({}));
     assert_eq!(home.status, 202, "{:?}", home.json);
@@ -221,16 +229,7 @@ fn home_clears_the_alarm_of_an_emergency_stop_and_says_so() {
 #[test]
 fn a_stop_right_after_home_stops_the_homing_and_the_hold_stays() {
     let dir = temp_dir("arm-state-stop-homing");
-    let daemon = Daemon::start(&dir, &emulator_config_scaled(0.5, 0.01));
-    let id = daemon.post_gold_scan(&[-80.0], &[0.05]);
-    daemon.wait_for("/api/hardware", Duration::from_secs(60), |h| {
-        h["arm"]["state"] == "moving"
-    });
-    assert_eq!(daemon.post("/api/arm/stop", &json!({})).status, 200);
-    daemon.wait_state(id, &["paused"], Duration::from_secs(30));
-    daemon.wait_for("/api/hardware", Duration::from_secs(10), |h| {
-        h["arm"]["state"] == "alarm"
-    });
+    let (daemon, _) = stopped_mid_move(&dir);
     let next = daemon.post_gold_scan(&[-20.0], &[0.05]);
     // Home, and STOP ARM at once, as an operator changing their mind: the homing is
     // dropped or abandoned, the hold stays, nothing moves.
@@ -263,6 +262,50 @@ fn a_stop_right_after_home_stops_the_homing_and_the_hold_stays() {
     });
     let done = daemon.wait_state(next, &["done", "failed"], Duration::from_secs(120));
     assert_eq!(done["state"], "done", "{done}");
+}
+
+#[test]
+fn a_board_reset_during_a_bracket_is_seen_before_the_next_capture() {
+    let dir = temp_dir("arm-state-reset-bracket");
+    let daemon = Daemon::start(&dir, &emulator_config_scaled(0.05, 0.5));
+    let id = daemon.post_gold_scan(&[-20.0], &[2.0, 1.0, 0.5, 0.25]);
+    let first = daemon.wait_for("/api/hardware/log", Duration::from_secs(60), |log| {
+        log.as_array()
+            .unwrap()
+            .iter()
+            .any(|e| e["action"] == "capture")
+    });
+    let before = first.as_array().unwrap().len();
+    fault(&daemon, "arm_reset");
+    let done = daemon.wait_state(id, &["done", "failed"], Duration::from_secs(120));
+    assert_eq!(done["state"], "done", "{done}");
+    // After the reset: the arm homed and placed again before the next frame.
+    let log = daemon.get("/api/hardware/log").json;
+    let after: Vec<String> = log.as_array().unwrap()[before..]
+        .iter()
+        .map(|e| format!("{} {}", e["action"].as_str().unwrap(), e["detail"]))
+        .collect();
+    // The capture under way when the board reset ends; the next one is taken only
+    // once the arm is homed and back at its θL.
+    let homed = after.iter().position(|e| e.starts_with("home "));
+    let captures_before = after[..homed.unwrap_or(after.len())]
+        .iter()
+        .filter(|e| e.starts_with("capture "))
+        .count();
+    assert!(
+        homed.is_some() && captures_before <= 1,
+        "no homing before the next capture: {after:?}"
+    );
+    let placed = after[homed.unwrap()..]
+        .iter()
+        .position(|e| e.starts_with("move "));
+    let next = after[homed.unwrap()..]
+        .iter()
+        .position(|e| e.starts_with("capture "));
+    assert!(
+        placed < next,
+        "not placed again before capturing: {after:?}"
+    );
 }
 
 #[test]

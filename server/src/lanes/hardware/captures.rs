@@ -107,6 +107,10 @@ impl HardwareLane {
                 (image, exposure)
             }
             None => {
+                // The board may have reset (or gone) since the last capture: asked
+                // before each one, so that the arm is homed and placed again first and
+                // /api/hardware says so at once.
+                self.refresh_arm_status();
                 self.place_for_capture(id, theta_l)?;
                 self.camera_op(id, &format!("exposure for {what}"), |c| {
                     c.set_exposure(requested)
