@@ -564,9 +564,11 @@ fn page_tells_the_truth_in_every_state() {
         Duration::from_secs(30),
     );
     assert!(held.as_str().unwrap().starts_with("arm stopped"), "{held}");
+    // Home is offered (the hold ends once the arm is homed), and the arm's line says
+    // its position was lost.
     let arm = page.wait_for(
         "the arm's unknown position",
-        "!document.getElementById('home').hidden && document.getElementById('arm').textContent",
+        "!document.getElementById('home').hidden && document.getElementById('arm').textContent.includes('position unknown') && document.getElementById('arm').textContent",
         Duration::from_secs(30),
     );
     let arm = arm.as_str().unwrap();

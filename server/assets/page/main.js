@@ -60,7 +60,7 @@ $("sweepform").addEventListener("submit", async (e) => {
     const r = await post(target("sweepform"), body);
     const when = body.start_at ? `, starting ${localTime(body.start_at)}` : "";
     const waits = waitsText(r.waits);
-    $("sweepmsg").innerHTML = `<span class="ok">sweep ${r.id} queued: ${r.scans.length} scans${escapeHtml(when)}</span>` +
+    $("sweepmsg").innerHTML = `<span class="ok">sweep ${r.id} queued: ${r.scans.length} scan${r.scans.length === 1 ? "" : "s"}${escapeHtml(when)}</span>` +
       (waits ? `<br><span class="note" id="sweepwaits">${escapeHtml(waits)}</span>` : "");
     page.sweep = r.id;
     refresh();
@@ -100,16 +100,22 @@ $("armpos").addEventListener("submit", async (ev) => {
   } catch (err) { $("armposmsg").textContent = err.message; }
 });
 
+// One control's request at a time: a second click while one is under way (a
+// double-click) sends nothing, so it cannot be refused for the first one's effect.
+let acting = false;
 document.querySelectorAll("#detail button[data-act]").forEach((btn) => {
   btn.addEventListener("click", async () => {
-    if (page.selected === null) return;
+    if (page.selected === null || acting) return;
     const id = page.selected, act = btn.dataset.act;
+    acting = true;
     try {
       const s = await post(`/api/scans/${id}/${act}`);
       // Said at once: a retried step may fail again before the next poll shows it ran.
-      say($("actmsg"), `scan ${id}: ${act} sent, now ${s.state}`, false);
+      if (page.selected === id) say($("actmsg"), `scan ${id}: ${act} sent, now ${s.state}`, false);
       refresh();
-    } catch (err) { say($("actmsg"), err.message, true); }
+    } catch (err) {
+      if (page.selected === id) say($("actmsg"), err.message, true);
+    } finally { acting = false; }
   });
 });
 
@@ -153,6 +159,9 @@ async function poll() {
     const { scans, sweeps, hw, detail } = await overview(id);
     // Another scan selected meanwhile: its own poll draws the page.
     if (page.selected !== id) return;
+    // The scan shown is gone (the daemon started on another data directory): the
+    // newest is shown instead.
+    if (id !== null && !scans.some((s) => s.id === id)) deselect();
     showOverview(scans, sweeps, hw);
     showSweep(sweeps);
     if (detail) show(detail);
@@ -163,12 +172,21 @@ async function poll() {
   }
 }
 
+// Empties the detail panel: nothing of a scan shown before stays, nor what a control
+// said of it.
+function deselect() {
+  page.selected = null;
+  page.lastDone = -1;
+  page.lastScan = null;
+  $("detail").hidden = true;
+  say($("actmsg"), "", false);
+}
+
 // Shows scan `id` in the detail panel, emptied until its first view arrives.
 function select(id) {
   if (page.selected === id) return;
+  deselect();
   page.selected = id;
-  page.lastDone = -1;
-  page.lastScan = null;
   $("detail").hidden = false;
   // Nothing of the scan shown before stays while the new one loads.
   $("dtitle").textContent = `Scan ${id}`;

@@ -207,9 +207,11 @@ function budgetTable(b) {
   }
   P.m.forEach((x, c) => { names.push(P.m.length === 1 ? "m" : `m ${CHANNEL_NAMES[c]}`); rows.push(x); });
   const sources = rows[0].contributions.map((c) => c.source.replace(/_/g, " "));
-  const num = (v) => (v === 0 ? "0" : Math.abs(v) >= 0.01 && Math.abs(v) < 1e4 ? v.toPrecision(3) : v.toExponential(1));
+  // Minus signs as U+2212, at which no line breaks (`1.7e-3` never splits as `1.7e-`).
+  const minus = (t) => t.replace(/-/g, "\u2212");
+  const num = (v) => minus(v === 0 ? "0" : Math.abs(v) >= 0.01 && Math.abs(v) < 1e4 ? v.toPrecision(3) : v.toExponential(1));
   // Uncertainties to two significant digits (GUM 7.2.6).
-  const unc = (v) => (v === 0 ? "0" : Math.abs(v) >= 0.01 && Math.abs(v) < 1e4 ? v.toPrecision(2) : v.toExponential(1));
+  const unc = (v) => minus(v === 0 ? "0" : Math.abs(v) >= 0.01 && Math.abs(v) < 1e4 ? v.toPrecision(2) : v.toExponential(1));
   const largest = (x) => x.contributions.reduce((a, c) => (c.u > a.u ? c : a)).source.replace(/_/g, " ");
   const head = `<tr><th></th><th>value</th>${sources.map((s) => `<th>${escapeHtml(s)}</th>`).join("")}<th>u<sub>c</sub></th><th>U (k = ${b.coverage_factor})</th><th>interval</th></tr>`;
   const body = rows.map((x, i) => `<tr><th>${escapeHtml(names[i])}</th><td>${num(x.value)}</td>` +
@@ -217,7 +219,7 @@ function budgetTable(b) {
     `<td>${unc(x.combined)}</td><td>${unc(x.expanded)}</td><td>[${num(x.interval[0])},<wbr> ${num(x.interval[1])}]</td></tr>`).join("");
   const summary = `uncertainty budget: ` + rows.map((x, i) => `${escapeHtml(names[i])} ± ${num(x.expanded)}`).join(", ") +
     ` (k = ${b.coverage_factor}); largest source of Ks ${CHANNEL_NAMES[1]}: ${escapeHtml(largest(P.ks[1]))}; residuals ${b.residual_to_noise.toFixed(2)}× the noise`;
-  return `<details class="budget"><summary>${summary}</summary><div class="scroll"><table>${head}${body}</table></div></details>`;
+  return `<details class="budget"><summary>${summary}</summary><div class="scroll"><table><thead>${head}</thead><tbody>${body}</tbody></table></div></details>`;
 }
 
 const HOVER_HINT = "move over or tap the plot for the values at a point";

@@ -125,14 +125,18 @@ export function showOverview(scans, sweeps, hw) {
   // the stop's note says so on every page that polls, and goes once the hold ends.
   const held = "nothing runs until the arm is homed or a scan resumed";
   const note = $("stopmsg");
-  if (hw.halted && !note.textContent.includes(held)) {
+  // A control's failure (red) stays as it is.
+  if (hw.halted && !note.textContent.includes(held) && note.className !== "msg") {
     note.textContent = (note.textContent || "arm stopped") + "; " + held;
     note.className = "note";
   } else if (!hw.halted && note.textContent.includes(held)) {
     note.textContent = "";
   }
   $("armpos").hidden = a.state !== "needs_position";
-  $("home").hidden = !["needs_homing", "alarm", "hold"].includes(a.state);
+  // Home is offered wherever it is needed: a lost position, and an emergency stop's
+  // hold, which homing ends (also when the arm is at rest with its position known).
+  const holdEnds = hw.halted && a.homes && ["idle", "hold"].includes(a.state);
+  $("home").hidden = !(["needs_homing", "alarm", "hold"].includes(a.state) || holdEnds);
   const c = hw.camera;
   // A capture outlives the scan's pause or end by the exposure under way.
   const state = c.state === "capturing" && !scans.some((s) => s.state === "running") ? "finishing the exposure under way" : c.state;

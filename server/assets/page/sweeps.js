@@ -24,7 +24,7 @@ export function showSweep(sweeps) {
   $("swtitle").textContent = `Sweep ${w.id}: ${w.request.samples.join(", ")}`;
   $("swstate").innerHTML = `<span class="state-${w.state}">${w.state}</span> ${w.progress.done}/${w.progress.total}` +
     ` ${bar(w.progress.done, w.progress.total)}` +
-    `<div class="muted">start ${escapeHtml(w.start_at ? localTime(w.start_at) : "at once")} (local time)</div>`;
+    `<div class="muted">${escapeHtml(w.start_at ? `start ${localTime(w.start_at)} (local time)` : "start at once")}</div>`;
   const text = waitsText(w.waits);
   $("swwaits").innerHTML = text ? `<p class="note" id="swwaitnote">${escapeHtml(text)}</p>` : "";
   document.querySelectorAll("#sweepdetail button[data-sweep-act]").forEach((btn) => {
