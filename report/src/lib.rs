@@ -55,6 +55,8 @@ pub enum ReportError {
     Empty { dir: PathBuf },
     #[error("{dir}: no fit: no colour to state (fit the scan first)")]
     NoFit { dir: PathBuf },
+    #[error("{dir}: not a scan directory (no setup.json and no plan.json)")]
+    NotAScan { dir: PathBuf },
 }
 
 /// The fit files a scan directory may hold, in the order the report prefers them as the
@@ -85,7 +87,7 @@ pub(crate) struct Scan {
     pub fits: Vec<Fit>,
     pub truth: Option<Value>,
     /// First and last capture time of the sidecars (RFC 3339 as written).
-    pub captured: Option<(String, String)>,
+    pub captured: Option<Captures>,
 }
 
 impl Scan {
@@ -125,16 +127,22 @@ impl Scan {
         }
         let plan = gonio_processing::scan_plan::ScanPlan::read(dir)
             .map_err(|e| invalid(dir, e.to_string()))?;
+        let setup = json_file("setup.json")?;
+        if setup.is_none() && plan.is_none() {
+            return Err(ReportError::NotAScan {
+                dir: dir.to_path_buf(),
+            });
+        }
         let gaps = gonio_processing::scan_plan::gaps(dir).unwrap_or_default();
         Ok(Scan {
             dir: dir.to_path_buf(),
-            setup: json_file("setup.json")?,
+            setup,
             plan,
             gaps,
             samples,
             fits,
             truth: json_file("truth.json")?,
-            captured: capture_times(dir),
+            captured: captures(dir),
         })
     }
 
@@ -165,28 +173,62 @@ impl Scan {
     }
 }
 
-/// The earliest and latest `time` of the captures' sidecars below `dir`.
-fn capture_times(dir: &Path) -> Option<(String, String)> {
-    let mut times = Vec::new();
+/// What the captures' sidecars below a scan directory say.
+#[derive(Debug, Default)]
+pub struct Captures {
+    /// Earliest and latest capture time (RFC 3339 as written).
+    pub first: String,
+    pub last: String,
+    /// The cameras named, each once.
+    pub cameras: Vec<String>,
+    /// Each θL's exposures (shutter times, seconds, longest first), θL in order.
+    pub brackets: Vec<(f64, Vec<f64>)>,
+}
+
+/// The captures below `dir`, from their sidecars; `None` without any.
+fn captures(dir: &Path) -> Option<Captures> {
+    let mut sidecars = Vec::new();
     for entry in std::fs::read_dir(dir).ok()?.flatten() {
-        let path = entry.path();
         let is_theta_dir = entry.file_type().is_ok_and(|t| t.is_dir())
             && entry.file_name().to_string_lossy().starts_with("theta_l_");
         if !is_theta_dir {
             continue;
         }
-        for frame in std::fs::read_dir(&path).ok()?.flatten() {
+        for frame in std::fs::read_dir(entry.path()).ok()?.flatten() {
             let image = frame.path();
             if gonio_processing::capture::is_capture_path(&image) {
                 if let Ok(sidecar) = gonio_processing::capture::read_sidecar(&image) {
-                    times.push(sidecar.time);
+                    sidecars.push(sidecar);
                 }
             }
         }
     }
+    let mut captures = Captures::default();
     // RFC 3339 times in one zone sort as text.
+    let mut times: Vec<&str> = sidecars.iter().map(|s| s.time.as_str()).collect();
     times.sort();
-    Some((times.first()?.clone(), times.last()?.clone()))
+    captures.first = (*times.first()?).to_owned();
+    captures.last = (*times.last()?).to_owned();
+    for sidecar in &sidecars {
+        if !captures.cameras.contains(&sidecar.camera) {
+            captures.cameras.push(sidecar.camera.clone());
+        }
+        match captures
+            .brackets
+            .iter_mut()
+            .find(|(t, _)| *t == sidecar.theta_l)
+        {
+            Some((_, shutters)) => shutters.push(sidecar.shutter_s),
+            None => captures
+                .brackets
+                .push((sidecar.theta_l, vec![sidecar.shutter_s])),
+        }
+    }
+    captures.brackets.sort_by(|a, b| b.0.total_cmp(&a.0));
+    for (_, shutters) in &mut captures.brackets {
+        shutters.sort_by(|a, b| b.total_cmp(a));
+    }
+    Some(captures)
 }
 
 /// The report of the scan in `dir` as one HTML document; `version` is the software's,
@@ -254,7 +296,8 @@ table.facts td,table.facts th{text-align:left}\
 .swatch{display:inline-block;width:28px;height:14px;border:1px solid #888;vertical-align:middle}.muted{color:#666;font-size:12px}\
 svg{width:100%;height:auto;max-width:900px;display:block}\
 footer{margin-top:32px;color:#666;font-size:12px}\
-@media print{body{max-width:none;padding:0}.scroll{overflow:visible}section{break-inside:avoid}}\
+@media print{body{max-width:none;padding:0}.scroll{overflow:visible}section{break-inside:avoid}\
+table.budget th,table.budget td{font-size:11px;padding:1px 4px}}\
 @page{size:A4;margin:15mm}";
 
 #[cfg(test)]
@@ -267,6 +310,19 @@ mod tests {
         let err = render(dir.path(), &ScanFacts::default(), "0", "now").unwrap_err();
         assert!(matches!(err, ReportError::Empty { .. }), "{err}");
         assert!(err.to_string().contains("nothing to report"));
+    }
+
+    #[test]
+    fn a_directory_that_is_not_a_scan_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(
+            dir.path().join("samples.csv"),
+            "theta_l,theta_i,theta_r,r,g,b\n-20,10,30,1,1,1\n",
+        )
+        .unwrap();
+        let err = render(dir.path(), &ScanFacts::default(), "0", "now").unwrap_err();
+        assert!(matches!(err, ReportError::NotAScan { .. }), "{err}");
+        assert!(err.to_string().contains("not a scan directory"), "{err}");
     }
 
     #[test]

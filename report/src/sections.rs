@@ -1,5 +1,6 @@
 //! The report's sections other than the plots, each an HTML `<section>`.
 
+use gonio_files::scan_layout::format_shutter;
 use gonio_processing::geometry::Setup;
 use serde_json::Value;
 
@@ -19,7 +20,21 @@ fn num(value: Option<&Value>, digits: i32) -> String {
 
 const CHANNELS: [&str; 3] = ["R", "G", "B"];
 
-/// Sample, scan, dates, notes and software.
+/// An RFC 3339 time to the second, in words a reader takes in (`2026-12-06 23:05:12Z`
+/// for `2026-12-06T23:05:12.123456789Z`); anything else as it is.
+fn short_time(rfc3339: &str) -> String {
+    let Some((date, time)) = rfc3339.split_once('T') else {
+        return rfc3339.to_owned();
+    };
+    let (clock, zone) = match time.find(['Z', 'z', '+', '-']) {
+        Some(at) => time.split_at(at),
+        None => (time, ""),
+    };
+    let whole = clock.split('.').next().unwrap_or(clock);
+    format!("{date} {whole}{zone}")
+}
+
+/// Sample, scan, dates, camera, notes and software.
 pub fn facts(
     scan: &Scan,
     facts: &ScanFacts,
@@ -40,14 +55,19 @@ pub fn facts(
         ("finished", &facts.finished),
     ] {
         if let Some(time) = time {
-            rows.push(vec![name.into(), escape(time)]);
+            rows.push(vec![name.into(), escape(&short_time(time))]);
         }
     }
-    if let Some((first, last)) = &scan.captured {
+    if let Some(captured) = &scan.captured {
         rows.push(vec![
             "captured".into(),
-            format!("{} – {}", escape(first), escape(last)),
+            format!(
+                "{} – {}",
+                escape(&short_time(&captured.first)),
+                escape(&short_time(&captured.last))
+            ),
         ]);
+        rows.push(vec!["camera".into(), escape(&captured.cameras.join(", "))]);
     }
     if let Some(truth) = &scan.truth {
         let scene = truth.get("scene").and_then(Value::as_str).unwrap_or("?");
@@ -68,7 +88,7 @@ pub fn facts(
         "software".into(),
         format!("gonio {}", escape(version)),
     ]);
-    rows.push(vec!["report made".into(), escape(generated)]);
+    rows.push(vec!["report made".into(), escape(&short_time(generated))]);
     section("Scan", &table("facts", &[], &rows))
 }
 
@@ -92,6 +112,17 @@ pub fn plan(scan: &Scan) -> String {
             };
         }
         None => body += "<p class=\"muted\">The directory has no plan.json.</p>",
+    }
+    if let Some(captured) = &scan.captured {
+        let items: String = captured
+            .brackets
+            .iter()
+            .map(|(theta_l, shutters)| {
+                let times: Vec<String> = shutters.iter().map(|&s| format_shutter(s)).collect();
+                format!("<li>θL {theta_l}°: {}</li>", escape(&times.join(", ")))
+            })
+            .collect();
+        body += &format!("<p>Exposures taken:</p><ul>{items}</ul>");
     }
     let theta_l = gonio_processing::samples::distinct_theta_l(&scan.samples);
     if !theta_l.is_empty() {
@@ -230,17 +261,23 @@ fn row3(name: &str, v: [f64; 3]) -> Vec<String> {
     row
 }
 
-/// The chosen fit's uncertainty budget in the GUM's layout: per quantity its value,
-/// each source's standard uncertainty, the combined and expanded uncertainty.
+/// The chosen fit's uncertainty budget in the GUM's layout: per quantity (a column) its
+/// value, each source's standard uncertainty (a row each), the combined and expanded
+/// uncertainty and the interval.
 pub fn budget(scan: &Scan) -> String {
     let Some(budget) = scan
         .chosen()
         .and_then(|f| f.json.get("budget"))
         .or_else(|| scan.fits.iter().find_map(|f| f.json.get("budget")))
     else {
+        let why = if scan.fits.is_empty() {
+            "No budget: no fit in the scan directory."
+        } else {
+            "No budget: the samples carry no uncertainty columns."
+        };
         return section(
             "Uncertainty budget",
-            "<p class=\"muted\">No budget: the samples carry no uncertainty columns.</p>",
+            &format!("<p class=\"muted\">{why}</p>"),
         );
     };
     let Some(parameters) = budget.get("parameters").and_then(Value::as_object) else {
@@ -277,22 +314,20 @@ pub fn budget(scan: &Scan) -> String {
         }
     }
     let k = num(budget.get("coverage_factor"), 3);
-    let mut header = vec!["quantity".into(), "value".into()];
-    header.extend(
-        sources
-            .iter()
-            .map(|s| format!("u({})", escape(&s.replace('_', " ")))),
-    );
-    header.extend([
-        "u<sub>c</sub>".into(),
-        format!("U (k = {k})"),
-        "interval".into(),
-    ]);
-    let rows: Vec<Vec<String>> = quantities
-        .iter()
-        .map(|(label, b)| {
-            let mut row = vec![escape(label), num(b.get("value"), 5)];
-            for source in &sources {
+    // A column per quantity and a row per source, as a certificate's budget lists its
+    // input quantities: a dozen sources by up to ten quantities fits a printed page.
+    let mut header = vec![String::new()];
+    header.extend(quantities.iter().map(|(label, _)| escape(label)));
+    let row = |name: String, cell: &dyn Fn(&Value) -> String| -> Vec<String> {
+        std::iter::once(name)
+            .chain(quantities.iter().map(|(_, b)| cell(b)))
+            .collect()
+    };
+    let mut rows = vec![row("value".into(), &|b| num(b.get("value"), 5))];
+    for source in &sources {
+        rows.push(row(
+            format!("u({})", escape(&source.replace('_', " "))),
+            &|b| {
                 let u = b
                     .get("contributions")
                     .and_then(Value::as_array)
@@ -301,18 +336,20 @@ pub fn budget(scan: &Scan) -> String {
                             .find(|c| c.get("source").and_then(Value::as_str) == Some(source))
                     })
                     .and_then(|c| c.get("u"));
-                row.push(num(u, 2));
-            }
-            row.push(num(b.get("combined"), 2));
-            row.push(num(b.get("expanded"), 2));
-            let interval = b.get("interval").and_then(Value::as_array);
-            row.push(match interval.map(|i| i.as_slice()) {
-                Some([lo, hi]) => format!("[{}, {}]", num(Some(lo), 5), num(Some(hi), 5)),
-                _ => "–".into(),
-            });
-            row
-        })
-        .collect();
+                num(u, 2)
+            },
+        ));
+    }
+    rows.push(row("u<sub>c</sub>".into(), &|b| num(b.get("combined"), 2)));
+    rows.push(row(format!("U (k = {k})"), &|b| num(b.get("expanded"), 2)));
+    rows.push(row("interval".into(), &|b| match b
+        .get("interval")
+        .and_then(Value::as_array)
+        .map(|i| i.as_slice())
+    {
+        Some([lo, hi]) => format!("[{},<wbr> {}]", num(Some(lo), 5), num(Some(hi), 5)),
+        _ => "–".into(),
+    }));
     let mut body = table("budget", &header, &rows);
     body += &format!(
         "<p class=\"muted\">Standard uncertainties by source (JCGM 100, law of propagation); \
@@ -421,4 +458,22 @@ pub fn other_fits(scan: &Scan) -> String {
         &rows,
     );
     section("Other fits of the scan", &body)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::short_time;
+
+    #[test]
+    fn times_are_shown_to_the_second() {
+        assert_eq!(
+            short_time("2026-12-06T23:05:12.123456789Z"),
+            "2026-12-06 23:05:12Z"
+        );
+        assert_eq!(
+            short_time("2026-12-06T23:05:12+01:00"),
+            "2026-12-06 23:05:12+01:00"
+        );
+        assert_eq!(short_time("yesterday"), "yesterday");
+    }
 }

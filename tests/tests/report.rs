@@ -1,7 +1,8 @@
 //! A scan's report: the daemon serves it for a finished scan and `gonio report` writes
 //! it from the scan directory; one self-contained HTML file that a headless Chromium
 //! opens with no network request and no error, that fits a 390 px screen (tables scroll
-//! in their boxes, plots scale) and holds the budget in the GUM's layout.
+//! in their boxes, plots scale) and holds the budget in the GUM's layout, whole on a
+//! printed A4 page.
 
 use std::time::Duration;
 
@@ -16,6 +17,7 @@ const REPORT_FACTS: &str = r#"(() => ({
     plots: document.querySelectorAll('svg').length,
     budgetRows: document.querySelectorAll('table.budget tbody tr').length,
     budgetHeader: [...document.querySelectorAll('table.budget th')].map((t) => t.textContent),
+    budgetLabels: [...document.querySelectorAll('table.budget tbody tr')].map((r) => r.cells[0].textContent),
     colourRows: [...document.querySelectorAll('table.colour tbody tr')].map((r) =>
         [...r.cells].map((c) => c.textContent)),
     swatches: [...document.querySelectorAll('table.colour .swatch')].map((s) =>
@@ -44,6 +46,12 @@ fn a_finished_scans_report_is_whole_self_contained_and_opens_in_a_browser() {
         html.contains(&format!("<td>scan</td><td>{id}</td>")),
         "scan id shown"
     );
+    // The exposures each θL took and the camera, as the sidecars say.
+    assert!(
+        html.contains("<li>θL -20°: 1/10 s, 1/100 s</li>"),
+        "exposures shown"
+    );
+    assert!(html.contains("<td>camera</td>"), "camera shown");
     // Nothing is loaded from elsewhere: no link, script or image source, no CSS url().
     for needle in ["src=", "href=", "url(", "<script", "<link"] {
         assert!(!html.contains(needle), "the report refers out: {needle}");
@@ -137,17 +145,46 @@ fn a_finished_scans_report_is_whole_self_contained_and_opens_in_a_browser() {
         .parse()
         .unwrap();
     assert!(b_15 > 10.0, "gold's b* at 15°: {b_15}");
-    // Kd, Ks per channel and m: seven quantities at least, each with u_c and U.
-    assert!(facts["budgetRows"].as_u64().unwrap() >= 7, "{facts}");
+    // Kd, Ks per channel and m: seven quantities at least, a column each; a row per
+    // source, then u_c, U and the interval.
     let header = facts["budgetHeader"].to_string();
-    for column in ["u(noise)", "u(camera offset)", "interval"] {
+    for column in ["Kd R", "Ks G", "m"] {
         assert!(header.contains(column), "{column} missing from {header}");
+    }
+    assert!(
+        facts["budgetHeader"].as_array().unwrap().len() >= 8,
+        "{facts}"
+    );
+    let labels = facts["budgetLabels"].to_string();
+    for row in [
+        "value",
+        "u(noise)",
+        "u(camera offset)",
+        "U (k = 2",
+        "interval",
+    ] {
+        assert!(labels.contains(row), "{row} missing from {labels}");
     }
     assert!(
         facts["pageWidth"].as_u64().unwrap() <= 390,
         "the report is wider than a 390 px screen: {facts}"
     );
     assert_eq!(facts["resources"], json!([]), "the report loaded resources");
+    // Printed on A4 (the page's 210 mm less 2 × 15 mm margins: 680 px at 96 dpi), the
+    // budget is whole on the page.
+    page.call("Emulation.setEmulatedMedia", json!({"media": "print"}));
+    page.call(
+        "Emulation.setDeviceMetricsOverride",
+        json!({"width": 680, "height": 960, "deviceScaleFactor": 1, "mobile": false}),
+    );
+    let printed = page.eval(
+        "(() => { const t = document.querySelector('table.budget'); \
+         return { table: t.getBoundingClientRect().width, page: document.documentElement.clientWidth }; })()",
+    );
+    assert!(
+        printed["table"].as_f64().unwrap() <= printed["page"].as_f64().unwrap(),
+        "the printed budget is wider than the page: {printed}"
+    );
     assert_eq!(page.errors(), Vec::<String>::new());
     std::fs::remove_dir_all(dir).ok();
 }
