@@ -1,5 +1,6 @@
 //! Every offline command reports a missing input in one line that names the file and
-//! its cause once (an error that quotes its cause does not also chain it).
+//! its cause once (an error that quotes its cause does not also chain it); options that
+//! do not apply, and a folder that is no scan, are refused.
 
 use std::process::Command;
 
@@ -83,4 +84,56 @@ fn missing_inputs_are_named_once_with_their_cause_once() {
         stderr.contains(&format!("cannot read silver: {NOT_FOUND}")),
         "{stderr}"
     );
+}
+
+#[test]
+fn options_that_do_not_apply_and_folders_that_are_no_scan_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("samples.csv"),
+        "theta_l,theta_i,theta_r,r,g,b\n-20,10,30,1,1,1\n",
+    )
+    .unwrap();
+    let stderr = failing(
+        dir.path(),
+        &[
+            "fit",
+            "samples.csv",
+            "--model",
+            "ward",
+            "--method",
+            "nelder-mead",
+            "--polish",
+            "--out",
+            "f.json",
+        ],
+    );
+    assert!(
+        stderr.starts_with("error: --polish") && stderr.contains("does not apply"),
+        "{stderr}"
+    );
+    let stderr = failing(
+        dir.path(),
+        &[
+            "export", "f.json", "--format", "mitsuba", "--step", "2", "--out", "f.xml",
+        ],
+    );
+    assert!(stderr.contains("do not apply"), "{stderr}");
+    let stderr = failing(
+        dir.path(),
+        &[
+            "study",
+            "samples.csv",
+            "--held-out",
+            "--reference",
+            "r.csv",
+            "--out",
+            "x",
+        ],
+    );
+    assert!(stderr.contains("cannot be used with"), "{stderr}");
+    // A folder of results that is no scan (no setup.json, no plan.json).
+    let stderr = failing(dir.path(), &["report", ".", "--out", "r.html"]);
+    assert!(stderr.contains("not a scan directory"), "{stderr}");
+    assert!(!dir.path().join("r.html").exists());
 }

@@ -13,6 +13,11 @@ use std::path::Path;
 /// beyond any real one (they take a few kilobytes), far below what memory holds.
 pub const MAX_SMALL_FILE_BYTES: u64 = 16 << 20;
 
+/// Pixels (width × height) a capture may have unless the reader is told otherwise (100
+/// megapixels; a 16-bit RGB frame of that size takes 600 MB): what gonio's readers
+/// decode by default, and so what the emulator renders at most.
+pub const DEFAULT_MAX_FRAME_PIXELS: u64 = 100_000_000;
+
 /// Opens `path` for reading as an input file of at most `max_bytes` (see the module).
 /// Errors say what is wrong (`not a regular file (a character device)`,
 /// `2000000 bytes, more than the 1048576 such a file may have`); a missing file keeps

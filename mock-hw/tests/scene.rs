@@ -123,6 +123,11 @@ fn bad_values_are_named() {
         ),
         ("bit_depth = 16", "bit_depth = 4", "camera.bit_depth"),
         (
+            "image_width = 400\nimage_height = 120",
+            "image_width = 20000\nimage_height = 20000",
+            "400000000 pixels, more than the 100000000 gonio decodes",
+        ),
+        (
             "intensity = 2000000.0",
             "intensity = nan",
             "light.intensity",

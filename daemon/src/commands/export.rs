@@ -30,15 +30,24 @@ pub struct Args {
     /// Output file.
     #[arg(long)]
     out: PathBuf,
-    /// Table: grid step in degrees.
-    #[arg(long, default_value_t = 1.0)]
-    step: f64,
-    /// Table: the grid spans −MAX…MAX degrees in θi and θr.
-    #[arg(long, default_value_t = 85.0)]
-    max_angle: f64,
+    /// Table: grid step in degrees [default: 1].
+    #[arg(long)]
+    step: Option<f64>,
+    /// Table: the grid spans −MAX…MAX degrees in θi and θr [default: 85].
+    #[arg(long)]
+    max_angle: Option<f64>,
 }
 
+/// The table's grid step and extent unless given, degrees.
+const TABLE_STEP_DEG: f64 = 1.0;
+const TABLE_MAX_ANGLE_DEG: f64 = 85.0;
+
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if matches!(args.format, Format::Mitsuba) && (args.step.is_some() || args.max_angle.is_some()) {
+        anyhow::bail!(
+            "--step and --max-angle shape a table: with --format mitsuba they do not apply"
+        );
+    }
     super::output::refuse_overwriting(&args.out, std::slice::from_ref(&args.fit), &[])?;
     let text = read_input_to_string(&args.fit, MAX_SMALL_FILE_BYTES)
         .with_context(|| format!("reading {}", args.fit.display()))?;
@@ -48,7 +57,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let written = match args.format {
         Format::Mitsuba => export::mitsuba_xml(&fit, white)?,
         Format::Table => {
-            let rows = export::table(&fit, white, args.step, args.max_angle)?;
+            let rows = export::table(
+                &fit,
+                white,
+                args.step.unwrap_or(TABLE_STEP_DEG),
+                args.max_angle.unwrap_or(TABLE_MAX_ANGLE_DEG),
+            )?;
             match args.out.extension().and_then(|e| e.to_str()) {
                 Some("csv") => export::table_csv(&rows),
                 Some("json") => {

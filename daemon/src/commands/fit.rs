@@ -131,6 +131,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         MethodArg::NelderMead => FitMethod::NelderMead,
     };
     options.robust.polish = args.polish;
+    if args.polish && options.method == FitMethod::NelderMead {
+        bail!("--polish polishes the robust fit with Nelder–Mead: with --method nelder-mead it does not apply");
+    }
     if model.is_none() && (options.method != FitMethod::Robust || args.polish) {
         bail!("--model auto compares robust fits: --method nelder-mead and --polish do not apply");
     }

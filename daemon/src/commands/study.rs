@@ -51,8 +51,8 @@ pub struct Args {
     /// Instead of every combination against a reference: leave each θL out in turn, fit
     /// the others and score the left-out θL's own samples (all points and the specular
     /// lobe), then choose the model as `gonio fit --model auto` does. Writes
-    /// `held_out.csv` and `held_out.json`.
-    #[arg(long)]
+    /// `held_out.csv` and `held_out.json`. Takes no `--reference`.
+    #[arg(long, conflicts_with = "reference")]
     pub held_out: bool,
     /// Output directory for the tables and figures (created if missing).
     #[arg(long)]

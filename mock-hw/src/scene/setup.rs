@@ -1,6 +1,7 @@
 //! The `[setup]` table: the nominal geometry of cylinder, camera and light, the strip
 //! rows, and the standard uncertainties setup.json states.
 
+use gonio_files::input::DEFAULT_MAX_FRAME_PIXELS;
 use serde::{Deserialize, Serialize};
 
 use super::error::{check_positive, invalid, SceneError};
@@ -101,6 +102,17 @@ impl SceneSetup {
         }
         if self.image_height == 0 || self.image_height > 20_000 {
             return Err(invalid("setup.image_height", "must be in 1..=20000"));
+        }
+        // A frame gonio's readers would refuse is not rendered.
+        let pixels = u64::from(self.image_width) * u64::from(self.image_height);
+        if pixels > DEFAULT_MAX_FRAME_PIXELS {
+            return Err(invalid(
+                "setup.image_width × setup.image_height",
+                format!(
+                    "{pixels} pixels, more than the {DEFAULT_MAX_FRAME_PIXELS} gonio \
+                     decodes by default (max_frame_pixels)"
+                ),
+            ));
         }
         for (key, value) in [
             ("setup.principal_point_x", self.principal_point_x),

@@ -9,9 +9,8 @@ use gonio_files::input::open_input;
 
 use super::error::{image_error, CaptureError};
 
-/// Pixels a capture may have unless [`set_max_pixels`] says otherwise (100 megapixels;
-/// a 16-bit RGB frame of that size takes 600 MB).
-pub const DEFAULT_MAX_PIXELS: u64 = 100_000_000;
+/// Pixels a capture may have unless [`set_max_pixels`] says otherwise.
+pub const DEFAULT_MAX_PIXELS: u64 = gonio_files::input::DEFAULT_MAX_FRAME_PIXELS;
 static MAX_PIXELS: AtomicU64 = AtomicU64::new(DEFAULT_MAX_PIXELS);
 /// Largest ratio of decoded to stored pixel bytes a compressed TIFF may claim
 /// (deflate's own limit is 1032:1).
