@@ -253,10 +253,16 @@ fn a_step_in_the_background_shares_the_cores_with_the_lane_s_steps() {
     steps[last_hdr].state = StepState::Started;
     steps[last_hdr].started = at(now, -1.0);
     let hdr_left = prior(&timing, &steps[last_hdr].step, 0.0, 3, 3) - 1.0;
+    // The gathering and the fits, measured in no scan yet, as far off their priors as
+    // the scan's θL processing is.
+    let theta_ratio = calibration(&steps, &timing, now)
+        .ratio_of(super::calibration::Kind::Theta)
+        .unwrap();
     let chain: f64 = steps[last_hdr + 1..]
         .iter()
         .map(|r| prior(&timing, &r.step, 0.0, 3, 3))
-        .sum();
+        .sum::<f64>()
+        * theta_ratio;
     // The chain, then the merge's rest (its prior scaled by the scan's measured
     // steps, less the second it has run) on top: the two share the cores.
     let left = progress(&steps, &[], &timing, now).eta_s;
