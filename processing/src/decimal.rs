@@ -163,13 +163,13 @@ fn leading_exponent(a: f64) -> i32 {
     }
 }
 
-/// A value in a message, to at most [`BRIEF_DIGITS`] significant digits: plain where that
+/// A value in a message, to at most six significant digits (`BRIEF_DIGITS`): plain where that
 /// is short (0, or 1e-4 ≤ |v| < 1e7), else in scientific notation (`2.22507e-308`, not
 /// 308 digits or 17). A value a user wrote with fewer digits reads as written.
 pub struct Brief(pub f64);
 
 /// Significant digits of a [`Brief`] value.
-pub const BRIEF_DIGITS: usize = 6;
+const BRIEF_DIGITS: usize = 6;
 
 impl std::fmt::Display for Brief {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
