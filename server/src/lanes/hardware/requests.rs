@@ -53,10 +53,12 @@ impl HardwareLane {
     /// A homing that succeeds ends an emergency stop's hold; an emergency stop meanwhile
     /// abandons it, before any command it has not sent yet.
     pub(super) fn answer_home_request(&mut self) -> Result<(), StoreError> {
+        // Read before the request is taken: a stop between the two would otherwise go
+        // unseen (it clears a request only while it is still there).
+        let stops = self.shared.stops.load(Ordering::Acquire);
         if !self.shared.home_requested.swap(false, Ordering::AcqRel) {
             return Ok(());
         }
-        let stops = self.shared.stops.load(Ordering::Acquire);
         let stopped = || self.shared.stops.load(Ordering::Acquire) != stops;
         let Some(arm) = self.arm.as_mut() else {
             return self.log(None, "home refused", "arm not connected");
