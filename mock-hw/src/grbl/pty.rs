@@ -35,7 +35,14 @@ pub(crate) enum Received {
 impl Pty {
     /// A new pty in raw mode at 115200 8N1, with `link` pointing at its slave.
     pub fn open(link: &Path) -> io::Result<Pty> {
-        let (master, mut slave) = TTYPort::pair()?;
+        let (inheritable, mut slave) = TTYPort::pair()?;
+        // `pair` opens both ends without close-on-exec: a process this one starts (a
+        // decode worker, another test's daemon) would hold the master open past an
+        // unplug, and the driver would see no hangup. The master kept is a close-on-exec
+        // duplicate; the originals close here (only a child started in the microseconds
+        // between would keep them).
+        let master = inheritable.try_clone_native()?;
+        drop(inheritable);
         slave.set_baud_rate(BAUD_RATE)?;
         slave.set_data_bits(DataBits::Eight)?;
         slave.set_parity(Parity::None)?;
