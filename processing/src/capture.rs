@@ -206,10 +206,20 @@ impl Frame {
             ));
         }
         if black_level >= white_level {
-            return Err(bad(
-                "black_level",
-                format!("{black_level} is not below the white level {white_level}"),
-            ));
+            // The level the sidecar states is the one at fault (the black level if both).
+            return Err(
+                if sidecar.black_level.is_none() && sidecar.white_level.is_some() {
+                    bad(
+                        "white_level",
+                        format!("{white_level} is not above the black level {black_level}"),
+                    )
+                } else {
+                    bad(
+                        "black_level",
+                        format!("{black_level} is not below the white level {white_level}"),
+                    )
+                },
+            );
         }
         if decoded.width == 0 || decoded.height == 0 {
             return Err(CaptureError::Layout {

@@ -101,7 +101,7 @@ impl From<FieldError> for ApiError {
 /// a quote, a colon or a comma) cut to its file name: `scene red.toml`, not `scene
 /// /etc/gonio/red.toml`.
 pub fn without_absolute_paths(message: &str) -> String {
-    let ends = |c: char| c.is_whitespace() || matches!(c, '"' | '\'' | ':' | ',' | ')');
+    let ends = |c: char| c.is_whitespace() || matches!(c, '"' | '\'' | '`' | ':' | ',' | ')');
     let mut out = String::with_capacity(message.len());
     let mut rest = message;
     while let Some(at) = rest.find('/') {
@@ -248,6 +248,10 @@ mod tests {
             ),
             "cannot mount sample red: scene of sample red: red.toml: \
              No such file or directory (os error 2); 'a/b' kept, (passwd)"
+        );
+        assert_eq!(
+            without_absolute_paths("`/tmp/x/red.toml` is neither a built-in scene"),
+            "`red.toml` is neither a built-in scene"
         );
         assert_eq!(without_absolute_paths("/ and x/y"), "/ and x/y");
     }

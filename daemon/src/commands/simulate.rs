@@ -29,7 +29,7 @@ pub struct Args {
     #[arg(long)]
     pub seed: Option<u64>,
     /// Bin the sensor N×N (image size divided by N) for fast previews and tests.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
     pub binning: u32,
 }
 
