@@ -11,15 +11,15 @@
 # it, the section is skipped and says so).
 # The coverage of the uncertainty budget's expanded intervals comes from 600 emulated
 # scans whose setup departs from the stated one, and from 400 whose setup.json states no
-# uncertainty, so that gonio's defaults hold (tests/tests/budget_coverage.rs).
+# uncertainty, so that gonio's defaults hold (tests/tests/end_to_end/budget_coverage.rs).
 # The verdicts of `--model auto` (colour shift reported or not, auto's held-out brightness
 # and colour against Cook–Torrance's) over a randomized family of emulated scans and, with
-# GONIO_RGL_DIR, the RGL files with several noise seeds (tests/tests/choice_family.rs).
+# GONIO_RGL_DIR, the RGL files with several noise seeds (tests/tests/end_to_end/choice_family.rs).
 # The multi-angle colour (CIELAB at ASTM E2539's six aspecular angles, D65/10°, each value
 # with its expanded uncertainty) of every example scene and RGL file, from its
 # `--model auto` fit and its samples (`gonio colour`); and that colour validated against
 # the emulator's spectral truth over the example scenes and a randomized family of
-# materials (accuracy, repeatability, discrimination: tests/tests/colour_validation.rs).
+# materials (accuracy, repeatability, discrimination: tests/tests/end_to_end/colour_validation.rs).
 # One function per section; a new section adds its function and its call in main.
 # Usage: bash scripts/results.sh [SCENE...]   (default: gold red blue-green opal)
 #        bash scripts/results.sh --real-materials-only   (that section and the tables)
@@ -162,19 +162,19 @@ coverage_section() {
     rm -f "$out"/coverage.json "$out"/coverage-defaults.json "$out"/coverage-lab.json
     echo "== uncertainty budget: coverage over 600 scans"
     GONIO_COVERAGE_SCANS=600 GONIO_COVERAGE_OUT="$PWD/$out/coverage.json" \
-        cargo test --locked --workspace --test budget_coverage -- --nocapture \
+        cargo test --locked --workspace --test end_to_end -- --nocapture \
         expanded_intervals_hold_the_truth_of_scans_whose_setup_is_off \
         || echo "coverage: a target was missed (see the table)"
     echo "== uncertainty budget: coverage on the default uncertainties over 400 scans"
     GONIO_COVERAGE_JOBS=2 GONIO_COVERAGE_DEFAULTS_SCANS=400 \
         GONIO_COVERAGE_DEFAULTS_OUT="$PWD/$out/coverage-defaults.json" \
-        cargo test --locked --workspace --test budget_coverage -- --nocapture \
+        cargo test --locked --workspace --test end_to_end -- --nocapture \
         expanded_intervals_hold_the_truth_on_the_default_uncertainties \
         || echo "coverage on the defaults: a target was missed (see the table)"
     echo "== uncertainty budget: coverage with a turned camera and a white that is not Lambertian over 400 scans"
     GONIO_COVERAGE_JOBS=2 GONIO_COVERAGE_LAB_SCANS=400 \
         GONIO_COVERAGE_LAB_OUT="$PWD/$out/coverage-lab.json" \
-        cargo test --locked --workspace --test budget_coverage -- --nocapture \
+        cargo test --locked --workspace --test end_to_end -- --nocapture \
         expanded_intervals_hold_the_truth_with_a_turned_camera_and_a_real_white \
         || echo "coverage with a turned camera: a target was missed (see the table)"
     for f in coverage coverage-defaults coverage-lab; do
@@ -189,10 +189,10 @@ verdicts_section() {
     mkdir -p "$out"
     local scans=${GONIO_CHOICE_SCANS:-60} seeds=${GONIO_CHOICE_SEEDS:-3}
     echo "== model choice verdicts: $scans family scans, $seeds seeds per RGL file"
-    echo "GONIO_CHOICE_SCANS=$scans GONIO_CHOICE_SEEDS=$seeds GONIO_RGL_DIR=${GONIO_RGL_DIR:+DIR} cargo test -p gonio-tests --test choice_family -- --nocapture" \
+    echo "GONIO_CHOICE_SCANS=$scans GONIO_CHOICE_SEEDS=$seeds GONIO_RGL_DIR=${GONIO_RGL_DIR:+DIR} cargo test -p gonio-tests --test end_to_end choice_family:: -- --nocapture" \
         > "$out/command.txt"
     GONIO_CHOICE_SCANS=$scans GONIO_CHOICE_SEEDS=$seeds GONIO_CHOICE_OUT="$PWD/$out/verdicts.json" \
-        cargo test --locked -p gonio-tests --test choice_family -- --nocapture
+        cargo test --locked -p gonio-tests --test end_to_end choice_family:: -- --nocapture
 }
 
 # The multi-angle colour's validation over the example scenes and 200 random materials
@@ -203,14 +203,14 @@ colour_validation_section() {
     mkdir -p "$out"
     local scans=${GONIO_COLOUR_SCANS:-200}
     echo "== multi-angle colour validation: 4 example scenes and $scans random materials"
-    echo "GONIO_COLOUR_SCANS=$scans GONIO_BIN=${gonio#"$PWD"/} cargo test -p gonio-tests --test colour_validation full -- --ignored --nocapture" \
+    echo "GONIO_COLOUR_SCANS=$scans GONIO_BIN=${gonio#"$PWD"/} cargo test -p gonio-tests --test end_to_end colour_validation::colour_against_the_spectral_truth_full -- --ignored --nocapture" \
         > "$out/command.txt"
     rm -f "$out/figures.json"
     # The figures are written before the targets are asserted: a missed target is
     # recorded (the table says so) and the run goes on.
     GONIO_BIN="$(cd "$(dirname "$gonio")" && pwd)/$(basename "$gonio")" \
         GONIO_COLOUR_SCANS=$scans GONIO_COLOUR_OUT="$PWD/$out/figures.json" \
-        cargo test --locked -p gonio-tests --test colour_validation full -- --ignored --nocapture \
+        cargo test --locked -p gonio-tests --test end_to_end colour_validation::colour_against_the_spectral_truth_full -- --ignored --nocapture \
         || echo "colour validation: a target was missed (see the table)"
     [ -s "$out/figures.json" ]
 }

@@ -652,7 +652,7 @@ def by_material_rows(by_material):
 
 def colour_validation_table():
     """The multi-angle colour against the emulator's spectral truth
-    (tests/tests/colour_validation.rs): coverage of the expanded intervals, the ΔE00 to
+    (tests/tests/end_to_end/colour_validation.rs): coverage of the expanded intervals, the ΔE00 to
     the truth, repeatability within compare's U, discrimination; each target beside it."""
     out = RESULTS / "colour-validation"
     path = out / "figures.json"

@@ -4,7 +4,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 # Debian packages the tests need: Chromium for the page's browser tests
-# (tests/tests/page_browser.rs, page_states.rs); libgphoto2-dev, libclang-dev (bindgen)
+# (tests/tests/end_to_end/page_browser.rs, page_states.rs); libgphoto2-dev, libclang-dev (bindgen)
 # and pkg-config to build the `gphoto2` feature; python3-venv for the tests' own Python
 # below.
 missing=()
@@ -36,7 +36,7 @@ fi
 export GONIO_PYTHON="$venv/bin/python"
 export GONIO_REQUIRE_OPENCV=1
 
-# The workspace, including the README's offline commands (daemon/tests/readme_commands.rs)
+# The workspace, including the README's offline commands (daemon/tests/cli/readme_commands.rs)
 # and the page in Chromium.
 cargo test --workspace --locked
 
@@ -69,4 +69,4 @@ RUSTUP_HOME="${RUSTUP_HOME:-$HOME/.rustup}" CARGO_HOME="${CARGO_HOME:-$HOME/.car
 
 # ---- Mitsuba 3 (in .venv-test) loads and evaluates `gonio export --format mitsuba` output ----
 # --workspace: the features the suite was built with, so nothing is compiled again.
-cargo test --workspace --test cli_export --locked -- --ignored
+cargo test --workspace --test cli --locked -- --ignored export::

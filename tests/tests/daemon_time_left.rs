@@ -31,6 +31,9 @@
 //! (so too when the probe gave up past its budget on a busy machine: on a quiet one that
 //! fails). Asserted whatever the load: an estimate at every poll and never "finishing"
 //! with seconds of work left.
+//!
+//! A test binary of its own (not a module of `end_to_end`): tests running beside it in one
+//! process would leave the machine never quiet.
 
 use std::time::{Duration, Instant};
 

@@ -1,7 +1,7 @@
 //! `gonio colour` and `gonio compare` on fit JSONs (docs/ARCHITECTURE.md, "Multi-angle
 //! colour"): the table and its files, verdicts, and bad input refused in one line.
 
-mod common;
+use crate::common;
 
 use common::{gonio, gonio_ok, text};
 use serde_json::{json, Value};

@@ -78,10 +78,11 @@ fn missing_inputs_are_named_once_with_their_cause_once() {
         stderr.contains("nowhere: no such scan directory"),
         "{stderr}"
     );
-    // The message the chain used to repeat.
+    // A name that is no scene: the built-in scenes listed, the file's absence said once.
     let stderr = failing(dir.path(), &["simulate", "--scene", "silver", "--out", "x"]);
     assert!(
-        stderr.contains(&format!("cannot read silver: {NOT_FOUND}")),
+        stderr.contains("`silver` is neither a built-in scene (gold, red, blue-green, opal)")
+            && stderr.contains(&format!("nor a scene file: {NOT_FOUND}")),
         "{stderr}"
     );
 }

@@ -12,7 +12,7 @@ use gonio_processing::color::CameraModel;
 use gonio_processing::fit::FitResult;
 use gonio_processing::samples::{write_csv, Sample};
 
-mod common;
+use crate::common;
 use common::{gonio, text};
 
 /// A gold-like Cook–Torrance scan at two θL, fitted with `model` into `dir/fit.json`.

@@ -20,7 +20,7 @@ use std::path::{Path, PathBuf};
 
 use gonio_processing::fit::held_out::median;
 
-mod common;
+use crate::common;
 
 use common::gonio_ok as gonio;
 
@@ -148,7 +148,7 @@ fn auto_reports_a_colour_shift_only_where_the_specular_changes_colour() {
 /// A scene of the built-in `gold` geometry whose sample is the RGL file `bsdf`, with a
 /// bracket wide enough for a film's specular (β up to ~5e5 against a white's 100).
 fn rgl_scene(name: &str, bsdf: &Path) -> String {
-    let gold = include_str!("../../mock-hw/scenes/gold.toml");
+    let gold = include_str!("../../../mock-hw/scenes/gold.toml");
     let mut out = String::new();
     let mut in_sample = false;
     for line in gold.lines() {

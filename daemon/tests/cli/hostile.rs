@@ -134,7 +134,7 @@ fn ciff_bomb(k: u16, padding: usize) -> Vec<u8> {
 
 /// A decoder that would spin for hours is stopped by its time limit (10 s of processor
 /// time for captures of a megapixel), with one line naming the file. Ignored by
-/// default for its 10 s: `cargo test -p gonio-daemon --test cli_hostile -- --ignored`.
+/// default for its 10 s: `cargo test -p gonio-daemon --test cli -- --ignored hostile::`.
 #[test]
 #[ignore]
 fn a_decoder_that_spins_is_stopped_by_its_time_limit() {

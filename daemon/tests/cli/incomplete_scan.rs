@@ -4,7 +4,7 @@
 //! could not check. And the small outputs an operator
 //! reads: the setup's source, `hdr` of a file that is not a capture, `export`'s summary.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 

@@ -3,7 +3,7 @@
 //! captures and their sidecars), is refused before anything is done, and the file is left
 //! as it was.
 
-mod common;
+use crate::common;
 
 use std::fs;
 use std::path::Path;

@@ -6,7 +6,7 @@ use std::process::Command;
 
 /// The tiny fixture scene with a noisy Cook–Torrance sample.
 fn tiny_scene() -> String {
-    include_str!("fixtures/tiny_scene.toml").to_owned()
+    include_str!("../fixtures/tiny_scene.toml").to_owned()
         + r#"
 [sample]
 model = "cook-torrance"

@@ -7,7 +7,7 @@ use gonio_processing::brdf::{Model, Params};
 use gonio_processing::color::CameraModel;
 use gonio_processing::samples::{write_csv, Sample};
 
-mod common;
+use crate::common;
 use common::{gonio, text};
 
 /// A neutral Cook–Torrance material (coefficients ∝ the white's camera RGB), so a flat
@@ -218,7 +218,7 @@ fn tradeoff_rejects_unknown_scenes_and_bad_settings() {
 
 /// The tiny fixture scene with a noise-free Cook–Torrance sample.
 fn tiny_scene() -> String {
-    include_str!("fixtures/tiny_scene.toml").to_owned()
+    include_str!("../fixtures/tiny_scene.toml").to_owned()
         + r#"
 [sample]
 model = "cook-torrance"

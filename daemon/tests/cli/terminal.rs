@@ -13,7 +13,7 @@ fn tiny_scene(dir: &Path) -> String {
     let sample = "[sample]\nmodel = \"cook-torrance\"\nkd = [9.0, 6.5, 2.0]\nks = [25.0, 20.0, 7.0]\nm = [0.07]\n";
     std::fs::write(
         &path,
-        include_str!("fixtures/tiny_scene.toml").to_owned() + sample,
+        include_str!("../fixtures/tiny_scene.toml").to_owned() + sample,
     )
     .unwrap();
     path.to_str().unwrap().to_owned()

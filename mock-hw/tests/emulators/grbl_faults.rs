@@ -1,6 +1,6 @@
 //! Every fault the GRBL emulator can inject, seen from a driver's side of the line.
 
-mod grbl_support;
+use crate::grbl_support;
 
 use std::io::ErrorKind;
 use std::time::Duration;
@@ -58,6 +58,27 @@ fn unplug_breaks_the_line_and_reconnect_reuses_the_path() {
     assert_eq!(world.arm_deg(), -20.0);
     grbl.exchange("$H\n", "ok\r\n");
     assert!((world.arm_deg() + 1.0).abs() < 1e-9);
+}
+
+/// A process started while the controller is plugged in (the daemon starts decode
+/// workers and notification commands) must not keep the line up after an unplug.
+#[test]
+fn an_unplug_breaks_the_line_while_a_child_process_runs() {
+    let (emulator, _world, mut grbl) = homed(-10.0);
+    let mut child = std::process::Command::new("sleep")
+        .arg("30")
+        .spawn()
+        .expect("sleep runs");
+    emulator.inject(Fault::Unplug);
+    let mut buf = [0u8; 16];
+    let read = grbl.port().read(&mut buf);
+    let _ = child.kill();
+    let _ = child.wait();
+    let err = read.expect_err("read from an unplugged device");
+    assert!(
+        matches!(err.kind(), ErrorKind::BrokenPipe) || err.raw_os_error() == Some(5),
+        "{err:?}"
+    );
 }
 
 #[test]

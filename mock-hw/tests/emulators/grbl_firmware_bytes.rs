@@ -2,7 +2,7 @@
 //! every open of the port, homing failures, the stock homing cycles, silence during a
 //! critical alarm. Each states the exact bytes.
 
-mod grbl_support;
+use crate::grbl_support;
 
 use std::time::Duration;
 

@@ -2,7 +2,7 @@
 //! replies checked byte for byte. The stock-board bytes are those GRBL 1.1h
 //! (1.1h.20190830) sends.
 
-mod grbl_support;
+use crate::grbl_support;
 
 use std::time::{Duration, Instant};
 

@@ -6,7 +6,7 @@
 use gonio_mock_hw::render::{render_frame, Frame16};
 use gonio_mock_hw::scene::Scene;
 
-const SMALL: &str = include_str!("scene_small.toml");
+const SMALL: &str = include_str!("../scene_small.toml");
 const LAMBERTIAN: &str = "[sample]\nmodel = \"lambertian\"\nkd = [40.0, 30.0, 20.0]\n";
 const CT: &str =
     "[sample]\nmodel = \"cook-torrance\"\nkd = [9.0, 6.5, 2.0]\nks = [25.0, 20.0, 7.0]\nm = [0.2]\n";

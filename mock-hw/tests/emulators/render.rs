@@ -5,7 +5,7 @@ use gonio_mock_hw::render::{self, reference, render_frame, Frame16, Shot};
 use gonio_mock_hw::scene::material::thin_film_reflectance;
 use gonio_mock_hw::scene::Scene;
 
-const SMALL: &str = include_str!("scene_small.toml");
+const SMALL: &str = include_str!("../scene_small.toml");
 const THETA_L: f64 = -30.0;
 const SHUTTER: f64 = 0.01;
 

@@ -15,7 +15,7 @@ use gonio_mock_hw::scene::Scene;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 
-const SMALL: &str = include_str!("scene_small.toml");
+const SMALL: &str = include_str!("../scene_small.toml");
 const FIXTURES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/rgl");
 
 /// A tensor field: name, shape and little-endian bytes.

@@ -3,7 +3,7 @@
 
 use gonio_mock_hw::scene::{Sample, Scene, SceneError};
 
-const SMALL: &str = include_str!("scene_small.toml");
+const SMALL: &str = include_str!("../scene_small.toml");
 const CT: &str =
     "[sample]\nmodel = \"cook-torrance\"\nkd = [10.0, 8.0, 3.0]\nks = [2.0, 1.5, 0.5]\nm = [0.1]\n";
 

@@ -8,7 +8,7 @@ use gonio_mock_hw::scene::Scene;
 use tiff::decoder::{Decoder, DecodingResult};
 use tiff::tags::Tag;
 
-const SMALL: &str = include_str!("scene_small.toml");
+const SMALL: &str = include_str!("../scene_small.toml");
 
 /// The small scene with a 12-bit sensor, a diffuse sample and stuck pixels.
 fn twelve_bit_scene() -> Scene {

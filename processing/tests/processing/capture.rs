@@ -132,6 +132,10 @@ fn contradicting_or_nonsense_sidecar_values_are_rejected() {
             "black_level",
         ),
         (
+            format!(r#"{{"shutter_s":0.1,"iso":100,"theta_l":-20,"white_level":0,{base}}}"#),
+            "white_level",
+        ),
+        (
             format!(r#"{{"shutter_s":0.1,"iso":100,"theta_l":-20,"black_level":-3,{base}}}"#),
             "black_level",
         ),

@@ -9,9 +9,9 @@ use gonio_processing::brdf::{Model, Params};
 use gonio_processing::color::CameraModel;
 use gonio_processing::fit::colour_change::{lobe_colour_change, LEVEL, MIN_UV_CHANGE};
 
-mod common;
+use crate::common;
+use crate::synthetic;
 use common::Rng;
-mod synthetic;
 use synthetic::{scan, Noise};
 
 const THETA_L: [f64; 6] = [-20.0, -25.0, -30.0, -35.0, -40.0, -45.0];

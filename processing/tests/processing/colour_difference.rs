@@ -11,7 +11,7 @@ use gonio_processing::multi_angle::transform_lines;
 /// The 34 pairs of Sharma, Wu and Dalal (2005), Table 1, as the colour-science package
 /// 0.4.7 carries them in its tests (`colour/difference/tests/test_delta_e.py`, pair 14
 /// there commented out); written by `scripts/colour_reference_data.py`.
-const SHARMA: &str = include_str!("colour/ciede2000_sharma_2005.csv");
+const SHARMA: &str = include_str!("../colour/ciede2000_sharma_2005.csv");
 
 #[test]
 fn ciede2000_matches_every_pair_of_sharma_wu_dalal_to_1e4() {

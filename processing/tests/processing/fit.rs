@@ -12,9 +12,7 @@ use gonio_processing::fit::{
 use gonio_processing::metrics;
 use gonio_processing::samples::Sample;
 
-mod common;
-mod fitting;
-mod synthetic;
+use crate::fitting;
 use fitting::{assert_close, assert_recovers, clip_and_drop, options, synthetic, ALL_THETA_L};
 
 fn loss_of(samples: &[Sample], model: Model, p: &Params) -> f64 {

@@ -10,10 +10,10 @@ use gonio_processing::fit::{
 };
 use gonio_processing::metrics;
 
-mod common;
+use crate::common;
+use crate::fitting;
+use crate::synthetic;
 use common::Rng;
-mod fitting;
-mod synthetic;
 use fitting::{
     assert_close, assert_recovers, clip_and_drop, options, synthetic, synthetic_fresnel,
     ALL_THETA_L,

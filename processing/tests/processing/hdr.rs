@@ -7,7 +7,7 @@ use gonio_processing::hdr::{
     self, HdrError, MergeMethod, MergeOptions, NoiseModel, SATURATED, UNDEREXPOSED,
 };
 
-mod common;
+use crate::common;
 use common::Rng;
 
 const W: usize = 64;

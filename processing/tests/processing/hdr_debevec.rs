@@ -6,8 +6,8 @@
 
 use gonio_processing::hdr;
 
-mod bracket;
-mod common;
+use crate::bracket;
+use crate::common;
 use bracket::{Camera, Curve};
 use common::Rng;
 

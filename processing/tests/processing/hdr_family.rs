@@ -14,7 +14,7 @@
 //!
 //! Each test prints its table (`-- --nocapture`). `GONIO_HDR_FAMILY_N` sets the number of
 //! brackets per family (default 12, seconds; the seven-frame regime gets a quarter as
-//! many scenes): `GONIO_HDR_FAMILY_N=200 cargo test -p gonio-processing --test hdr_family
+//! many scenes): `GONIO_HDR_FAMILY_N=200 cargo test -p gonio-processing --test processing hdr_family::
 //! -- --nocapture --test-threads 1` gives the figures of a larger family (minutes).
 
 use std::path::PathBuf;
@@ -22,8 +22,8 @@ use std::path::PathBuf;
 use gonio_processing::capture::{Frame, Response, Sidecar};
 use gonio_processing::hdr::{self, MergeMethod, MergeOptions, NoiseModel, UNDEREXPOSED};
 
-mod bracket;
-mod common;
+use crate::bracket;
+use crate::common;
 use bracket::{Camera, Curve};
 use common::Rng;
 

@@ -19,9 +19,9 @@ use gonio_processing::fit::{
 };
 use gonio_processing::samples::Sample;
 
-mod common;
+use crate::common;
+use crate::synthetic;
 use common::Rng;
-mod synthetic;
 use synthetic::{scan, Noise};
 
 const ALL_THETA_L: [f64; 6] = [-20.0, -25.0, -30.0, -35.0, -40.0, -45.0];

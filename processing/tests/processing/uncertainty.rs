@@ -8,9 +8,9 @@
 use gonio_processing::brdf::{Model, Params, Roughness};
 use gonio_processing::fit::{chi2_3_survival, fit, FitOptions, FitResult};
 
-mod common;
+use crate::common;
+use crate::synthetic;
 use common::Rng;
-mod synthetic;
 use synthetic::Noise;
 
 const REPEATS: usize = 200;

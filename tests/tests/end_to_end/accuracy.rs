@@ -126,7 +126,7 @@ fn without_noise(scene: &str) -> String {
 #[test]
 fn red_without_noise_is_within_0_2_percent() {
     let dir = temp_dir("accuracy-red");
-    let quiet = without_noise(include_str!("../../mock-hw/scenes/red.toml"));
+    let quiet = without_noise(include_str!("../../../mock-hw/scenes/red.toml"));
     let scene = dir.join("red.toml");
     std::fs::write(&scene, quiet).unwrap();
     let (fitted, truth, _) = readme_chain(&dir, scene.to_str().unwrap());
@@ -160,7 +160,7 @@ fn sample_errors(samples: &[Sample], beta: impl Fn(&Cosines) -> [f64; 3]) -> (f6
 /// Gold's scene without noise, with `sample` as its `[sample]` table, one θL (−30°) and a
 /// bracket down to 1/100,000 s so a sharp peak is not clipped.
 fn sharp_scene(sample: &str) -> String {
-    let gold = include_str!("../../mock-hw/scenes/gold.toml");
+    let gold = include_str!("../../../mock-hw/scenes/gold.toml");
     let table =
         "model = \"cook-torrance\"\nkd = [9.0, 6.5, 2.0]\nks = [25.0, 20.0, 7.0]\nm = [0.07]\n";
     let bracket = "bracket_s = [0.5, 0.125, 0.033333333333333333, 0.01]";

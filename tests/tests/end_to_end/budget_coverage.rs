@@ -35,7 +35,7 @@ use gonio_processing::white_angular::DEFAULT_FALLOFF;
 use gonio_tests::{gonio, temp_dir};
 use serde_json::{json, Value};
 
-const GOLD: &str = include_str!("../../mock-hw/scenes/gold.toml");
+const GOLD: &str = include_str!("../../../mock-hw/scenes/gold.toml");
 
 /// Scans of the CI run.
 const FAST_SCANS: usize = 16;

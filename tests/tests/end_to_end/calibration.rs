@@ -18,7 +18,7 @@ use gonio_processing::samples::read_csv;
 use gonio_tests::{gonio, temp_dir};
 use serde_json::Value;
 
-const GOLD: &str = include_str!("../../mock-hw/scenes/gold.toml");
+const GOLD: &str = include_str!("../../../mock-hw/scenes/gold.toml");
 const THETA_L: &str = "--theta-l=-20,-30,-45";
 
 /// The misalignments of a test, as the scene states them.

@@ -26,7 +26,7 @@ use std::path::Path;
 use gonio_tests::{gonio, temp_dir};
 use serde_json::{json, Value};
 
-const GOLD: &str = include_str!("../../mock-hw/scenes/gold.toml");
+const GOLD: &str = include_str!("../../../mock-hw/scenes/gold.toml");
 
 /// Family scans of the CI run.
 const FAST_SCANS: usize = 3;

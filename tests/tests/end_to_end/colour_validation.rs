@@ -46,10 +46,10 @@ use gonio_processing::samples::read_csv;
 use gonio_tests::{gonio, temp_dir};
 use serde_json::json;
 
-const GOLD: &str = include_str!("../../mock-hw/scenes/gold.toml");
-const RED: &str = include_str!("../../mock-hw/scenes/red.toml");
-const BLUE_GREEN: &str = include_str!("../../mock-hw/scenes/blue-green.toml");
-const OPAL: &str = include_str!("../../mock-hw/scenes/opal.toml");
+const GOLD: &str = include_str!("../../../mock-hw/scenes/gold.toml");
+const RED: &str = include_str!("../../../mock-hw/scenes/red.toml");
+const BLUE_GREEN: &str = include_str!("../../../mock-hw/scenes/blue-green.toml");
+const OPAL: &str = include_str!("../../../mock-hw/scenes/opal.toml");
 
 /// The standard uncertainties every scan's setup.json states (as the budget's coverage
 /// test: a calibrated setup and a certified white).

@@ -139,7 +139,11 @@ fn unplug_then_reconnect_requires_homing(variant: Variant) {
     arm.home().unwrap();
     move_and_check(&mut arm, &world, -20.0);
     emulator.inject(Fault::Unplug);
-    assert!(matches!(arm.status(), Err(DeviceError::Disconnected(_))));
+    let status = arm.status();
+    assert!(
+        matches!(status, Err(DeviceError::Disconnected(_))),
+        "{status:?}"
+    );
     // Still unplugged: bounded reconnect attempts, then Disconnected again.
     let started = Instant::now();
     assert!(matches!(

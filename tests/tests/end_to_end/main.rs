@@ -1,0 +1,35 @@
+//! End-to-end tests across the crates, one binary (one link).
+
+mod accuracy;
+mod bench_table;
+mod budget_coverage;
+mod budget_departure;
+mod calibration;
+mod choice_family;
+mod colour_validation;
+mod daemon_api;
+mod daemon_arm;
+mod daemon_arm_state;
+mod daemon_calibrate;
+mod daemon_carousel;
+mod daemon_decoders;
+mod daemon_downloads;
+mod daemon_faults;
+mod daemon_hardening;
+mod daemon_health;
+mod daemon_lanes;
+mod daemon_resume;
+mod daemon_samples;
+mod daemon_scan;
+mod daemon_signals;
+mod daemon_storage;
+mod daemon_sweeps;
+mod docs_map;
+mod grbl_driver;
+mod page_browser;
+mod page_colour;
+mod page_modules;
+mod page_states;
+mod report;
+mod results_docs;
+mod source_lines;
