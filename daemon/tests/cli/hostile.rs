@@ -49,6 +49,30 @@ fn partials(dir: &Path) -> Vec<String> {
         .collect()
 }
 
+/// The tiny fixture scene with a Cook–Torrance sample simulated into `dir`/scan (its
+/// scene file `dir`/scene.toml); the scan's path.
+fn simulated_scan(dir: &Path) -> std::path::PathBuf {
+    let scan = dir.join("scan");
+    let scene = dir.join("scene.toml");
+    let fixture = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/tiny_scene.toml");
+    let text = std::fs::read_to_string(fixture).unwrap()
+        + "\n[sample]\nmodel = \"cook-torrance\"\nkd = [9.0, 6.5, 2.0]\nks = [25.0, 20.0, 7.0]\nm = [0.07]\n";
+    std::fs::write(&scene, text).unwrap();
+    let output = gonio(&[
+        "simulate".as_ref(),
+        "--scene".as_ref(),
+        scene.as_os_str(),
+        "--out".as_ref(),
+        scan.as_os_str(),
+    ]);
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    scan
+}
+
 /// A failure: exit 1, one line on stderr starting `error:`, no panic text.
 fn assert_clean_failure(output: &Output, needle: &str) -> String {
     let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
@@ -351,22 +375,10 @@ fn devices_and_fifos_as_outputs_stay_what_they_are() {
     use std::os::unix::fs::FileTypeExt;
     let dir = tempfile::tempdir().unwrap();
     // A fit to export and a scan to calibrate, both small.
-    let scene = dir.path().join("scene.toml");
-    let fixture = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/tiny_scene.toml");
-    let text = std::fs::read_to_string(fixture).unwrap()
-        + "\n[sample]\nmodel = \"cook-torrance\"\nkd = [9.0, 6.5, 2.0]\nks = [25.0, 20.0, 7.0]\nm = [0.07]\n";
-    std::fs::write(&scene, text).unwrap();
-    let scan = dir.path().join("scan");
+    let scan = simulated_scan(dir.path());
     let fit = dir.path().join("fit.json");
     let samples = dir.path().join("samples.csv");
     for args in [
-        vec![
-            "simulate".as_ref(),
-            "--scene".as_ref(),
-            scene.as_os_str(),
-            "--out".as_ref(),
-            scan.as_os_str(),
-        ],
         vec![
             "extract".as_ref(),
             scan.as_os_str(),
@@ -514,24 +526,7 @@ fn fit_refuses_a_beta_whose_square_overflows_naming_the_line() {
 #[test]
 fn extract_with_no_samples_exits_non_zero_naming_the_dominant_reason() {
     let dir = tempfile::tempdir().unwrap();
-    let scan = dir.path().join("scan");
-    let scene = dir.path().join("scene.toml");
-    let fixture = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/tiny_scene.toml");
-    let text = std::fs::read_to_string(fixture).unwrap()
-        + "\n[sample]\nmodel = \"cook-torrance\"\nkd = [9.0, 6.5, 2.0]\nks = [25.0, 20.0, 7.0]\nm = [0.07]\n";
-    std::fs::write(&scene, text).unwrap();
-    let output = gonio(&[
-        "simulate".as_ref(),
-        "--scene".as_ref(),
-        scene.as_os_str(),
-        "--out".as_ref(),
-        scan.as_os_str(),
-    ]);
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
+    let scan = simulated_scan(dir.path());
     // The same captures with the camera 10 km away: the cylinder is not in the picture.
     let setup_path = scan.join("setup.json");
     let mut setup: serde_json::Value =
@@ -555,24 +550,7 @@ fn extract_with_no_samples_exits_non_zero_naming_the_dominant_reason() {
 #[test]
 fn extract_and_calibrate_refuse_a_symlinked_theta_l_folder() {
     let dir = tempfile::tempdir().unwrap();
-    let scan = dir.path().join("scan");
-    let scene = dir.path().join("scene.toml");
-    let fixture = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/tiny_scene.toml");
-    let text = std::fs::read_to_string(fixture).unwrap()
-        + "\n[sample]\nmodel = \"cook-torrance\"\nkd = [9.0, 6.5, 2.0]\nks = [25.0, 20.0, 7.0]\nm = [0.07]\n";
-    std::fs::write(&scene, text).unwrap();
-    let output = gonio(&[
-        "simulate".as_ref(),
-        "--scene".as_ref(),
-        scene.as_os_str(),
-        "--out".as_ref(),
-        scan.as_os_str(),
-    ]);
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
+    let scan = simulated_scan(dir.path());
     let folder = std::fs::read_dir(&scan)
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
